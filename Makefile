@@ -1,0 +1,45 @@
+# The two commands of the README: `make demo` and `make test`. Both install what they need first.
+JOBS ?= $(shell nproc)
+DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev
+SUDO := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
+
+.PHONY: all deps release asan demo test test-release test-asan bench clean
+
+all: release
+
+deps:
+	@missing=""; for p in $(DEPS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing:$$missing"; \
+	  $(SUDO) apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $$missing; \
+	fi
+
+release: deps
+	cmake --preset release >/dev/null
+	cmake --build --preset release -j $(JOBS)
+
+asan: deps
+	cmake --preset asan >/dev/null
+	cmake --build --preset asan -j $(JOBS)
+
+demo: release
+	@if [ -x build/release/raypack ]; then \
+	  ./build/release/raypack render -o raypack-demo.png && echo "wrote raypack-demo.png"; \
+	else \
+	  ./build/release/tests/rp_core_demo; \
+	fi
+
+test-release: release
+	ctest --preset release -j $(JOBS)
+
+test-asan: asan
+	ctest --preset asan -j $(JOBS)
+
+test: test-release test-asan
+
+bench: release
+	./build/release/raypack bench
+
+clean:
+	rm -rf build

@@ -1,0 +1,138 @@
+/* raypack I/O: scene loaders and image files.
+ *
+ * A loader turns a scene file into plain flat arrays (rp_scene_data): no pointers into other
+ * objects, so a scene can be handed to the core API, sent to MPI ranks or copied to a GPU.
+ * Formats: Wavefront OBJ+MTL, PLY (ASCII, binary LE/BE), NFF and BART's AFF; any of them gzip'd
+ * (.gz), and tar archives (.tar, .tar.gz) holding a scene (BART's kitchen and museum).
+ *
+ * Ownership: every array in rp_scene_data is owned by it and freed by rp_scene_data_free.
+ */
+#ifndef RAYPACK_IO_H
+#define RAYPACK_IO_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#if !defined(RP_API)
+#if defined(_WIN32)
+#define RP_API __declspec(dllexport)
+#else
+#define RP_API __attribute__((visibility("default")))
+#endif
+#endif
+
+/* Material as the scene file states it (MTL and NFF/AFF parameters); the renderer maps it to its
+ * own BSDFs. Colours are linear RGB. */
+typedef struct rp_material_data {
+    char name[64];
+    float kd[3];        /* diffuse (MTL Kd, NFF colour * Kd) */
+    float ks[3];        /* Phong specular highlight (MTL Ks, NFF colour-less Ks) */
+    float ke[3];        /* emission (MTL Ke) */
+    float kr[3];        /* mirror reflectance (MTL illum 3/5/7 uses Ks; NFF Ks) */
+    float kt[3];        /* transmittance (MTL 1-d or Tf with illum 4/6/7/9; NFF T) */
+    float ns;           /* Phong exponent (MTL Ns, NFF Shine) */
+    float ior;          /* index of refraction (MTL Ni, NFF index_of_refraction); 1 if absent */
+    int32_t illum;      /* MTL illum model; -1 for NFF/AFF/PLY */
+    int32_t map_kd;     /* index into textures of the diffuse texture, or -1 */
+} rp_material_data;
+
+/* Image texture, decoded to 8-bit RGB (sRGB encoded, as stored in the file). */
+typedef struct rp_texture_data {
+    char path[256];     /* the path the scene named, as written */
+    int32_t width, height;
+    uint8_t *rgb;       /* width * height * 3 bytes, top row first */
+} rp_texture_data;
+
+typedef enum rp_light_type { RP_LIGHT_DATA_POINT = 0 } rp_light_type;
+
+typedef struct rp_light_data {
+    rp_light_type type;
+    float position[3];
+    float color[3];     /* intensity; NFF lights without a colour get 1,1,1 */
+} rp_light_data;
+
+/* Pinhole camera of DESIGN.md (eye, look-at point, up, vertical field of view in degrees). */
+typedef struct rp_camera_data {
+    bool valid;         /* false: the file had no camera */
+    float eye[3], look[3], up[3];
+    float fov_deg;      /* vertical */
+    int32_t width, height; /* resolution the file asks for, 0 if none */
+} rp_camera_data;
+
+typedef struct rp_sphere_data {
+    float center[3];
+    float radius;
+    uint32_t material;
+} rp_sphere_data;
+
+/* Cone or cylinder (NFF `c`): a frustum between two capped-off circles; not counted as triangles. */
+typedef struct rp_cone_data {
+    float base[3];
+    float base_radius;
+    float apex[3];
+    float apex_radius;
+    uint32_t material;
+} rp_cone_data;
+
+typedef struct rp_scene_data {
+    /* Triangle mesh: positions are indexed by `indices`; normals and texcoords, when present, have
+     * their own per-corner index arrays (OBJ style), NULL when absent. */
+    size_t vertex_count;
+    float *positions;           /* 3 * vertex_count */
+    size_t normal_count;
+    float *normals;             /* 3 * normal_count, or NULL */
+    size_t texcoord_count;
+    float *texcoords;           /* 2 * texcoord_count, or NULL */
+    size_t triangle_count;
+    uint32_t *indices;          /* 3 * triangle_count, into positions */
+    uint32_t *normal_indices;   /* 3 * triangle_count, into normals, or NULL */
+    uint32_t *texcoord_indices; /* 3 * triangle_count, into texcoords, or NULL */
+    uint32_t *tri_materials;    /* triangle_count, into materials */
+
+    size_t sphere_count;
+    rp_sphere_data *spheres;
+    size_t cone_count;
+    rp_cone_data *cones;
+
+    size_t material_count;      /* >= 1: loaders add a default grey diffuse material if needed */
+    rp_material_data *materials;
+    size_t texture_count;
+    rp_texture_data *textures;
+    size_t light_count;
+    rp_light_data *lights;
+
+    rp_camera_data camera;
+    float background[3];        /* NFF `b`; 0,0,0 if absent */
+    bool has_background;
+
+    size_t file_bytes;          /* bytes parsed, after decompression */
+    double parse_ms;            /* wall time of rp_scene_data_load */
+} rp_scene_data;
+
+/* Loads a scene file (format from the extension; .gz and .tar(.gz) are unpacked transparently).
+ * On failure returns false and writes "file:line: error: message" into err (err_size bytes);
+ * out is then empty and needs no free. */
+RP_API bool rp_scene_data_load(const char *path, rp_scene_data *out, char *err, size_t err_size);
+/* Frees every array of a loaded scene and zeroes it. */
+RP_API void rp_scene_data_free(rp_scene_data *scene);
+
+
+/* Writes an image; the format follows the extension: .png and .ppm (8-bit, linear values clamped
+ * to [0,1] and sRGB-encoded), .pfm (32-bit float, linear, standard PFM: rows bottom-up, negative
+ * scale = little endian). channels is 1 or 3; pixels are row-major, top row first.
+ * Returns false and writes "path: error: message" into err on failure. */
+RP_API bool rp_image_write(const char *path, int width, int height, int channels, const float *pixels,
+                           char *err, size_t err_size);
+/* Reads a PFM (1 or 3 channels) into a malloc'ed float array, top row first (caller frees). */
+RP_API float *rp_image_read_pfm(const char *path, int *width, int *height, int *channels, char *err,
+                                size_t err_size);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* RAYPACK_IO_H */

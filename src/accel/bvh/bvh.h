@@ -1,0 +1,71 @@
+/* Bounding volume hierarchies: one canonical binary BVH, built by binned SAH from primitive boxes
+ * (centroids are the box centres), converted to wide layouts (4, 8 or 16 children per node) for
+ * traversal. Builders and layouts vary independently (tinybvh's ConvertFrom). */
+#ifndef RP_BVH_H
+#define RP_BVH_H
+
+#include <stdint.h>
+
+#include "math/vec.h"
+#include "sys/sys.h"
+
+/* Binary node, 32 bytes. Inner: children at index and index + 1 (count == 0).
+ * Leaf: primitives prims[index .. index + count). */
+typedef struct bvh_node {
+    float lo[3];
+    uint32_t index;
+    float hi[3];
+    uint32_t count;
+} bvh_node;
+
+typedef struct bvh2 {
+    bvh_node *nodes;     /* nodes[0] is the root */
+    uint32_t node_count;
+    uint32_t node_capacity;
+    uint32_t *prims;     /* primitive ids in leaf order */
+    uint32_t prim_count;
+    uint32_t depth;      /* number of levels (a single leaf: 1) */
+    uint32_t leaf_count;
+    double sah_cost;     /* traversal cost 1, intersection cost 1 per primitive, relative to root */
+} bvh2;
+
+typedef struct bvh_build_desc {
+    int bins;          /* per axis, 4..64 */
+    int max_leaf_size; /* primitives per leaf, 1..60 */
+} bvh_build_desc;
+
+/* Builds over n boxes (none empty or non-finite); uses the pool's threads when pool != NULL.
+ * Returns false when out of memory. n == 0 gives a single empty leaf. */
+bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, uint32_t n,
+               const bvh_build_desc *desc, bvh2 *out);
+void bvh2_free(const sys_allocator *alloc, bvh2 *bvh);
+
+/* Wide node of width W (4, 8 or 16) is stored as floats bounds[6][W] (lo_x, hi_x, lo_y, hi_y,
+ * lo_z, hi_z) followed by uint32_t child[W]. A child reference is either an inner node index or a
+ * leaf: BVHW_LEAF | first_item << 4 | item_count (1..15). Empty slots have an empty box and the
+ * reference BVHW_EMPTY. */
+#define BVHW_LEAF 0x80000000u
+#define BVHW_EMPTY 0x80000000u
+#define BVHW_MAX_ITEMS 15u
+#define BVHW_MAX_FIRST ((1u << 27) - 1u)
+#define BVHW_MAX_DEPTH 100u /* the builder keeps binary trees shallower (median splits past 64) */
+
+static inline uint32_t bvhw_node_bytes(int width) { return (uint32_t)width * 7u * 4u; }
+
+typedef struct bvhw {
+    int width;
+    void *nodes;        /* 64-byte aligned array of node_count nodes; node 0 is the root */
+    uint32_t node_count;
+    size_t bytes;
+} bvhw;
+
+/* Maps a binary leaf to its payload: the first item and the number of items (1..15) holding its
+ * primitives (e.g. blocks of 4 triangles). Returns false if the leaf does not fit. */
+typedef bool (*bvhw_leaf_fn)(void *user, const bvh_node *leaf, uint32_t *first_item, uint32_t *items);
+
+/* Collapses a binary BVH into a wide one, opening the child of largest area first. */
+bool bvhw_from_bvh2(const sys_allocator *alloc, const bvh2 *src, int width, bvhw_leaf_fn leaf,
+                    void *leaf_user, bvhw *out);
+void bvhw_free(const sys_allocator *alloc, bvhw *bvh);
+
+#endif

@@ -1,0 +1,79 @@
+/* Devices, geometries and scenes: the objects behind the public handles. */
+#ifndef RP_CORE_H
+#define RP_CORE_H
+
+#include <pthread.h>
+#include <stdatomic.h>
+
+#include "accel/bvh/bvh.h"
+#include "raypack.h"
+#include "sys/sys.h"
+#include "traverse/traverse.h"
+
+struct rp_device {
+    _Atomic int refs;
+    rp_device_desc desc;
+    sys_allocator alloc;
+    sys_pool *pool;
+    pthread_mutex_t pool_lock; /* parallel_for is not reentrant: one job at a time */
+    const rp_kernels *kernels;
+    pthread_key_t error_key;   /* first error per thread, until read */
+};
+
+typedef struct geom_buffer {
+    const uint8_t *data;  /* first item */
+    size_t stride;
+    size_t count;
+    rp_format format;
+    void *owned;          /* geometry-owned storage, or NULL */
+    size_t owned_bytes;
+    bool set;
+} geom_buffer;
+
+struct rp_geometry {
+    _Atomic int refs;
+    rp_device *device;
+    rp_geometry_type type;
+    uint32_t mask;
+    geom_buffer buffers[2];
+    uint32_t user_count;
+    rp_user_bounds_fn user_bounds;
+    rp_user_intersect_fn user_intersect;
+    rp_user_occluded_fn user_occluded;
+    void *user;
+};
+
+struct rp_scene {
+    _Atomic int refs;
+    rp_device *device;
+    rp_scene_desc desc;
+    rp_geometry **geoms;  /* indexed by geom_id; NULL slots are free */
+    uint32_t geom_count, geom_capacity;
+    bool committed;       /* committed and not edited since */
+    rp_accel accel;
+    /* storage behind accel */
+    bvhw tri_bvh, prim_bvh;
+    tri4 *tris;
+    size_t tri_block_count;
+    prim_ref *prims;
+    size_t prim_count;
+    rp_scene_stats stats;
+    rp_bounds bounds;
+};
+
+/* Raises an error on the calling thread: keeps it if it is the first since the last read, and
+ * calls the device's error callback. */
+void device_error(rp_device *device, rp_error code, const char *message);
+/* Sends a warning to the device's log callback, if any. */
+void device_log(rp_device *device, rp_log_level level, const char *message);
+/* Picks the kernel table for an ISA width (0: the best the CPU has). */
+const rp_kernels *device_pick_kernels(int isa);
+
+/* Builds the scene's acceleration structures (rp_scene_commit). */
+rp_error scene_build(rp_scene *scene);
+void scene_free_accel(rp_scene *scene);
+
+/* Item i of a geometry buffer. */
+static inline const void *geom_item(const geom_buffer *b, size_t i) { return b->data + i * b->stride; }
+
+#endif

@@ -1,0 +1,449 @@
+/* Scenes: geometry bookkeeping and commit, which gathers valid primitives, builds the canonical
+ * binary BVH and converts it to the wide layout the kernels traverse. */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "core/core.h"
+#include "geometry/sphere.h"
+
+rp_scene_desc rp_scene_desc_defaults(const rp_scene_desc *desc) {
+    rp_scene_desc d = desc ? *desc : (rp_scene_desc){0};
+    if (d.max_leaf_size <= 0) d.max_leaf_size = 4;
+    if (d.max_leaf_size > 60) d.max_leaf_size = 60;
+    return d;
+}
+
+rp_scene *rp_scene_new(rp_device *device, const rp_scene_desc *desc) {
+    if (!device) return NULL;
+    if (desc && ((unsigned)desc->quality > RP_BUILD_QUALITY_HIGH ||
+                 (desc->bvh_width != 0 && desc->bvh_width != 4 && desc->bvh_width != 8 && desc->bvh_width != 16) ||
+                 desc->max_leaf_size < 0 || desc->max_leaf_size > 60)) {
+        device_error(device, RP_ERROR_INVALID_ARGUMENT, "rp_scene_new: bad quality, bvh_width or max_leaf_size");
+        return NULL;
+    }
+    rp_scene *s = sys_calloc(&device->alloc, sizeof *s);
+    if (!s) {
+        device_error(device, RP_ERROR_OUT_OF_MEMORY, NULL);
+        return NULL;
+    }
+    atomic_store(&s->refs, 1);
+    s->device = device;
+    s->desc = rp_scene_desc_defaults(desc);
+    rp_device_retain(device);
+    return s;
+}
+
+void rp_scene_retain(rp_scene *scene) {
+    if (scene) atomic_fetch_add(&scene->refs, 1);
+}
+
+void scene_free_accel(rp_scene *s) {
+    const sys_allocator *a = &s->device->alloc;
+    bvhw_free(a, &s->tri_bvh);
+    bvhw_free(a, &s->prim_bvh);
+    sys_free(a, s->tris, s->tri_block_count * sizeof(tri4));
+    sys_free(a, s->prims, s->prim_count * sizeof(prim_ref));
+    s->tris = NULL, s->prims = NULL;
+    s->tri_block_count = s->prim_count = 0;
+    memset(&s->accel, 0, sizeof s->accel);
+}
+
+void rp_scene_release(rp_scene *scene) {
+    if (!scene || atomic_fetch_sub(&scene->refs, 1) != 1) return;
+    rp_device *dev = scene->device;
+    scene_free_accel(scene);
+    for (uint32_t i = 0; i < scene->geom_count; i++) rp_geometry_release(scene->geoms[i]);
+    sys_free(&dev->alloc, scene->geoms, scene->geom_capacity * sizeof(rp_geometry *));
+    sys_free(&dev->alloc, scene, sizeof *scene);
+    rp_device_release(dev);
+}
+
+uint32_t rp_scene_attach(rp_scene *scene, rp_geometry *geometry) {
+    if (!scene) return RP_INVALID_ID;
+    if (!geometry || geometry->device != scene->device) {
+        device_error(scene->device, RP_ERROR_INVALID_ARGUMENT, "rp_scene_attach: NULL geometry or another device's");
+        return RP_INVALID_ID;
+    }
+    uint32_t id = scene->geom_count;
+    for (uint32_t i = 0; i < scene->geom_count; i++)
+        if (!scene->geoms[i]) {
+            id = i;
+            break;
+        }
+    if (id == scene->geom_count) {
+        if (scene->geom_count == scene->geom_capacity) {
+            uint32_t cap = scene->geom_capacity ? scene->geom_capacity * 2 : 8;
+            rp_geometry **g = sys_calloc(&scene->device->alloc, cap * sizeof *g);
+            if (!g) {
+                device_error(scene->device, RP_ERROR_OUT_OF_MEMORY, NULL);
+                return RP_INVALID_ID;
+            }
+            if (scene->geoms) memcpy(g, scene->geoms, scene->geom_count * sizeof *g);
+            sys_free(&scene->device->alloc, scene->geoms, scene->geom_capacity * sizeof *g);
+            scene->geoms = g;
+            scene->geom_capacity = cap;
+        }
+        scene->geom_count++;
+    }
+    rp_geometry_retain(geometry);
+    scene->geoms[id] = geometry;
+    scene->committed = false;
+    return id;
+}
+
+void rp_scene_detach(rp_scene *scene, uint32_t geom_id) {
+    if (!scene) return;
+    if (geom_id >= scene->geom_count || !scene->geoms[geom_id]) {
+        device_error(scene->device, RP_ERROR_INVALID_ARGUMENT, "rp_scene_detach: no geometry with this id");
+        return;
+    }
+    rp_geometry_release(scene->geoms[geom_id]);
+    scene->geoms[geom_id] = NULL;
+    scene->committed = false;
+}
+
+rp_geometry *rp_scene_get_geometry(rp_scene *scene, uint32_t geom_id) {
+    if (!scene || geom_id >= scene->geom_count) return NULL;
+    return scene->geoms[geom_id];
+}
+
+rp_error rp_scene_commit(rp_scene *scene) {
+    if (!scene) return RP_ERROR_INVALID_ARGUMENT;
+    double t0 = sys_seconds();
+    scene_free_accel(scene);
+    scene->committed = false;
+    rp_error e = scene_build(scene);
+    if (e != RP_ERROR_NONE) {
+        scene_free_accel(scene);
+        device_error(scene->device, e, "rp_scene_commit failed");
+        return e;
+    }
+    scene->stats.build_ms = (sys_seconds() - t0) * 1e3;
+    scene->committed = true;
+    return RP_ERROR_NONE;
+}
+
+void rp_scene_get_bounds(const rp_scene *scene, rp_bounds *out) {
+    if (!scene || !out) return;
+    *out = scene->bounds;
+}
+
+void rp_scene_get_stats(const rp_scene *scene, rp_scene_stats *out) {
+    if (!scene || !out) return;
+    *out = scene->stats;
+}
+
+/* ---- commit ------------------------------------------------------------------------------- */
+
+typedef struct gather {
+    box3 *boxes;
+    prim_ref *refs;
+    uint32_t count, capacity;
+} gather;
+
+static bool gather_push(const sys_allocator *a, gather *g, box3 b, uint32_t geom, uint32_t prim) {
+    if (g->count == g->capacity) {
+        uint32_t cap = g->capacity ? g->capacity * 2 : 1024;
+        box3 *nb = sys_alloc(a, (size_t)cap * sizeof *nb);
+        prim_ref *nr = sys_alloc(a, (size_t)cap * sizeof *nr);
+        if (!nb || !nr) {
+            sys_free(a, nb, (size_t)cap * sizeof *nb);
+            sys_free(a, nr, (size_t)cap * sizeof *nr);
+            return false;
+        }
+        if (g->count) {
+            memcpy(nb, g->boxes, g->count * sizeof *nb);
+            memcpy(nr, g->refs, g->count * sizeof *nr);
+        }
+        sys_free(a, g->boxes, (size_t)g->capacity * sizeof *nb);
+        sys_free(a, g->refs, (size_t)g->capacity * sizeof *nr);
+        g->boxes = nb, g->refs = nr, g->capacity = cap;
+    }
+    g->boxes[g->count] = b;
+    g->refs[g->count] = (prim_ref){geom, prim};
+    g->count++;
+    return true;
+}
+
+static void gather_free(const sys_allocator *a, gather *g) {
+    sys_free(a, g->boxes, (size_t)g->capacity * sizeof *g->boxes);
+    sys_free(a, g->refs, (size_t)g->capacity * sizeof *g->refs);
+    memset(g, 0, sizeof *g);
+}
+
+static vec3 load_vertex(const rp_geometry *g, uint32_t i) {
+    const float *p = geom_item(&g->buffers[RP_BUFFER_VERTEX], i);
+    return v3(p[0], p[1], p[2]);
+}
+
+/* Loads triangle prim of geometry g; false if its indices or coordinates are invalid. */
+static bool load_triangle(const rp_geometry *g, uint32_t prim, vec3 v[3]) {
+    const uint32_t *idx = geom_item(&g->buffers[RP_BUFFER_INDEX], prim);
+    size_t nv = g->buffers[RP_BUFFER_VERTEX].count;
+    for (int k = 0; k < 3; k++) {
+        if (idx[k] >= nv) return false;
+        v[k] = load_vertex(g, idx[k]);
+        if (!v3_finite(v[k])) return false;
+    }
+    return true;
+}
+
+typedef struct tri_pack_ctx {
+    const rp_scene *scene;
+    const bvh2 *bvh;
+    const prim_ref *refs;
+    tri4 *blocks;
+    uint32_t next, capacity;
+} tri_pack_ctx;
+
+/* Leaf payload of the triangle BVH: its triangles packed 4 to a block. */
+static bool tri_leaf(void *user, const bvh_node *leaf, uint32_t *first, uint32_t *items) {
+    tri_pack_ctx *c = user;
+    uint32_t n = leaf->count, blocks = (n + 3) / 4;
+    if (c->next + blocks > c->capacity) return false;
+    *first = c->next;
+    *items = blocks;
+    for (uint32_t b = 0; b < blocks; b++) {
+        tri4 *t = &c->blocks[c->next + b];
+        memset(t, 0, sizeof *t);
+        for (uint32_t j = 0; j < 4; j++) {
+            uint32_t k = b * 4 + j;
+            if (k >= n) break;
+            prim_ref r = c->refs[c->bvh->prims[leaf->index + k]];
+            const rp_geometry *g = c->scene->geoms[r.geom];
+            vec3 v[3] = {{0}};
+            load_triangle(g, r.prim, v); /* validated when gathered */
+            for (int q = 0; q < 3; q++) {
+                t->v[3 * q + 0][j] = v[q].x;
+                t->v[3 * q + 1][j] = v[q].y;
+                t->v[3 * q + 2][j] = v[q].z;
+            }
+            t->geom[j] = r.geom, t->prim[j] = r.prim, t->mask[j] = g->mask;
+        }
+    }
+    c->next += blocks;
+    return true;
+}
+
+/* Leaf payload of the primitive BVH: a range of the reordered prim_refs. */
+static bool prim_leaf(void *user, const bvh_node *leaf, uint32_t *first, uint32_t *items) {
+    (void)user;
+    *first = leaf->index;
+    *items = leaf->count;
+    return true;
+}
+
+static bool sphere_intersect_cb(const rp_accel *acc, prim_ref ref, rp_ray *ray, rp_hit *hit);
+static bool sphere_occluded_cb(const rp_accel *acc, prim_ref ref, const rp_ray *ray);
+
+static int pick_width(const rp_scene *s) {
+    if (s->desc.bvh_width) return s->desc.bvh_width;
+    return s->device->kernels->isa >= 8 ? 8 : 4;
+}
+
+static int quality_bins(rp_build_quality q) {
+    switch (q) {
+    case RP_BUILD_QUALITY_LOW: return 8;
+    case RP_BUILD_QUALITY_HIGH: return 64;
+    case RP_BUILD_QUALITY_MEDIUM: return 16;
+    }
+    return 16;
+}
+
+rp_error scene_build(rp_scene *s) {
+    const sys_allocator *a = &s->device->alloc;
+    rp_scene_stats st = {0};
+    gather tris = {0}, prims = {0};
+    rp_error err = RP_ERROR_NONE;
+    box3 bounds = box3_empty();
+    /* collect valid primitives */
+    for (uint32_t gi = 0; gi < s->geom_count && err == RP_ERROR_NONE; gi++) {
+        rp_geometry *g = s->geoms[gi];
+        if (!g) continue;
+        switch (g->type) {
+        case RP_GEOMETRY_TRIANGLE: {
+            if (!g->buffers[0].set || !g->buffers[1].set) {
+                err = RP_ERROR_INVALID_GEOMETRY;
+                break;
+            }
+            size_t n = g->buffers[RP_BUFFER_INDEX].count;
+            if (n > 0xFFFFFFF0u) {
+                err = RP_ERROR_INVALID_GEOMETRY;
+                break;
+            }
+            for (uint32_t p = 0; p < (uint32_t)n; p++) {
+                vec3 v[3];
+                if (!load_triangle(g, p, v)) {
+                    st.rejected_prims++;
+                    continue;
+                }
+                box3 b = {v3_min(v[0], v3_min(v[1], v[2])), v3_max(v[0], v3_max(v[1], v[2]))};
+                bounds = box3_union(bounds, b);
+                if (!gather_push(a, &tris, b, gi, p)) {
+                    err = RP_ERROR_OUT_OF_MEMORY;
+                    break;
+                }
+            }
+            break;
+        }
+        case RP_GEOMETRY_SPHERE: {
+            if (!g->buffers[0].set) {
+                err = RP_ERROR_INVALID_GEOMETRY;
+                break;
+            }
+            size_t n = g->buffers[RP_BUFFER_VERTEX].count;
+            for (uint32_t p = 0; p < (uint32_t)n && p < 0xFFFFFFF0u; p++) {
+                const float *c = geom_item(&g->buffers[RP_BUFFER_VERTEX], p);
+                if (!isfinite(c[0]) || !isfinite(c[1]) || !isfinite(c[2]) || !isfinite(c[3]) || !(c[3] >= 0.0f)) {
+                    st.rejected_prims++;
+                    continue;
+                }
+                box3 b = {v3(c[0] - c[3], c[1] - c[3], c[2] - c[3]), v3(c[0] + c[3], c[1] + c[3], c[2] + c[3])};
+                bounds = box3_union(bounds, b);
+                if (!gather_push(a, &prims, b, gi, p)) {
+                    err = RP_ERROR_OUT_OF_MEMORY;
+                    break;
+                }
+                st.spheres++;
+            }
+            break;
+        }
+        case RP_GEOMETRY_USER: {
+            if (!g->user_bounds) {
+                err = RP_ERROR_INVALID_GEOMETRY;
+                break;
+            }
+            for (uint32_t p = 0; p < g->user_count; p++) {
+                rp_bounds ub = {0};
+                g->user_bounds(g->user, p, &ub);
+                box3 b = {v3(ub.lower_x, ub.lower_y, ub.lower_z), v3(ub.upper_x, ub.upper_y, ub.upper_z)};
+                if (!v3_finite(b.lo) || !v3_finite(b.hi) || box3_is_empty(b) || b.lo.y > b.hi.y || b.lo.z > b.hi.z) {
+                    st.rejected_prims++;
+                    continue;
+                }
+                bounds = box3_union(bounds, b);
+                if (!gather_push(a, &prims, b, gi, p)) {
+                    err = RP_ERROR_OUT_OF_MEMORY;
+                    break;
+                }
+                st.user_prims++;
+            }
+            break;
+        }
+        }
+    }
+    if (err == RP_ERROR_NONE && st.rejected_prims) {
+        char msg[160];
+        snprintf(msg, sizeof msg, "rp_scene_commit: %llu primitives rejected (NaN/Inf coordinates or bad indices)",
+                 (unsigned long long)st.rejected_prims);
+        device_log(s->device, RP_LOG_WARNING, msg);
+    }
+    /* share the device's threads unless a parallel_for is running (commit called from a task) */
+    bool locked = err == RP_ERROR_NONE && pthread_mutex_trylock(&s->device->pool_lock) == 0;
+    sys_pool *pool = locked ? s->device->pool : NULL;
+    bvh_build_desc bd = {.bins = quality_bins(s->desc.quality), .max_leaf_size = s->desc.max_leaf_size};
+    int width = pick_width(s);
+    if (err == RP_ERROR_NONE && tris.count) {
+        bvh2 b2;
+        if (!bvh_build(a, pool, tris.boxes, tris.count, &bd, &b2)) {
+            err = RP_ERROR_OUT_OF_MEMORY;
+        } else {
+            tri_pack_ctx pc = {.scene = s, .bvh = &b2, .refs = tris.refs};
+            pc.capacity = b2.leaf_count + tris.count / 4 + 1;
+            pc.blocks = sys_alloc(a, (size_t)pc.capacity * sizeof(tri4));
+            if (!pc.blocks || !bvhw_from_bvh2(a, &b2, width, tri_leaf, &pc, &s->tri_bvh)) {
+                sys_free(a, pc.blocks, (size_t)pc.capacity * sizeof(tri4));
+                err = RP_ERROR_OUT_OF_MEMORY;
+            } else {
+                s->tris = pc.blocks;
+                s->tri_block_count = pc.capacity;
+                st.triangles = tris.count;
+                st.binary_nodes = b2.node_count;
+                st.wide_nodes = s->tri_bvh.node_count;
+                st.leaves = b2.leaf_count;
+                st.depth = b2.depth;
+                st.sah_cost = b2.sah_cost;
+                st.bytes = s->tri_bvh.bytes + (size_t)pc.next * sizeof(tri4);
+            }
+            bvh2_free(a, &b2);
+        }
+    }
+    if (err == RP_ERROR_NONE && prims.count) {
+        bvh2 b2;
+        bvh_build_desc pd = {.bins = bd.bins, .max_leaf_size = 4};
+        if (!bvh_build(a, pool, prims.boxes, prims.count, &pd, &b2)) {
+            err = RP_ERROR_OUT_OF_MEMORY;
+        } else {
+            s->prims = sys_alloc(a, (size_t)prims.count * sizeof(prim_ref));
+            if (s->prims) {
+                s->prim_count = prims.count;
+                for (uint32_t i = 0; i < prims.count; i++) s->prims[i] = prims.refs[b2.prims[i]];
+            }
+            if (!s->prims || !bvhw_from_bvh2(a, &b2, 4, prim_leaf, NULL, &s->prim_bvh)) {
+                err = RP_ERROR_OUT_OF_MEMORY;
+            } else {
+                st.binary_nodes += b2.node_count;
+                st.wide_nodes += s->prim_bvh.node_count;
+                st.leaves += b2.leaf_count;
+                if (b2.depth > st.depth) st.depth = b2.depth;
+                st.bytes += s->prim_bvh.bytes + prims.count * sizeof(prim_ref);
+            }
+            bvh2_free(a, &b2);
+        }
+    }
+    if (locked) pthread_mutex_unlock(&s->device->pool_lock);
+    gather_free(a, &tris);
+    gather_free(a, &prims);
+    if (err != RP_ERROR_NONE) return err;
+    st.bvh_width = (uint32_t)width;
+    s->stats = st;
+    s->bounds = (rp_bounds){bounds.lo.x, bounds.lo.y, bounds.lo.z, 0.0f, bounds.hi.x, bounds.hi.y, bounds.hi.z, 0.0f};
+    s->accel = (rp_accel){
+        .width = width,
+        .nodes = s->tri_bvh.nodes,
+        .tris = s->tris,
+        .pnodes = s->prim_bvh.nodes,
+        .prims = s->prims,
+        .prim_intersect = sphere_intersect_cb,
+        .prim_occluded = sphere_occluded_cb,
+        .scene = s,
+    };
+    return RP_ERROR_NONE;
+}
+
+/* ---- spheres and user primitives ---------------------------------------------------------- */
+
+static bool sphere_intersect_cb(const rp_accel *acc, prim_ref ref, rp_ray *ray, rp_hit *hit) {
+    const rp_scene *s = acc->scene;
+    const rp_geometry *g = s->geoms[ref.geom];
+    if ((ray->mask & g->mask) == 0) return false;
+    if (g->type == RP_GEOMETRY_USER) {
+        if (!g->user_intersect(g->user, ref.prim, ray, hit)) return false;
+        hit->geom_id = ref.geom, hit->prim_id = ref.prim, hit->inst_id = RP_INVALID_ID;
+        return true;
+    }
+    const float *c = geom_item(&g->buffers[RP_BUFFER_VERTEX], ref.prim);
+    float org[3] = {ray->org_x, ray->org_y, ray->org_z}, dir[3] = {ray->dir_x, ray->dir_y, ray->dir_z}, t;
+    if (!sphere_intersect(org, dir, ray->tnear, ray->tfar, c, c[3], &t)) return false;
+    float n[3] = {org[0] + t * dir[0] - c[0], org[1] + t * dir[1] - c[1], org[2] + t * dir[2] - c[2]};
+    ray->tfar = t;
+    hit->Ng_x = n[0], hit->Ng_y = n[1], hit->Ng_z = n[2];
+    /* spherical coordinates, for texturing */
+    float r = sqrtf(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    float phi = atan2f(n[1], n[0]);
+    hit->u = (phi < 0.0f ? phi + 6.2831853f : phi) * 0.15915494f;
+    hit->v = r > 0.0f ? acosf(fminf(fmaxf(n[2] / r, -1.0f), 1.0f)) * 0.31830989f : 0.0f;
+    hit->geom_id = ref.geom, hit->prim_id = ref.prim, hit->inst_id = RP_INVALID_ID;
+    return true;
+}
+
+static bool sphere_occluded_cb(const rp_accel *acc, prim_ref ref, const rp_ray *ray) {
+    const rp_scene *s = acc->scene;
+    const rp_geometry *g = s->geoms[ref.geom];
+    if ((ray->mask & g->mask) == 0) return false;
+    if (g->type == RP_GEOMETRY_USER) return g->user_occluded(g->user, ref.prim, ray);
+    const float *c = geom_item(&g->buffers[RP_BUFFER_VERTEX], ref.prim);
+    float org[3] = {ray->org_x, ray->org_y, ray->org_z}, dir[3] = {ray->dir_x, ray->dir_y, ray->dir_z}, t;
+    return sphere_intersect(org, dir, ray->tnear, ray->tfar, c, c[3], &t);
+}

@@ -1,0 +1,42 @@
+/* Scalar reference of the watertight ray-triangle test (Woop, Benthin, Wald 2013, JCGT 2(1)).
+ * The kernels in traverse/kernels.inc run this exact arithmetic on SIMD lanes. */
+#include <math.h>
+
+#include "traverse/traverse.h"
+
+bool tri_intersect_ref(const float org[3], const float dir[3], float tnear, float tfar, const float v0[3],
+                       const float v1[3], const float v2[3], float *t, float *u, float *v) {
+    int kz = 0;
+    float a = fabsf(dir[0]);
+    if (fabsf(dir[1]) > a) kz = 1, a = fabsf(dir[1]);
+    if (fabsf(dir[2]) > a) kz = 2;
+    int kx = kz == 2 ? 0 : kz + 1, ky = kx == 2 ? 0 : kx + 1;
+    if (dir[kz] < 0.0f) {
+        int s = kx;
+        kx = ky, ky = s;
+    }
+    float sx = dir[kx] / dir[kz], sy = dir[ky] / dir[kz], sz = 1.0f / dir[kz];
+    float ax = v0[kx] - org[kx], ay = v0[ky] - org[ky], az = v0[kz] - org[kz];
+    float bx = v1[kx] - org[kx], by = v1[ky] - org[ky], bz = v1[kz] - org[kz];
+    float cx = v2[kx] - org[kx], cy = v2[ky] - org[ky], cz = v2[kz] - org[kz];
+    float Ax = ax - sx * az, Ay = ay - sy * az;
+    float Bx = bx - sx * bz, By = by - sy * bz;
+    float Cx = cx - sx * cz, Cy = cy - sy * cz;
+    float U = Cx * By - Cy * Bx, V = Ax * Cy - Ay * Cx, W = Bx * Ay - By * Ax;
+    if (U == 0.0f || V == 0.0f || W == 0.0f) {
+        U = (float)((double)Cx * (double)By - (double)Cy * (double)Bx);
+        V = (float)((double)Ax * (double)Cy - (double)Ay * (double)Cx);
+        W = (float)((double)Bx * (double)Ay - (double)By * (double)Ax);
+    }
+    if ((U < 0.0f || V < 0.0f || W < 0.0f) && (U > 0.0f || V > 0.0f || W > 0.0f)) return false;
+    float det = U + V + W;
+    if (det == 0.0f) return false;
+    float T = U * (sz * az) + V * (sz * bz) + W * (sz * cz);
+    float rcp = 1.0f / det;
+    float tt = T * rcp;
+    if (!(tt >= tnear && tt <= tfar)) return false;
+    *t = tt;
+    *u = V * rcp;
+    *v = W * rcp;
+    return true;
+}

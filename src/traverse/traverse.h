@@ -1,0 +1,70 @@
+/* What the traversal kernels see of a committed scene, and the per-ISA kernel table. */
+#ifndef RP_TRAVERSE_H
+#define RP_TRAVERSE_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "raypack.h"
+
+/* Four triangles in SoA form, the leaf item of triangle BVHs. v[3*vertex + axis][lane].
+ * Unused lanes have mask 0, so no ray ever hits them. */
+typedef struct tri4 {
+    float v[9][4];
+    uint32_t geom[4];
+    uint32_t prim[4];
+    uint32_t mask[4];
+} tri4;
+
+/* A primitive of a sphere or user geometry, the leaf item of the second BVH. */
+typedef struct prim_ref {
+    uint32_t geom;
+    uint32_t prim;
+} prim_ref;
+
+typedef struct rp_accel rp_accel;
+/* Exact intersection with one non-triangle primitive: closest-hit and any-hit forms. */
+typedef bool (*prim_intersect_fn)(const rp_accel *acc, prim_ref ref, rp_ray *ray, rp_hit *hit);
+typedef bool (*prim_occluded_fn)(const rp_accel *acc, prim_ref ref, const rp_ray *ray);
+
+struct rp_accel {
+    /* triangles: wide BVH of tri4 blocks */
+    int width;                 /* 4, 8 or 16 */
+    const void *nodes;         /* NULL when the scene has no triangles */
+    const tri4 *tris;
+    /* spheres and user primitives: BVH4 of prim_refs */
+    const void *pnodes;        /* NULL when there are none */
+    const prim_ref *prims;
+    prim_intersect_fn prim_intersect;
+    prim_occluded_fn prim_occluded;
+    const void *scene;         /* the rp_scene, for the primitive callbacks */
+};
+
+typedef struct rp_kernels {
+    const char *name;
+    int isa;
+    void (*intersect1)(const rp_accel *acc, rp_rayhit *rh);
+    void (*occluded1)(const rp_accel *acc, rp_ray *ray);
+    void (*intersect4)(const rp_accel *acc, const int32_t *valid, rp_rayhit4 *rh);
+    void (*intersect8)(const rp_accel *acc, const int32_t *valid, rp_rayhit8 *rh);
+    void (*intersect16)(const rp_accel *acc, const int32_t *valid, rp_rayhit16 *rh);
+    void (*occluded4)(const rp_accel *acc, const int32_t *valid, rp_ray4 *ray);
+    void (*occluded8)(const rp_accel *acc, const int32_t *valid, rp_ray8 *ray);
+    void (*occluded16)(const rp_accel *acc, const int32_t *valid, rp_ray16 *ray);
+} rp_kernels;
+
+extern const rp_kernels rp_kernels_scalar, rp_kernels_sse, rp_kernels_avx2, rp_kernels_avx512;
+
+/* Scalar reference: the watertight test of one ray against one triangle (Woop, Benthin, Wald
+ * 2013), the same arithmetic as every kernel, so results agree bit for bit. Returns true on a hit
+ * with tnear <= t <= tfar and writes t, u, v. */
+bool tri_intersect_ref(const float org[3], const float dir[3], float tnear, float tfar, const float v0[3],
+                       const float v1[3], const float v2[3], float *t, float *u, float *v);
+
+/* Tie-break of equal distances: the lower (geom, prim) wins, so every traversal order gives the
+ * same hit. */
+static inline bool hit_key_less(uint32_t g0, uint32_t p0, uint32_t g1, uint32_t p1) {
+    return g0 < g1 || (g0 == g1 && p0 < p1);
+}
+
+#endif

@@ -1,0 +1,283 @@
+// rp-test: labels=core
+/* The public API at its boundary: error codes, the error callback and the first-error-per-thread
+ * rule, refcounts and allocator hooks (every byte given back), NaN/Inf and out-of-range
+ * primitives rejected with a counted warning, degenerate and huge/tiny inputs, spheres, user
+ * geometry, masks, parallel_for. */
+#include <math.h>
+#include <pthread.h>
+
+#include "mesh_gen.h"
+#include "raypack.h"
+#include "rp_test.h"
+
+typedef struct counting {
+    long live_blocks;
+    long long live_bytes;
+    long total;
+} counting;
+
+static void *count_alloc(void *user, void *ptr, size_t old_size, size_t new_size, size_t align) {
+    counting *c = user;
+    if (new_size == 0) {
+        if (ptr) c->live_blocks--, c->live_bytes -= (long long)old_size;
+        free(ptr);
+        return NULL;
+    }
+    void *p = NULL;
+    if (posix_memalign(&p, align < sizeof(void *) ? sizeof(void *) : align, new_size) != 0) return NULL;
+    c->live_blocks++, c->live_bytes += (long long)new_size, c->total++;
+    return p;
+}
+
+typedef struct errors {
+    int count;
+    rp_error last;
+    int warnings;
+    char message[256];
+} errors;
+
+static void on_error(void *user, rp_error code, const char *message) {
+    errors *e = user;
+    e->count++, e->last = code;
+    snprintf(e->message, sizeof e->message, "%s", message);
+}
+
+static void on_log(void *user, rp_log_level level, const char *message) {
+    errors *e = user;
+    if (level == RP_LOG_WARNING) e->warnings++;
+    snprintf(e->message, sizeof e->message, "%s", message);
+}
+
+static rp_rayhit ray_at(float ox, float oy, float oz, float dx, float dy, float dz) {
+    rp_rayhit rh = {.ray = {.org_x = ox, .org_y = oy, .org_z = oz, .dir_x = dx, .dir_y = dy, .dir_z = dz,
+                            .tnear = 0.0f, .tfar = INFINITY, .mask = ~0u}};
+    rh.hit.geom_id = RP_INVALID_ID;
+    return rh;
+}
+
+typedef struct user_spheres {
+    float c[3], r;
+} user_spheres;
+
+static void ub(void *user, uint32_t prim, rp_bounds *out) {
+    const user_spheres *s = (const user_spheres *)user + prim;
+    *out = (rp_bounds){s->c[0] - s->r, s->c[1] - s->r, s->c[2] - s->r, 0, s->c[0] + s->r, s->c[1] + s->r, s->c[2] + s->r, 0};
+}
+/* A user primitive that is a plane square at z = c[2] of half size r. */
+static bool ui(void *user, uint32_t prim, rp_ray *ray, rp_hit *hit) {
+    const user_spheres *s = (const user_spheres *)user + prim;
+    if (ray->dir_z == 0.0f) return false;
+    float t = (s->c[2] - ray->org_z) / ray->dir_z;
+    float x = ray->org_x + t * ray->dir_x, y = ray->org_y + t * ray->dir_y;
+    if (t < ray->tnear || t > ray->tfar || fabsf(x - s->c[0]) > s->r || fabsf(y - s->c[1]) > s->r) return false;
+    ray->tfar = t;
+    hit->Ng_x = 0, hit->Ng_y = 0, hit->Ng_z = 1, hit->u = 0, hit->v = 0;
+    return true;
+}
+static bool uo(void *user, uint32_t prim, const rp_ray *ray) {
+    rp_ray r = *ray;
+    rp_hit h;
+    return ui(user, prim, &r, &h);
+}
+
+typedef struct pf {
+    uint32_t *seen;
+    int threads;
+} pf;
+static void pf_task(void *user, uint32_t index, uint32_t thread) {
+    pf *p = user;
+    __atomic_fetch_add(&p->seen[index], 1u, __ATOMIC_RELAXED);
+    if ((int)thread >= p->threads) __atomic_fetch_add(&p->seen[0], 1000u, __ATOMIC_RELAXED);
+}
+
+static void *other_thread(void *dev) { return (void *)(intptr_t)rp_device_get_error(dev); }
+
+int main(void) {
+    counting mem = {0};
+    errors err = {0};
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 3, .alloc = count_alloc, .alloc_user = &mem,
+                                                     .error = on_error, .error_user = &err, .log = on_log, .log_user = &err});
+    CHECK(dev != NULL);
+    CHECK(rp_device_thread_count(dev) == 3);
+    CHECK(rp_device_isa(dev) == 1 || rp_device_isa(dev) == 4 || rp_device_isa(dev) == 8 || rp_device_isa(dev) == 16);
+    CHECK(strcmp(rp_error_string(RP_ERROR_NOT_COMMITTED), "the scene was edited and not committed since") == 0);
+    CHECK(strcmp(rp_error_string((rp_error)999), "invalid error code") == 0);
+    CHECK(rp_device_new(&(rp_device_desc){.threads = -1}) == NULL);
+    CHECK(rp_device_new(&(rp_device_desc){.isa = 3}) == NULL);
+
+    /* bad arguments */
+    CHECK(rp_geometry_new(dev, (rp_geometry_type)7) == NULL);
+    CHECK(err.last == RP_ERROR_INVALID_ARGUMENT && err.count == 1);
+    CHECK(rp_scene_new(dev, &(rp_scene_desc){.bvh_width = 3}) == NULL);
+    rp_geometry *tri = rp_geometry_new(dev, RP_GEOMETRY_TRIANGLE);
+    rp_geometry_set_buffer(tri, RP_BUFFER_INDEX, RP_FORMAT_FLOAT3, NULL, 0, 0, 0);
+    CHECK(err.last == RP_ERROR_INVALID_ARGUMENT);
+    rp_geometry_set_buffer(tri, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, (const float[3]){0}, 0, 8, 1); /* stride < 12 */
+    CHECK(err.last == RP_ERROR_INVALID_ARGUMENT);
+    /* the first error of this thread is kept until read, then cleared; other threads have their own */
+    CHECK(rp_device_get_error(dev) == RP_ERROR_INVALID_ARGUMENT);
+    CHECK(rp_device_get_error(dev) == RP_ERROR_NONE);
+    pthread_t th;
+    rp_geometry_set_mask(NULL, 0); /* NULL handles are ignored */
+    rp_geometry_commit(tri);       /* no buffers */
+    CHECK(err.last == RP_ERROR_INVALID_GEOMETRY);
+    pthread_create(&th, NULL, other_thread, dev);
+    void *other = NULL;
+    pthread_join(th, &other);
+    CHECK((rp_error)(intptr_t)other == RP_ERROR_NONE);
+    CHECK(rp_device_get_error(dev) == RP_ERROR_INVALID_GEOMETRY);
+
+    /* queries on an uncommitted scene */
+    rp_scene *scene = rp_scene_new(dev, NULL);
+    rp_rayhit rh = ray_at(0, 0, -5, 0, 0, 1);
+    rp_intersect1(scene, &rh);
+    CHECK(rp_device_get_error(dev) == RP_ERROR_NOT_COMMITTED);
+    CHECK(rh.hit.geom_id == RP_INVALID_ID && rh.ray.tfar == INFINITY);
+    /* a committed empty scene: no hit, no error */
+    CHECK(rp_scene_commit(scene) == RP_ERROR_NONE);
+    rp_intersect1(scene, &rh);
+    CHECK(rh.hit.geom_id == RP_INVALID_ID && rp_device_get_error(dev) == RP_ERROR_NONE);
+    /* a geometry missing its index buffer fails the commit */
+    rp_scene_attach(scene, tri);
+    CHECK(rp_scene_commit(scene) == RP_ERROR_INVALID_GEOMETRY);
+    rp_intersect1(scene, &rh);
+    CHECK(rp_device_get_error(dev) == RP_ERROR_INVALID_GEOMETRY); /* first error kept: the commit's */
+
+    /* library-owned buffers: 2 good triangles, 1 with NaN, 1 with an out-of-range index */
+    float *v = rp_geometry_new_buffer(tri, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, 0, 7);
+    uint32_t *ix = rp_geometry_new_buffer(tri, RP_BUFFER_INDEX, RP_FORMAT_UINT3, 0, 4);
+    CHECK(v && ix);
+    float vv[21] = {-1, -1, 0, 1, -1, 0, 1, 1, 0, -1, 1, 0, NAN, 0, 0, 0, 1, 0, 0, 0, 1};
+    memcpy(v, vv, sizeof vv);
+    uint32_t ii[12] = {0, 1, 2, 0, 2, 3, 4, 5, 6, 0, 1, 9};
+    memcpy(ix, ii, sizeof ii);
+    rp_geometry_commit(tri);
+    err.warnings = 0;
+    CHECK(rp_scene_commit(scene) == RP_ERROR_NONE);
+    rp_scene_stats st;
+    rp_scene_get_stats(scene, &st);
+    CHECK(st.triangles == 2 && st.rejected_prims == 2);
+    CHECKF(err.warnings == 1 && strstr(err.message, "2 primitives rejected"), "warning: %s", err.message);
+    rh = ray_at(0.5f, -0.5f, -5, 0, 0, 1);
+    rp_intersect1(scene, &rh);
+    CHECK(rh.hit.geom_id == 0 && rh.hit.prim_id == 0 && fabsf(rh.ray.tfar - 5.0f) < 1e-6f);
+    CHECK(rh.hit.Ng_z > 0.0f && fabsf(rh.hit.u + rh.hit.v - 0.5f) < 1.0f);
+    rh = ray_at(-0.5f, 0.5f, -5, 0, 0, 1);
+    rp_intersect1(scene, &rh);
+    CHECK(rh.hit.prim_id == 1);
+    /* tnear / tfar bound the segment */
+    rh = ray_at(0.5f, -0.5f, -5, 0, 0, 1);
+    rh.ray.tfar = 4.9f;
+    rp_intersect1(scene, &rh);
+    CHECK(rh.hit.geom_id == RP_INVALID_ID);
+    rh.ray.tnear = 5.1f, rh.ray.tfar = INFINITY;
+    rp_intersect1(scene, &rh);
+    CHECK(rh.hit.geom_id == RP_INVALID_ID);
+    /* masks */
+    rp_geometry_set_mask(tri, 2);
+    CHECK(rp_scene_commit(scene) == RP_ERROR_NONE);
+    rh = ray_at(0.5f, -0.5f, -5, 0, 0, 1);
+    rh.ray.mask = 1;
+    rp_intersect1(scene, &rh);
+    CHECK(rh.hit.geom_id == RP_INVALID_ID);
+    rh.ray.mask = 2;
+    rp_intersect1(scene, &rh);
+    CHECK(rh.hit.geom_id == 0);
+
+    /* spheres and user geometry beside triangles, with strided shared buffers */
+    float spheres[2][5] = {{0, 0, 3, 0.5f, 99}, {0, 0, 6, 1.0f, 99}};
+    rp_geometry *sph = rp_geometry_new(dev, RP_GEOMETRY_SPHERE);
+    rp_geometry_set_buffer(sph, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT4, spheres, 0, 5 * sizeof(float), 2);
+    uint32_t sid = rp_scene_attach(scene, sph);
+    user_spheres squares[1] = {{{0, 0, -2}, 0.25f}};
+    rp_geometry *usr = rp_geometry_new(dev, RP_GEOMETRY_USER);
+    rp_geometry_set_user(usr, 1, ub, ui, uo, squares);
+    uint32_t uid = rp_scene_attach(scene, usr);
+    rp_geometry_set_mask(tri, ~0u);
+    CHECK(rp_scene_commit(scene) == RP_ERROR_NONE);
+    rh = ray_at(0, 0, 10, 0, 0, -1); /* from above: the big sphere first */
+    rp_intersect1(scene, &rh);
+    CHECKF(rh.hit.geom_id == sid && rh.hit.prim_id == 1 && fabsf(rh.ray.tfar - 3.0f) < 1e-5f, "sphere hit %u %u %g",
+           rh.hit.geom_id, rh.hit.prim_id, (double)rh.ray.tfar);
+    rh = ray_at(0, 0, -10, 0, 0, 1); /* from below: the user square at z = -2 */
+    rp_intersect1(scene, &rh);
+    CHECK(rh.hit.geom_id == uid && fabsf(rh.ray.tfar - 8.0f) < 1e-5f);
+    rh = ray_at(0.6f, 0.6f, -10, 0, 0, 1); /* misses the square, hits the triangles */
+    rp_intersect1(scene, &rh);
+    CHECK(rh.hit.geom_id == 0);
+    rp_ray sr = ray_at(0, 0, 10, 0, 0, -1).ray;
+    sr.tfar = 3.5f;
+    rp_occluded1(scene, &sr);
+    CHECK(sr.tfar == -INFINITY);
+    sr = ray_at(3, 3, 10, 0, 0, -1).ray;
+    rp_occluded1(scene, &sr);
+    CHECK(sr.tfar == INFINITY);
+    /* the same through a packet, with dead lanes untouched */
+    rp_rayhit4 p4;
+    int32_t valid[4] = {-1, 0, -1, -1};
+    rp_rayhit r4[4] = {ray_at(0, 0, 10, 0, 0, -1), ray_at(0, 0, 10, 0, 0, -1), ray_at(0, 0, -10, 0, 0, 1),
+                       ray_at(0.5f, -0.5f, -5, 0, 0, 1)};
+    for (int i = 0; i < 4; i++) {
+        p4.ray.org_x[i] = r4[i].ray.org_x, p4.ray.org_y[i] = r4[i].ray.org_y, p4.ray.org_z[i] = r4[i].ray.org_z;
+        p4.ray.dir_x[i] = r4[i].ray.dir_x, p4.ray.dir_y[i] = r4[i].ray.dir_y, p4.ray.dir_z[i] = r4[i].ray.dir_z;
+        p4.ray.tnear[i] = 0, p4.ray.tfar[i] = INFINITY, p4.ray.mask[i] = ~0u, p4.hit.geom_id[i] = RP_INVALID_ID;
+    }
+    rp_intersect4(scene, valid, &p4);
+    CHECK(p4.hit.geom_id[0] == sid && p4.hit.geom_id[1] == RP_INVALID_ID && p4.ray.tfar[1] == INFINITY);
+    CHECK(p4.hit.geom_id[2] == uid && p4.hit.geom_id[3] == 0 && fabsf(p4.ray.tfar[3] - 5.0f) < 1e-6f);
+    /* detach */
+    rp_scene_detach(scene, sid);
+    rp_scene_detach(scene, sid);
+    CHECK(rp_device_get_error(dev) == RP_ERROR_INVALID_ARGUMENT);
+    rp_intersect1(scene, &rh);
+    CHECK(rp_device_get_error(dev) == RP_ERROR_NOT_COMMITTED);
+    CHECK(rp_scene_commit(scene) == RP_ERROR_NONE);
+    rp_geometry_release(sph);
+    rp_geometry_release(usr);
+    rp_geometry_release(tri);
+
+    /* degenerate input: all triangles identical, and huge / tiny coordinates */
+    rp_scene *deg = rp_scene_new(dev, NULL);
+    rp_geometry *dg = rp_geometry_new(dev, RP_GEOMETRY_TRIANGLE);
+    float *dv = rp_geometry_new_buffer(dg, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, 0, 9);
+    uint32_t *di = rp_geometry_new_buffer(dg, RP_BUFFER_INDEX, RP_FORMAT_UINT3, 0, 5003);
+    float dvv[27] = {0, 0, 0, 1, 0, 0, 0, 1, 0, -3e15f, -3e15f, 1, 3e15f, -3e15f, 1, 0, 3e15f, 1, 1e-30f, 1e-30f, 2, 2e-30f, 1e-30f, 2, 1e-30f, 2e-30f, 2};
+    memcpy(dv, dvv, sizeof dvv);
+    for (int i = 0; i < 5000; i++) di[3 * i] = 0, di[3 * i + 1] = 1, di[3 * i + 2] = 2;
+    di[15000] = 3, di[15001] = 4, di[15002] = 5, di[15003] = 6, di[15004] = 7, di[15005] = 8, di[15006] = 0, di[15007] = 0, di[15008] = 0;
+    rp_scene_attach(deg, dg);
+    rp_geometry_release(dg);
+    CHECK(rp_scene_commit(deg) == RP_ERROR_NONE);
+    rp_scene_get_stats(deg, &st);
+    CHECK(st.triangles == 5003 && st.depth <= 100);
+    rh = ray_at(0.2f, 0.2f, -1, 0, 0, 1);
+    rp_intersect1(deg, &rh);
+    CHECK(rh.hit.geom_id == 0 && rh.hit.prim_id == 0); /* lowest id among 5000 duplicates */
+    rh = ray_at(1e14f, 0, -1, 0, 0, 1);
+    rp_intersect1(deg, &rh);
+    CHECKF(rh.hit.prim_id == 5000 && fabsf(rh.ray.tfar - 2.0f) < 1e-6f, "huge triangle: geom %u prim %u t %g", rh.hit.geom_id, rh.hit.prim_id, (double)rh.ray.tfar);
+    /* coordinates near FLT_MAX build fine (the edge functions of such triangles overflow float,
+     * so they are not hit: the same limit as every float ray tracer) */
+    dv[9] = -3e38f, dv[12] = 3e38f, dv[16] = 3e38f;
+    CHECK(rp_scene_commit(deg) == RP_ERROR_NONE);
+    rp_scene_get_stats(deg, &st);
+    CHECK(st.triangles == 5003);
+    rh = ray_at(0.2f, 0.2f, -1, 0, 0, 1);
+    rp_intersect1(deg, &rh);
+    CHECK(rh.hit.prim_id == 0);
+    rp_scene_release(deg);
+
+    /* parallel_for hands out every index exactly once, on the device's threads */
+    pf p = {calloc(10000, sizeof(uint32_t)), rp_device_thread_count(dev)};
+    rp_device_parallel_for(dev, 10000, pf_task, &p);
+    int once = 1;
+    for (int i = 0; i < 10000; i++) once &= p.seen[i] == 1;
+    CHECK(once);
+    free(p.seen);
+
+    rp_scene_release(scene);
+    rp_device_release(dev);
+    CHECKF(mem.live_blocks == 0 && mem.live_bytes == 0, "%ld blocks, %lld bytes not freed", mem.live_blocks, mem.live_bytes);
+    CHECK(mem.total > 5);
+    return RP_TEST_END();
+}

@@ -1,0 +1,261 @@
+/* Internals shared by the scene loaders: the load context (files, errors), the scene builder the
+ * parsers append to, the polygon triangulator and the number parsers.
+ *
+ * Every file a loader reads is held in memory, NUL-terminated one byte past its end, so parsers can
+ * look one character ahead without bounds checks: the NUL stops every digit and word loop. */
+#ifndef RP_IO_INTERNAL_H
+#define RP_IO_INTERNAL_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "raypack_io.h"
+
+#define IO_PATH_MAX 1024
+#define IO_NONE UINT32_MAX /* "no normal / texcoord for this corner" while building */
+
+/* ---- files ------------------------------------------------------------------------------------ */
+
+/* A whole file in memory; data[size] == '\0'. */
+typedef struct io_buf {
+    char *data;
+    size_t size;
+    bool owned; /* false: borrowed from the archive */
+} io_buf;
+
+typedef struct io_entry {
+    char *name; /* normalized path inside the archive */
+    char *data; /* NUL-terminated */
+    size_t size;
+} io_entry;
+
+/* Where relative paths resolve: the disk, or the entries of one tar archive. */
+typedef struct io_vfs {
+    const char *archive; /* path of the archive, NULL: the disk */
+    io_entry *entries;
+    size_t entry_count;
+} io_vfs;
+
+/* ---- builder ---------------------------------------------------------------------------------- */
+
+typedef struct io_builder {
+    float *pos;
+    size_t pos_n, pos_cap; /* in vertices */
+    float *nrm;
+    size_t nrm_n, nrm_cap;
+    float *uv;
+    size_t uv_n, uv_cap;
+    uint32_t *idx, *nidx, *tidx, *mat; /* nidx/tidx allocated lazily, IO_NONE where absent */
+    size_t tri_n, tri_cap;
+    rp_sphere_data *spheres;
+    size_t sphere_n, sphere_cap;
+    rp_cone_data *cones;
+    size_t cone_n, cone_cap;
+    rp_material_data *materials;
+    size_t material_n, material_cap;
+    rp_texture_data *textures;
+    size_t texture_n, texture_cap;
+    char **texture_keys; /* resolved path of each texture, for sharing */
+    rp_light_data *lights;
+    size_t light_n, light_cap;
+    rp_camera_data camera;
+    float background[3];
+    bool has_background;
+    uint32_t default_material; /* IO_NONE until needed */
+} io_builder;
+
+/* ---- load context ----------------------------------------------------------------------------- */
+
+typedef struct io_ctx {
+    io_vfs vfs;
+    io_builder b;
+    char *err;
+    size_t err_size;
+    bool failed;
+    size_t bytes;  /* scene text parsed, after decompression */
+    int depth;     /* include nesting */
+    uint32_t *scratch_u; /* per-polygon scratch, grown as needed */
+    size_t scratch_u_cap;
+    float *scratch_f;
+    size_t scratch_f_cap;
+} io_ctx;
+
+/* Records the first error as "file:line: error: message"; always returns false. */
+bool io_error(io_ctx *ctx, const char *file, uint32_t line, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+/* Grows *p to hold at least `need` elements of `elem` bytes, geometrically; false when out of memory. */
+bool io_reserve(void **p, size_t *cap, size_t need, size_t elem);
+/* Scratch arrays for one polygon (n indices, 3n floats); NULL when out of memory. */
+uint32_t *io_scratch_u(io_ctx *ctx, size_t n);
+float *io_scratch_f(io_ctx *ctx, size_t n);
+
+/* ---- files (io_vfs.c) ------------------------------------------------------------------------- */
+
+/* Reads `path` (on disk: gzip'd or plain; in an archive: an entry). Writes no error. */
+bool vfs_read(io_ctx *ctx, const char *path, io_buf *out);
+/* True when `path` can be read. */
+bool vfs_exists(io_ctx *ctx, const char *path);
+void vfs_buf_free(io_buf *buf);
+/* Reads every regular file of a tar (.tar, .tar.gz) archive into ctx->vfs. */
+bool vfs_open_archive(io_ctx *ctx, const char *path);
+void vfs_close(io_vfs *vfs);
+/* dir of `base` + `rel` into out (lexically normalized inside archives). */
+void vfs_join(const io_vfs *vfs, const char *base, const char *rel, char *out, size_t size);
+/* The name errors use for `path`: "archive/entry" inside an archive. */
+void vfs_display(const io_vfs *vfs, const char *path, char *out, size_t size);
+/* Archive entry whose base name is `name`, when exactly one is; NULL otherwise. */
+const char *vfs_find_basename(const io_vfs *vfs, const char *name);
+/* Lower-case extension of path after stripping ".gz" ("obj", "tar", ...); "" if none. */
+void vfs_extension(const char *path, char *ext, size_t size);
+
+/* ---- builder (io_scene.c) --------------------------------------------------------------------- */
+
+uint32_t builder_default_material(io_ctx *ctx);
+/* Appends a material (kd etc. filled by the caller); returns its index or IO_NONE (out of memory). */
+uint32_t builder_add_material(io_ctx *ctx, const rp_material_data *m);
+bool builder_add_triangle(io_ctx *ctx, const uint32_t v[3], const uint32_t *n, const uint32_t *t,
+                          uint32_t material);
+bool builder_reserve_vertices(io_ctx *ctx, size_t extra);
+bool builder_reserve_normals(io_ctx *ctx, size_t extra);
+bool builder_reserve_texcoords(io_ctx *ctx, size_t extra);
+bool builder_reserve_triangles(io_ctx *ctx, size_t extra);
+/* Material initialised to the defaults of every format (grey diffuse, ior 1, no texture). */
+void builder_material_defaults(rp_material_data *m, const char *name);
+
+/* ---- textures (io_texture.c) ------------------------------------------------------------------ */
+
+/* Loads (or finds already loaded) the texture at resolved path `path`, named `as_written` in the
+ * scene; returns its index, or IO_NONE after writing an error at file:line. */
+uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const char *file,
+                  uint32_t line);
+
+/* ---- polygons (io_poly.c) --------------------------------------------------------------------- */
+
+/* Triangulates the simple polygon of n points (xyz each): a fan when it is convex, ear clipping
+ * otherwise. Writes 3(n-2) indices into [0, n) to tris; scratch holds n uint32. */
+void poly_triangulate(const float *pts, uint32_t n, uint32_t *tris, uint32_t *scratch);
+
+/* ---- loaders ---------------------------------------------------------------------------------- */
+
+bool obj_load(io_ctx *ctx, const char *path);
+bool ply_load(io_ctx *ctx, const char *path);
+bool nff_load(io_ctx *ctx, const char *path);
+
+/* ---- numbers ---------------------------------------------------------------------------------- */
+
+static inline bool io_is_digit(char c) { return (unsigned)(c - '0') < 10u; }
+static inline bool io_is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+
+/* Exact powers of ten for the fast path (Clinger 1990): 10^k is exact in a double for k <= 22. */
+static const double io_pow10[23] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
+                                    1e8,  1e9,  1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+                                    1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+
+float io_parse_float_slow(const char *start, const char *end, bool *ok);
+
+/* Parses a decimal float at p (sign, digits, point, exponent); returns the end, or NULL when there
+ * is no number or it is out of float range. Correctly rounded: the fast path is a single exact
+ * double operation whose result is rounded to float only when that rounding is not a tie;
+ * everything else goes to strtof. NaN/Inf spellings are not numbers here. */
+static inline const char *io_parse_float(const char *p, float *out) {
+    const char *start = p;
+    bool neg = false;
+    if (*p == '-') {
+        neg = true;
+        p++;
+    } else if (*p == '+') {
+        p++;
+    }
+    uint64_t m = 0;
+    int digits = 0, exp10 = 0;
+    bool any = false, truncated = false;
+    while (io_is_digit(*p)) {
+        if (digits < 19) {
+            m = m * 10 + (uint64_t)(*p - '0');
+            if (m) digits++;
+        } else {
+            exp10++;
+            truncated |= *p != '0';
+        }
+        p++;
+        any = true;
+    }
+    if (*p == '.') {
+        p++;
+        while (io_is_digit(*p)) {
+            if (digits < 19) {
+                m = m * 10 + (uint64_t)(*p - '0');
+                if (m) digits++;
+                exp10--;
+            } else {
+                truncated |= *p != '0';
+            }
+            p++;
+            any = true;
+        }
+    }
+    if (!any) return NULL;
+    if (*p == 'e' || *p == 'E') {
+        const char *q = p + 1;
+        bool eneg = false;
+        if (*q == '-') {
+            eneg = true;
+            q++;
+        } else if (*q == '+') {
+            q++;
+        }
+        if (io_is_digit(*q)) {
+            int e = 0;
+            while (io_is_digit(*q)) {
+                if (e < 100000) e = e * 10 + (*q - '0');
+                q++;
+            }
+            exp10 += eneg ? -e : e;
+            p = q;
+        }
+    }
+    if (m == 0) {
+        *out = neg ? -0.0f : 0.0f;
+        return p;
+    }
+    if (!truncated && m < (1ull << 53) && exp10 >= -22 && exp10 <= 22) {
+        double d = (double)m;
+        d = exp10 < 0 ? d / io_pow10[-exp10] : d * io_pow10[exp10];
+        uint64_t bits;
+        memcpy(&bits, &d, sizeof bits);
+        if ((bits & 0x1FFFFFFFu) != 0x10000000u) { /* not a float tie: rounding once more is exact */
+            float f = (float)d;
+            *out = neg ? -f : f;
+            return p;
+        }
+    }
+    bool ok;
+    *out = io_parse_float_slow(start, p, &ok);
+    return ok ? p : NULL;
+}
+
+/* Parses an optionally signed decimal integer; NULL when there is none or it overflows int64. */
+static inline const char *io_parse_int(const char *p, int64_t *out) {
+    bool neg = false;
+    if (*p == '-') {
+        neg = true;
+        p++;
+    } else if (*p == '+') {
+        p++;
+    }
+    if (!io_is_digit(*p)) return NULL;
+    uint64_t v = 0;
+    int n = 0;
+    while (io_is_digit(*p)) {
+        v = v * 10 + (uint64_t)(*p - '0');
+        if (++n > 18) return NULL;
+        p++;
+    }
+    *out = neg ? -(int64_t)v : (int64_t)v;
+    return p;
+}
+
+#endif

@@ -1,0 +1,882 @@
+/* NFF (Eric Haines' Standard Procedural Databases) and its superset AFF (BART, Lext, Assarsson and
+ * Moller 2001): a stream of whitespace-separated commands, parsed in one pass over the file in
+ * memory. Includes recurse into the same parser; transform blocks are a stack of 3x4 matrices
+ * applied as primitives are emitted. Keyframed transforms (`x name {...}`) get their keyframes
+ * from a `k name` block that may come later, so their geometry is recorded as index ranges and
+ * moved by the first keyframe once the whole scene is read. */
+#include <math.h>
+#include <stdio.h>
+
+#include "io/io_internal.h"
+
+#define NFF_MAX_DEPTH 64
+#define NFF_MAX_INCLUDE 32
+
+typedef struct nff_xf {
+    float m[12];  /* rows of a 3x4 affine matrix */
+    float nm[9];  /* normal matrix: inverse transpose of the 3x3 part (up to scale) */
+    float scale;  /* radius scale for spheres and cones */
+    bool identity;
+} nff_xf;
+
+/* An `x name {` block: what it holds, and the transform above it when it was opened. */
+typedef struct nff_anim_node {
+    char name[64];
+    nff_xf parent;
+    size_t pos0, pos1, nrm0, nrm1, sph0, sph1, cone0, cone1, light0, light1;
+} nff_anim_node;
+
+typedef struct nff_keys {
+    char name[64];
+    bool has_t, has_r, has_s;
+    float t[3], r[4], s[3]; /* first keyframe of each channel; r = axis, degrees */
+} nff_keys;
+
+typedef struct nff_level {
+    nff_xf xf;
+    int anim; /* index of the anim node, -1 for `xs` */
+    uint32_t line;
+    const char *file;
+} nff_level;
+
+typedef struct nff_state {
+    uint32_t material; /* IO_NONE: the default material */
+    int detail;
+    nff_level stack[NFF_MAX_DEPTH + 1];
+    int depth;
+    nff_anim_node *anims;
+    size_t anim_n, anim_cap;
+    nff_keys *keys;
+    size_t key_n, key_cap;
+    uint32_t (*tex_mats)[3]; /* (base material, texture) -> material */
+    size_t tex_mat_n, tex_mat_cap;
+    size_t f_count;
+} nff_state;
+
+typedef struct nff_file {
+    io_ctx *ctx;
+    nff_state *st;
+    const char *path;
+    char shown[IO_PATH_MAX + 256];
+    const char *p, *end;
+    uint32_t line;
+} nff_file;
+
+/* ---- tokens ----------------------------------------------------------------------------------- */
+
+static inline void nff_skip(nff_file *f) {
+    const char *p = f->p;
+    for (;;) {
+        char c = *p;
+        if (c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v') {
+            p++;
+        } else if (c == '\n') {
+            f->line++;
+            p++;
+        } else if (c == '#' || c == '%') { /* comment to the end of the line, also after data */
+            while (*p != '\n' && p < f->end) p++;
+        } else {
+            break;
+        }
+    }
+    f->p = p;
+}
+
+static inline bool nff_delim(char c) {
+    return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\0' || c == '#' || c == '%' || c == '\f' ||
+           c == '\v';
+}
+
+/* A short printable copy of the token at p, for messages. */
+static const char *nff_preview(const nff_file *f, const char *p, char *buf, size_t size) {
+    size_t n = 0;
+    while (n + 1 < size && p + n < f->end && !nff_delim(p[n])) {
+        unsigned char c = (unsigned char)p[n];
+        buf[n] = c >= 32 && c < 127 ? (char)c : '?';
+        n++;
+    }
+    buf[n] = '\0';
+    return buf;
+}
+
+static bool nff_eof_error(nff_file *f, const char *what) {
+    return io_error(f->ctx, f->shown, f->line, "unexpected end of file, expected %s (truncated file?)", what);
+}
+
+static inline bool nff_float(nff_file *f, float *v, const char *what) {
+    nff_skip(f);
+    const char *q = io_parse_float(f->p, v);
+    if (q && nff_delim(*q)) {
+        f->p = q;
+        return true;
+    }
+    if (f->p >= f->end) return nff_eof_error(f, what);
+    char tok[32];
+    return io_error(f->ctx, f->shown, f->line, "%s: expected a finite number, got '%s'", what,
+                    nff_preview(f, f->p, tok, sizeof tok));
+}
+
+static bool nff_floats(nff_file *f, float *v, int n, const char *what) {
+    for (int i = 0; i < n; i++)
+        if (!nff_float(f, &v[i], what)) return false;
+    return true;
+}
+
+static bool nff_int(nff_file *f, int64_t *v, const char *what) {
+    nff_skip(f);
+    const char *q = io_parse_int(f->p, v);
+    if (q && nff_delim(*q)) {
+        f->p = q;
+        return true;
+    }
+    if (f->p >= f->end) return nff_eof_error(f, what);
+    char tok[32];
+    return io_error(f->ctx, f->shown, f->line, "%s: expected an integer, got '%s'", what,
+                    nff_preview(f, f->p, tok, sizeof tok));
+}
+
+/* Next word (up to a delimiter) into out; false at end of file or when too long. */
+static bool nff_word(nff_file *f, char *out, size_t size, const char *what) {
+    nff_skip(f);
+    if (f->p >= f->end) return nff_eof_error(f, what);
+    size_t n = 0;
+    while (!nff_delim(f->p[n])) n++;
+    if (n == 0 || n >= size) {
+        char tok[32];
+        return io_error(f->ctx, f->shown, f->line, "%s: bad or too long word '%s'", what,
+                        nff_preview(f, f->p, tok, sizeof tok));
+    }
+    memcpy(out, f->p, n);
+    out[n] = '\0';
+    f->p += n;
+    return true;
+}
+
+/* True when the next token starts like a number (optional light colours). */
+static bool nff_number_next(nff_file *f) {
+    nff_skip(f);
+    char c = *f->p;
+    return io_is_digit(c) || ((c == '-' || c == '+' || c == '.') && (io_is_digit(f->p[1]) || f->p[1] == '.'));
+}
+
+static bool nff_expect(nff_file *f, char c, const char *after) {
+    nff_skip(f);
+    if (*f->p == c && f->p < f->end) {
+        f->p++;
+        return true;
+    }
+    return io_error(f->ctx, f->shown, f->line, "expected '%c' after %s", c, after);
+}
+
+/* ---- transforms ------------------------------------------------------------------------------- */
+
+static void xf_identity(nff_xf *x) {
+    static const float id[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+    static const float id3[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    memcpy(x->m, id, sizeof id);
+    memcpy(x->nm, id3, sizeof id3);
+    x->scale = 1.0f;
+    x->identity = true;
+}
+
+/* Normal matrix and radius scale from the 3x3 part. */
+static void xf_finish(nff_xf *x) {
+    const float *m = x->m;
+    float a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], i = m[10];
+    /* Cofactor matrix = det * inverse transpose; the sign of det keeps normals on their side. */
+    float co[9] = {e * i - f * h, f * g - d * i, d * h - e * g, c * h - b * i, a * i - c * g,
+                   b * g - a * h, b * f - c * e, c * d - a * f, a * e - b * d};
+    float det = a * co[0] + b * co[1] + c * co[2];
+    float s = det < 0.0f ? -1.0f : 1.0f;
+    for (int k = 0; k < 9; k++) x->nm[k] = s * co[k];
+    float cx = sqrtf(a * a + d * d + g * g), cy = sqrtf(b * b + e * e + h * h), cz = sqrtf(c * c + f * f + i * i);
+    x->scale = fmaxf(cx, fmaxf(cy, cz));
+    static const float id[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+    x->identity = memcmp(x->m, id, sizeof id) == 0;
+}
+
+/* out = a * b (3x4 affine). */
+static void xf_mul(const float *a, const float *b, float *out) {
+    float r[12];
+    for (int row = 0; row < 3; row++) {
+        for (int col = 0; col < 4; col++) {
+            float v = a[4 * row] * b[col] + a[4 * row + 1] * b[4 + col] + a[4 * row + 2] * b[8 + col];
+            if (col == 3) v += a[4 * row + 3];
+            r[4 * row + col] = v;
+        }
+    }
+    memcpy(out, r, sizeof r);
+}
+
+/* T * R * S, the order BART composes both static and keyframed transforms in. */
+static void xf_trs(const float t[3], const float axis[3], float deg, const float s[3], float *out) {
+    float x = axis[0], y = axis[1], z = axis[2];
+    float len = sqrtf(x * x + y * y + z * z);
+    float r[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    if (len > 0.0f && deg != 0.0f) {
+        x /= len, y /= len, z /= len;
+        float rad = deg * 3.14159265358979323846f / 180.0f;
+        float c = cosf(rad), sn = sinf(rad), k = 1.0f - c;
+        float rr[9] = {c + x * x * k,     x * y * k - z * sn, x * z * k + y * sn,
+                       y * x * k + z * sn, c + y * y * k,     y * z * k - x * sn,
+                       z * x * k - y * sn, z * y * k + x * sn, c + z * z * k};
+        memcpy(r, rr, sizeof r);
+    }
+    for (int row = 0; row < 3; row++) {
+        for (int col = 0; col < 3; col++) out[4 * row + col] = r[3 * row + col] * s[col];
+        out[4 * row + 3] = t[row];
+    }
+}
+
+/* Inverse of an affine 3x4 matrix; false when singular. */
+static bool xf_inverse(const float *m, float *out) {
+    double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], i = m[10];
+    double co[9] = {e * i - f * h, c * h - b * i, b * f - c * e, f * g - d * i, a * i - c * g,
+                    c * d - a * f, d * h - e * g, b * g - a * h, a * e - b * d};
+    double det = a * co[0] + b * co[3] + c * co[6];
+    if (det == 0.0 || !isfinite(det)) return false;
+    for (int row = 0; row < 3; row++) {
+        for (int col = 0; col < 3; col++) out[4 * row + col] = (float)(co[3 * row + col] / det);
+        out[4 * row + 3] = -(out[4 * row] * m[3] + out[4 * row + 1] * m[7] + out[4 * row + 2] * m[11]);
+    }
+    return true;
+}
+
+static inline void xf_point(const nff_xf *x, float *p) {
+    const float *m = x->m;
+    float v[3] = {p[0], p[1], p[2]};
+    for (int r = 0; r < 3; r++) p[r] = m[4 * r] * v[0] + m[4 * r + 1] * v[1] + m[4 * r + 2] * v[2] + m[4 * r + 3];
+}
+
+static inline void xf_normal(const nff_xf *x, float *n) {
+    const float *m = x->nm;
+    float v[3] = {n[0], n[1], n[2]};
+    for (int r = 0; r < 3; r++) n[r] = m[3 * r] * v[0] + m[3 * r + 1] * v[1] + m[3 * r + 2] * v[2];
+    float len = sqrtf(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (len > 0.0f) n[0] /= len, n[1] /= len, n[2] /= len;
+}
+
+static const nff_xf *nff_top(const nff_file *f) { return &f->st->stack[f->st->depth].xf; }
+
+/* ---- materials and textures ------------------------------------------------------------------- */
+
+static uint32_t nff_material(nff_file *f) {
+    if (f->st->material == IO_NONE) return builder_default_material(f->ctx);
+    return f->st->material;
+}
+
+static bool nff_add_material(nff_file *f, rp_material_data *m) {
+    snprintf(m->name, sizeof m->name, "f%zu", f->st->f_count++);
+    if (m->ior <= 0.0f) m->ior = 1.0f; /* BART files write 0 for "no refraction" */
+    uint32_t k = builder_add_material(f->ctx, m);
+    if (k == IO_NONE) return io_error(f->ctx, f->shown, f->line, "out of memory");
+    f->st->material = k;
+    return true;
+}
+
+/* Texture named in an AFF file. BART keeps them in TextureFiles/ beside aff/, so the lookup tries
+ * the file's folder, then ../TextureFiles/ and TextureFiles/, then (in an archive) the one entry of
+ * that base name. */
+static uint32_t nff_texture(nff_file *f, const char *name) {
+    io_ctx *ctx = f->ctx;
+    char rel[IO_PATH_MAX], full[IO_PATH_MAX], first[IO_PATH_MAX];
+    const char *tries[3] = {"%s", "../TextureFiles/%s", "TextureFiles/%s"};
+    for (int i = 0; i < 3; i++) {
+        snprintf(rel, sizeof rel, tries[i], name);
+        vfs_join(&ctx->vfs, f->path, rel, full, sizeof full);
+        if (i == 0) memcpy(first, full, sizeof first);
+        if (vfs_exists(ctx, full)) return tex_load(ctx, full, name, f->shown, f->line);
+    }
+    if (ctx->vfs.archive) {
+        const char *slash = strrchr(name, '/');
+        const char *found = vfs_find_basename(&ctx->vfs, slash ? slash + 1 : name);
+        if (found) return tex_load(ctx, found, name, f->shown, f->line);
+    }
+    return tex_load(ctx, first, name, f->shown, f->line); /* fails with the error naming it */
+}
+
+/* The current material with a diffuse texture: one material per (material, texture) pair. */
+static uint32_t nff_textured_material(nff_file *f, const char *tex_name) {
+    uint32_t tex = nff_texture(f, tex_name);
+    if (tex == IO_NONE) return IO_NONE;
+    uint32_t base = nff_material(f);
+    if (base == IO_NONE) {
+        io_error(f->ctx, f->shown, f->line, "out of memory");
+        return IO_NONE;
+    }
+    nff_state *st = f->st;
+    for (size_t i = 0; i < st->tex_mat_n; i++)
+        if (st->tex_mats[i][0] == base && st->tex_mats[i][1] == tex) return st->tex_mats[i][2];
+    rp_material_data m = f->ctx->b.materials[base];
+    m.map_kd = (int32_t)tex;
+    uint32_t k = builder_add_material(f->ctx, &m);
+    if (k == IO_NONE || !io_reserve((void **)&st->tex_mats, &st->tex_mat_cap, st->tex_mat_n + 1, sizeof st->tex_mats[0])) {
+        io_error(f->ctx, f->shown, f->line, "out of memory");
+        return IO_NONE;
+    }
+    st->tex_mats[st->tex_mat_n][0] = base;
+    st->tex_mats[st->tex_mat_n][1] = tex;
+    st->tex_mats[st->tex_mat_n][2] = k;
+    st->tex_mat_n++;
+    return k;
+}
+
+/* ---- primitives ------------------------------------------------------------------------------- */
+
+/* Reads n vertices (xyz, then normal and uv when asked) straight into the builder, transformed. */
+static bool nff_vertices(nff_file *f, size_t n, bool normals, bool uvs, const char *what) {
+    io_ctx *ctx = f->ctx;
+    io_builder *b = &ctx->b;
+    if (b->pos_n + n >= UINT32_MAX || !builder_reserve_vertices(ctx, n) ||
+        (normals && !builder_reserve_normals(ctx, n)) || (uvs && !builder_reserve_texcoords(ctx, n)))
+        return io_error(ctx, f->shown, f->line, "out of memory");
+    const nff_xf *x = nff_top(f);
+    for (size_t i = 0; i < n; i++) {
+        float *p = b->pos + 3 * (b->pos_n + i);
+        if (!nff_floats(f, p, 3, what)) return false;
+        if (!x->identity) xf_point(x, p);
+        if (normals) {
+            float *nn = b->nrm + 3 * (b->nrm_n + i);
+            if (!nff_floats(f, nn, 3, what)) return false;
+            if (!x->identity) xf_normal(x, nn);
+        }
+        if (uvs && !nff_floats(f, b->uv + 2 * (b->uv_n + i), 2, what)) return false;
+    }
+    return true;
+}
+
+/* Emits the polygon whose n vertices were just read (not yet counted in the builder). */
+static bool nff_polygon(nff_file *f, uint32_t n, bool normals, bool uvs, uint32_t material) {
+    io_ctx *ctx = f->ctx;
+    io_builder *b = &ctx->b;
+    uint32_t v0 = (uint32_t)b->pos_n, n0 = (uint32_t)b->nrm_n, t0 = (uint32_t)b->uv_n;
+    uint32_t tri_buf[3 * 2 + 4], *tris = tri_buf, *ring = tri_buf + 6;
+    if (n > 4) {
+        uint32_t *s = io_scratch_u(ctx, 4 * (size_t)n);
+        if (!s) return io_error(ctx, f->shown, f->line, "out of memory");
+        tris = s;
+        ring = s + 3 * (n - 2);
+    }
+    poly_triangulate(b->pos + 3 * (size_t)v0, n, tris, ring);
+    b->pos_n += n;
+    if (normals) b->nrm_n += n;
+    if (uvs) b->uv_n += n;
+    if (!builder_reserve_triangles(ctx, n - 2)) return io_error(ctx, f->shown, f->line, "out of memory");
+    for (uint32_t k = 0; k < n - 2; k++) {
+        const uint32_t *t = tris + 3 * k;
+        uint32_t v[3] = {v0 + t[0], v0 + t[1], v0 + t[2]};
+        uint32_t nn[3] = {n0 + t[0], n0 + t[1], n0 + t[2]};
+        uint32_t tt[3] = {t0 + t[0], t0 + t[1], t0 + t[2]};
+        if (!builder_add_triangle(ctx, v, normals ? nn : NULL, uvs ? tt : NULL, material))
+            return io_error(ctx, f->shown, f->line, "out of memory");
+    }
+    return true;
+}
+
+/* `p n` / `pp n`: a polygon, with a normal per vertex for `pp`. */
+static bool nff_poly(nff_file *f, bool patch) {
+    int64_t n;
+    const char *what = patch ? "pp" : "p";
+    if (!nff_int(f, &n, what)) return false;
+    if (n < 3) return io_error(f->ctx, f->shown, f->line, "%s: polygon with %lld vertices (at least 3 needed)", what, (long long)n);
+    /* Every vertex takes at least 6 bytes of text: a larger count is a truncated or lying file. */
+    if ((uint64_t)n > (uint64_t)(f->end - f->p) / 6 + 1) {
+        f->p = f->end;
+        return nff_eof_error(f, "polygon vertices");
+    }
+    uint32_t material = nff_material(f);
+    if (material == IO_NONE) return io_error(f->ctx, f->shown, f->line, "out of memory");
+    return nff_vertices(f, (size_t)n, patch, false, what) && nff_polygon(f, (uint32_t)n, patch, false, material);
+}
+
+/* `tt tex` / `ttp tex`: a textured triangle (ttp with normals). */
+static bool nff_textured_triangle(nff_file *f, bool patch) {
+    char tex[256];
+    if (!nff_word(f, tex, sizeof tex, "texture name")) return false;
+    uint32_t material = nff_textured_material(f, tex);
+    if (material == IO_NONE) return false;
+    return nff_vertices(f, 3, patch, true, patch ? "ttp" : "tt") && nff_polygon(f, 3, patch, true, material);
+}
+
+/* `tpa n`: a triangle keyframed n times; the first keyframe is the static scene. */
+static bool nff_animated_triangle(nff_file *f) {
+    int64_t n;
+    if (!nff_int(f, &n, "tpa")) return false;
+    if (n < 1) return io_error(f->ctx, f->shown, f->line, "tpa: %lld keyframes (at least 1 needed)", (long long)n);
+    float time;
+    if (!nff_float(f, &time, "tpa time")) return false;
+    uint32_t material = nff_material(f);
+    if (material == IO_NONE) return io_error(f->ctx, f->shown, f->line, "out of memory");
+    if (!nff_vertices(f, 3, true, false, "tpa") || !nff_polygon(f, 3, true, false, material)) return false;
+    for (int64_t k = 1; k < n; k++) { /* later keyframes: read and checked, not kept */
+        float v[19];
+        if (!nff_floats(f, v, 19, "tpa")) return false;
+    }
+    return true;
+}
+
+static bool nff_sphere(nff_file *f) {
+    float v[4];
+    if (!nff_floats(f, v, 4, "s")) return false;
+    io_ctx *ctx = f->ctx;
+    io_builder *b = &ctx->b;
+    uint32_t material = nff_material(f);
+    if (material == IO_NONE || !io_reserve((void **)&b->spheres, &b->sphere_cap, b->sphere_n + 1, sizeof(rp_sphere_data)))
+        return io_error(ctx, f->shown, f->line, "out of memory");
+    const nff_xf *x = nff_top(f);
+    rp_sphere_data *s = &b->spheres[b->sphere_n++];
+    memcpy(s->center, v, sizeof s->center);
+    xf_point(x, s->center);
+    s->radius = fabsf(v[3]) * x->scale; /* negative: seen from inside; the renderer takes both sides */
+    s->material = material;
+    return true;
+}
+
+static bool nff_cone(nff_file *f) {
+    float v[8];
+    if (!nff_floats(f, v, 8, "c")) return false;
+    io_ctx *ctx = f->ctx;
+    io_builder *b = &ctx->b;
+    uint32_t material = nff_material(f);
+    if (material == IO_NONE || !io_reserve((void **)&b->cones, &b->cone_cap, b->cone_n + 1, sizeof(rp_cone_data)))
+        return io_error(ctx, f->shown, f->line, "out of memory");
+    const nff_xf *x = nff_top(f);
+    rp_cone_data *c = &b->cones[b->cone_n++];
+    memcpy(c->base, v, sizeof c->base);
+    memcpy(c->apex, v + 4, sizeof c->apex);
+    xf_point(x, c->base);
+    xf_point(x, c->apex);
+    c->base_radius = fabsf(v[3]) * x->scale;
+    c->apex_radius = fabsf(v[7]) * x->scale;
+    c->material = material;
+    return true;
+}
+
+static bool nff_light(nff_file *f, bool animated) {
+    char name[64];
+    if (animated && !nff_word(f, name, sizeof name, "la name")) return false;
+    rp_light_data l;
+    memset(&l, 0, sizeof l);
+    l.type = RP_LIGHT_DATA_POINT;
+    l.color[0] = l.color[1] = l.color[2] = 1.0f;
+    if (!nff_floats(f, l.position, 3, "l")) return false;
+    if (nff_number_next(f) && !nff_floats(f, l.color, 3, "l colour")) return false;
+    xf_point(nff_top(f), l.position);
+    io_builder *b = &f->ctx->b;
+    if (!io_reserve((void **)&b->lights, &b->light_cap, b->light_n + 1, sizeof l))
+        return io_error(f->ctx, f->shown, f->line, "out of memory");
+    b->lights[b->light_n++] = l;
+    return true;
+}
+
+/* `f r g b Kd Ks Shine T ior`: kd = colour * Kd, ks = kr = Ks, kt = T. */
+static bool nff_fill(nff_file *f) {
+    float v[8];
+    if (!nff_floats(f, v, 8, "f")) return false;
+    rp_material_data m;
+    builder_material_defaults(&m, "");
+    for (int i = 0; i < 3; i++) {
+        m.kd[i] = v[i] * v[3];
+        m.ks[i] = m.kr[i] = v[4];
+        m.kt[i] = v[6];
+    }
+    m.ns = v[5];
+    m.ior = v[7];
+    return nff_add_material(f, &m);
+}
+
+/* `fm amb(3) diff(3) spec(3) Shine T ior` (AFF): ks = kr = spec, kt = T; ambient has no field. */
+static bool nff_fill_material(nff_file *f) {
+    float v[12];
+    if (!nff_floats(f, v, 12, "fm")) return false;
+    rp_material_data m;
+    builder_material_defaults(&m, "");
+    for (int i = 0; i < 3; i++) {
+        m.kd[i] = v[3 + i];
+        m.ks[i] = m.kr[i] = v[6 + i];
+        m.kt[i] = v[10];
+    }
+    m.ns = v[9];
+    m.ior = v[11];
+    return nff_add_material(f, &m);
+}
+
+static bool nff_viewpoint(nff_file *f) {
+    rp_camera_data *cam = &f->ctx->b.camera;
+    memset(cam, 0, sizeof *cam);
+    float angle = 45.0f;
+    unsigned seen = 0;
+    for (;;) {
+        nff_skip(f);
+        const char *p = f->p;
+        size_t n = 0;
+        while (!nff_delim(p[n])) n++;
+#define NFF_IS(w) (n == sizeof(w) - 1 && memcmp(p, w, n) == 0)
+        if (NFF_IS("from")) {
+            f->p += n;
+            if (!nff_floats(f, cam->eye, 3, "from")) return false;
+            seen |= 1;
+        } else if (NFF_IS("at")) {
+            f->p += n;
+            if (!nff_floats(f, cam->look, 3, "at")) return false;
+            seen |= 2;
+        } else if (NFF_IS("up")) {
+            f->p += n;
+            if (!nff_floats(f, cam->up, 3, "up")) return false;
+            seen |= 4;
+        } else if (NFF_IS("angle")) {
+            f->p += n;
+            if (!nff_float(f, &angle, "angle")) return false;
+            seen |= 8;
+        } else if (NFF_IS("hither")) {
+            float hither;
+            f->p += n;
+            if (!nff_float(f, &hither, "hither")) return false;
+        } else if (NFF_IS("resolution")) {
+            int64_t w, h;
+            f->p += n;
+            if (!nff_int(f, &w, "resolution") || !nff_int(f, &h, "resolution")) return false;
+            if (w <= 0 || h <= 0 || w > 1 << 16 || h > 1 << 16)
+                return io_error(f->ctx, f->shown, f->line, "resolution %lld x %lld out of range", (long long)w, (long long)h);
+            cam->width = (int32_t)w;
+            cam->height = (int32_t)h;
+        } else {
+            break;
+        }
+#undef NFF_IS
+    }
+    if (seen != 15) return io_error(f->ctx, f->shown, f->line, "viewpoint needs from, at, up and angle");
+    if (!(angle > 0.0f && angle < 180.0f)) return io_error(f->ctx, f->shown, f->line, "view angle %g out of (0, 180)", (double)angle);
+    /* NFF's angle spans the smaller image side: the vertical fov unless the image is portrait. */
+    float fov = angle;
+    if (cam->width > 0 && cam->height > cam->width) {
+        double half = tan((double)angle * 3.14159265358979323846 / 360.0) * cam->height / cam->width;
+        fov = (float)(atan(half) * 360.0 / 3.14159265358979323846);
+    }
+    cam->fov_deg = fov;
+    cam->valid = true;
+    return true;
+}
+
+/* `m`: an indexed triangle mesh with optional normals and texture coordinates. */
+static bool nff_mesh(nff_file *f) {
+    io_ctx *ctx = f->ctx;
+    io_builder *b = &ctx->b;
+    char word[64];
+    int64_t nv, nn = 0, nt = 0, ntri;
+    if (!nff_word(f, word, sizeof word, "mesh 'vertices'")) return false;
+    if (strcmp(word, "vertices") != 0) return io_error(ctx, f->shown, f->line, "mesh: expected 'vertices', got '%s'", word);
+    if (!nff_int(f, &nv, "vertices")) return false;
+    if (nv < 0 || (uint64_t)nv > (uint64_t)(f->end - f->p) / 6 + 1) return io_error(ctx, f->shown, f->line, "mesh: bad vertex count %lld", (long long)nv);
+    size_t v0 = b->pos_n, n0 = b->nrm_n, t0 = b->uv_n;
+    if (!nff_vertices(f, (size_t)nv, false, false, "mesh vertex")) return false;
+    b->pos_n += (size_t)nv;
+    if (!nff_word(f, word, sizeof word, "mesh 'normals', 'texturecoords' or 'triangles'")) return false;
+    if (strcmp(word, "normals") == 0) {
+        if (!nff_int(f, &nn, "normals")) return false;
+        if (nn < 0 || (uint64_t)nn > (uint64_t)(f->end - f->p) / 6 + 1 || b->nrm_n + (size_t)nn >= UINT32_MAX ||
+            !builder_reserve_normals(ctx, (size_t)nn))
+            return io_error(ctx, f->shown, f->line, "mesh: bad normal count %lld", (long long)nn);
+        const nff_xf *x = nff_top(f);
+        for (int64_t i = 0; i < nn; i++) {
+            float *v = b->nrm + 3 * b->nrm_n;
+            if (!nff_floats(f, v, 3, "mesh normal")) return false;
+            if (!x->identity) xf_normal(x, v);
+            b->nrm_n++;
+        }
+        if (!nff_word(f, word, sizeof word, "mesh 'texturecoords' or 'triangles'")) return false;
+    }
+    uint32_t material = nff_material(f);
+    if (strcmp(word, "texturecoords") == 0) {
+        char tex[256];
+        if (!nff_int(f, &nt, "texturecoords")) return false;
+        if (!nff_word(f, tex, sizeof tex, "texture name")) return false;
+        if (nt < 0 || (uint64_t)nt > (uint64_t)(f->end - f->p) / 4 + 1 || b->uv_n + (size_t)nt >= UINT32_MAX ||
+            !builder_reserve_texcoords(ctx, (size_t)nt))
+            return io_error(ctx, f->shown, f->line, "mesh: bad texture coordinate count %lld", (long long)nt);
+        uint32_t line = f->line;
+        for (int64_t i = 0; i < nt; i++) {
+            if (!nff_floats(f, b->uv + 2 * b->uv_n, 2, "mesh texture coordinate")) return false;
+            b->uv_n++;
+        }
+        uint32_t here = f->line;
+        f->line = line; /* a missing texture is reported on the line naming it */
+        material = nff_textured_material(f, tex);
+        f->line = here;
+        if (material == IO_NONE) return false;
+        if (!nff_word(f, word, sizeof word, "mesh 'triangles'")) return false;
+    }
+    if (material == IO_NONE) return io_error(ctx, f->shown, f->line, "out of memory");
+    if (strcmp(word, "triangles") != 0) return io_error(ctx, f->shown, f->line, "mesh: expected 'triangles', got '%s'", word);
+    if (!nff_int(f, &ntri, "triangles")) return false;
+    if (ntri < 0 || (uint64_t)ntri > (uint64_t)(f->end - f->p) / 6 + 1)
+        return io_error(ctx, f->shown, f->line, "mesh: bad triangle count %lld", (long long)ntri);
+    if (!builder_reserve_triangles(ctx, (size_t)ntri)) return io_error(ctx, f->shown, f->line, "out of memory");
+    /* Per triangle: vertex indices, then normal indices, then texture coordinate indices. */
+    for (int64_t k = 0; k < ntri; k++) {
+        int64_t raw[9];
+        int m = 3 + (nn ? 3 : 0) + (nt ? 3 : 0);
+        for (int j = 0; j < m; j++)
+            if (!nff_int(f, &raw[j], "mesh triangle index")) return false;
+        uint32_t v[3], n[3], t[3];
+        for (int j = 0; j < 3; j++) {
+            int64_t iv = raw[j], in = nn ? raw[3 + j] : 0, it = nt ? raw[(nn ? 6 : 3) + j] : 0;
+            if (iv < 0 || iv >= nv || in < 0 || (nn && in >= nn) || it < 0 || (nt && it >= nt))
+                return io_error(ctx, f->shown, f->line, "mesh triangle %lld: index out of range (%lld vertices, %lld normals, %lld texture coordinates)",
+                                (long long)k, (long long)nv, (long long)nn, (long long)nt);
+            v[j] = (uint32_t)(v0 + (size_t)iv);
+            n[j] = (uint32_t)(n0 + (size_t)in);
+            t[j] = (uint32_t)(t0 + (size_t)it);
+        }
+        if (!builder_add_triangle(ctx, v, nn ? n : NULL, nt ? t : NULL, material))
+            return io_error(ctx, f->shown, f->line, "out of memory");
+    }
+    return true;
+}
+
+/* `xs sx sy sz  rx ry rz deg  tx ty tz {` and `x name {`. */
+static bool nff_transform(nff_file *f, bool is_static) {
+    nff_state *st = f->st;
+    io_builder *b = &f->ctx->b;
+    if (st->depth >= NFF_MAX_DEPTH) return io_error(f->ctx, f->shown, f->line, "transforms nested too deep");
+    nff_level *parent = &st->stack[st->depth], *lv = &st->stack[st->depth + 1];
+    lv->line = f->line;
+    lv->file = f->path;
+    lv->anim = -1;
+    if (is_static) {
+        float v[10], local[12];
+        if (!nff_floats(f, v, 10, "xs")) return false;
+        xf_trs(v + 7, v + 3, v[6], v, local);
+        xf_mul(parent->xf.m, local, lv->xf.m);
+        xf_finish(&lv->xf);
+    } else {
+        char name[64];
+        if (!nff_word(f, name, sizeof name, "x name")) return false;
+        if (!io_reserve((void **)&st->anims, &st->anim_cap, st->anim_n + 1, sizeof(nff_anim_node)))
+            return io_error(f->ctx, f->shown, f->line, "out of memory");
+        nff_anim_node *a = &st->anims[st->anim_n];
+        memset(a, 0, sizeof *a);
+        snprintf(a->name, sizeof a->name, "%s", name);
+        a->parent = parent->xf;
+        a->pos0 = b->pos_n, a->nrm0 = b->nrm_n, a->sph0 = b->sphere_n, a->cone0 = b->cone_n, a->light0 = b->light_n;
+        lv->xf = parent->xf;
+        lv->anim = (int)st->anim_n++;
+    }
+    if (!nff_expect(f, '{', is_static ? "xs" : "x")) return false;
+    st->depth++;
+    return true;
+}
+
+static bool nff_close(nff_file *f) {
+    nff_state *st = f->st;
+    if (st->depth == 0) return io_error(f->ctx, f->shown, f->line, "'}' without an open transform");
+    nff_level *lv = &st->stack[st->depth];
+    if (lv->anim >= 0) {
+        io_builder *b = &f->ctx->b;
+        nff_anim_node *a = &st->anims[lv->anim];
+        a->pos1 = b->pos_n, a->nrm1 = b->nrm_n, a->sph1 = b->sphere_n, a->cone1 = b->cone_n, a->light1 = b->light_n;
+    }
+    st->depth--;
+    return true;
+}
+
+/* `k name { transl n ... rot n ... scale n ... visibility n ... }`: keeps the first keyframes. */
+static bool nff_keyframes(nff_file *f) {
+    nff_state *st = f->st;
+    char name[64], word[64];
+    if (!nff_word(f, name, sizeof name, "k name") || !nff_expect(f, '{', "k name")) return false;
+    if (!io_reserve((void **)&st->keys, &st->key_cap, st->key_n + 1, sizeof(nff_keys)))
+        return io_error(f->ctx, f->shown, f->line, "out of memory");
+    nff_keys *k = &st->keys[st->key_n++];
+    memset(k, 0, sizeof *k);
+    snprintf(k->name, sizeof k->name, "%s", name);
+    for (;;) {
+        nff_skip(f);
+        if (f->p >= f->end) return nff_eof_error(f, "'}' closing the keyframes");
+        if (*f->p == '}') {
+            f->p++;
+            return true;
+        }
+        int64_t n;
+        if (!nff_word(f, word, sizeof word, "keyframe type") || !nff_int(f, &n, "keyframe count")) return false;
+        int per;
+        float *first = NULL;
+        if (strcmp(word, "transl") == 0) per = 7, first = k->t, k->has_t = true;
+        else if (strcmp(word, "rot") == 0) per = 8, first = k->r, k->has_r = true;
+        else if (strcmp(word, "scale") == 0) per = 7, first = k->s, k->has_s = true;
+        else if (strcmp(word, "visibility") == 0) per = 2;
+        else return io_error(f->ctx, f->shown, f->line, "unknown keyframe type '%s' (transl, rot, scale, visibility)", word);
+        if (n < 1 || (uint64_t)n > (uint64_t)(f->end - f->p) / 4 + 1)
+            return io_error(f->ctx, f->shown, f->line, "bad keyframe count %lld", (long long)n);
+        for (int64_t i = 0; i < n; i++) {
+            float v[8];
+            if (!nff_floats(f, v, per, word)) return false;
+            if (i == 0 && first) memcpy(first, v + 1, (size_t)(per == 8 ? 4 : 3) * sizeof(float));
+        }
+    }
+}
+
+/* Moves each keyframed block by its first keyframe: the stored data is parent * inner * p and must
+ * become parent * key * inner * p, i.e. (parent * key * parent^-1) applied to it. Innermost blocks
+ * come later in the list, so walking it backwards composes nested blocks correctly. */
+static bool nff_apply_keyframes(io_ctx *ctx, nff_state *st, const char *shown) {
+    io_builder *b = &ctx->b;
+    for (size_t ai = st->anim_n; ai-- > 0;) {
+        const nff_anim_node *a = &st->anims[ai];
+        const nff_keys *k = NULL;
+        for (size_t i = 0; i < st->key_n; i++)
+            if (strcmp(st->keys[i].name, a->name) == 0) k = &st->keys[i];
+        if (!k) continue; /* no keyframes: identity */
+        static const float zero[3] = {0, 0, 0}, one[3] = {1, 1, 1}, yaxis[3] = {0, 1, 0};
+        float key[12], inv[12];
+        xf_trs(k->has_t ? k->t : zero, k->has_r ? k->r : yaxis, k->has_r ? k->r[3] : 0.0f, k->has_s ? k->s : one, key);
+        if (!xf_inverse(a->parent.m, inv)) return io_error(ctx, shown, 0, "singular transform around keyframed block '%s'", a->name);
+        nff_xf c;
+        xf_mul(a->parent.m, key, c.m);
+        xf_mul(c.m, inv, c.m);
+        xf_finish(&c);
+        for (size_t i = a->pos0; i < a->pos1; i++) xf_point(&c, b->pos + 3 * i);
+        for (size_t i = a->nrm0; i < a->nrm1; i++) xf_normal(&c, b->nrm + 3 * i);
+        for (size_t i = a->sph0; i < a->sph1; i++) {
+            xf_point(&c, b->spheres[i].center);
+            b->spheres[i].radius *= c.scale;
+        }
+        for (size_t i = a->cone0; i < a->cone1; i++) {
+            xf_point(&c, b->cones[i].base);
+            xf_point(&c, b->cones[i].apex);
+            b->cones[i].base_radius *= c.scale;
+            b->cones[i].apex_radius *= c.scale;
+        }
+        for (size_t i = a->light0; i < a->light1; i++) xf_point(&c, b->lights[i].position);
+    }
+    return true;
+}
+
+/* ---- files ------------------------------------------------------------------------------------ */
+
+static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path);
+
+static bool nff_include(nff_file *f) {
+    int64_t level;
+    char name[IO_PATH_MAX], full[IO_PATH_MAX];
+    if (!nff_int(f, &level, "include detail level") || !nff_word(f, name, sizeof name, "include file name")) return false;
+    if (level > f->st->detail) return true; /* more detail than asked for */
+    if (f->ctx->depth >= NFF_MAX_INCLUDE) return io_error(f->ctx, f->shown, f->line, "includes nested too deep (a cycle?)");
+    vfs_join(&f->ctx->vfs, f->path, name, full, sizeof full);
+    if (!vfs_exists(f->ctx, full)) {
+        char shown[IO_PATH_MAX + 256];
+        vfs_display(&f->ctx->vfs, full, shown, sizeof shown);
+        return io_error(f->ctx, f->shown, f->line, "cannot open include '%s' (%s)", name, shown);
+    }
+    f->ctx->depth++;
+    bool ok = nff_parse(f->ctx, f->st, full);
+    f->ctx->depth--;
+    return ok;
+}
+
+static bool nff_command(nff_file *f) {
+    const char *p = f->p;
+    size_t n = 0;
+    while (!nff_delim(p[n])) n++;
+    f->p += n;
+    char c0 = p[0], c1 = n > 1 ? p[1] : '\0';
+    switch (n) {
+    case 1:
+        switch (c0) {
+        case 'p': return nff_poly(f, false);
+        case 's': return nff_sphere(f);
+        case 'c': return nff_cone(f);
+        case 'l': return nff_light(f, false);
+        case 'f': return nff_fill(f);
+        case 'b': {
+            io_builder *b = &f->ctx->b;
+            b->has_background = true;
+            return nff_floats(f, b->background, 3, "b");
+        }
+        case 'v': return nff_viewpoint(f);
+        case 'm': return nff_mesh(f);
+        case 'i': return nff_include(f);
+        case 'x': return nff_transform(f, false);
+        case 'k': return nff_keyframes(f);
+        case '}': return nff_close(f);
+        case 'a': {
+            float v[3]; /* animation start, end, frame count: a still scene needs none */
+            return nff_floats(f, v, 3, "a");
+        }
+        case 'd': {
+            int64_t d;
+            if (!nff_int(f, &d, "d")) return false;
+            f->st->detail = (int)(d < 0 ? 0 : d > 1000 ? 1000 : d);
+            return true;
+        }
+        default: break;
+        }
+        break;
+    case 2:
+        if (c0 == 'p' && c1 == 'p') return nff_poly(f, true);
+        if (c0 == 'f' && c1 == 'm') return nff_fill_material(f);
+        if (c0 == 'x' && c1 == 's') return nff_transform(f, true);
+        if (c0 == 't' && c1 == 't') return nff_textured_triangle(f, false);
+        if (c0 == 'l' && c1 == 'a') return nff_light(f, true);
+        if (c0 == 'a' && c1 == 'm') {
+            float v[3]; /* global ambient: no field in rp_scene_data */
+            return nff_floats(f, v, 3, "am");
+        }
+        break;
+    case 3:
+        if (memcmp(p, "ttp", 3) == 0) return nff_textured_triangle(f, true);
+        if (memcmp(p, "tpa", 3) == 0) return nff_animated_triangle(f);
+        break;
+    default: break;
+    }
+    char tok[32];
+    f->p = p;
+    return io_error(f->ctx, f->shown, f->line, "unknown command '%s'", nff_preview(f, p, tok, sizeof tok));
+}
+
+static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path) {
+    nff_file f = {.ctx = ctx, .st = st, .path = path, .line = 1};
+    vfs_display(&ctx->vfs, path, f.shown, sizeof f.shown);
+    io_buf buf;
+    if (!vfs_read(ctx, path, &buf)) return io_error(ctx, f.shown, 0, "cannot open or decompress file");
+    ctx->bytes += buf.size;
+    f.p = buf.data;
+    f.end = buf.data + buf.size;
+    int depth0 = st->depth;
+    bool ok = true;
+    for (;;) {
+        nff_skip(&f);
+        if (f.p >= f.end) break;
+        if (*f.p == '\0' || *f.p == '{') {
+            ok = io_error(ctx, f.shown, f.line, "%s", *f.p ? "unexpected '{'" : "binary data (NUL byte) in a text file");
+            break;
+        }
+        if (!(ok = nff_command(&f))) break;
+    }
+    if (ok && st->depth > depth0) {
+        const nff_level *lv = &st->stack[st->depth];
+        ok = io_error(ctx, f.shown, f.line, "end of file inside the transform block opened at line %u", lv->line);
+    }
+    if (ok && st->depth < depth0) ok = io_error(ctx, f.shown, f.line, "file closes a transform block it did not open");
+    vfs_buf_free(&buf);
+    return ok;
+}
+
+bool nff_load(io_ctx *ctx, const char *path) {
+    nff_state *st = calloc(1, sizeof *st);
+    if (!st) return io_error(ctx, path, 0, "out of memory");
+    st->material = IO_NONE;
+    xf_identity(&st->stack[0].xf);
+    st->stack[0].anim = -1;
+    bool ok = nff_parse(ctx, st, path);
+    if (ok) {
+        char shown[IO_PATH_MAX + 256];
+        vfs_display(&ctx->vfs, path, shown, sizeof shown);
+        ok = nff_apply_keyframes(ctx, st, shown);
+    }
+    free(st->anims);
+    free(st->keys);
+    free(st->tex_mats);
+    free(st);
+    return ok;
+}

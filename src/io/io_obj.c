@@ -1,0 +1,367 @@
+/* Wavefront OBJ and MTL: one pass over the file in memory, line by line. Positions, normals and
+ * texture coordinates go to the builder as they come (OBJ indexes them globally, so the builder's
+ * arrays are the file's); faces are triangulated as they are read. Objects, groups and smoothing
+ * groups do not change the geometry and are skipped. */
+#include <stdio.h>
+
+#include "io/io_internal.h"
+
+typedef struct obj_file {
+    io_ctx *ctx;
+    const char *path; /* as the vfs knows it */
+    char shown[IO_PATH_MAX + 256];
+    uint32_t line;
+} obj_file;
+
+static const char *skip_blank(const char *p) {
+    while (*p == ' ' || *p == '\t') p++;
+    return p;
+}
+
+static bool at_eol(const char *p) { return *p == '\n' || *p == '\r' || *p == '\0' || *p == '#'; }
+
+static bool is_delim(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\0'; }
+
+static const char *next_line(const char *p, const char *end) {
+    while (p < end && *p != '\n') p++;
+    return p < end ? p + 1 : end;
+}
+
+/* Reads one float after blanks; NULL (with the error written) when there is none. */
+static const char *obj_float(obj_file *f, const char *p, float *v, const char *what) {
+    p = skip_blank(p);
+    const char *q = io_parse_float(p, v);
+    if (!q || !is_delim(*q)) {
+        int len = 0;
+        while (len < 24 && !is_delim(p[len])) len++;
+        io_error(f->ctx, f->shown, f->line, "%s: expected a finite number, got '%.*s'", what, len, p);
+        return NULL;
+    }
+    return q;
+}
+
+/* The rest of the line without surrounding blanks, copied into out. */
+static const char *rest_of_line(const char *p, char *out, size_t size) {
+    p = skip_blank(p);
+    const char *s = p;
+    while (*p != '\n' && *p != '\0') p++;
+    const char *e = p;
+    while (e > s && (e[-1] == ' ' || e[-1] == '\t' || e[-1] == '\r')) e--;
+    size_t n = (size_t)(e - s);
+    if (n >= size) n = size - 1;
+    memcpy(out, s, n);
+    out[n] = '\0';
+    return p;
+}
+
+static bool word_is(const char *p, const char *w) {
+    size_t n = strlen(w);
+    return strncmp(p, w, n) == 0 && is_delim(p[n]);
+}
+
+/* ---- MTL -------------------------------------------------------------------------------------- */
+
+typedef struct mtl_pending {
+    bool active;
+    rp_material_data m;
+    float d;
+    bool has_tf;
+    float tf[3];
+} mtl_pending;
+
+/* Derives kr and kt from illum, d and Tf as the MTL spec's illumination models use them. */
+static bool mtl_finish(io_ctx *ctx, mtl_pending *pm) {
+    if (!pm->active) return true;
+    rp_material_data *m = &pm->m;
+    int il = m->illum;
+    if (il == 3 || il == 5 || il == 7) memcpy(m->kr, m->ks, sizeof m->kr);
+    if (pm->has_tf && (il == 4 || il == 6 || il == 7 || il == 9)) {
+        memcpy(m->kt, pm->tf, sizeof m->kt);
+    } else if (pm->d < 1.0f) {
+        m->kt[0] = m->kt[1] = m->kt[2] = 1.0f - pm->d;
+    }
+    pm->active = false;
+    return builder_add_material(ctx, m) != IO_NONE;
+}
+
+static bool mtl_color(obj_file *f, const char **pp, float c[3], const char *what) {
+    const char *p = *pp;
+    if (!(p = obj_float(f, p, &c[0], what))) return false;
+    /* "Kd r" alone means grey r. */
+    const char *q = skip_blank(p);
+    if (at_eol(q)) {
+        c[1] = c[2] = c[0];
+    } else if (!(p = obj_float(f, p, &c[1], what)) || !(p = obj_float(f, p, &c[2], what))) {
+        return false;
+    }
+    *pp = p;
+    return true;
+}
+
+static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io_buf *buf) {
+    obj_file f = {.ctx = ctx, .path = path, .line = 1};
+    snprintf(f.shown, sizeof f.shown, "%s", shown);
+    const char *p = buf->data, *end = buf->data + buf->size;
+    mtl_pending pm;
+    memset(&pm, 0, sizeof pm);
+    for (; p < end; p = next_line(p, end), f.line++) {
+        p = skip_blank(p);
+        if (at_eol(p)) continue;
+        if (word_is(p, "newmtl")) {
+            if (!mtl_finish(ctx, &pm)) return io_error(ctx, f.shown, f.line, "out of memory");
+            char name[256];
+            rest_of_line(p + 6, name, sizeof name);
+            builder_material_defaults(&pm.m, name);
+            pm.m.illum = 2;
+            pm.d = 1.0f;
+            pm.has_tf = false;
+            pm.active = true;
+            continue;
+        }
+        if (!pm.active) continue; /* statements before the first newmtl have no material */
+        const char *q = p;
+        while (!is_delim(*q)) q++;
+        size_t kw = (size_t)(q - p);
+        rp_material_data *m = &pm.m;
+        float tmp;
+        if (kw == 2 && p[0] == 'K' && (p[1] == 'd' || p[1] == 's' || p[1] == 'e')) {
+            float *dst = p[1] == 'd' ? m->kd : p[1] == 's' ? m->ks : m->ke;
+            if (!mtl_color(&f, &q, dst, p[1] == 'd' ? "Kd" : p[1] == 's' ? "Ks" : "Ke")) return false;
+        } else if (kw == 2 && p[0] == 'T' && p[1] == 'f') {
+            if (!mtl_color(&f, &q, pm.tf, "Tf")) return false;
+            pm.has_tf = true;
+        } else if (kw == 2 && p[0] == 'N' && p[1] == 's') {
+            if (!obj_float(&f, q, &m->ns, "Ns")) return false;
+        } else if (kw == 2 && p[0] == 'N' && p[1] == 'i') {
+            if (!obj_float(&f, q, &m->ior, "Ni")) return false;
+        } else if (kw == 1 && p[0] == 'd') {
+            if (!obj_float(&f, q, &pm.d, "d")) return false;
+        } else if (kw == 2 && p[0] == 'T' && p[1] == 'r') {
+            if (!obj_float(&f, q, &tmp, "Tr")) return false;
+            pm.d = 1.0f - tmp;
+        } else if (kw == 5 && strncmp(p, "illum", 5) == 0) {
+            int64_t il;
+            const char *r = io_parse_int(skip_blank(q), &il);
+            if (!r || !is_delim(*r) || il < 0 || il > 10)
+                return io_error(ctx, f.shown, f.line, "illum: expected an integer 0-10");
+            m->illum = (int32_t)il;
+        } else if (kw == 6 && strncmp(p, "map_Kd", 6) == 0) {
+            /* Options (-s 1 1 1, -clamp on, ...) come before the file name; the name is the rest. */
+            const char *r = skip_blank(q);
+            while (*r == '-') {
+                const char *o = r;
+                while (!is_delim(*r)) r++;
+                int args = (strncmp(o, "-s ", 3) == 0 || strncmp(o, "-o ", 3) == 0 || strncmp(o, "-t ", 3) == 0) ? 3
+                           : strncmp(o, "-mm ", 4) == 0                                                        ? 2
+                                                                                                                : 1;
+                for (int k = 0; k < args; k++) {
+                    r = skip_blank(r);
+                    float dummy;
+                    const char *e = io_parse_float(r, &dummy);
+                    if (k > 0 && (!e || !is_delim(*e))) break; /* -s may give fewer than 3 */
+                    while (!is_delim(*r)) r++;
+                }
+                r = skip_blank(r);
+            }
+            char name[IO_PATH_MAX], full[IO_PATH_MAX];
+            rest_of_line(r, name, sizeof name);
+            if (!name[0]) return io_error(ctx, f.shown, f.line, "map_Kd without a file name");
+            for (char *c = name; *c; c++)
+                if (*c == '\\') *c = '/';
+            vfs_join(&ctx->vfs, path, name, full, sizeof full);
+            uint32_t t = tex_load(ctx, full, name, f.shown, f.line);
+            if (t == IO_NONE) return false;
+            m->map_kd = (int32_t)t;
+        }
+        /* Everything else (Ka, map_Ks, bump, PBR extensions...) has no field in rp_material_data. */
+    }
+    if (!mtl_finish(ctx, &pm)) return io_error(ctx, f.shown, f.line, "out of memory");
+    ctx->bytes += buf->size;
+    return true;
+}
+
+/* ---- OBJ -------------------------------------------------------------------------------------- */
+
+/* Statements of the OBJ spec that carry no triangle data: accepted and skipped. */
+static bool obj_skippable(const char *p) {
+    static const char *const words[] = {"o", "g", "s", "l", "p", "vp", "cstype", "deg", "bmat", "step",
+                                        "curv", "curv2", "surf", "parm", "trim", "hole", "scrv", "sp",
+                                        "end", "con", "mg", "bevel", "c_interp", "d_interp", "lod",
+                                        "shadow_obj", "trace_obj", "ctech", "stech", "maplib", "usemap",
+                                        "call", "csh"};
+    for (size_t i = 0; i < sizeof words / sizeof words[0]; i++)
+        if (word_is(p, words[i])) return true;
+    return false;
+}
+
+static bool obj_index(obj_file *f, int64_t raw, size_t count, const char *what, uint32_t *out) {
+    int64_t i;
+    if (raw > 0)
+        i = raw - 1;
+    else if (raw < 0)
+        i = (int64_t)count + raw;
+    else
+        return io_error(f->ctx, f->shown, f->line, "%s index 0 is invalid (OBJ indices start at 1)", what);
+    if (i < 0 || (uint64_t)i >= count)
+        return io_error(f->ctx, f->shown, f->line, "%s index %lld out of range (%zu defined so far)", what,
+                        (long long)raw, count);
+    *out = (uint32_t)i;
+    return true;
+}
+
+static bool obj_face(obj_file *f, const char *p, uint32_t material) {
+    io_ctx *ctx = f->ctx;
+    io_builder *b = &ctx->b;
+    uint32_t n = 0;
+    uint32_t *c = NULL; /* corners: v, t, n per vertex */
+    for (;;) {
+        p = skip_blank(p);
+        if (at_eol(p)) break;
+        if (!(c = io_scratch_u(ctx, 7 * ((size_t)n + 1) + 8)))
+            return io_error(ctx, f->shown, f->line, "out of memory");
+        int64_t raw;
+        const char *q = io_parse_int(p, &raw);
+        if (!q) return io_error(ctx, f->shown, f->line, "bad face vertex '%.*s'", (int)strcspn(p, " \t\r\n"), p);
+        uint32_t *corner = c + 3 * n;
+        corner[1] = corner[2] = IO_NONE;
+        if (!obj_index(f, raw, b->pos_n, "vertex", &corner[0])) return false;
+        if (*q == '/') {
+            q++;
+            if (*q != '/') {
+                if (!(q = io_parse_int(q, &raw)))
+                    return io_error(ctx, f->shown, f->line, "bad texture coordinate index in face");
+                if (!obj_index(f, raw, b->uv_n, "texture coordinate", &corner[1])) return false;
+            }
+            if (*q == '/') {
+                q++;
+                if (!(q = io_parse_int(q, &raw))) return io_error(ctx, f->shown, f->line, "bad normal index in face");
+                if (!obj_index(f, raw, b->nrm_n, "normal", &corner[2])) return false;
+            }
+        }
+        if (!is_delim(*q) && *q != '#')
+            return io_error(ctx, f->shown, f->line, "bad face vertex '%.*s'", (int)strcspn(p, " \t\r\n"), p);
+        p = q;
+        if (++n >= (1u << 24)) return io_error(ctx, f->shown, f->line, "face has too many vertices");
+    }
+    if (n < 3) return io_error(ctx, f->shown, f->line, "face with %u vertices (at least 3 needed)", n);
+    if (material == IO_NONE && (material = builder_default_material(ctx)) == IO_NONE)
+        return io_error(ctx, f->shown, f->line, "out of memory");
+    if (!builder_reserve_triangles(ctx, n - 2)) return io_error(ctx, f->shown, f->line, "out of memory");
+    uint32_t *tris = c + 3 * n, *ring = tris + 3 * (n - 2);
+    if (n == 3) {
+        tris[0] = 0, tris[1] = 1, tris[2] = 2;
+    } else {
+        float *pts = io_scratch_f(ctx, 3 * (size_t)n);
+        if (!pts) return io_error(ctx, f->shown, f->line, "out of memory");
+        for (uint32_t i = 0; i < n; i++) memcpy(pts + 3 * i, b->pos + 3 * (size_t)c[3 * i], 3 * sizeof(float));
+        poly_triangulate(pts, n, tris, ring);
+    }
+    for (uint32_t k = 0; k < n - 2; k++) {
+        uint32_t v[3], t[3], nn[3];
+        bool has_t = true, has_n = true;
+        for (int j = 0; j < 3; j++) {
+            const uint32_t *corner = c + 3 * tris[3 * k + j];
+            v[j] = corner[0];
+            t[j] = corner[1];
+            nn[j] = corner[2];
+            has_t &= t[j] != IO_NONE;
+            has_n &= nn[j] != IO_NONE;
+        }
+        if (!builder_add_triangle(ctx, v, has_n ? nn : NULL, has_t ? t : NULL, material))
+            return io_error(ctx, f->shown, f->line, "out of memory");
+    }
+    return true;
+}
+
+static uint32_t obj_find_material(io_ctx *ctx, size_t first, const char *name) {
+    for (size_t i = first; i < ctx->b.material_n; i++)
+        if (strncmp(ctx->b.materials[i].name, name, sizeof ctx->b.materials[i].name - 1) == 0)
+            return (uint32_t)i;
+    return IO_NONE;
+}
+
+bool obj_load(io_ctx *ctx, const char *path) {
+    obj_file f = {.ctx = ctx, .path = path, .line = 1};
+    vfs_display(&ctx->vfs, path, f.shown, sizeof f.shown);
+    io_buf buf;
+    if (!vfs_read(ctx, path, &buf)) return io_error(ctx, f.shown, 0, "cannot open or decompress file");
+    ctx->bytes += buf.size;
+    io_builder *b = &ctx->b;
+    const char *p = buf.data, *end = buf.data + buf.size;
+    uint32_t material = IO_NONE;
+    size_t first_mtl = b->material_n;
+    bool ok = true;
+    for (; ok && p < end; p = next_line(p, end), f.line++) {
+        p = skip_blank(p);
+        if (at_eol(p)) {
+            if (*p == '\0' && p < end) ok = io_error(ctx, f.shown, f.line, "binary data in a text file");
+            continue;
+        }
+        if (p[0] == 'v' && (p[1] == ' ' || p[1] == '\t')) {
+            if (b->pos_n >= b->pos_cap && (b->pos_n >= UINT32_MAX || !builder_reserve_vertices(ctx, 1))) {
+                ok = io_error(ctx, f.shown, f.line, "out of memory");
+                break;
+            }
+            float *v = b->pos + 3 * b->pos_n;
+            const char *q = p + 1;
+            ok = (q = obj_float(&f, q, &v[0], "v")) && (q = obj_float(&f, q, &v[1], "v")) &&
+                 (q = obj_float(&f, q, &v[2], "v"));
+            b->pos_n++;
+        } else if (p[0] == 'f' && (p[1] == ' ' || p[1] == '\t')) {
+            ok = obj_face(&f, p + 1, material);
+        } else if (p[0] == 'v' && p[1] == 'n' && is_delim(p[2])) {
+            if (b->nrm_n >= b->nrm_cap && (b->nrm_n >= UINT32_MAX || !builder_reserve_normals(ctx, 1))) {
+                ok = io_error(ctx, f.shown, f.line, "out of memory");
+                break;
+            }
+            float *v = b->nrm + 3 * b->nrm_n;
+            const char *q = p + 2;
+            ok = (q = obj_float(&f, q, &v[0], "vn")) && (q = obj_float(&f, q, &v[1], "vn")) &&
+                 (q = obj_float(&f, q, &v[2], "vn"));
+            b->nrm_n++;
+        } else if (p[0] == 'v' && p[1] == 't' && is_delim(p[2])) {
+            if (b->uv_n >= b->uv_cap && (b->uv_n >= UINT32_MAX || !builder_reserve_texcoords(ctx, 1))) {
+                ok = io_error(ctx, f.shown, f.line, "out of memory");
+                break;
+            }
+            float *v = b->uv + 2 * b->uv_n;
+            const char *q = p + 2;
+            v[1] = 0.0f;
+            ok = (q = obj_float(&f, q, &v[0], "vt")) != NULL;
+            if (ok && !at_eol(skip_blank(q))) ok = obj_float(&f, q, &v[1], "vt") != NULL;
+            b->uv_n++;
+        } else if (word_is(p, "usemtl")) {
+            char name[256];
+            rest_of_line(p + 6, name, sizeof name);
+            /* A name no library defines falls back to the default material, as most readers do. */
+            material = obj_find_material(ctx, first_mtl, name);
+        } else if (word_is(p, "mtllib")) {
+            /* One or more library names, each relative to the OBJ file. */
+            const char *q = p + 6;
+            for (;;) {
+                q = skip_blank(q);
+                if (at_eol(q)) break;
+                const char *s = q;
+                while (!is_delim(*q)) q++;
+                char rel[IO_PATH_MAX], full[IO_PATH_MAX], shown[IO_PATH_MAX + 256];
+                snprintf(rel, sizeof rel, "%.*s", (int)(q - s), s);
+                vfs_join(&ctx->vfs, path, rel, full, sizeof full);
+                vfs_display(&ctx->vfs, full, shown, sizeof shown);
+                io_buf mb;
+                if (!vfs_read(ctx, full, &mb)) {
+                    ok = io_error(ctx, f.shown, f.line, "cannot open material library '%s' (%s)", rel, shown);
+                    break;
+                }
+                ok = mtl_parse(ctx, full, shown, &mb);
+                vfs_buf_free(&mb);
+                if (!ok) break;
+            }
+        } else if (!obj_skippable(p)) {
+            int len = 0;
+            while (len < 24 && !is_delim(p[len])) len++;
+            ok = io_error(ctx, f.shown, f.line, "unknown statement '%.*s'", len, p);
+        }
+    }
+    vfs_buf_free(&buf);
+    return ok;
+}

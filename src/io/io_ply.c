@@ -1,0 +1,475 @@
+/* PLY (ASCII, binary little and big endian). The header declares elements and their properties;
+ * the vertex element gives positions (and normals, texture coordinates when present), the face
+ * element a vertex index list per face. Every other element and property, lists included, is read
+ * past by its declared type. */
+#include <math.h>
+#include <stdio.h>
+
+#include "io/io_internal.h"
+
+typedef enum ply_type {
+    PLY_NONE = 0,
+    PLY_I8,
+    PLY_U8,
+    PLY_I16,
+    PLY_U16,
+    PLY_I32,
+    PLY_U32,
+    PLY_F32,
+    PLY_F64
+} ply_type;
+
+typedef enum ply_format { PLY_ASCII, PLY_BINARY_LE, PLY_BINARY_BE } ply_format;
+
+/* What a vertex property feeds: nothing, or one coordinate. */
+enum { PLY_USE_NONE = 0, PLY_USE_X, PLY_USE_Y, PLY_USE_Z, PLY_USE_NX, PLY_USE_NY, PLY_USE_NZ, PLY_USE_U, PLY_USE_V };
+
+typedef struct ply_prop {
+    ply_type type;
+    ply_type count_type; /* PLY_NONE: not a list */
+    int use;
+} ply_prop;
+
+typedef struct ply_elem {
+    char name[64];
+    uint64_t count;
+    uint32_t line; /* header line declaring it */
+    ply_prop *props;
+    size_t prop_n, prop_cap;
+    int face_list; /* index of the vertex index list in a face element, -1 if none */
+} ply_elem;
+
+typedef struct ply_file {
+    io_ctx *ctx;
+    char shown[IO_PATH_MAX + 256];
+    ply_format format;
+    ply_elem *elems;
+    size_t elem_n, elem_cap;
+    const char *p, *end;
+    uint32_t line;
+    uint64_t vertex_count;
+    size_t vertex_base;
+    bool has_normals, has_uv;
+} ply_file;
+
+static size_t ply_size(ply_type t) {
+    switch (t) {
+    case PLY_I8:
+    case PLY_U8: return 1;
+    case PLY_I16:
+    case PLY_U16: return 2;
+    case PLY_I32:
+    case PLY_U32:
+    case PLY_F32: return 4;
+    case PLY_F64: return 8;
+    case PLY_NONE: break;
+    }
+    return 0;
+}
+
+static ply_type ply_type_named(const char *s) {
+    static const struct {
+        const char *name;
+        ply_type type;
+    } names[] = {{"char", PLY_I8},    {"int8", PLY_I8},     {"uchar", PLY_U8},   {"uint8", PLY_U8},
+                 {"short", PLY_I16},  {"int16", PLY_I16},   {"ushort", PLY_U16}, {"uint16", PLY_U16},
+                 {"int", PLY_I32},    {"int32", PLY_I32},   {"uint", PLY_U32},   {"uint32", PLY_U32},
+                 {"float", PLY_F32},  {"float32", PLY_F32}, {"double", PLY_F64}, {"float64", PLY_F64}};
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
+        if (strcmp(s, names[i].name) == 0) return names[i].type;
+    return PLY_NONE;
+}
+
+static int ply_use_named(const char *s) {
+    static const struct {
+        const char *name;
+        int use;
+    } names[] = {{"x", PLY_USE_X},         {"y", PLY_USE_Y},         {"z", PLY_USE_Z},
+                 {"nx", PLY_USE_NX},       {"ny", PLY_USE_NY},       {"nz", PLY_USE_NZ},
+                 {"u", PLY_USE_U},         {"v", PLY_USE_V},         {"s", PLY_USE_U},
+                 {"t", PLY_USE_V},         {"texture_u", PLY_USE_U}, {"texture_v", PLY_USE_V},
+                 {"texture_s", PLY_USE_U}, {"texture_t", PLY_USE_V}};
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
+        if (strcmp(s, names[i].name) == 0) return names[i].use;
+    return PLY_USE_NONE;
+}
+
+/* ---- header ----------------------------------------------------------------------------------- */
+
+/* Splits the next header line into at most 6 words. */
+static int ply_header_words(ply_file *f, char words[6][64]) {
+    int n = 0;
+    while (f->p < f->end && *f->p != '\n') {
+        while (f->p < f->end && io_is_space(*f->p)) f->p++;
+        if (f->p >= f->end || *f->p == '\n') break;
+        const char *s = f->p;
+        while (f->p < f->end && !io_is_space(*f->p) && *f->p != '\n') f->p++;
+        if (n < 6) snprintf(words[n++], 64, "%.*s", (int)(f->p - s), s);
+    }
+    if (f->p < f->end) f->p++; /* the '\n' */
+    return n;
+}
+
+static bool ply_read_header(ply_file *f) {
+    io_ctx *ctx = f->ctx;
+    char w[6][64];
+    if (f->end - f->p < 4 || strncmp(f->p, "ply", 3) != 0 || !(f->p[3] == '\n' || f->p[3] == '\r'))
+        return io_error(ctx, f->shown, 1, "not a PLY file (no 'ply' magic line)");
+    ply_header_words(f, w);
+    bool have_format = false;
+    for (f->line = 2;; f->line++) {
+        if (f->p >= f->end) return io_error(ctx, f->shown, f->line, "header ends without end_header");
+        int n = ply_header_words(f, w);
+        if (n == 0) continue;
+        if (strcmp(w[0], "end_header") == 0) break;
+        if (strcmp(w[0], "comment") == 0 || strcmp(w[0], "obj_info") == 0) continue;
+        if (strcmp(w[0], "format") == 0) {
+            if (n < 2) return io_error(ctx, f->shown, f->line, "format line without a format");
+            if (strcmp(w[1], "ascii") == 0) f->format = PLY_ASCII;
+            else if (strcmp(w[1], "binary_little_endian") == 0) f->format = PLY_BINARY_LE;
+            else if (strcmp(w[1], "binary_big_endian") == 0) f->format = PLY_BINARY_BE;
+            else return io_error(ctx, f->shown, f->line, "unknown PLY format '%s'", w[1]);
+            have_format = true;
+        } else if (strcmp(w[0], "element") == 0) {
+            int64_t count;
+            const char *e;
+            if (n != 3 || !(e = io_parse_int(w[2], &count)) || *e || count < 0)
+                return io_error(ctx, f->shown, f->line, "bad element line (expected 'element <name> <count>')");
+            if (!io_reserve((void **)&f->elems, &f->elem_cap, f->elem_n + 1, sizeof(ply_elem)))
+                return io_error(ctx, f->shown, f->line, "out of memory");
+            ply_elem *el = &f->elems[f->elem_n++];
+            memset(el, 0, sizeof *el);
+            snprintf(el->name, sizeof el->name, "%s", w[1]);
+            el->count = (uint64_t)count;
+            el->line = f->line;
+            el->face_list = -1;
+        } else if (strcmp(w[0], "property") == 0) {
+            if (f->elem_n == 0) return io_error(ctx, f->shown, f->line, "property before any element");
+            ply_elem *el = &f->elems[f->elem_n - 1];
+            ply_prop pr = {PLY_NONE, PLY_NONE, PLY_USE_NONE};
+            const char *name;
+            if (n >= 2 && strcmp(w[1], "list") == 0) {
+                if (n != 5) return io_error(ctx, f->shown, f->line, "bad list property line");
+                pr.count_type = ply_type_named(w[2]);
+                pr.type = ply_type_named(w[3]);
+                if (pr.count_type == PLY_NONE || pr.type == PLY_NONE ||
+                    pr.count_type == PLY_F32 || pr.count_type == PLY_F64)
+                    return io_error(ctx, f->shown, f->line, "bad list property types '%s %s'", w[2], w[3]);
+                name = w[4];
+            } else {
+                if (n != 3) return io_error(ctx, f->shown, f->line, "bad property line");
+                pr.type = ply_type_named(w[1]);
+                if (pr.type == PLY_NONE) return io_error(ctx, f->shown, f->line, "unknown property type '%s'", w[1]);
+                name = w[2];
+            }
+            if (strcmp(el->name, "vertex") == 0 && pr.count_type == PLY_NONE) pr.use = ply_use_named(name);
+            if (strcmp(el->name, "face") == 0 && pr.count_type != PLY_NONE && el->face_list < 0 &&
+                (strcmp(name, "vertex_indices") == 0 || strcmp(name, "vertex_index") == 0))
+                el->face_list = (int)el->prop_n;
+            if (!io_reserve((void **)&el->props, &el->prop_cap, el->prop_n + 1, sizeof(ply_prop)))
+                return io_error(ctx, f->shown, f->line, "out of memory");
+            el->props[el->prop_n++] = pr;
+        } else {
+            return io_error(ctx, f->shown, f->line, "unknown header line '%s'", w[0]);
+        }
+    }
+    if (!have_format) return io_error(ctx, f->shown, f->line, "no format line in the header");
+    f->line++;
+    return true;
+}
+
+/* ---- values ----------------------------------------------------------------------------------- */
+
+/* Next ASCII value as a double (integers exactly), NULL-free: false with the error written. */
+static bool ply_ascii_value(ply_file *f, ply_type t, double *out) {
+    const char *p = f->p;
+    for (;;) {
+        while (io_is_space(*p)) p++;
+        if (*p == '\n') {
+            f->line++;
+            p++;
+            continue;
+        }
+        break;
+    }
+    if (p >= f->end) {
+        f->p = p;
+        return io_error(f->ctx, f->shown, f->line, "unexpected end of file (truncated data?)");
+    }
+    const char *q;
+    if (t == PLY_F32 || t == PLY_F64) {
+        float v = 0.0f;
+        q = io_parse_float(p, &v);
+        *out = v;
+    } else {
+        int64_t v = 0;
+        q = io_parse_int(p, &v);
+        *out = (double)v;
+    }
+    if (!q || !(io_is_space(*q) || *q == '\n' || *q == '\0')) {
+        int len = 0;
+        while (len < 24 && p[len] && !io_is_space(p[len]) && p[len] != '\n') len++;
+        return io_error(f->ctx, f->shown, f->line, "expected a %s, got '%.*s'",
+                        t == PLY_F32 || t == PLY_F64 ? "finite number" : "integer", len, p);
+    }
+    f->p = q;
+    return true;
+}
+
+static bool ply_binary_value(ply_file *f, ply_type t, double *out) {
+    size_t n = ply_size(t);
+    if ((size_t)(f->end - f->p) < n)
+        return io_error(f->ctx, f->shown, f->line, "unexpected end of binary data at byte %zu (truncated file?)",
+                        (size_t)(f->end - f->p));
+    uint8_t b[8];
+    memcpy(b, f->p, n);
+    f->p += n;
+    if (f->format == PLY_BINARY_BE)
+        for (size_t i = 0; i < n / 2; i++) {
+            uint8_t tmp = b[i];
+            b[i] = b[n - 1 - i];
+            b[n - 1 - i] = tmp;
+        }
+    switch (t) {
+    case PLY_I8: *out = (int8_t)b[0]; break;
+    case PLY_U8: *out = b[0]; break;
+    case PLY_I16: {
+        int16_t v;
+        memcpy(&v, b, 2);
+        *out = v;
+    } break;
+    case PLY_U16: {
+        uint16_t v;
+        memcpy(&v, b, 2);
+        *out = v;
+    } break;
+    case PLY_I32: {
+        int32_t v;
+        memcpy(&v, b, 4);
+        *out = v;
+    } break;
+    case PLY_U32: {
+        uint32_t v;
+        memcpy(&v, b, 4);
+        *out = v;
+    } break;
+    case PLY_F32: {
+        float v = 0.0f;
+        memcpy(&v, b, 4);
+        *out = v;
+    } break;
+    case PLY_F64: memcpy(out, b, 8); break;
+    case PLY_NONE: *out = 0; break;
+    }
+    return true;
+}
+
+static bool ply_value(ply_file *f, ply_type t, double *out) {
+    return f->format == PLY_ASCII ? ply_ascii_value(f, t, out) : ply_binary_value(f, t, out);
+}
+
+/* Moves an ASCII reader to the next value so f->line is the line that value is on. */
+static void ply_sync_line(ply_file *f) {
+    if (f->format != PLY_ASCII) return;
+    while (io_is_space(*f->p) || *f->p == '\n') {
+        if (*f->p == '\n') f->line++;
+        f->p++;
+    }
+}
+
+/* ---- elements --------------------------------------------------------------------------------- */
+
+static bool ply_read_list_count(ply_file *f, const ply_prop *pr, uint64_t *count) {
+    double c = 0.0;
+    if (!ply_value(f, pr->count_type, &c)) return false;
+    if (c < 0) return io_error(f->ctx, f->shown, f->line, "negative list size %.0f", c);
+    /* Every entry takes its size in bytes (binary) or two (ASCII): a larger count is a lie. */
+    double per = f->format == PLY_ASCII ? 2.0 : (double)ply_size(pr->type);
+    if (c * per > (double)(f->end - f->p)) return io_error(f->ctx, f->shown, f->line, "list size %.0f exceeds the file", c);
+    *count = (uint64_t)c;
+    return true;
+}
+
+static bool ply_skip_list(ply_file *f, const ply_prop *pr) {
+    uint64_t count = 0;
+    if (!ply_read_list_count(f, pr, &count)) return false;
+    if (f->format != PLY_ASCII) {
+        size_t bytes = (size_t)count * ply_size(pr->type);
+        if ((size_t)(f->end - f->p) < bytes)
+            return io_error(f->ctx, f->shown, f->line, "unexpected end of binary data (truncated file?)");
+        f->p += bytes;
+        return true;
+    }
+    double v;
+    for (uint64_t i = 0; i < count; i++)
+        if (!ply_value(f, pr->type, &v)) return false;
+    return true;
+}
+
+static bool ply_read_vertices(ply_file *f, const ply_elem *el) {
+    io_ctx *ctx = f->ctx;
+    io_builder *b = &ctx->b;
+    if (el->count > UINT32_MAX - b->pos_n) return io_error(ctx, f->shown, el->line, "too many vertices");
+    bool has_xyz[3] = {false, false, false};
+    for (size_t i = 0; i < el->prop_n; i++) {
+        int u = el->props[i].use;
+        if (u >= PLY_USE_X && u <= PLY_USE_Z) has_xyz[u - PLY_USE_X] = true;
+        if (u >= PLY_USE_NX && u <= PLY_USE_NZ) f->has_normals = true;
+        if (u == PLY_USE_U || u == PLY_USE_V) f->has_uv = true;
+    }
+    if (!has_xyz[0] || !has_xyz[1] || !has_xyz[2])
+        return io_error(ctx, f->shown, el->line, "vertex element without x, y and z properties");
+    /* Reserve no more than the data could hold, so a lying count fails on the data, not on malloc. */
+    size_t plausible = (size_t)(f->end - f->p) / 2 + 1;
+    size_t n = el->count < plausible ? (size_t)el->count : plausible;
+    if (!builder_reserve_vertices(ctx, n) || (f->has_normals && !builder_reserve_normals(ctx, n)) ||
+        (f->has_uv && !builder_reserve_texcoords(ctx, n)))
+        return io_error(ctx, f->shown, el->line, "out of memory");
+    f->vertex_base = b->pos_n;
+    for (uint64_t k = 0; k < el->count; k++) {
+        if (b->pos_n >= b->pos_cap && !builder_reserve_vertices(ctx, 1)) return io_error(ctx, f->shown, f->line, "out of memory");
+        if (f->has_normals && b->nrm_n >= b->nrm_cap && !builder_reserve_normals(ctx, 1))
+            return io_error(ctx, f->shown, f->line, "out of memory");
+        if (f->has_uv && b->uv_n >= b->uv_cap && !builder_reserve_texcoords(ctx, 1))
+            return io_error(ctx, f->shown, f->line, "out of memory");
+        float xyz[3] = {0, 0, 0}, nrm[3] = {0, 0, 0}, uv[2] = {0, 0};
+        ply_sync_line(f);
+        uint32_t line = f->line;
+        for (size_t i = 0; i < el->prop_n; i++) {
+            const ply_prop *pr = &el->props[i];
+            if (pr->count_type != PLY_NONE) {
+                if (!ply_skip_list(f, pr)) return false;
+                continue;
+            }
+            double v;
+            if (!ply_value(f, pr->type, &v)) return false;
+            switch (pr->use) {
+            case PLY_USE_X: xyz[0] = (float)v; break;
+            case PLY_USE_Y: xyz[1] = (float)v; break;
+            case PLY_USE_Z: xyz[2] = (float)v; break;
+            case PLY_USE_NX: nrm[0] = (float)v; break;
+            case PLY_USE_NY: nrm[1] = (float)v; break;
+            case PLY_USE_NZ: nrm[2] = (float)v; break;
+            case PLY_USE_U: uv[0] = (float)v; break;
+            case PLY_USE_V: uv[1] = (float)v; break;
+            default: break;
+            }
+        }
+        if (!isfinite(xyz[0]) || !isfinite(xyz[1]) || !isfinite(xyz[2]) || !isfinite(nrm[0]) ||
+            !isfinite(nrm[1]) || !isfinite(nrm[2]) || !isfinite(uv[0]) || !isfinite(uv[1]))
+            return io_error(ctx, f->shown, line, "vertex %llu has a NaN or infinite value", (unsigned long long)k);
+        memcpy(b->pos + 3 * b->pos_n++, xyz, sizeof xyz);
+        if (f->has_normals) memcpy(b->nrm + 3 * b->nrm_n++, nrm, sizeof nrm);
+        if (f->has_uv) memcpy(b->uv + 2 * b->uv_n++, uv, sizeof uv);
+    }
+    f->vertex_count = el->count;
+    return true;
+}
+
+static bool ply_read_faces(ply_file *f, const ply_elem *el, bool vertices_seen) {
+    io_ctx *ctx = f->ctx;
+    io_builder *b = &ctx->b;
+    uint32_t material = builder_default_material(ctx);
+    if (material == IO_NONE) return io_error(ctx, f->shown, el->line, "out of memory");
+    if (!vertices_seen) return io_error(ctx, f->shown, el->line, "face element before the vertex element");
+    for (uint64_t k = 0; k < el->count; k++) {
+        ply_sync_line(f);
+        uint32_t line = f->line;
+        for (size_t i = 0; i < el->prop_n; i++) {
+            const ply_prop *pr = &el->props[i];
+            if ((int)i != el->face_list) {
+                double v;
+                if (pr->count_type != PLY_NONE ? !ply_skip_list(f, pr) : !ply_value(f, pr->type, &v)) return false;
+                continue;
+            }
+            uint64_t n = 0;
+            if (!ply_read_list_count(f, pr, &n)) return false;
+            if (n < 3)
+                return io_error(ctx, f->shown, line, "face %llu has %llu vertices (at least 3 needed)",
+                                (unsigned long long)k, (unsigned long long)n);
+            uint32_t *s = io_scratch_u(ctx, 5 * n);
+            if (!s) return io_error(ctx, f->shown, line, "out of memory");
+            for (uint64_t j = 0; j < n; j++) {
+                double v;
+                if (!ply_value(f, pr->type, &v)) return false;
+                if (v < 0 || v >= (double)f->vertex_count || v != floor(v))
+                    return io_error(ctx, f->shown, line, "face %llu: vertex index %.0f out of range (%llu vertices)",
+                                    (unsigned long long)k, v, (unsigned long long)f->vertex_count);
+                s[j] = (uint32_t)(f->vertex_base + (size_t)v);
+            }
+            uint32_t *tris = s + n, *ring = tris + 3 * (n - 2);
+            if (n == 3) {
+                tris[0] = 0, tris[1] = 1, tris[2] = 2;
+            } else {
+                float *pts = io_scratch_f(ctx, 3 * n);
+                if (!pts) return io_error(ctx, f->shown, line, "out of memory");
+                for (uint64_t j = 0; j < n; j++) memcpy(pts + 3 * j, b->pos + 3 * (size_t)s[j], 3 * sizeof(float));
+                poly_triangulate(pts, (uint32_t)n, tris, ring);
+            }
+            for (uint64_t t = 0; t < n - 2; t++) {
+                uint32_t v[3] = {s[tris[3 * t]], s[tris[3 * t + 1]], s[tris[3 * t + 2]]};
+                /* PLY normals and coordinates are per vertex: their indices are the vertex's. */
+                uint32_t nn[3], tt[3];
+                for (int j = 0; j < 3; j++) {
+                    nn[j] = (uint32_t)(v[j] - f->vertex_base + (b->nrm_n - f->vertex_count));
+                    tt[j] = (uint32_t)(v[j] - f->vertex_base + (b->uv_n - f->vertex_count));
+                }
+                if (!builder_add_triangle(ctx, v, f->has_normals ? nn : NULL, f->has_uv ? tt : NULL, material))
+                    return io_error(ctx, f->shown, line, "out of memory");
+            }
+        }
+    }
+    return true;
+}
+
+static void ply_free(ply_file *f) {
+    for (size_t i = 0; i < f->elem_n; i++) free(f->elems[i].props);
+    free(f->elems);
+}
+
+bool ply_load(io_ctx *ctx, const char *path) {
+    ply_file f;
+    memset(&f, 0, sizeof f);
+    f.ctx = ctx;
+    f.line = 1;
+    vfs_display(&ctx->vfs, path, f.shown, sizeof f.shown);
+    io_buf buf;
+    if (!vfs_read(ctx, path, &buf)) return io_error(ctx, f.shown, 0, "cannot open or decompress file");
+    ctx->bytes += buf.size;
+    f.p = buf.data;
+    f.end = buf.data + buf.size;
+    bool ok = ply_read_header(&f);
+    bool vertices_seen = false;
+    for (size_t i = 0; ok && i < f.elem_n; i++) {
+        const ply_elem *el = &f.elems[i];
+        if (strcmp(el->name, "vertex") == 0 && !vertices_seen) {
+            ok = ply_read_vertices(&f, el);
+            vertices_seen = true;
+        } else if (strcmp(el->name, "face") == 0 && el->face_list >= 0) {
+            ok = ply_read_faces(&f, el, vertices_seen);
+        } else {
+            for (uint64_t k = 0; ok && k < el->count; k++)
+                for (size_t j = 0; ok && j < el->prop_n; j++) {
+                    double v;
+                    const ply_prop *pr = &el->props[j];
+                    ok = pr->count_type != PLY_NONE ? ply_skip_list(&f, pr) : ply_value(&f, pr->type, &v);
+                }
+        }
+    }
+    if (ok && !vertices_seen) ok = io_error(ctx, f.shown, f.line, "no vertex element");
+    if (ok && f.format == PLY_ASCII) {
+        /* Anything but blanks after the last element means the counts were wrong. */
+        const char *p = f.p;
+        while (p < f.end && (io_is_space(*p) || *p == '\n')) {
+            if (*p == '\n') f.line++;
+            p++;
+        }
+        if (p < f.end) ok = io_error(ctx, f.shown, f.line, "data after the last element (element counts too small?)");
+    } else if (ok && f.p != f.end) {
+        ok = io_error(ctx, f.shown, f.line, "%zu bytes after the last element (element counts too small?)",
+                      (size_t)(f.end - f.p));
+    }
+    ply_free(&f);
+    vfs_buf_free(&buf);
+    return ok;
+}

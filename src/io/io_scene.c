@@ -1,0 +1,415 @@
+/* rp_scene_data_load: picks the loader from the extension, runs it into a builder, then hands the
+ * builder's arrays to the caller's rp_scene_data. */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <time.h>
+
+#include "io/io_internal.h"
+
+bool io_error(io_ctx *ctx, const char *file, uint32_t line, const char *fmt, ...) {
+    if (ctx->failed) return false; /* the first error is the one that explains the others */
+    ctx->failed = true;
+    if (!ctx->err || ctx->err_size == 0) return false;
+    int n = snprintf(ctx->err, ctx->err_size, "%s:%u: error: ", file, line);
+    if (n >= 0 && (size_t)n < ctx->err_size) {
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(ctx->err + n, ctx->err_size - (size_t)n, fmt, ap);
+        va_end(ap);
+    }
+    return false;
+}
+
+bool io_reserve(void **p, size_t *cap, size_t need, size_t elem) {
+    if (need <= *cap) return true;
+    size_t c = *cap ? *cap : 16;
+    while (c < need) {
+        if (c > SIZE_MAX / 2 / elem) return false;
+        c *= 2;
+    }
+    void *q = realloc(*p, c * elem);
+    if (!q) return false;
+    *p = q;
+    *cap = c;
+    return true;
+}
+
+uint32_t *io_scratch_u(io_ctx *ctx, size_t n) {
+    if (!io_reserve((void **)&ctx->scratch_u, &ctx->scratch_u_cap, n, sizeof(uint32_t))) return NULL;
+    return ctx->scratch_u;
+}
+
+float *io_scratch_f(io_ctx *ctx, size_t n) {
+    if (!io_reserve((void **)&ctx->scratch_f, &ctx->scratch_f_cap, n, sizeof(float))) return NULL;
+    return ctx->scratch_f;
+}
+
+float io_parse_float_slow(const char *start, const char *end, bool *ok) {
+    /* Long mantissas and large exponents: rare, so the C library's correctly rounded strtof. The
+     * text was already checked to be a plain decimal number ending at `end`. */
+    char *e;
+    float f = strtof(start, &e);
+    *ok = e == end && isfinite(f); /* overflow gives HUGE_VALF; underflow to 0 or subnormal is fine */
+    return f;
+}
+
+/* ---- builder ---------------------------------------------------------------------------------- */
+
+void builder_material_defaults(rp_material_data *m, const char *name) {
+    memset(m, 0, sizeof *m);
+    snprintf(m->name, sizeof m->name, "%s", name);
+    m->kd[0] = m->kd[1] = m->kd[2] = 0.8f;
+    m->ior = 1.0f;
+    m->illum = -1;
+    m->map_kd = -1;
+}
+
+uint32_t builder_add_material(io_ctx *ctx, const rp_material_data *m) {
+    io_builder *b = &ctx->b;
+    if (b->material_n >= UINT32_MAX - 1 ||
+        !io_reserve((void **)&b->materials, &b->material_cap, b->material_n + 1, sizeof *m))
+        return IO_NONE;
+    b->materials[b->material_n] = *m;
+    return (uint32_t)b->material_n++;
+}
+
+uint32_t builder_default_material(io_ctx *ctx) {
+    if (ctx->b.default_material == IO_NONE) {
+        rp_material_data m;
+        builder_material_defaults(&m, "default");
+        ctx->b.default_material = builder_add_material(ctx, &m);
+    }
+    return ctx->b.default_material;
+}
+
+bool builder_reserve_vertices(io_ctx *ctx, size_t extra) {
+    io_builder *b = &ctx->b;
+    return io_reserve((void **)&b->pos, &b->pos_cap, b->pos_n + extra, 3 * sizeof(float));
+}
+
+bool builder_reserve_normals(io_ctx *ctx, size_t extra) {
+    io_builder *b = &ctx->b;
+    return io_reserve((void **)&b->nrm, &b->nrm_cap, b->nrm_n + extra, 3 * sizeof(float));
+}
+
+bool builder_reserve_texcoords(io_ctx *ctx, size_t extra) {
+    io_builder *b = &ctx->b;
+    return io_reserve((void **)&b->uv, &b->uv_cap, b->uv_n + extra, 2 * sizeof(float));
+}
+
+bool builder_reserve_triangles(io_ctx *ctx, size_t extra) {
+    io_builder *b = &ctx->b;
+    size_t need = b->tri_n + extra, cap = b->tri_cap;
+    if (need <= cap) return true;
+    /* The four per-triangle arrays grow together; nidx/tidx only once they exist. */
+    size_t c = cap;
+    if (!io_reserve((void **)&b->idx, &c, need, 3 * sizeof(uint32_t))) return false;
+    c = cap;
+    if (!io_reserve((void **)&b->mat, &c, need, sizeof(uint32_t))) return false;
+    if (b->nidx) {
+        c = cap;
+        if (!io_reserve((void **)&b->nidx, &c, need, 3 * sizeof(uint32_t))) return false;
+    }
+    if (b->tidx) {
+        c = cap;
+        if (!io_reserve((void **)&b->tidx, &c, need, 3 * sizeof(uint32_t))) return false;
+    }
+    b->tri_cap = c;
+    return true;
+}
+
+/* Allocates a per-corner index array for the triangles so far, every corner IO_NONE. */
+static uint32_t *corner_array(const io_builder *b) {
+    size_t cap = b->tri_cap ? b->tri_cap : 16;
+    uint32_t *a = malloc(cap * 3 * sizeof(uint32_t));
+    if (a) memset(a, 0xFF, b->tri_n * 3 * sizeof(uint32_t));
+    return a;
+}
+
+bool builder_add_triangle(io_ctx *ctx, const uint32_t v[3], const uint32_t *n, const uint32_t *t,
+                          uint32_t material) {
+    io_builder *b = &ctx->b;
+    if (b->tri_n >= b->tri_cap) {
+        if (b->tri_n >= UINT32_MAX / 3 || !builder_reserve_triangles(ctx, 1)) return false;
+        if (b->tri_cap < b->tri_n + 1) return false;
+    }
+    if (n && !b->nidx && !(b->nidx = corner_array(b))) return false;
+    if (t && !b->tidx && !(b->tidx = corner_array(b))) return false;
+    size_t i = b->tri_n++;
+    memcpy(b->idx + 3 * i, v, 3 * sizeof(uint32_t));
+    if (b->nidx) {
+        if (n) memcpy(b->nidx + 3 * i, n, 3 * sizeof(uint32_t));
+        else b->nidx[3 * i] = b->nidx[3 * i + 1] = b->nidx[3 * i + 2] = IO_NONE;
+    }
+    if (b->tidx) {
+        if (t) memcpy(b->tidx + 3 * i, t, 3 * sizeof(uint32_t));
+        else b->tidx[3 * i] = b->tidx[3 * i + 1] = b->tidx[3 * i + 2] = IO_NONE;
+    }
+    b->mat[i] = material;
+    return true;
+}
+
+static void builder_free(io_builder *b) {
+    free(b->pos);
+    free(b->nrm);
+    free(b->uv);
+    free(b->idx);
+    free(b->nidx);
+    free(b->tidx);
+    free(b->mat);
+    free(b->spheres);
+    free(b->cones);
+    free(b->materials);
+    for (size_t i = 0; i < b->texture_n; i++) {
+        free(b->textures[i].rgb);
+        free(b->texture_keys[i]);
+    }
+    free(b->textures);
+    free(b->texture_keys);
+    free(b->lights);
+    memset(b, 0, sizeof *b);
+}
+
+/* Triangles that had no normal (an OBJ face without //n among faces with them, an NFF `p` among
+ * `pp`) get their flat face normal, and those without texture coordinates the (0,0) coordinate, so
+ * the per-corner arrays are either absent or complete. */
+static bool builder_fill_missing(io_ctx *ctx) {
+    io_builder *b = &ctx->b;
+    if (b->nidx) {
+        for (size_t i = 0; i < b->tri_n; i++) {
+            uint32_t *n = b->nidx + 3 * i;
+            if (n[0] != IO_NONE && n[1] != IO_NONE && n[2] != IO_NONE) continue;
+            const float *p0 = b->pos + 3 * (size_t)b->idx[3 * i];
+            const float *p1 = b->pos + 3 * (size_t)b->idx[3 * i + 1];
+            const float *p2 = b->pos + 3 * (size_t)b->idx[3 * i + 2];
+            float e1[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
+            float e2[3] = {p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
+            float c[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                          e1[0] * e2[1] - e1[1] * e2[0]};
+            float len = sqrtf(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+            if (len > 0.0f) {
+                c[0] /= len, c[1] /= len, c[2] /= len;
+            } else {
+                c[0] = 0.0f, c[1] = 0.0f, c[2] = 1.0f; /* zero-area triangle: any unit vector */
+            }
+            if (b->nrm_n >= UINT32_MAX || !builder_reserve_normals(ctx, 1)) return false;
+            memcpy(b->nrm + 3 * b->nrm_n, c, sizeof c);
+            uint32_t k = (uint32_t)b->nrm_n++;
+            for (int j = 0; j < 3; j++)
+                if (n[j] == IO_NONE) n[j] = k;
+        }
+    }
+    if (b->tidx) {
+        uint32_t zero = IO_NONE;
+        for (size_t i = 0; i < 3 * b->tri_n; i++) {
+            if (b->tidx[i] != IO_NONE) continue;
+            if (zero == IO_NONE) {
+                if (b->uv_n >= UINT32_MAX || !builder_reserve_texcoords(ctx, 1)) return false;
+                b->uv[2 * b->uv_n] = b->uv[2 * b->uv_n + 1] = 0.0f;
+                zero = (uint32_t)b->uv_n++;
+            }
+            b->tidx[i] = zero;
+        }
+    }
+    return true;
+}
+
+/* ---- entry points ----------------------------------------------------------------------------- */
+
+static double now_ms(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+static bool ends_with(const char *s, const char *suffix) {
+    size_t n = strlen(s), k = strlen(suffix);
+    return n >= k && strcmp(s + n - k, suffix) == 0;
+}
+
+static bool has_ext(const char *path, const char *ext) {
+    char e[16];
+    vfs_extension(path, e, sizeof e);
+    return strcmp(e, ext) == 0;
+}
+
+static bool is_archive(const char *path) {
+    char lower[IO_PATH_MAX];
+    size_t n = strlen(path);
+    if (n >= sizeof lower) return false;
+    for (size_t i = 0; i <= n; i++) lower[i] = (char)(path[i] >= 'A' && path[i] <= 'Z' ? path[i] + 32 : path[i]);
+    return ends_with(lower, ".tar") || ends_with(lower, ".tar.gz") || ends_with(lower, ".tgz");
+}
+
+/* Scans an AFF/NFF text for `i <detail> <file>` includes and marks the archive entries they name. */
+static void mark_includes(io_ctx *ctx, const io_entry *e, bool *included) {
+    const char *p = e->data, *end = e->data + e->size;
+    while (p < end) {
+        while (p < end && io_is_space(*p)) p++;
+        if (p + 1 < end && p[0] == 'i' && io_is_space(p[1])) {
+            p++;
+            while (p < end && io_is_space(*p)) p++;
+            while (p < end && !io_is_space(*p) && *p != '\n') p++; /* detail level */
+            while (p < end && io_is_space(*p)) p++;
+            const char *s = p;
+            while (p < end && !io_is_space(*p) && *p != '\n' && *p != '\0') p++;
+            char rel[IO_PATH_MAX], full[IO_PATH_MAX];
+            size_t len = (size_t)(p - s);
+            if (len > 0 && len < sizeof rel) {
+                memcpy(rel, s, len);
+                rel[len] = '\0';
+                vfs_join(&ctx->vfs, e->name, rel, full, sizeof full);
+                for (size_t k = 0; k < ctx->vfs.entry_count; k++)
+                    if (strcmp(ctx->vfs.entries[k].name, full) == 0) included[k] = true;
+            }
+        }
+        while (p < end && *p != '\n') p++;
+        p++;
+    }
+}
+
+static size_t count_includes(const io_entry *e) {
+    size_t n = 0;
+    const char *p = e->data, *end = e->data + e->size;
+    while (p < end) {
+        while (p < end && io_is_space(*p)) p++;
+        if (p + 1 < end && p[0] == 'i' && io_is_space(p[1])) n++;
+        while (p < end && *p != '\n') p++;
+        p++;
+    }
+    return n;
+}
+
+/* The main scene of an archive: among its .aff/.nff files the ones no other file includes; of those
+ * the one with the most includes (kitchen.aff, museum5.aff), ties to the first in archive order.
+ * Archives without AFF/NFF files must hold exactly one .obj or .ply. */
+static const char *archive_main(io_ctx *ctx) {
+    io_vfs *v = &ctx->vfs;
+    bool *included = calloc(v->entry_count + 1, sizeof(bool));
+    if (!included) return NULL;
+    for (size_t i = 0; i < v->entry_count; i++)
+        if (has_ext(v->entries[i].name, "aff") || has_ext(v->entries[i].name, "nff"))
+            mark_includes(ctx, &v->entries[i], included);
+    const char *best = NULL;
+    size_t best_inc = 0;
+    for (size_t i = 0; i < v->entry_count; i++) {
+        const io_entry *e = &v->entries[i];
+        if (included[i] || !(has_ext(e->name, "aff") || has_ext(e->name, "nff"))) continue;
+        size_t inc = count_includes(e);
+        if (!best || inc > best_inc) best = e->name, best_inc = inc;
+    }
+    free(included);
+    if (best) return best;
+    const char *only = NULL;
+    for (size_t i = 0; i < v->entry_count; i++) {
+        const char *n = v->entries[i].name;
+        if (has_ext(n, "obj") || has_ext(n, "ply")) {
+            if (only) return NULL;
+            only = n;
+        }
+    }
+    return only;
+}
+
+static bool load_scene_file(io_ctx *ctx, const char *path, const char *shown) {
+    char ext[16];
+    vfs_extension(path, ext, sizeof ext);
+    if (strcmp(ext, "obj") == 0) return obj_load(ctx, path);
+    if (strcmp(ext, "ply") == 0) return ply_load(ctx, path);
+    if (strcmp(ext, "nff") == 0 || strcmp(ext, "aff") == 0) return nff_load(ctx, path);
+    return io_error(ctx, shown, 0, "unknown scene format '.%s' (expected .obj, .ply, .nff, .aff, .tar)", ext);
+}
+
+static void move_out(io_builder *b, rp_scene_data *out) {
+    out->vertex_count = b->pos_n;
+    out->positions = b->pos;
+    out->normal_count = b->nidx ? b->nrm_n : 0;
+    out->normals = b->nidx ? b->nrm : NULL;
+    if (!b->nidx) free(b->nrm);
+    out->texcoord_count = b->tidx ? b->uv_n : 0;
+    out->texcoords = b->tidx ? b->uv : NULL;
+    if (!b->tidx) free(b->uv);
+    out->triangle_count = b->tri_n;
+    out->indices = b->idx;
+    out->normal_indices = b->nidx;
+    out->texcoord_indices = b->tidx;
+    out->tri_materials = b->mat;
+    out->sphere_count = b->sphere_n;
+    out->spheres = b->spheres;
+    out->cone_count = b->cone_n;
+    out->cones = b->cones;
+    out->material_count = b->material_n;
+    out->materials = b->materials;
+    out->texture_count = b->texture_n;
+    out->textures = b->textures;
+    for (size_t i = 0; i < b->texture_n; i++) free(b->texture_keys[i]);
+    free(b->texture_keys);
+    out->light_count = b->light_n;
+    out->lights = b->lights;
+    out->camera = b->camera;
+    memcpy(out->background, b->background, sizeof out->background);
+    out->has_background = b->has_background;
+    memset(b, 0, sizeof *b);
+}
+
+bool rp_scene_data_load(const char *path, rp_scene_data *out, char *err, size_t err_size) {
+    double t0 = now_ms();
+    if (err && err_size) err[0] = '\0';
+    if (!out) return false;
+    memset(out, 0, sizeof *out);
+    io_ctx ctx;
+    memset(&ctx, 0, sizeof ctx);
+    ctx.err = err;
+    ctx.err_size = err_size;
+    ctx.b.default_material = IO_NONE;
+    if (!path) return io_error(&ctx, "(null)", 0, "no path given");
+    if (strlen(path) >= IO_PATH_MAX - 64) return io_error(&ctx, path, 0, "path too long");
+
+    bool ok;
+    if (is_archive(path)) {
+        ok = vfs_open_archive(&ctx, path);
+        if (ok) {
+            const char *main_file = archive_main(&ctx);
+            if (!main_file)
+                ok = io_error(&ctx, path, 0, "archive holds no single main scene (.aff/.nff not included by another, or one .obj/.ply)");
+            else
+                ok = load_scene_file(&ctx, main_file, path);
+        }
+    } else {
+        ok = load_scene_file(&ctx, path, path);
+    }
+    if (ok && ctx.b.material_n == 0) builder_default_material(&ctx);
+    if (ok && ctx.b.material_n == 0) ok = io_error(&ctx, path, 0, "out of memory");
+    if (ok && !builder_fill_missing(&ctx)) ok = io_error(&ctx, path, 0, "out of memory");
+    free(ctx.scratch_u);
+    free(ctx.scratch_f);
+    vfs_close(&ctx.vfs);
+    if (!ok) {
+        if (!ctx.failed) io_error(&ctx, path, 0, "load failed");
+        builder_free(&ctx.b);
+        return false;
+    }
+    move_out(&ctx.b, out);
+    out->file_bytes = ctx.bytes;
+    out->parse_ms = now_ms() - t0;
+    return true;
+}
+
+void rp_scene_data_free(rp_scene_data *scene) {
+    if (!scene) return;
+    free(scene->positions);
+    free(scene->normals);
+    free(scene->texcoords);
+    free(scene->indices);
+    free(scene->normal_indices);
+    free(scene->texcoord_indices);
+    free(scene->tri_materials);
+    free(scene->spheres);
+    free(scene->cones);
+    free(scene->materials);
+    for (size_t i = 0; i < scene->texture_count; i++) free(scene->textures[i].rgb);
+    free(scene->textures);
+    free(scene->lights);
+    memset(scene, 0, sizeof *scene);
+}

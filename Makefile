@@ -24,11 +24,8 @@ asan: deps
 	cmake --build --preset asan -j $(JOBS)
 
 demo: release
-	@if [ -x build/release/raypack ]; then \
-	  ./build/release/raypack render -o raypack-demo.png && echo "wrote raypack-demo.png"; \
-	else \
-	  ./build/release/tests/rp_core_demo; \
-	fi
+	./build/release/raypack render -o raypack-demo.png
+	@echo "wrote raypack-demo.png"
 
 test-release: release
 	ctest --preset release -j $(JOBS)

@@ -267,6 +267,44 @@ int main(void) {
     CHECK(rh.hit.prim_id == 0);
     rp_scene_release(deg);
 
+    /* short rays starting near a large triangle keep an accurate distance (a reflection ray
+     * leaving a wall towards a big floor 0.03 away), compared with the plane distance in double */
+    {
+        rp_scene *big = rp_scene_new(dev, NULL);
+        rp_geometry *bg = rp_geometry_new(dev, RP_GEOMETRY_TRIANGLE);
+        float bv[9] = {-500, 0.0f, -500, 700, 0.37f, -400, -300, -0.21f, 650};
+        uint32_t bi[3] = {0, 1, 2};
+        rp_geometry_set_buffer(bg, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, bv, 0, 0, 3);
+        rp_geometry_set_buffer(bg, RP_BUFFER_INDEX, RP_FORMAT_UINT3, bi, 0, 0, 1);
+        rp_scene_attach(big, bg);
+        rp_geometry_release(bg);
+        CHECK(rp_scene_commit(big) == RP_ERROR_NONE);
+        test_rng g = {5};
+        double worst = 0.0;
+        for (int i = 0; i < 2000; i++) {
+            float o[3] = {(test_rng_float(&g) - 0.5f) * 200.0f, 0.0f, (test_rng_float(&g) - 0.5f) * 200.0f};
+            float d[3] = {test_rng_float(&g) - 0.5f, -0.05f - test_rng_float(&g), test_rng_float(&g) - 0.5f};
+            /* lift the origin 0.01..0.05 above the plane */
+            double e1[3] = {(double)bv[3] - bv[0], (double)bv[4] - bv[1], (double)bv[5] - bv[2]};
+            double e2[3] = {(double)bv[6] - bv[0], (double)bv[7] - bv[1], (double)bv[8] - bv[2]};
+            double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+            double y = bv[1] - (n[0] * (o[0] - bv[0]) + n[2] * (o[2] - bv[2])) / n[1];
+            o[1] = (float)(y + 0.01 + 0.04 * test_rng_float(&g));
+            double t = (n[0] * ((double)bv[0] - o[0]) + n[1] * ((double)bv[1] - o[1]) + n[2] * ((double)bv[2] - o[2])) /
+                       (n[0] * d[0] + n[1] * d[1] + n[2] * d[2]);
+            rh = ray_at(o[0], o[1], o[2], d[0], d[1], d[2]);
+            rp_intersect1(big, &rh);
+            if (rh.hit.geom_id != 0) {
+                worst = 1.0;
+                continue;
+            }
+            double rel = fabs(rh.ray.tfar - t) / t;
+            worst = rel > worst ? rel : worst;
+        }
+        CHECKF(worst < 1e-4, "short rays near a large triangle: worst relative t error %g", worst);
+        rp_scene_release(big);
+    }
+
     /* parallel_for hands out every index exactly once, on the device's threads */
     pf p = {calloc(10000, sizeof(uint32_t)), rp_device_thread_count(dev)};
     rp_device_parallel_for(dev, 10000, pf_task, &p);

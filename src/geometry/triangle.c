@@ -1,5 +1,6 @@
 /* Scalar reference of the watertight ray-triangle test (Woop, Benthin, Wald 2013, JCGT 2(1)).
- * The kernels in traverse/kernels.inc run this exact arithmetic on SIMD lanes. */
+ * The kernels in traverse/kernels.inc run this exact arithmetic on SIMD lanes. The inside test
+ * is the paper's; the distance comes from the plane equation, which keeps short rays accurate. */
 #include <math.h>
 
 #include "traverse/traverse.h"
@@ -31,9 +32,15 @@ bool tri_intersect_ref(const float org[3], const float dir[3], float tnear, floa
     if ((U < 0.0f || V < 0.0f || W < 0.0f) && (U > 0.0f || V > 0.0f || W > 0.0f)) return false;
     float det = U + V + W;
     if (det == 0.0f) return false;
-    float T = U * (sz * az) + V * (sz * bz) + W * (sz * cz);
+    /* distance from the plane (see WT_DEFINE in traverse/kernels.inc for why) */
+    float e1x = bx - ax, e1y = by - ay, e1z = bz - az;
+    float e2x = cx - ax, e2y = cy - ay, e2z = cz - az;
+    float nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
+    float na = nx * ax + ny * ay + nz * az;
+    float nd = nx * sx + ny * sy + nz;
+    if (nd == 0.0f) return false;
+    float tt = (na * sz) / nd;
     float rcp = 1.0f / det;
-    float tt = T * rcp;
     if (!(tt >= tnear && tt <= tfar)) return false;
     *t = tt;
     *u = V * rcp;

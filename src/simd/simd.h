@@ -152,6 +152,22 @@ static inline float vf16_reduce_min(vf16 a) {
     return r;
 }
 
+static inline float vf4_reduce_max(vf4 a) {
+    float r = a[0];
+    for (int i = 1; i < 4; i++) r = a[i] > r ? a[i] : r;
+    return r;
+}
+static inline float vf8_reduce_max(vf8 a) {
+    float r = a[0];
+    for (int i = 1; i < 8; i++) r = a[i] > r ? a[i] : r;
+    return r;
+}
+static inline float vf16_reduce_max(vf16 a) {
+    float r = a[0];
+    for (int i = 1; i < 16; i++) r = a[i] > r ? a[i] : r;
+    return r;
+}
+
 static inline uint32_t simd_ctz(uint32_t x) { return (uint32_t)__builtin_ctz(x); }
 static inline uint32_t simd_popcount(uint32_t x) { return (uint32_t)__builtin_popcount(x); }
 

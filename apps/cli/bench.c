@@ -1,0 +1,1228 @@
+/* `raypack bench [SCENE]`: Mrays/s of raypack's query modes on primary, shadow, reflection and
+ * diffuse rays, checked against single-ray hits before timing. `--vs embree` runs raypack against
+ * Embree (bench_embree.c). */
+#include "bench.h"
+#include "cli.h"
+
+#include <errno.h>
+#include <float.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#if defined(__x86_64__) || defined(__i386__) || defined(__SSE__)
+#include <pmmintrin.h>
+#include <xmmintrin.h>
+#define BENCH_HAVE_MXCSR 1
+#endif
+
+#include <raypack_io.h>
+
+/* rp_intersect_array / rtcIntersect1M copy a chunk into an array of this many bytes per ray. */
+#define BENCH_SCRATCH_RAY_BYTES 128
+
+/* ---- small helpers -------------------------------------------------------------------------- */
+
+const char *bench_kind_name(bench_kind kind) {
+    switch (kind) {
+    case BENCH_PRIMARY: return "primary";
+    case BENCH_SHADOW: return "shadow";
+    case BENCH_REFLECTION: return "reflection";
+    case BENCH_DIFFUSE: return "diffuse";
+    case BENCH_KIND_COUNT: break;
+    }
+    return "?";
+}
+
+double bench_now_ms(void) { return cli_now_ms(); }
+
+void bench_set_ftz(void) {
+#if defined(BENCH_HAVE_MXCSR)
+    _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+    _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+#endif
+}
+
+void bench_json_string(FILE *f, const char *s) {
+    fputc('"', f);
+    for (; *s; s++) {
+        unsigned char c = (unsigned char)*s;
+        if (c == '"' || c == '\\')
+            fprintf(f, "\\%c", c);
+        else if (c < 0x20)
+            fprintf(f, "\\u%04x", c);
+        else
+            fputc(c, f);
+    }
+    fputc('"', f);
+}
+
+/* 64-byte aligned zeroed allocation (packets and hit arrays), NULL when out of memory. */
+static void *alloc_aligned(size_t bytes) {
+    size_t rounded = (bytes + 63) / 64 * 64;
+    void *p = aligned_alloc(64, rounded ? rounded : 64);
+    if (p) memset(p, 0, rounded ? rounded : 64);
+    return p;
+}
+
+bool bench_hits_alloc(bench_hits *hits, size_t slots) {
+    hits->t = alloc_aligned(slots * sizeof(float));
+    hits->prim = alloc_aligned(slots * sizeof(uint32_t));
+    if (!hits->t || !hits->prim) {
+        bench_hits_free(hits);
+        return false;
+    }
+    return true;
+}
+
+void bench_hits_free(bench_hits *hits) {
+    free(hits->t);
+    free(hits->prim);
+    hits->t = NULL;
+    hits->prim = NULL;
+}
+
+/* qsort order of doubles. */
+static int compare_double(const void *a, const void *b) {
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+bench_stat bench_stats(double *samples, int n) {
+    bench_stat s = {0, 0, 0};
+    if (n <= 0) return s;
+    qsort(samples, (size_t)n, sizeof *samples, compare_double);
+    s.min = samples[0];
+    s.max = samples[n - 1];
+    s.median = n % 2 ? samples[n / 2] : 0.5 * (samples[n / 2 - 1] + samples[n / 2]);
+    return s;
+}
+
+/* Relative tolerance on hit distances between modes and engines. */
+#define BENCH_T_TOLERANCE 1e-4f
+/* Floor of the tolerance in float ulps of the hit point's magnitude, divided by the cosine of the
+ * incidence angle: a hit point is only known to that precision, and a plane met at a grazing angle
+ * spreads it along the ray (a reflection ray leaving a corner of the Cornell box hits the next wall
+ * at t = 0.03, 552 units from the origin; diffuse rays in the conference room graze lamp panels). */
+#define BENCH_T_ULPS 16.0
+#define BENCH_MIN_COSINE 1e-2
+
+/* Cosine between the ray and triangle prim's normal (1 when the triangle is degenerate). */
+static double hit_cosine(const bench_mesh *mesh, const bench_ray *r, uint32_t prim) {
+    if (prim >= mesh->triangle_count) return 1.0;
+    const uint32_t *tri = mesh->indices + 3 * (size_t)prim;
+    const float *v0 = mesh->positions + 3 * (size_t)tri[0];
+    const float *v1 = mesh->positions + 3 * (size_t)tri[1];
+    const float *v2 = mesh->positions + 3 * (size_t)tri[2];
+    double e1[3], e2[3];
+    for (int k = 0; k < 3; k++) {
+        e1[k] = (double)v1[k] - v0[k];
+        e2[k] = (double)v2[k] - v0[k];
+    }
+    double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                   e1[0] * e2[1] - e1[1] * e2[0]};
+    double nn = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    double dd = sqrt((double)r->dir[0] * r->dir[0] + (double)r->dir[1] * r->dir[1] +
+                     (double)r->dir[2] * r->dir[2]);
+    if (!(nn > 0.0) || !(dd > 0.0)) return 1.0;
+    return fabs(n[0] * r->dir[0] + n[1] * r->dir[1] + n[2] * r->dir[2]) / (nn * dd);
+}
+
+/* True when two hit distances of the same ray agree: within 1e-4 relative, or within the precision
+ * of the hit point (cosine: of the incidence angle on the hit triangle). */
+static bool same_distance(const bench_ray *r, double ta, double tb, double cosine) {
+    double t = fmax(fabs(ta), fabs(tb));
+    double org = fmax(fabs((double)r->org[0]), fmax(fabs((double)r->org[1]), fabs((double)r->org[2])));
+    double floor_tol = BENCH_T_ULPS * (double)FLT_EPSILON * (org + t) / fmax(cosine, BENCH_MIN_COSINE);
+    return fabs(ta - tb) <= fmax((double)BENCH_T_TOLERANCE * t, floor_tol);
+}
+
+/* Distance along the ray to triangle prim's plane in double precision (NAN when parallel or prim is
+ * out of range), with the barycentrics of that point. */
+static double triangle_t_double(const bench_mesh *mesh, const bench_ray *r, uint32_t prim, double *u,
+                                double *v) {
+    if (prim >= mesh->triangle_count) return NAN;
+    const uint32_t *tri = mesh->indices + 3 * (size_t)prim;
+    const float *v0 = mesh->positions + 3 * (size_t)tri[0];
+    const float *v1 = mesh->positions + 3 * (size_t)tri[1];
+    const float *v2 = mesh->positions + 3 * (size_t)tri[2];
+    double e1[3], e2[3], o[3], d[3];
+    for (int k = 0; k < 3; k++) {
+        e1[k] = (double)v1[k] - v0[k];
+        e2[k] = (double)v2[k] - v0[k];
+        o[k] = (double)r->org[k] - v0[k];
+        d[k] = r->dir[k];
+    }
+    double p[3] = {d[1] * e2[2] - d[2] * e2[1], d[2] * e2[0] - d[0] * e2[2], d[0] * e2[1] - d[1] * e2[0]};
+    double det = e1[0] * p[0] + e1[1] * p[1] + e1[2] * p[2];
+    if (det == 0.0) return NAN;
+    double q[3] = {o[1] * e1[2] - o[2] * e1[1], o[2] * e1[0] - o[0] * e1[2], o[0] * e1[1] - o[1] * e1[0]};
+    *u = (o[0] * p[0] + o[1] * p[1] + o[2] * p[2]) / det;
+    *v = (d[0] * q[0] + d[1] * q[1] + d[2] * q[2]) / det;
+    return (e2[0] * q[0] + e2[1] * q[1] + e2[2] * q[2]) / det;
+}
+
+/* True when the ray meets triangle prim at distance t (double precision, edges included): the
+ * triangle the other side reported lies at the same distance, so both answers are closest hits. */
+static bool hits_triangle_at(const bench_mesh *mesh, const bench_ray *r, uint32_t prim, float t) {
+    double u, v, tt = triangle_t_double(mesh, r, prim, &u, &v);
+    const double edge = 1e-6;
+    if (!(tt == tt) || u < -edge || v < -edge || u + v > 1.0 + edge) return false;
+    return same_distance(r, tt, (double)t, hit_cosine(mesh, r, prim));
+}
+
+bench_diff bench_compare(const bench_mesh *mesh, const bench_rays *set, const bench_hits *ref,
+                         const bench_hits *hits) {
+    bench_diff d = {0, 0, 0, 0, 0};
+    for (size_t i = 0; i < set->slots; i++) {
+        if (!set->valid[i]) continue;
+        if (set->occlusion) {
+            bool a = ref->t[i] == -INFINITY, b = hits->t[i] == -INFINITY;
+            if (a != b) d.hit_miss++;
+            continue;
+        }
+        bool a = ref->prim[i] != RP_INVALID_ID, b = hits->prim[i] != RP_INVALID_ID;
+        if (a != b) {
+            d.hit_miss++;
+        } else if (a) {
+            float ta = ref->t[i], tb = hits->t[i];
+            const bench_ray *r = &set->rays[i];
+            if (!same_distance(r, (double)ta, (double)tb, hit_cosine(mesh, r, ref->prim[i])))
+                d.distance++;
+            else if (ref->prim[i] != hits->prim[i]) {
+                if (hits_triangle_at(mesh, r, hits->prim[i], ta) &&
+                    hits_triangle_at(mesh, r, ref->prim[i], tb))
+                    d.ties++;
+                else
+                    d.primitive++;
+            }
+        }
+    }
+    d.total = d.hit_miss + d.distance + d.primitive;
+    return d;
+}
+
+void bench_print_mismatches(const bench_mesh *mesh, const bench_rays *set, const bench_hits *ref,
+                            const bench_hits *hits, const char *ref_name, const char *name, int max) {
+    int shown = 0;
+    for (size_t i = 0; i < set->slots && shown < max; i++) {
+        if (!set->valid[i]) continue;
+        bench_hits one_ref = {ref->t + i, ref->prim + i}, one = {hits->t + i, hits->prim + i};
+        bench_rays one_set = *set;
+        one_set.slots = 1;
+        one_set.rays = set->rays + i;
+        one_set.valid = set->valid + i;
+        if (bench_compare(mesh, &one_set, &one_ref, &one).total == 0) continue;
+        const bench_ray *r = &set->rays[i];
+        double u, v, exact = triangle_t_double(mesh, r, ref->prim[i], &u, &v);
+        fprintf(stderr,
+                "  %s ray %zu: org %.9g,%.9g,%.9g dir %.9g,%.9g,%.9g [%g, %g]: %s t=%.9g prim %d, "
+                "%s t=%.9g prim %d (double precision: t=%.9g, cosine %.3g)\n",
+                bench_kind_name(set->kind), i, (double)r->org[0], (double)r->org[1],
+                (double)r->org[2], (double)r->dir[0], (double)r->dir[1], (double)r->dir[2],
+                (double)r->tnear, (double)r->tfar, ref_name, (double)ref->t[i], (int)ref->prim[i],
+                name, (double)hits->t[i], (int)hits->prim[i], exact,
+                hit_cosine(mesh, r, ref->prim[i]));
+        shown++;
+    }
+}
+
+/* ---- the timing loop ------------------------------------------------------------------------ */
+
+typedef struct trace_job {
+    const bench_mode *mode;
+    const bench_rays *set;
+    bench_hits *out;
+    bench_scratch *scratch;
+} trace_job;
+
+/* One chunk (a 32x32 pixel block) on a device thread; FTZ/DAZ are set on every thread that traces,
+ * for both engines alike. */
+static void trace_task(void *user, uint32_t index, uint32_t thread) {
+    trace_job *job = user;
+    bench_set_ftz();
+    size_t first = (size_t)index * BENCH_CHUNK;
+    job->mode->trace(job->mode->engine, job->set, first, BENCH_CHUNK, job->out,
+                     job->scratch->per_thread[thread]);
+}
+
+double bench_trace_set(bench_ctx *ctx, int threads, const bench_mode *mode, const bench_rays *set,
+                       bench_hits *out) {
+    trace_job job = {mode, set, out, &ctx->scratch};
+    uint32_t chunks = (uint32_t)(set->slots / BENCH_CHUNK);
+    double t0 = bench_now_ms();
+    if (threads <= 1) {
+        bench_set_ftz();
+        for (uint32_t c = 0; c < chunks; c++)
+            mode->trace(mode->engine, set, (size_t)c * BENCH_CHUNK, BENCH_CHUNK, out,
+                        ctx->scratch.per_thread[0]);
+    } else {
+        rp_device_parallel_for(ctx->device, chunks, trace_task, &job);
+    }
+    return (bench_now_ms() - t0) * 1e-3;
+}
+
+/* ---- raypack's query modes ------------------------------------------------------------------ */
+
+static inline void fill_rp_ray(rp_ray *r, const bench_ray *b, size_t slot) {
+    r->org_x = b->org[0];
+    r->org_y = b->org[1];
+    r->org_z = b->org[2];
+    r->tnear = b->tnear;
+    r->dir_x = b->dir[0];
+    r->dir_y = b->dir[1];
+    r->dir_z = b->dir[2];
+    r->time = 0.0f;
+    r->tfar = b->tfar;
+    r->mask = 0xFFFFFFFFu;
+    r->id = (uint32_t)slot;
+    r->flags = 0;
+}
+
+/* True when any lane of a packet is live (packets of misses are skipped, as by Embree). */
+static inline bool any_valid(const int32_t *valid, int width) {
+    int32_t any = 0;
+    for (int k = 0; k < width; k++) any |= valid[k];
+    return any != 0;
+}
+
+/* rp_intersect1, one ray at a time. */
+static void rp_trace_intersect1(void *engine, const bench_rays *set, size_t first, size_t n,
+                                bench_hits *out, void *scratch) {
+    (void)scratch;
+    rp_scene *scene = engine;
+    for (size_t i = first; i < first + n; i++) {
+        if (!set->valid[i]) continue;
+        rp_rayhit rh;
+        fill_rp_ray(&rh.ray, &set->rays[i], i);
+        rh.hit.geom_id = RP_INVALID_ID;
+        rh.hit.prim_id = RP_INVALID_ID;
+        rp_intersect1(scene, &rh);
+        bool hit = rh.hit.geom_id != RP_INVALID_ID;
+        out->t[i] = hit ? rh.ray.tfar : INFINITY;
+        out->prim[i] = hit ? rh.hit.prim_id : RP_INVALID_ID;
+    }
+}
+
+/* rp_occluded1, one ray at a time. */
+static void rp_trace_occluded1(void *engine, const bench_rays *set, size_t first, size_t n,
+                               bench_hits *out, void *scratch) {
+    (void)scratch;
+    rp_scene *scene = engine;
+    for (size_t i = first; i < first + n; i++) {
+        if (!set->valid[i]) continue;
+        rp_ray r;
+        fill_rp_ray(&r, &set->rays[i], i);
+        rp_occluded1(scene, &r);
+        out->t[i] = r.tfar;
+        out->prim[i] = RP_INVALID_ID;
+    }
+}
+
+/* Packet modes: W consecutive slots (a row, half or all of a 4x4 tile) per call. */
+#define BENCH_RP_PACKET_MODES(W)                                                                 \
+    static void rp_trace_intersect##W(void *engine, const bench_rays *set, size_t first,         \
+                                      size_t n, bench_hits *out, void *scratch) {                \
+        (void)scratch;                                                                           \
+        rp_scene *scene = engine;                                                                \
+        for (size_t base = first; base < first + n; base += W) {                                 \
+            const int32_t *valid = set->valid + base;                                            \
+            if (!any_valid(valid, W)) continue;                                                  \
+            rp_rayhit##W p;                                                                      \
+            for (int k = 0; k < W; k++) {                                                        \
+                const bench_ray *b = &set->rays[base + (size_t)k];                               \
+                p.ray.org_x[k] = b->org[0];                                                      \
+                p.ray.org_y[k] = b->org[1];                                                      \
+                p.ray.org_z[k] = b->org[2];                                                      \
+                p.ray.tnear[k] = b->tnear;                                                       \
+                p.ray.dir_x[k] = b->dir[0];                                                      \
+                p.ray.dir_y[k] = b->dir[1];                                                      \
+                p.ray.dir_z[k] = b->dir[2];                                                      \
+                p.ray.time[k] = 0.0f;                                                            \
+                p.ray.tfar[k] = b->tfar;                                                         \
+                p.ray.mask[k] = 0xFFFFFFFFu;                                                     \
+                p.ray.id[k] = (uint32_t)(base + (size_t)k);                                      \
+                p.ray.flags[k] = 0;                                                              \
+                p.hit.geom_id[k] = RP_INVALID_ID;                                                \
+                p.hit.prim_id[k] = RP_INVALID_ID;                                                \
+            }                                                                                    \
+            rp_intersect##W(scene, valid, &p);                                                   \
+            for (int k = 0; k < W; k++) {                                                        \
+                if (!valid[k]) continue;                                                         \
+                bool hit = p.hit.geom_id[k] != RP_INVALID_ID;                                    \
+                out->t[base + (size_t)k] = hit ? p.ray.tfar[k] : INFINITY;                       \
+                out->prim[base + (size_t)k] = hit ? p.hit.prim_id[k] : RP_INVALID_ID;            \
+            }                                                                                    \
+        }                                                                                        \
+    }                                                                                            \
+    static void rp_trace_occluded##W(void *engine, const bench_rays *set, size_t first,          \
+                                     size_t n, bench_hits *out, void *scratch) {                 \
+        (void)scratch;                                                                           \
+        rp_scene *scene = engine;                                                                \
+        for (size_t base = first; base < first + n; base += W) {                                 \
+            const int32_t *valid = set->valid + base;                                            \
+            if (!any_valid(valid, W)) continue;                                                  \
+            rp_ray##W p;                                                                         \
+            for (int k = 0; k < W; k++) {                                                        \
+                const bench_ray *b = &set->rays[base + (size_t)k];                               \
+                p.org_x[k] = b->org[0];                                                          \
+                p.org_y[k] = b->org[1];                                                          \
+                p.org_z[k] = b->org[2];                                                          \
+                p.tnear[k] = b->tnear;                                                           \
+                p.dir_x[k] = b->dir[0];                                                          \
+                p.dir_y[k] = b->dir[1];                                                          \
+                p.dir_z[k] = b->dir[2];                                                          \
+                p.time[k] = 0.0f;                                                                \
+                p.tfar[k] = b->tfar;                                                             \
+                p.mask[k] = 0xFFFFFFFFu;                                                         \
+                p.id[k] = (uint32_t)(base + (size_t)k);                                          \
+                p.flags[k] = 0;                                                                  \
+            }                                                                                    \
+            rp_occluded##W(scene, valid, &p);                                                    \
+            for (int k = 0; k < W; k++) {                                                        \
+                if (!valid[k]) continue;                                                         \
+                out->t[base + (size_t)k] = p.tfar[k];                                            \
+                out->prim[base + (size_t)k] = RP_INVALID_ID;                                     \
+            }                                                                                    \
+        }                                                                                        \
+    }
+BENCH_RP_PACKET_MODES(4)
+BENCH_RP_PACKET_MODES(8)
+BENCH_RP_PACKET_MODES(16)
+#undef BENCH_RP_PACKET_MODES
+
+/* rp_intersect_array / rp_occluded_array on the live rays of a chunk, with the given hint. */
+static void rp_trace_array(rp_scene *scene, const bench_rays *set, size_t first, size_t n,
+                           bench_hits *out, void *scratch, uint32_t flags) {
+    size_t m = 0;
+    if (set->occlusion) {
+        rp_ray *rays = scratch;
+        for (size_t i = first; i < first + n; i++)
+            if (set->valid[i]) fill_rp_ray(&rays[m++], &set->rays[i], i);
+        if (m == 0) return;
+        rp_occluded_array(scene, rays, m, flags);
+        for (size_t j = 0; j < m; j++) {
+            out->t[rays[j].id] = rays[j].tfar;
+            out->prim[rays[j].id] = RP_INVALID_ID;
+        }
+    } else {
+        rp_rayhit *rh = scratch;
+        for (size_t i = first; i < first + n; i++) {
+            if (!set->valid[i]) continue;
+            fill_rp_ray(&rh[m].ray, &set->rays[i], i);
+            rh[m].hit.geom_id = RP_INVALID_ID;
+            rh[m].hit.prim_id = RP_INVALID_ID;
+            m++;
+        }
+        if (m == 0) return;
+        rp_intersect_array(scene, rh, m, flags);
+        for (size_t j = 0; j < m; j++) {
+            bool hit = rh[j].hit.geom_id != RP_INVALID_ID;
+            out->t[rh[j].ray.id] = hit ? rh[j].ray.tfar : INFINITY;
+            out->prim[rh[j].ray.id] = hit ? rh[j].hit.prim_id : RP_INVALID_ID;
+        }
+    }
+}
+
+/* rp_intersect_array with RP_QUERY_COHERENT. */
+static void rp_trace_array_coherent(void *engine, const bench_rays *set, size_t first, size_t n,
+                                    bench_hits *out, void *scratch) {
+    rp_trace_array(engine, set, first, n, out, scratch, RP_QUERY_COHERENT);
+}
+
+/* rp_intersect_array with RP_QUERY_INCOHERENT. */
+static void rp_trace_array_incoherent(void *engine, const bench_rays *set, size_t first, size_t n,
+                                      bench_hits *out, void *scratch) {
+    rp_trace_array(engine, set, first, n, out, scratch, RP_QUERY_INCOHERENT);
+}
+
+int bench_raypack_modes(rp_scene *scene, bool occlusion, bench_mode *modes, int max) {
+    const bench_mode all[] = {
+        {"single", occlusion ? rp_trace_occluded1 : rp_trace_intersect1, scene},
+        {"packet4", occlusion ? rp_trace_occluded4 : rp_trace_intersect4, scene},
+        {"packet8", occlusion ? rp_trace_occluded8 : rp_trace_intersect8, scene},
+        {"packet16", occlusion ? rp_trace_occluded16 : rp_trace_intersect16, scene},
+        {"array_coherent", rp_trace_array_coherent, scene},
+        {"array_incoherent", rp_trace_array_incoherent, scene},
+    };
+    int n = (int)(sizeof all / sizeof all[0]);
+    if (n > max) n = max;
+    for (int i = 0; i < n; i++) modes[i] = all[i];
+    return n;
+}
+
+/* ---- the mesh ------------------------------------------------------------------------------- */
+
+static bool finite3(const float *v) { return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]); }
+
+/* Copies the loader's triangles, leaving out those raypack rejects, so both engines get one list
+ * in the same order and agree on primitive ids. */
+static bool mesh_from_data(bench_mesh *mesh, const float *positions, size_t vertex_count,
+                           const uint32_t *indices, size_t triangle_count) {
+    memset(mesh, 0, sizeof *mesh);
+    mesh->vertex_count = vertex_count;
+    mesh->positions = alloc_aligned((3 * vertex_count + 1) * sizeof(float));
+    mesh->indices = alloc_aligned((3 * triangle_count + 1) * sizeof(uint32_t));
+    if (!mesh->positions || !mesh->indices) return false;
+    if (vertex_count) memcpy(mesh->positions, positions, 3 * vertex_count * sizeof(float));
+    for (int k = 0; k < 3; k++) {
+        mesh->lower[k] = INFINITY;
+        mesh->upper[k] = -INFINITY;
+    }
+    size_t kept = 0;
+    for (size_t t = 0; t < triangle_count; t++) {
+        const uint32_t *tri = indices + 3 * t;
+        if (tri[0] >= vertex_count || tri[1] >= vertex_count || tri[2] >= vertex_count ||
+            !finite3(positions + 3 * (size_t)tri[0]) || !finite3(positions + 3 * (size_t)tri[1]) ||
+            !finite3(positions + 3 * (size_t)tri[2])) {
+            mesh->dropped++;
+            continue;
+        }
+        const float *v[3] = {positions + 3 * (size_t)tri[0], positions + 3 * (size_t)tri[1],
+                             positions + 3 * (size_t)tri[2]};
+        float e1[3], e2[3];
+        for (int k = 0; k < 3; k++) {
+            e1[k] = v[1][k] - v[0][k];
+            e2[k] = v[2][k] - v[0][k];
+        }
+        float cx = e1[1] * e2[2] - e1[2] * e2[1], cy = e1[2] * e2[0] - e1[0] * e2[2],
+              cz = e1[0] * e2[1] - e1[1] * e2[0];
+        if (cx == 0.0f && cy == 0.0f && cz == 0.0f) mesh->degenerate++;
+        for (int c = 0; c < 3; c++)
+            for (int k = 0; k < 3; k++) {
+                mesh->lower[k] = fminf(mesh->lower[k], v[c][k]);
+                mesh->upper[k] = fmaxf(mesh->upper[k], v[c][k]);
+            }
+        memcpy(mesh->indices + 3 * kept, tri, 3 * sizeof(uint32_t));
+        kept++;
+    }
+    mesh->triangle_count = kept;
+    return true;
+}
+
+/* Frees the mesh arrays. */
+static void mesh_free(bench_mesh *mesh) {
+    free(mesh->positions);
+    free(mesh->indices);
+    memset(mesh, 0, sizeof *mesh);
+}
+
+/* The scene without a file: a 6x6 field of tessellated spheres on a ground quad (80k triangles),
+ * seen from above the front edge. */
+static bool mesh_sphere_field(bench_mesh *mesh, bench_camera *cam) {
+    enum { GRID = 6, LON = 48, LAT = 24 };
+    const float radius = 1.0f, spacing = 3.0f;
+    size_t per_vertices = (size_t)(LAT + 1) * (LON + 1);
+    size_t per_tris = (size_t)LON * 2 * (LAT - 1);
+    size_t vcount = GRID * GRID * per_vertices + 4, tcount = GRID * GRID * per_tris + 2;
+    float *pos = malloc(3 * vcount * sizeof(float));
+    uint32_t *idx = malloc(3 * tcount * sizeof(uint32_t));
+    if (!pos || !idx) {
+        free(pos);
+        free(idx);
+        return false;
+    }
+    size_t v = 0, t = 0;
+    const float pi = 3.14159265358979f;
+    for (int gz = 0; gz < GRID; gz++)
+        for (int gx = 0; gx < GRID; gx++) {
+            float cx = ((float)gx - 0.5f * (GRID - 1)) * spacing;
+            float cz = ((float)gz - 0.5f * (GRID - 1)) * spacing;
+            uint32_t base = (uint32_t)v;
+            for (int i = 0; i <= LAT; i++) {
+                float theta = pi * (float)i / LAT;
+                for (int j = 0; j <= LON; j++) {
+                    float phi = 2.0f * pi * (float)j / LON;
+                    pos[3 * v + 0] = cx + radius * sinf(theta) * cosf(phi);
+                    pos[3 * v + 1] = radius + radius * cosf(theta);
+                    pos[3 * v + 2] = cz + radius * sinf(theta) * sinf(phi);
+                    v++;
+                }
+            }
+            for (int i = 0; i < LAT; i++)
+                for (int j = 0; j < LON; j++) {
+                    uint32_t a = base + (uint32_t)(i * (LON + 1) + j), b = a + 1;
+                    uint32_t c = a + (LON + 1), d = c + 1;
+                    /* The pole rows are fans: their other triangle would have zero area. */
+                    if (i != 0) {
+                        idx[3 * t] = a, idx[3 * t + 1] = b, idx[3 * t + 2] = d;
+                        t++;
+                    }
+                    if (i != LAT - 1) {
+                        idx[3 * t] = a, idx[3 * t + 1] = d, idx[3 * t + 2] = c;
+                        t++;
+                    }
+                }
+        }
+    const float g = 0.5f * GRID * spacing + 2.0f;
+    const float ground[4][3] = {{-g, 0, -g}, {g, 0, -g}, {g, 0, g}, {-g, 0, g}};
+    uint32_t gb = (uint32_t)v;
+    for (int i = 0; i < 4; i++, v++) memcpy(pos + 3 * v, ground[i], sizeof ground[i]);
+    const uint32_t quad[6] = {gb, gb + 2, gb + 1, gb, gb + 3, gb + 2};
+    memcpy(idx + 3 * t, quad, sizeof quad);
+    t += 2;
+    bool ok = mesh_from_data(mesh, pos, v, idx, t);
+    free(pos);
+    free(idx);
+    *cam = (bench_camera){{0.0f, 9.0f, 19.0f}, {0.0f, 0.5f, 0.0f}, {0.0f, 1.0f, 0.0f}, 40.0f};
+    return ok;
+}
+
+/* ---- cameras and rays ----------------------------------------------------------------------- */
+
+static void normalize3(float *v) {
+    double l = sqrt((double)v[0] * v[0] + (double)v[1] * v[1] + (double)v[2] * v[2]);
+    if (l > 0.0)
+        for (int k = 0; k < 3; k++) v[k] = (float)(v[k] / l);
+}
+
+/* out = a x b. */
+static void cross3(float *out, const float *a, const float *b) {
+    out[0] = a[1] * b[2] - a[2] * b[1];
+    out[1] = a[2] * b[0] - a[0] * b[2];
+    out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+/* a . b */
+static float dot3(const float *a, const float *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+/* Pixel of a slot (inverse of the block / tile / pixel layout of bench.h). */
+static void slot_pixel(int width, size_t slot, int *x, int *y) {
+    int blocks_x = (width + BENCH_BLOCK - 1) / BENCH_BLOCK;
+    size_t block = slot / BENCH_CHUNK, within = slot % BENCH_CHUNK;
+    size_t tile = within / (BENCH_TILE * BENCH_TILE), pix = within % (BENCH_TILE * BENCH_TILE);
+    const size_t tiles_x = BENCH_BLOCK / BENCH_TILE;
+    *x = (int)(block % (size_t)blocks_x) * BENCH_BLOCK + (int)(tile % tiles_x) * BENCH_TILE +
+         (int)(pix % BENCH_TILE);
+    *y = (int)(block / (size_t)blocks_x) * BENCH_BLOCK + (int)(tile / tiles_x) * BENCH_TILE +
+         (int)(pix / BENCH_TILE);
+}
+
+/* Allocates an empty set covering the image in whole 32x32 blocks. */
+static bool rays_alloc(bench_rays *set, bench_kind kind, int width, int height) {
+    size_t blocks = (size_t)((width + BENCH_BLOCK - 1) / BENCH_BLOCK) *
+                    (size_t)((height + BENCH_BLOCK - 1) / BENCH_BLOCK);
+    memset(set, 0, sizeof *set);
+    set->kind = kind;
+    set->occlusion = kind == BENCH_SHADOW;
+    set->coherent = kind == BENCH_PRIMARY || kind == BENCH_SHADOW;
+    set->slots = blocks * BENCH_CHUNK;
+    set->rays = alloc_aligned(set->slots * sizeof(bench_ray));
+    set->valid = alloc_aligned(set->slots * sizeof(int32_t));
+    return set->rays && set->valid;
+}
+
+/* Frees a set. */
+static void rays_free(bench_rays *set) {
+    free(set->rays);
+    free(set->valid);
+    memset(set, 0, sizeof *set);
+}
+
+/* Primary rays of DESIGN.md's pinhole camera through pixel centres. */
+static void make_primary(bench_rays *set, const bench_camera *cam, int width, int height) {
+    float f[3], r[3], u[3];
+    for (int k = 0; k < 3; k++) f[k] = cam->look[k] - cam->eye[k];
+    normalize3(f);
+    cross3(r, f, cam->up);
+    normalize3(r);
+    cross3(u, r, f);
+    float tan_half = tanf(0.5f * cam->fov_deg * 3.14159265358979f / 180.0f);
+    float aspect = (float)width / (float)height;
+    for (size_t i = 0; i < set->slots; i++) {
+        int x, y;
+        slot_pixel(width, i, &x, &y);
+        if (x >= width || y >= height) continue;
+        float sx = (2.0f * ((float)x + 0.5f) / (float)width - 1.0f) * tan_half * aspect;
+        float sy = (1.0f - 2.0f * ((float)y + 0.5f) / (float)height) * tan_half;
+        bench_ray *ray = &set->rays[i];
+        for (int k = 0; k < 3; k++) {
+            ray->org[k] = cam->eye[k];
+            ray->dir[k] = f[k] + sx * r[k] + sy * u[k];
+        }
+        normalize3(ray->dir);
+        ray->tnear = 0.0f;
+        ray->tfar = INFINITY;
+        set->valid[i] = -1;
+        set->count++;
+    }
+}
+
+/* Front faces minus back faces hit by a 12x12 grid of primary rays: a room open on one side (the
+ * Cornell box) is seen through its opening. */
+static int view_score(const bench_ctx *ctx, const bench_camera *cam) {
+    enum { N = 12 };
+    float f[3], r[3], u[3];
+    for (int k = 0; k < 3; k++) f[k] = cam->look[k] - cam->eye[k];
+    normalize3(f);
+    cross3(r, f, cam->up);
+    normalize3(r);
+    cross3(u, r, f);
+    float tan_half = tanf(0.5f * cam->fov_deg * 3.14159265358979f / 180.0f);
+    int score = 0;
+    for (int y = 0; y < N; y++)
+        for (int x = 0; x < N; x++) {
+            float sx = (2.0f * ((float)x + 0.5f) / N - 1.0f) * tan_half;
+            float sy = (1.0f - 2.0f * ((float)y + 0.5f) / N) * tan_half;
+            bench_ray b = {{cam->eye[0], cam->eye[1], cam->eye[2]}, 0.0f, {0, 0, 0}, INFINITY};
+            for (int k = 0; k < 3; k++) b.dir[k] = f[k] + sx * r[k] + sy * u[k];
+            normalize3(b.dir);
+            rp_rayhit rh;
+            fill_rp_ray(&rh.ray, &b, 0);
+            rh.hit.geom_id = RP_INVALID_ID;
+            rh.hit.prim_id = RP_INVALID_ID;
+            rp_intersect1(ctx->scene, &rh);
+            if (rh.hit.geom_id == RP_INVALID_ID || rh.hit.prim_id >= ctx->mesh.triangle_count) continue;
+            const uint32_t *tri = ctx->mesh.indices + 3 * (size_t)rh.hit.prim_id;
+            const float *v0 = ctx->mesh.positions + 3 * (size_t)tri[0];
+            const float *v1 = ctx->mesh.positions + 3 * (size_t)tri[1];
+            const float *v2 = ctx->mesh.positions + 3 * (size_t)tri[2];
+            float e1[3], e2[3], n[3];
+            for (int k = 0; k < 3; k++) {
+                e1[k] = v1[k] - v0[k];
+                e2[k] = v2[k] - v0[k];
+            }
+            cross3(n, e1, e2);
+            float d = dot3(n, b.dir);
+            score += d < 0.0f ? 1 : (d > 0.0f ? -1 : 0);
+        }
+    return score;
+}
+
+/* The camera of `raypack render` for files without one: the bounds framed at 45 degrees from the
+ * first of +z, -z, +x, -x (y up) that sees the most front faces. */
+static bench_camera camera_frame_bounds(const bench_ctx *ctx) {
+    const bench_mesh *mesh = &ctx->mesh;
+    bench_camera cam = {{0, 0, 0}, {0, 0, 0}, {0, 1, 0}, 45.0f};
+    float radius = 0.0f;
+    for (int k = 0; k < 3; k++) {
+        cam.look[k] = 0.5f * (mesh->lower[k] + mesh->upper[k]);
+        radius += (mesh->upper[k] - mesh->lower[k]) * (mesh->upper[k] - mesh->lower[k]);
+    }
+    radius = 0.5f * sqrtf(radius);
+    if (!(radius > 0.0f)) radius = 1.0f;
+    float dist = radius / sinf(0.5f * cam.fov_deg * 3.14159265358979f / 180.0f);
+    static const float dirs[4][3] = {{0, 0, 1}, {0, 0, -1}, {1, 0, 0}, {-1, 0, 0}};
+    bench_camera best = cam;
+    int best_score = 0;
+    for (int i = 0; i < 4; i++) {
+        bench_camera cand = cam;
+        for (int k = 0; k < 3; k++) cand.eye[k] = cam.look[k] + dirs[i][k] * dist;
+        int s = view_score(ctx, &cand);
+        if (i == 0 || s > best_score) {
+            best = cand;
+            best_score = s;
+        }
+    }
+    return best;
+}
+
+/* Camera (the file's, framed bounds, then the command line's overrides) and light (the file's
+ * first, else above the centre along the camera's up axis, inside the bounds so closed rooms are
+ * lit); needs the committed scene to frame the bounds. */
+static void finish_camera_and_light(bench_ctx *ctx) {
+    const bench_opts *o = &ctx->opts;
+    if (!ctx->have_camera) ctx->camera = camera_frame_bounds(ctx);
+    if (o->has_eye) memcpy(ctx->camera.eye, o->eye, sizeof o->eye);
+    if (o->has_look) memcpy(ctx->camera.look, o->look, sizeof o->look);
+    if (o->has_up) memcpy(ctx->camera.up, o->up, sizeof o->up);
+    if (o->has_fov) ctx->camera.fov_deg = o->fov_deg;
+    if (!ctx->have_light) {
+        int axis = 0;
+        for (int k = 1; k < 3; k++)
+            if (fabsf(ctx->camera.up[k]) > fabsf(ctx->camera.up[axis])) axis = k;
+        for (int k = 0; k < 3; k++) ctx->light[k] = 0.5f * (ctx->mesh.lower[k] + ctx->mesh.upper[k]);
+        float extent = ctx->mesh.upper[axis] - ctx->mesh.lower[axis];
+        ctx->light[axis] += copysignf(0.45f * extent, ctx->camera.up[axis]);
+    }
+}
+
+/* Hash of 32 bits (lowbias32, Chris Wellons), for random numbers that depend only on their key. */
+static uint32_t hash_u32(uint32_t x) {
+    x ^= x >> 16;
+    x *= 0x7feb352du;
+    x ^= x >> 15;
+    x *= 0x846ca68bu;
+    x ^= x >> 16;
+    return x;
+}
+
+/* Uniform number in [0,1) from (pixel, dimension): the same whatever the thread count. */
+static float rand_pixel(uint32_t pixel, uint32_t dim) {
+    uint32_t h = hash_u32(pixel ^ hash_u32(dim * 0x9E3779B9u + 0x632BE5ABu));
+    return (float)(h >> 8) * 0x1p-24f;
+}
+
+/* Shadow, reflection and diffuse rays from the reference primary hits: each leaves its hit point
+ * on the side the primary ray came from, offset along the normal to avoid re-hitting its surface. */
+static void make_secondary(bench_ctx *ctx, bench_rays *set) {
+    const bench_rays *prim = &ctx->sets[BENCH_PRIMARY];
+    const bench_hits *hits = &ctx->ref[BENCH_PRIMARY];
+    const bench_mesh *mesh = &ctx->mesh;
+    float diag = 0.0f;
+    for (int k = 0; k < 3; k++) diag += (mesh->upper[k] - mesh->lower[k]) * (mesh->upper[k] - mesh->lower[k]);
+    const float eps = 5e-5f * sqrtf(diag);
+    for (size_t i = 0; i < set->slots; i++) {
+        if (!prim->valid[i] || hits->prim[i] == RP_INVALID_ID) continue;
+        const bench_ray *in = &prim->rays[i];
+        const uint32_t *tri = mesh->indices + 3 * (size_t)hits->prim[i];
+        const float *v0 = mesh->positions + 3 * (size_t)tri[0];
+        const float *v1 = mesh->positions + 3 * (size_t)tri[1];
+        const float *v2 = mesh->positions + 3 * (size_t)tri[2];
+        float e1[3], e2[3], n[3], p[3];
+        for (int k = 0; k < 3; k++) {
+            e1[k] = v1[k] - v0[k];
+            e2[k] = v2[k] - v0[k];
+        }
+        cross3(n, e1, e2);
+        normalize3(n);
+        if (dot3(n, n) == 0.0f) continue;
+        if (dot3(n, in->dir) > 0.0f)
+            for (int k = 0; k < 3; k++) n[k] = -n[k];
+        for (int k = 0; k < 3; k++) p[k] = in->org[k] + hits->t[i] * in->dir[k] + eps * n[k];
+        bench_ray *out = &set->rays[i];
+        memcpy(out->org, p, sizeof p);
+        out->tnear = 0.0f;
+        out->tfar = INFINITY;
+        switch (set->kind) {
+        case BENCH_SHADOW: {
+            float d[3] = {ctx->light[0] - p[0], ctx->light[1] - p[1], ctx->light[2] - p[2]};
+            float dist = sqrtf(dot3(d, d));
+            /* A light behind the surface needs no ray. */
+            if (!(dist > 0.0f) || dot3(d, n) <= 0.0f) continue;
+            for (int k = 0; k < 3; k++) out->dir[k] = d[k] / dist;
+            out->tfar = dist * (1.0f - 1e-4f);
+            break;
+        }
+        case BENCH_REFLECTION: {
+            float dn = dot3(in->dir, n);
+            for (int k = 0; k < 3; k++) out->dir[k] = in->dir[k] - 2.0f * dn * n[k];
+            normalize3(out->dir);
+            break;
+        }
+        case BENCH_DIFFUSE: {
+            int x, y;
+            slot_pixel(ctx->opts.width, i, &x, &y);
+            uint32_t pixel = (uint32_t)y * (uint32_t)ctx->opts.width + (uint32_t)x;
+            float u1 = rand_pixel(pixel, 0), u2 = rand_pixel(pixel, 1);
+            /* Cosine-distributed around n (Malley), in the frame of Duff et al. 2017. */
+            float rad = sqrtf(u1), phi = 2.0f * 3.14159265358979f * u2;
+            float lx = rad * cosf(phi), ly = rad * sinf(phi), lz = sqrtf(fmaxf(0.0f, 1.0f - u1));
+            float sign = copysignf(1.0f, n[2]);
+            float a = -1.0f / (sign + n[2]), b = n[0] * n[1] * a;
+            float t1[3] = {1.0f + sign * n[0] * n[0] * a, sign * b, -sign * n[0]};
+            float t2[3] = {b, sign + n[1] * n[1] * a, -n[1]};
+            for (int k = 0; k < 3; k++) out->dir[k] = lx * t1[k] + ly * t2[k] + lz * n[k];
+            normalize3(out->dir);
+            break;
+        }
+        case BENCH_PRIMARY:
+        case BENCH_KIND_COUNT:
+            continue;
+        }
+        set->valid[i] = -1;
+        set->count++;
+    }
+}
+
+/* ---- setting up a run ----------------------------------------------------------------------- */
+
+static void usage(FILE *f) {
+    fprintf(f,
+            "usage: raypack bench [SCENE] [options]\n"
+            "  Times raypack's query modes (single rays, 4/8/16-wide packets, ray arrays) on\n"
+            "  primary, shadow, reflection and diffuse rays; no SCENE: a generated sphere field.\n"
+            "  --vs embree        raypack against Embree on the same rays, in one process\n"
+            "  --threads N        tracing threads (default 2); plain bench also times 1 thread\n"
+            "  --repeats N        timed repeats per mode (default 5; median, min, max)\n"
+            "  --warmup N         untimed passes per mode first (default 1)\n"
+            "  --width W --height H   primary rays (default 1024x1024)\n"
+            "  --eye x,y,z --look x,y,z --up x,y,z --fov DEG   override the scene's camera\n"
+            "  --json FILE        write the results as JSON\n");
+}
+
+/* Parses argv (argv[0] is "bench"); returns CLI_EXIT_OK to go on, CLI_EXIT_USAGE on a bad
+ * argument, -1 after --help. */
+static int parse_args(int argc, char **argv, bench_opts *o) {
+    const char *cmd = "bench";
+    *o = (bench_opts){.threads = 2, .repeats = 5, .warmup = 1, .width = 1024, .height = 1024};
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        if (strcmp(a, "--help") == 0 || strcmp(a, "-h") == 0) {
+            usage(stdout);
+            return -1;
+        }
+        if (a[0] != '-') {
+            if (o->scene_path) {
+                fprintf(stderr, "raypack bench: more than one scene (%s, %s)\n", o->scene_path, a);
+                return CLI_EXIT_USAGE;
+            }
+            o->scene_path = a;
+            continue;
+        }
+        const char *val = cli_flag_value(cmd, argc, argv, &i);
+        if (!val) return CLI_EXIT_USAGE;
+        bool ok = true;
+        if (strcmp(a, "--vs") == 0) {
+            ok = strcmp(val, "embree") == 0;
+            if (!ok) fprintf(stderr, "raypack bench: --vs takes 'embree', got '%s'\n", val);
+            o->vs_embree = ok;
+        } else if (strcmp(a, "--threads") == 0) {
+            ok = cli_parse_int(cmd, a, val, 1, CLI_MAX_THREADS, &o->threads);
+        } else if (strcmp(a, "--repeats") == 0) {
+            ok = cli_parse_int(cmd, a, val, 1, 1000, &o->repeats);
+        } else if (strcmp(a, "--warmup") == 0) {
+            ok = cli_parse_int(cmd, a, val, 0, 1000, &o->warmup);
+        } else if (strcmp(a, "--width") == 0) {
+            ok = cli_parse_int(cmd, a, val, 1, 1 << 15, &o->width);
+        } else if (strcmp(a, "--height") == 0) {
+            ok = cli_parse_int(cmd, a, val, 1, 1 << 15, &o->height);
+        } else if (strcmp(a, "--eye") == 0) {
+            ok = o->has_eye = cli_parse_vec3(cmd, a, val, o->eye);
+        } else if (strcmp(a, "--look") == 0) {
+            ok = o->has_look = cli_parse_vec3(cmd, a, val, o->look);
+        } else if (strcmp(a, "--up") == 0) {
+            ok = o->has_up = cli_parse_vec3(cmd, a, val, o->up);
+        } else if (strcmp(a, "--fov") == 0) {
+            ok = o->has_fov = cli_parse_float(cmd, a, val, 0.0, 180.0, true, &o->fov_deg);
+        } else if (strcmp(a, "--json") == 0) {
+            o->json_path = val;
+        } else {
+            fprintf(stderr, "raypack bench: unknown option %s (see --help)\n", a);
+            return CLI_EXIT_USAGE;
+        }
+        if (!ok) return CLI_EXIT_USAGE;
+    }
+    return CLI_EXIT_OK;
+}
+
+/* Loads the scene (or generates one) into the mesh, camera and light of ctx. */
+static bool load_scene(bench_ctx *ctx) {
+    const bench_opts *o = &ctx->opts;
+    bool have_camera = false, have_light = false;
+    if (!o->scene_path) {
+        ctx->scene_name = "sphere_field";
+        if (!mesh_sphere_field(&ctx->mesh, &ctx->camera)) return false;
+        /* Above and in front of the field, so its spheres cast shadows toward the back. */
+        const float light[3] = {4.0f, 12.0f, 8.0f};
+        memcpy(ctx->light, light, sizeof light);
+        have_camera = true;
+        have_light = true;
+    } else {
+        const char *slash = strrchr(o->scene_path, '/');
+        ctx->scene_name = slash ? slash + 1 : o->scene_path;
+        rp_scene_data data;
+        char err[512] = "";
+        memset(&data, 0, sizeof data);
+        if (!rp_scene_data_load(o->scene_path, &data, err, sizeof err)) {
+            fprintf(stderr, "raypack bench: %s\n", err[0] ? err : "cannot load the scene");
+            return false;
+        }
+        bool ok = mesh_from_data(&ctx->mesh, data.positions, data.vertex_count, data.indices,
+                                 data.triangle_count);
+        if (data.camera.valid) {
+            memcpy(ctx->camera.eye, data.camera.eye, sizeof ctx->camera.eye);
+            memcpy(ctx->camera.look, data.camera.look, sizeof ctx->camera.look);
+            memcpy(ctx->camera.up, data.camera.up, sizeof ctx->camera.up);
+            ctx->camera.fov_deg = data.camera.fov_deg;
+            have_camera = true;
+        }
+        if (data.light_count > 0) {
+            memcpy(ctx->light, data.lights[0].position, sizeof ctx->light);
+            have_light = true;
+        }
+        if (data.sphere_count || data.cone_count)
+            printf("note: %zu spheres and %zu cones of the scene are not benchmarked (triangles only)\n",
+                   data.sphere_count, data.cone_count);
+        rp_scene_data_free(&data);
+        if (!ok) {
+            fprintf(stderr, "raypack bench: out of memory\n");
+            return false;
+        }
+    }
+    if (ctx->mesh.triangle_count == 0) {
+        fprintf(stderr, "raypack bench: %s has no valid triangles\n", ctx->scene_name);
+        return false;
+    }
+    ctx->have_camera = have_camera;
+    ctx->have_light = have_light;
+    return true;
+}
+
+/* Device, raypack's scene and per-thread scratch. */
+static bool setup_raypack(bench_ctx *ctx) {
+    ctx->device = rp_device_new(&(rp_device_desc){.threads = ctx->opts.threads});
+    if (!ctx->device) {
+        fprintf(stderr, "raypack bench: cannot create the device\n");
+        return false;
+    }
+    int threads = rp_device_thread_count(ctx->device);
+    if (threads < 1) threads = 1;
+    ctx->scratch.threads = threads;
+    ctx->scratch.per_thread = calloc((size_t)threads, sizeof(void *));
+    if (!ctx->scratch.per_thread) return false;
+    for (int i = 0; i < threads; i++) {
+        ctx->scratch.per_thread[i] = alloc_aligned((size_t)BENCH_CHUNK * BENCH_SCRATCH_RAY_BYTES);
+        if (!ctx->scratch.per_thread[i]) return false;
+    }
+    return true;
+}
+
+rp_scene *bench_build_raypack(bench_ctx *ctx, double *wall_ms, rp_scene_stats *stats) {
+    rp_scene *scene = rp_scene_new(ctx->device, NULL);
+    rp_geometry *geom = rp_geometry_new(ctx->device, RP_GEOMETRY_TRIANGLE);
+    if (!scene || !geom) {
+        if (geom) rp_geometry_release(geom);
+        if (scene) rp_scene_release(scene);
+        return NULL;
+    }
+    rp_geometry_set_buffer(geom, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, ctx->mesh.positions, 0, 0,
+                           ctx->mesh.vertex_count);
+    rp_geometry_set_buffer(geom, RP_BUFFER_INDEX, RP_FORMAT_UINT3, ctx->mesh.indices, 0, 0,
+                           ctx->mesh.triangle_count);
+    rp_geometry_commit(geom);
+    rp_scene_attach(scene, geom);
+    rp_geometry_release(geom);
+    double t0 = bench_now_ms();
+    rp_error e = rp_scene_commit(scene);
+    *wall_ms = bench_now_ms() - t0;
+    if (e != RP_ERROR_NONE) {
+        fprintf(stderr, "raypack bench: rp_scene_commit: %s\n", rp_error_string(e));
+        rp_scene_release(scene);
+        return NULL;
+    }
+    rp_scene_get_stats(scene, stats);
+    return scene;
+}
+
+/* Generates the four ray sets; the secondary ones start at raypack's single-ray primary hits. */
+static bool make_ray_sets(bench_ctx *ctx) {
+    for (int k = 0; k < BENCH_KIND_COUNT; k++)
+        if (!rays_alloc(&ctx->sets[k], (bench_kind)k, ctx->opts.width, ctx->opts.height) ||
+            !bench_hits_alloc(&ctx->ref[k], ctx->sets[k].slots))
+            return false;
+    finish_camera_and_light(ctx);
+    make_primary(&ctx->sets[BENCH_PRIMARY], &ctx->camera, ctx->opts.width, ctx->opts.height);
+    bench_mode single[1];
+    bench_raypack_modes(ctx->scene, false, single, 1);
+    bench_trace_set(ctx, ctx->opts.threads, &single[0], &ctx->sets[BENCH_PRIMARY],
+                    &ctx->ref[BENCH_PRIMARY]);
+    for (int k = BENCH_SHADOW; k < BENCH_KIND_COUNT; k++) {
+        make_secondary(ctx, &ctx->sets[k]);
+        bench_raypack_modes(ctx->scene, ctx->sets[k].occlusion, single, 1);
+        bench_trace_set(ctx, ctx->opts.threads, &single[0], &ctx->sets[k], &ctx->ref[k]);
+    }
+    return true;
+}
+
+/* Releases everything setup and the ray sets made, in reverse order. */
+static void teardown(bench_ctx *ctx) {
+    for (int k = 0; k < BENCH_KIND_COUNT; k++) {
+        rays_free(&ctx->sets[k]);
+        bench_hits_free(&ctx->ref[k]);
+    }
+    if (ctx->scratch.per_thread)
+        for (int i = 0; i < ctx->scratch.threads; i++) free(ctx->scratch.per_thread[i]);
+    free(ctx->scratch.per_thread);
+    if (ctx->scene) rp_scene_release(ctx->scene);
+    if (ctx->device) rp_device_release(ctx->device);
+    mesh_free(&ctx->mesh);
+}
+
+void bench_print_header(const bench_ctx *ctx) {
+    const bench_camera *c = &ctx->camera;
+    printf("scene     %s: %zu triangles (%zu zero-area), %zu left out (NaN/Inf or bad indices)\n",
+           ctx->scene_name, ctx->mesh.triangle_count, ctx->mesh.degenerate, ctx->mesh.dropped);
+    printf("camera    eye %g,%g,%g look %g,%g,%g up %g,%g,%g fov %g, %dx%d\n", (double)c->eye[0],
+           (double)c->eye[1], (double)c->eye[2], (double)c->look[0], (double)c->look[1],
+           (double)c->look[2], (double)c->up[0], (double)c->up[1], (double)c->up[2],
+           (double)c->fov_deg, ctx->opts.width, ctx->opts.height);
+    printf("bounds    %g,%g,%g .. %g,%g,%g\n", (double)ctx->mesh.lower[0], (double)ctx->mesh.lower[1],
+           (double)ctx->mesh.lower[2], (double)ctx->mesh.upper[0], (double)ctx->mesh.upper[1],
+           (double)ctx->mesh.upper[2]);
+    printf("light     %g,%g,%g\n", (double)ctx->light[0], (double)ctx->light[1], (double)ctx->light[2]);
+    printf("device    %d threads, SIMD width %d; %d timed repeats after %d warm-up\n",
+           rp_device_thread_count(ctx->device), rp_device_isa(ctx->device), ctx->opts.repeats,
+           ctx->opts.warmup);
+}
+
+/* ---- plain `raypack bench` ------------------------------------------------------------------ */
+
+#define BENCH_MAX_MODES 8
+
+typedef struct core_result {
+    bench_stat stat[2][BENCH_MAX_MODES]; /* [thread config][mode] in Mrays/s */
+} core_result;
+
+/* Times every raypack mode on every set at 1 and N threads, after checking them against single
+ * rays; returns the exit code. */
+static int bench_core(bench_ctx *ctx) {
+    double build_ms;
+    rp_scene_stats st;
+    memset(&st, 0, sizeof st);
+    ctx->scene = bench_build_raypack(ctx, &build_ms, &st);
+    if (!ctx->scene) return 1;
+    if (!make_ray_sets(ctx)) {
+        fprintf(stderr, "raypack bench: out of memory\n");
+        return 1;
+    }
+    bench_print_header(ctx);
+    printf("build     %.2f ms (commit stats %.2f ms), %.2f MiB; %llu triangles, %llu rejected, "
+           "%llu nodes of width %u, %llu leaves, depth %u, SAH %.2f\n",
+           build_ms, st.build_ms, (double)st.bytes / (1024.0 * 1024.0),
+           (unsigned long long)st.triangles, (unsigned long long)st.rejected_prims,
+           (unsigned long long)st.wide_nodes, st.bvh_width, (unsigned long long)st.leaves, st.depth,
+           st.sah_cost);
+
+    int configs[2] = {1, ctx->opts.threads};
+    int nconfigs = ctx->opts.threads > 1 ? 2 : 1;
+    bench_mode modes[BENCH_KIND_COUNT][BENCH_MAX_MODES];
+    int nmodes[BENCH_KIND_COUNT];
+    bench_hits hits;
+    if (!bench_hits_alloc(&hits, ctx->sets[0].slots)) return 1;
+
+    /* Every mode must find the single-ray hits before any of them is timed. */
+    int failed = 0;
+    for (int k = 0; k < BENCH_KIND_COUNT; k++) {
+        bench_rays *set = &ctx->sets[k];
+        nmodes[k] = bench_raypack_modes(ctx->scene, set->occlusion, modes[k], BENCH_MAX_MODES);
+        for (int m = 1; m < nmodes[k]; m++) {
+            bench_trace_set(ctx, ctx->opts.threads, &modes[k][m], set, &hits);
+            bench_diff d = bench_compare(&ctx->mesh, set, &ctx->ref[k], &hits);
+            if (d.total) {
+                fprintf(stderr,
+                        "raypack bench: %s rays, %s disagrees with single rays on %zu of %zu "
+                        "(hit/miss %zu, distance %zu, primitive %zu)\n",
+                        bench_kind_name((bench_kind)k), modes[k][m].name, d.total, set->count,
+                        d.hit_miss, d.distance, d.primitive);
+                bench_print_mismatches(&ctx->mesh, set, &ctx->ref[k], &hits, "single",
+                                       modes[k][m].name, 3);
+                failed = 1;
+            } else if (d.ties) {
+                printf("note      %s rays: %s ties with single rays on %zu (same distance, other "
+                       "triangle)\n",
+                       bench_kind_name((bench_kind)k), modes[k][m].name, d.ties);
+            }
+        }
+    }
+    if (failed) {
+        bench_hits_free(&hits);
+        return 1;
+    }
+    printf("check     every mode finds the single-ray hits on every ray\n\n");
+
+    /* Modes and thread counts take turns inside each repeat, so drift hits them alike. */
+    core_result res[BENCH_KIND_COUNT];
+    double *samples = calloc((size_t)ctx->opts.repeats * 2 * BENCH_MAX_MODES, sizeof(double));
+    if (!samples) {
+        bench_hits_free(&hits);
+        return 1;
+    }
+    for (int k = 0; k < BENCH_KIND_COUNT; k++) {
+        bench_rays *set = &ctx->sets[k];
+        for (int w = 0; w < ctx->opts.warmup; w++)
+            for (int c = 0; c < nconfigs; c++)
+                for (int m = 0; m < nmodes[k]; m++)
+                    bench_trace_set(ctx, configs[c], &modes[k][m], set, &hits);
+        for (int r = 0; r < ctx->opts.repeats; r++)
+            for (int c = 0; c < nconfigs; c++)
+                for (int m = 0; m < nmodes[k]; m++) {
+                    double s = bench_trace_set(ctx, configs[c], &modes[k][m], set, &hits);
+                    samples[((size_t)c * BENCH_MAX_MODES + (size_t)m) * (size_t)ctx->opts.repeats +
+                            (size_t)r] = s > 0.0 ? (double)set->count / s * 1e-6 : 0.0;
+                }
+        for (int c = 0; c < nconfigs; c++)
+            for (int m = 0; m < nmodes[k]; m++)
+                res[k].stat[c][m] = bench_stats(
+                    samples + ((size_t)c * BENCH_MAX_MODES + (size_t)m) * (size_t)ctx->opts.repeats,
+                    ctx->opts.repeats);
+    }
+    free(samples);
+    bench_hits_free(&hits);
+
+    printf("%-11s %9s  %-17s", "rays", "count", "mode");
+    for (int c = 0; c < nconfigs; c++)
+        printf("  %2d thr Mrays/s median (min-max)", configs[c]);
+    printf("\n");
+    for (int k = 0; k < BENCH_KIND_COUNT; k++)
+        for (int m = 0; m < nmodes[k]; m++) {
+            printf("%-11s %9zu  %-17s", m == 0 ? bench_kind_name((bench_kind)k) : "",
+                   ctx->sets[k].count, modes[k][m].name);
+            for (int c = 0; c < nconfigs; c++) {
+                bench_stat s = res[k].stat[c][m];
+                printf("  %8.2f (%7.2f - %7.2f)      ", s.median, s.min, s.max);
+            }
+            printf("\n");
+        }
+
+    if (ctx->opts.json_path) {
+        FILE *f = fopen(ctx->opts.json_path, "w");
+        if (!f) {
+            fprintf(stderr, "raypack bench: cannot write %s: %s\n", ctx->opts.json_path,
+                    strerror(errno));
+            return 1;
+        }
+        fprintf(f, "{\"scene\": ");
+        bench_json_string(f, ctx->scene_name);
+        fprintf(f, ", \"triangles\": %zu, \"threads\": %d, \"width\": %d, \"height\": %d, "
+                   "\"repeats\": %d,\n",
+                ctx->mesh.triangle_count, ctx->opts.threads, ctx->opts.width, ctx->opts.height,
+                ctx->opts.repeats);
+        fprintf(f, " \"build\": {\"raypack_ms\": %.3f, \"raypack_commit_ms\": %.3f, "
+                   "\"raypack_bytes\": %zu, \"sah_cost\": %.4f},\n \"rays\": {",
+                build_ms, st.build_ms, st.bytes, st.sah_cost);
+        for (int k = 0; k < BENCH_KIND_COUNT; k++) {
+            fprintf(f, "%s\n  \"%s\": {\"count\": %zu, \"mismatches\": 0, \"modes\": {", k ? "," : "",
+                    bench_kind_name((bench_kind)k), ctx->sets[k].count);
+            for (int m = 0; m < nmodes[k]; m++) {
+                fprintf(f, "%s\n   \"%s\": {", m ? "," : "", modes[k][m].name);
+                for (int c = 0; c < nconfigs; c++) {
+                    bench_stat s = res[k].stat[c][m];
+                    fprintf(f, "%s\"threads_%d\": {\"mrays_median\": %.4f, \"mrays_min\": %.4f, "
+                               "\"mrays_max\": %.4f}",
+                            c ? ", " : "", configs[c], s.median, s.min, s.max);
+                }
+                fprintf(f, "}");
+            }
+            fprintf(f, "}}");
+        }
+        fprintf(f, "\n }\n}\n");
+        if (fclose(f) != 0) {
+            fprintf(stderr, "raypack bench: cannot write %s\n", ctx->opts.json_path);
+            return 1;
+        }
+    }
+    return 0;
+}
+
+int cli_bench(int argc, char **argv) {
+    bench_ctx ctx;
+    memset(&ctx, 0, sizeof ctx);
+    int rc = parse_args(argc, argv, &ctx.opts);
+    if (rc) return rc < 0 ? CLI_EXIT_OK : rc;
+#if !defined(RP_HAVE_EMBREE)
+    if (ctx.opts.vs_embree) {
+        fprintf(stderr, "raypack bench: --vs embree: raypack was built without Embree "
+                        "(install libembree-dev and reconfigure)\n");
+        return CLI_EXIT_USAGE;
+    }
+#endif
+    bench_set_ftz();
+    if (!load_scene(&ctx) || !setup_raypack(&ctx)) {
+        teardown(&ctx);
+        return 1;
+    }
+#if defined(RP_HAVE_EMBREE)
+    if (ctx.opts.vs_embree) {
+        rc = bench_vs_embree(&ctx);
+        teardown(&ctx);
+        return rc;
+    }
+#endif
+    rc = bench_core(&ctx);
+    teardown(&ctx);
+    return rc;
+}
+
+/* Used by bench_embree.c. */
+bool bench_make_ray_sets(bench_ctx *ctx) { return make_ray_sets(ctx); }

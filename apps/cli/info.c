@@ -1,0 +1,150 @@
+/* `raypack info`: what a scene holds and what its acceleration structure looks like. */
+#include "cli.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "raypack.h"
+#include "raypack_io.h"
+#include "raypack_render.h"
+
+static void info_usage(FILE *out) {
+    fprintf(out,
+            "usage: raypack info [SCENE] [--threads N]\n"
+            "\n"
+            "Loads SCENE (the built-in room without one), builds its BVH and prints its primitives, bounds,\n"
+            "materials, textures, lights, camera, and the BVH's nodes, depth, SAH cost and build time.\n"
+            "\n"
+            "options:\n"
+            "  --threads N   build threads, 1..%d; 0 for all hardware threads [0]\n"
+            "  --materials   list every material (else the first 16)\n"
+            "  -h, --help    this help\n",
+            CLI_MAX_THREADS);
+}
+
+static const char *material_type_name(rp_material_type t) {
+    switch (t) {
+    case RP_MATERIAL_DIFFUSE: return "diffuse";
+    case RP_MATERIAL_PHONG: return "phong";
+    case RP_MATERIAL_MIRROR: return "mirror";
+    case RP_MATERIAL_DIELECTRIC: return "dielectric";
+    }
+    return "?";
+}
+
+int cli_info(int argc, char **argv) {
+    const char *path = NULL;
+    int threads = 0;
+    bool all_materials = false;
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+            info_usage(stdout);
+            return CLI_EXIT_OK;
+        } else if (strcmp(a, "--threads") == 0) {
+            const char *v = cli_flag_value("info", argc, argv, &i);
+            if (!v || !cli_parse_int("info", a, v, 0, CLI_MAX_THREADS, &threads)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--materials") == 0) {
+            all_materials = true;
+        } else if (a[0] == '-' && a[1] != '\0') {
+            fprintf(stderr, "raypack info: unknown option '%s' (see raypack info --help)\n", a);
+            return CLI_EXIT_USAGE;
+        } else if (!path) {
+            path = a;
+        } else {
+            fprintf(stderr, "raypack info: expected one SCENE, got '%s' and '%s'\n", path, a);
+            return CLI_EXIT_USAGE;
+        }
+    }
+
+    double t0 = cli_now_ms();
+    rp_scene_data d;
+    memset(&d, 0, sizeof d);
+    bool builtin = path == NULL;
+    if (builtin) {
+        if (!rp_default_scene(&d)) {
+            fprintf(stderr, "raypack info: out of memory\n");
+            return CLI_EXIT_FAILURE;
+        }
+    } else {
+        FILE *probe = fopen(path, "rb");
+        if (!probe) {
+            fprintf(stderr, "raypack info: cannot open scene %s: %s\n", path, strerror(errno));
+            return CLI_EXIT_FAILURE;
+        }
+        fclose(probe);
+        char err[512] = "";
+        if (!rp_scene_data_load(path, &d, err, sizeof err)) {
+            fprintf(stderr, "%s\n", err[0] ? err : "raypack info: cannot load the scene");
+            return CLI_EXIT_FAILURE;
+        }
+    }
+    double load_ms = cli_now_ms() - t0;
+
+    int status = CLI_EXIT_FAILURE;
+    rp_device *device = rp_device_new(&(rp_device_desc){.threads = threads});
+    rp_render_scene *rs = NULL;
+    if (!device) {
+        fprintf(stderr, "raypack info: cannot create a device\n");
+        goto done;
+    }
+    char err[512] = "";
+    rs = rp_render_scene_new(device, &d, NULL, err, sizeof err);
+    if (!rs) {
+        fprintf(stderr, "raypack info: %s\n", err);
+        goto done;
+    }
+    rp_scene *scene = rp_render_scene_core(rs);
+    rp_scene_stats st;
+    rp_scene_get_stats(scene, &st);
+    rp_bounds b;
+    rp_scene_get_bounds(scene, &b);
+
+    printf("scene       %s\n", builtin ? "(built-in room)" : path);
+    printf("file        %zu bytes parsed in %.1f ms (load %.1f ms)\n", d.file_bytes, d.parse_ms, load_ms);
+    printf("primitives  %zu triangles (%llu valid, %llu rejected), %zu spheres, %zu cones\n", d.triangle_count,
+           (unsigned long long)st.triangles, (unsigned long long)st.rejected_prims, d.sphere_count, d.cone_count);
+    printf("vertices    %zu positions, %zu normals, %zu texcoords\n", d.vertex_count, d.normal_count, d.texcoord_count);
+    printf("bounds      (%g, %g, %g) - (%g, %g, %g)\n", b.lower_x, b.lower_y, b.lower_z, b.upper_x, b.upper_y,
+           b.upper_z);
+    printf("materials   %zu\n", d.material_count);
+    size_t shown = all_materials ? d.material_count : (d.material_count < 16 ? d.material_count : 16);
+    for (size_t i = 0; i < shown; i++) {
+        const rp_material_data *m = &d.materials[i];
+        const rp_material *rm = rp_render_scene_material(rs, i);
+        printf("  %-3zu %-24s %-10s kd (%.2f %.2f %.2f) ks (%.2f %.2f %.2f) ns %g kr (%.2f %.2f %.2f) "
+               "kt (%.2f %.2f %.2f) ior %g%s\n",
+               i, m->name[0] ? m->name : "-", material_type_name(rm->type), m->kd[0], m->kd[1], m->kd[2], m->ks[0],
+               m->ks[1], m->ks[2], m->ns, m->kr[0], m->kr[1], m->kr[2], m->kt[0], m->kt[1], m->kt[2], m->ior,
+               m->map_kd >= 0 ? " textured" : "");
+    }
+    if (shown < d.material_count) printf("  ... %zu more (--materials lists all)\n", d.material_count - shown);
+    printf("textures    %zu\n", d.texture_count);
+    for (size_t i = 0; i < d.texture_count && i < 16; i++)
+        printf("  %-3zu %s (%dx%d)\n", i, d.textures[i].path, d.textures[i].width, d.textures[i].height);
+    printf("lights      %zu%s\n", d.light_count, d.light_count ? "" : " (renders light the scene from the eye)");
+    for (size_t i = 0; i < d.light_count && i < 16; i++)
+        printf("  point at (%g, %g, %g), colour (%g, %g, %g)\n", d.lights[i].position[0], d.lights[i].position[1],
+               d.lights[i].position[2], d.lights[i].color[0], d.lights[i].color[1], d.lights[i].color[2]);
+    rp_camera cam = rp_render_scene_default_camera(rs);
+    printf("camera      %s: eye (%g, %g, %g) look (%g, %g, %g) up (%g, %g, %g) fov %g", d.camera.valid ? "file" : "framed",
+           cam.pinhole.eye[0], cam.pinhole.eye[1], cam.pinhole.eye[2], cam.pinhole.look[0], cam.pinhole.look[1],
+           cam.pinhole.look[2], cam.pinhole.up[0], cam.pinhole.up[1], cam.pinhole.up[2], cam.pinhole.fov_deg);
+    if (d.camera.width > 0) printf(", %dx%d", d.camera.width, d.camera.height);
+    printf("\n");
+    if (d.has_background) printf("background  (%g, %g, %g)\n", d.background[0], d.background[1], d.background[2]);
+    printf("bvh         %llu binary nodes, %llu leaves, depth %u, SAH cost %.2f\n",
+           (unsigned long long)st.binary_nodes, (unsigned long long)st.leaves, st.depth, st.sah_cost);
+    printf("layout      %llu inner nodes of width %u, %.2f MiB\n", (unsigned long long)st.wide_nodes, st.bvh_width,
+           (double)st.bytes / 1048576.0);
+    printf("build       %.1f ms on %d threads\n", st.build_ms, rp_device_thread_count(device));
+    status = CLI_EXIT_OK;
+
+done:
+    rp_render_scene_release(rs);
+    if (device) rp_device_release(device);
+    if (builtin) rp_default_scene_free(&d);
+    else rp_scene_data_free(&d);
+    return status;
+}

@@ -1,0 +1,41 @@
+/* `raypack`: the command line front end (render, info, bench). */
+#include "cli.h"
+
+#include <stdio.h>
+#include <string.h>
+
+#include "raypack.h"
+
+static void usage(FILE *out) {
+    fprintf(out,
+            "usage: raypack COMMAND [ARGS]\n"
+            "\n"
+            "commands:\n"
+            "  render [SCENE]   render a scene (the built-in room without SCENE) to an image\n"
+            "  info SCENE       what a scene holds and how its BVH looks\n"
+            "  bench [SCENE]    measure ray throughput\n"
+            "\n"
+            "`raypack COMMAND --help` describes a command's options.\n");
+}
+
+int main(int argc, char **argv) {
+    if (argc < 2) {
+        usage(stderr);
+        return CLI_EXIT_USAGE;
+    }
+    const char *cmd = argv[1];
+    if (strcmp(cmd, "render") == 0) return cli_render(argc - 1, argv + 1);
+    if (strcmp(cmd, "info") == 0) return cli_info(argc - 1, argv + 1);
+    if (strcmp(cmd, "bench") == 0) return cli_bench(argc - 1, argv + 1);
+    if (strcmp(cmd, "--help") == 0 || strcmp(cmd, "-h") == 0 || strcmp(cmd, "help") == 0) {
+        usage(stdout);
+        return CLI_EXIT_OK;
+    }
+    if (strcmp(cmd, "--version") == 0) {
+        printf("raypack %d.%d.%d\n", RP_VERSION_MAJOR, RP_VERSION_MINOR, RP_VERSION_PATCH);
+        return CLI_EXIT_OK;
+    }
+    fprintf(stderr, "raypack: unknown command '%s' (expected render, info or bench)\n", cmd);
+    usage(stderr);
+    return CLI_EXIT_USAGE;
+}

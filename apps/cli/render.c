@@ -1,0 +1,420 @@
+/* `raypack render`: load a scene (or build the default room), render it, write an image, report. */
+#include "cli.h"
+
+#include <errno.h>
+#include <libgen.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "raypack.h"
+#include "raypack_io.h"
+#include "raypack_render.h"
+
+static const char *const CMD = "render";
+
+static void render_usage(FILE *out) {
+    fprintf(out,
+            "usage: raypack render [SCENE] [options]\n"
+            "\n"
+            "Renders SCENE (OBJ, PLY, NFF, AFF; .gz and .tar.gz too), or the built-in room without one.\n"
+            "\n"
+            "options:\n"
+            "  -o, --output FILE      image to write; the format follows the extension:\n"
+            "                         .png, .ppm (8-bit sRGB) or .pfm (float, linear) [raypack.png]\n"
+            "  --width W, --height H  image size in pixels, 1..16384 [the scene's, else 512x512]\n"
+            "  --spp N                samples per pixel, jittered deterministically when N > 1 [1]\n"
+            "  --integrator NAME      eyelight or whitted [whitted]\n"
+            "  --max-depth N          Whitted reflection/refraction depth, 0..64 [5]\n"
+            "  --aov NAME             debug output instead of shading: depth (PFM: distance along\n"
+            "                         the primary ray, +inf on a miss), normal, primid or albedo\n"
+            "  --threads N            worker threads, 1..%d; 0 for all hardware threads [0]\n"
+            "  --eye X,Y,Z  --look X,Y,Z  --up X,Y,Z  --fov DEG\n"
+            "                         camera (pinhole; vertical fov in (0, 180)); each replaces that\n"
+            "                         part of the scene's camera, or of one framing the scene\n"
+            "  --stats                also print the BVH statistics\n"
+            "  --stats-json FILE      write times, ray counts and Mrays/s as JSON\n"
+            "  --quiet                no progress and no report\n"
+            "  -h, --help             this help\n"
+            "\n"
+            "exit status: 0 ok, 1 the scene could not be loaded or the image written, 2 usage error\n",
+            CLI_MAX_THREADS);
+}
+
+typedef struct render_options {
+    const char *scene;
+    const char *output;
+    const char *stats_json;
+    int width, height, spp, max_depth, threads;
+    rp_integrator_type integrator;
+    const char *integrator_name;
+    bool use_aov;
+    rp_aov aov;
+    const char *aov_name;
+    bool has_eye, has_look, has_up, has_fov;
+    float eye[3], look[3], up[3], fov;
+    bool stats, quiet;
+} render_options;
+
+/* Returns CLI_EXIT_OK when the options parsed, else the exit status. */
+static int parse_options(int argc, char **argv, render_options *o, bool *help) {
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        const char *v = NULL;
+#define VALUE()                                                           \
+    do {                                                                  \
+        if (!(v = cli_flag_value(CMD, argc, argv, &i))) return CLI_EXIT_USAGE; \
+    } while (0)
+        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+            *help = true;
+            return CLI_EXIT_OK;
+        } else if (strcmp(a, "-o") == 0 || strcmp(a, "--output") == 0) {
+            VALUE();
+            o->output = v;
+        } else if (strcmp(a, "--width") == 0) {
+            VALUE();
+            if (!cli_parse_int(CMD, a, v, 1, 16384, &o->width)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--height") == 0) {
+            VALUE();
+            if (!cli_parse_int(CMD, a, v, 1, 16384, &o->height)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--spp") == 0) {
+            VALUE();
+            if (!cli_parse_int(CMD, a, v, 1, 65536, &o->spp)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--max-depth") == 0) {
+            VALUE();
+            if (!cli_parse_int(CMD, a, v, 0, 64, &o->max_depth)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--threads") == 0) {
+            VALUE();
+            if (!cli_parse_int(CMD, a, v, 0, CLI_MAX_THREADS, &o->threads)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--integrator") == 0) {
+            VALUE();
+            if (strcmp(v, "eyelight") == 0) {
+                o->integrator = RP_INTEGRATOR_EYELIGHT;
+            } else if (strcmp(v, "whitted") == 0) {
+                o->integrator = RP_INTEGRATOR_WHITTED;
+            } else {
+                fprintf(stderr, "raypack render: --integrator expects eyelight or whitted, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
+            o->integrator_name = v;
+        } else if (strcmp(a, "--aov") == 0) {
+            VALUE();
+            static const struct { const char *name; rp_aov aov; } aovs[] = {
+                {"depth", RP_AOV_DEPTH}, {"normal", RP_AOV_NORMAL}, {"primid", RP_AOV_PRIMID}, {"albedo", RP_AOV_ALBEDO}};
+            o->use_aov = false;
+            for (size_t k = 0; k < sizeof aovs / sizeof aovs[0]; k++) {
+                if (strcmp(v, aovs[k].name) == 0) {
+                    o->use_aov = true;
+                    o->aov = aovs[k].aov;
+                    o->aov_name = aovs[k].name;
+                }
+            }
+            if (!o->use_aov) {
+                fprintf(stderr, "raypack render: --aov expects depth, normal, primid or albedo, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
+        } else if (strcmp(a, "--eye") == 0) {
+            VALUE();
+            if (!cli_parse_vec3(CMD, a, v, o->eye)) return CLI_EXIT_USAGE;
+            o->has_eye = true;
+        } else if (strcmp(a, "--look") == 0) {
+            VALUE();
+            if (!cli_parse_vec3(CMD, a, v, o->look)) return CLI_EXIT_USAGE;
+            o->has_look = true;
+        } else if (strcmp(a, "--up") == 0) {
+            VALUE();
+            if (!cli_parse_vec3(CMD, a, v, o->up)) return CLI_EXIT_USAGE;
+            o->has_up = true;
+        } else if (strcmp(a, "--fov") == 0) {
+            VALUE();
+            if (!cli_parse_float(CMD, a, v, 0.0, 180.0, true, &o->fov)) return CLI_EXIT_USAGE;
+            o->has_fov = true;
+        } else if (strcmp(a, "--stats") == 0) {
+            o->stats = true;
+        } else if (strcmp(a, "--stats-json") == 0) {
+            VALUE();
+            o->stats_json = v;
+        } else if (strcmp(a, "--quiet") == 0 || strcmp(a, "-q") == 0) {
+            o->quiet = true;
+        } else if (a[0] == '-' && a[1] != '\0') {
+            fprintf(stderr, "raypack render: unknown option '%s' (see raypack render --help)\n", a);
+            return CLI_EXIT_USAGE;
+        } else if (!o->scene) {
+            o->scene = a;
+        } else {
+            fprintf(stderr, "raypack render: expected one SCENE, got '%s' and '%s'\n", o->scene, a);
+            return CLI_EXIT_USAGE;
+        }
+#undef VALUE
+    }
+    const char *dot = strrchr(o->output, '.');
+    if (!dot || (strcasecmp(dot, ".png") != 0 && strcasecmp(dot, ".pfm") != 0 && strcasecmp(dot, ".ppm") != 0)) {
+        fprintf(stderr, "raypack render: -o expects a file ending in .png, .pfm or .ppm, got '%s'\n", o->output);
+        return CLI_EXIT_USAGE;
+    }
+    return CLI_EXIT_OK;
+}
+
+/* Checks before the work that the image can be written: its folder exists and is writable, and an
+ * existing file there is a writable regular file. */
+static bool output_writable(const char *path) {
+    struct stat st;
+    if (stat(path, &st) == 0) {
+        if (S_ISDIR(st.st_mode)) {
+            fprintf(stderr, "raypack render: cannot write %s: it is a directory\n", path);
+            return false;
+        }
+        if (access(path, W_OK) != 0) {
+            fprintf(stderr, "raypack render: cannot write %s: %s\n", path, strerror(errno));
+            return false;
+        }
+        return true;
+    }
+    char *copy = strdup(path);
+    if (!copy) return true;
+    const char *dir = dirname(copy);
+    bool ok = true;
+    if (stat(dir, &st) != 0 || !S_ISDIR(st.st_mode)) {
+        fprintf(stderr, "raypack render: cannot write %s: folder %s does not exist\n", path, dir);
+        ok = false;
+    } else if (access(dir, W_OK) != 0) {
+        fprintf(stderr, "raypack render: cannot write %s: folder %s: %s\n", path, dir, strerror(errno));
+        ok = false;
+    }
+    free(copy);
+    return ok;
+}
+
+typedef struct progress_state {
+    double start_ms, last_ms;
+    bool tty, quiet;
+    int last_quarter;
+} progress_state;
+
+static void on_progress(void *user, uint32_t done, uint32_t total, uint64_t rays) {
+    progress_state *p = user;
+    if (p->quiet || total == 0) return;
+    double now = cli_now_ms(), elapsed = now - p->start_ms;
+    double frac = (double)done / (double)total;
+    double mrays = elapsed > 0.0 ? (double)rays / (elapsed * 1e3) : 0.0;
+    if (p->tty) {
+        if (done < total && now - p->last_ms < 100.0) return;
+        p->last_ms = now;
+        enum { BAR = 30 };
+        char bar[BAR + 1];
+        int fill = (int)(frac * BAR);
+        for (int i = 0; i < BAR; i++) bar[i] = i < fill ? '#' : '-';
+        bar[BAR] = '\0';
+        double eta = frac > 0.0 ? elapsed * (1.0 - frac) / frac / 1e3 : 0.0;
+        fprintf(stderr, "\rrender [%s] %3d%%  ETA %5.1f s  %7.2f Mrays/s ", bar, (int)(frac * 100.0), eta, mrays);
+        if (done == total) fputc('\n', stderr);
+        fflush(stderr);
+    } else {
+        int quarter = (int)(frac * 4.0);
+        if (quarter <= p->last_quarter) return;
+        p->last_quarter = quarter;
+        fprintf(stderr, "render: %3d%% after %.2f s, %.2f Mrays/s\n", quarter * 25, elapsed / 1e3, mrays);
+    }
+}
+
+/* Depth for an 8-bit image: near is bright, far dark, misses black. */
+static void depth_to_grey(float *px, size_t n) {
+    float maxd = 0.0f;
+    for (size_t i = 0; i < n; i++)
+        if (isfinite(px[i]) && px[i] > maxd) maxd = px[i];
+    for (size_t i = 0; i < n; i++) px[i] = isfinite(px[i]) && maxd > 0.0f ? 1.0f - 0.9f * px[i] / maxd : 0.0f;
+}
+
+static const char *basename_of(const char *path) {
+    const char *s = strrchr(path, '/');
+    return s ? s + 1 : path;
+}
+
+static void json_string(FILE *f, const char *s) {
+    fputc('"', f);
+    for (; *s; s++) {
+        unsigned char c = (unsigned char)*s;
+        if (c == '"' || c == '\\') fprintf(f, "\\%c", c);
+        else if (c < 0x20) fprintf(f, "\\u%04x", c);
+        else fputc(c, f);
+    }
+    fputc('"', f);
+}
+
+int cli_render(int argc, char **argv) {
+    render_options o = {.output = "raypack.png", .max_depth = -1, .integrator = RP_INTEGRATOR_WHITTED, .integrator_name = "whitted"};
+    bool help = false;
+    int rc = parse_options(argc, argv, &o, &help);
+    if (rc != CLI_EXIT_OK) return rc;
+    if (help) {
+        render_usage(stdout);
+        return CLI_EXIT_OK;
+    }
+    if (!output_writable(o.output)) return CLI_EXIT_FAILURE;
+    if (o.stats_json && !output_writable(o.stats_json)) return CLI_EXIT_FAILURE;
+
+    /* Load. */
+    double t0 = cli_now_ms();
+    rp_scene_data data;
+    memset(&data, 0, sizeof data);
+    bool builtin = o.scene == NULL;
+    if (builtin) {
+        if (!rp_default_scene(&data)) {
+            fprintf(stderr, "raypack render: out of memory building the default scene\n");
+            return CLI_EXIT_FAILURE;
+        }
+    } else {
+        FILE *probe = fopen(o.scene, "rb");
+        if (!probe) {
+            fprintf(stderr, "raypack render: cannot open scene %s: %s\n", o.scene, strerror(errno));
+            return CLI_EXIT_FAILURE;
+        }
+        fclose(probe);
+        char err[512] = "";
+        if (!rp_scene_data_load(o.scene, &data, err, sizeof err)) {
+            fprintf(stderr, "%s\n", err[0] ? err : "raypack render: cannot load the scene");
+            return CLI_EXIT_FAILURE;
+        }
+    }
+    double load_ms = cli_now_ms() - t0;
+
+    int status = CLI_EXIT_FAILURE;
+    rp_device *device = rp_device_new(&(rp_device_desc){.threads = o.threads});
+    rp_render_scene *scene = NULL;
+    float *pixels = NULL;
+    if (!device) {
+        fprintf(stderr, "raypack render: cannot create a device\n");
+        goto done;
+    }
+    double t1 = cli_now_ms();
+    char err[512] = "";
+    scene = rp_render_scene_new(device, &data, NULL, err, sizeof err);
+    if (!scene) {
+        fprintf(stderr, "raypack render: %s\n", err);
+        goto done;
+    }
+    double build_ms = cli_now_ms() - t1;
+    rp_scene_stats sst;
+    rp_scene_get_stats(rp_render_scene_core(scene), &sst);
+
+    /* Camera and size. */
+    rp_camera cam = rp_render_scene_default_camera(scene);
+    if (o.has_eye) memcpy(cam.pinhole.eye, o.eye, sizeof o.eye);
+    if (o.has_look) memcpy(cam.pinhole.look, o.look, sizeof o.look);
+    if (o.has_up) memcpy(cam.pinhole.up, o.up, sizeof o.up);
+    if (o.has_fov) cam.pinhole.fov_deg = o.fov;
+    int sw = data.camera.width > 0 ? data.camera.width : 512, sh = data.camera.height > 0 ? data.camera.height : 512;
+    int w = o.width, h = o.height;
+    if (!w && !h) {
+        w = sw;
+        h = sh;
+    } else if (!h) {
+        h = (int)fmax(1.0, floor((double)w * sh / sw + 0.5));
+    } else if (!w) {
+        w = (int)fmax(1.0, floor((double)h * sw / sh + 0.5));
+    }
+    if ((double)w * (double)h > 16384.0 * 16384.0 / 4.0) {
+        fprintf(stderr, "raypack render: %dx%d is too many pixels (at most 67108864)\n", w, h);
+        status = CLI_EXIT_USAGE;
+        goto done;
+    }
+
+    rp_render_desc desc = {
+        .width = w, .height = h, .spp = o.spp, .integrator = o.use_aov ? RP_INTEGRATOR_AOV : o.integrator,
+        .aov = o.aov, .camera = &cam,
+        /* rp_render_desc: 0 is the default depth (5), negative is none. */
+        .max_depth = o.max_depth < 0 ? 0 : (o.max_depth == 0 ? -1 : o.max_depth),
+    };
+    progress_state ps = {.start_ms = cli_now_ms(), .tty = isatty(2) != 0, .quiet = o.quiet, .last_quarter = 0};
+    desc.progress = on_progress;
+    desc.progress_user = &ps;
+    int channels = rp_render_channels(&desc);
+    pixels = malloc((size_t)w * (size_t)h * (size_t)channels * sizeof(float));
+    if (!pixels) {
+        fprintf(stderr, "raypack render: out of memory for a %dx%d image\n", w, h);
+        goto done;
+    }
+    rp_render_stats rs;
+    if (!rp_render(scene, &desc, pixels, &rs)) {
+        fprintf(stderr, "raypack render: rendering failed (out of memory?)\n");
+        goto done;
+    }
+
+    /* Write. */
+    const char *dot = strrchr(o.output, '.');
+    if (channels == 1 && strcasecmp(dot, ".pfm") != 0) depth_to_grey(pixels, (size_t)w * (size_t)h);
+    if (!rp_image_write(o.output, w, h, channels, pixels, err, sizeof err)) {
+        fprintf(stderr, "raypack render: %s\n", err);
+        goto done;
+    }
+
+    uint64_t total = 0;
+    for (int k = 0; k < RP_RAY_KIND_COUNT; k++) total += rs.rays[k];
+    double mrays = rs.render_ms > 0.0 ? (double)total / (rs.render_ms * 1e3) : 0.0;
+    const char *scene_name = builtin ? "(built-in room)" : basename_of(o.scene);
+    const char *mode = o.use_aov ? o.aov_name : o.integrator_name;
+    int threads = rp_device_thread_count(device);
+    if (!o.quiet) {
+        printf("scene    %s: %zu triangles, %zu spheres, %zu cones, %zu materials, %zu lights\n", scene_name,
+               data.triangle_count, data.sphere_count, data.cone_count, data.material_count, data.light_count);
+        printf("image    %s: %dx%d, %d spp, %s", o.output, w, h, o.use_aov ? 1 : (o.spp ? o.spp : 1), mode);
+        if (!o.use_aov && o.integrator == RP_INTEGRATOR_WHITTED) printf(" (max depth %d)", o.max_depth < 0 ? 5 : o.max_depth);
+        printf(", %d threads\n", threads);
+        printf("time     load %.1f ms, build %.1f ms, render %.1f ms\n", load_ms, build_ms, rs.render_ms);
+        printf("rays     primary %llu, shadow %llu, reflection %llu, refraction %llu, total %llu\n",
+               (unsigned long long)rs.rays[RP_RAY_PRIMARY], (unsigned long long)rs.rays[RP_RAY_SHADOW],
+               (unsigned long long)rs.rays[RP_RAY_REFLECTION], (unsigned long long)rs.rays[RP_RAY_REFRACTION],
+               (unsigned long long)total);
+        printf("speed    %.2f Mrays/s\n", mrays);
+        if (o.stats) {
+            printf("bvh      %llu binary nodes, %llu wide nodes (width %u), %llu leaves, depth %u, SAH cost %.2f, "
+                   "%.2f MiB, commit %.1f ms\n",
+                   (unsigned long long)sst.binary_nodes, (unsigned long long)sst.wide_nodes, sst.bvh_width,
+                   (unsigned long long)sst.leaves, sst.depth, sst.sah_cost, (double)sst.bytes / 1048576.0,
+                   sst.build_ms);
+        }
+    }
+    if (o.stats_json) {
+        FILE *f = fopen(o.stats_json, "w");
+        if (!f) {
+            fprintf(stderr, "raypack render: cannot write %s: %s\n", o.stats_json, strerror(errno));
+            goto done;
+        }
+        fprintf(f, "{\n  \"scene\": ");
+        json_string(f, builtin ? "" : o.scene);
+        fprintf(f, ",\n  \"output\": ");
+        json_string(f, o.output);
+        fprintf(f, ",\n  \"width\": %d,\n  \"height\": %d,\n  \"spp\": %d,\n  \"integrator\": \"%s\",\n", w, h,
+                o.use_aov ? 1 : (o.spp ? o.spp : 1), mode);
+        fprintf(f, "  \"threads\": %d,\n  \"triangles\": %zu,\n", threads, data.triangle_count);
+        fprintf(f, "  \"load_ms\": %.3f,\n  \"build_ms\": %.3f,\n  \"render_ms\": %.3f,\n", load_ms, build_ms,
+                rs.render_ms);
+        fprintf(f, "  \"rays\": {\"primary\": %llu, \"shadow\": %llu, \"reflection\": %llu, \"refraction\": %llu, "
+                   "\"total\": %llu},\n",
+                (unsigned long long)rs.rays[RP_RAY_PRIMARY], (unsigned long long)rs.rays[RP_RAY_SHADOW],
+                (unsigned long long)rs.rays[RP_RAY_REFLECTION], (unsigned long long)rs.rays[RP_RAY_REFRACTION],
+                (unsigned long long)total);
+        fprintf(f, "  \"mrays_per_s\": %.3f,\n", mrays);
+        fprintf(f, "  \"bvh\": {\"binary_nodes\": %llu, \"wide_nodes\": %llu, \"leaves\": %llu, \"depth\": %u, "
+                   "\"sah_cost\": %.4f, \"bytes\": %zu, \"build_ms\": %.3f}\n}\n",
+                (unsigned long long)sst.binary_nodes, (unsigned long long)sst.wide_nodes,
+                (unsigned long long)sst.leaves, sst.depth, sst.sah_cost, sst.bytes, sst.build_ms);
+        if (fclose(f) != 0) {
+            fprintf(stderr, "raypack render: cannot write %s: %s\n", o.stats_json, strerror(errno));
+            goto done;
+        }
+    }
+    status = CLI_EXIT_OK;
+
+done:
+    free(pixels);
+    rp_render_scene_release(scene);
+    if (device) rp_device_release(device);
+    if (builtin) rp_default_scene_free(&data);
+    else rp_scene_data_free(&data);
+    return status;
+}

@@ -1,0 +1,66 @@
+/* Helpers shared by the subcommands: flag values, numbers, clock. */
+#include "cli.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+
+double cli_now_ms(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+const char *cli_flag_value(const char *cmd, int argc, char **argv, int *i) {
+    if (*i + 1 >= argc) {
+        fprintf(stderr, "raypack %s: %s expects a value\n", cmd, argv[*i]);
+        return NULL;
+    }
+    *i += 1;
+    return argv[*i];
+}
+
+bool cli_parse_int(const char *cmd, const char *flag, const char *text, long lo, long hi, int *out) {
+    char *end;
+    errno = 0;
+    long v = strtol(text, &end, 10);
+    if (end == text || *end != '\0' || errno == ERANGE || v < lo || v > hi) {
+        fprintf(stderr, "raypack %s: %s expects an integer in [%ld, %ld], got '%s'\n", cmd, flag, lo, hi, text);
+        return false;
+    }
+    *out = (int)v;
+    return true;
+}
+
+bool cli_parse_float(const char *cmd, const char *flag, const char *text, double lo, double hi, bool open,
+                     float *out) {
+    char *end;
+    errno = 0;
+    double v = strtod(text, &end);
+    bool in = open ? (v > lo && v < hi) : (v >= lo && v <= hi);
+    if (end == text || *end != '\0' || errno == ERANGE || !isfinite(v) || !in) {
+        fprintf(stderr, "raypack %s: %s expects a number in %c%g, %g%c, got '%s'\n", cmd, flag, open ? '(' : '[',
+                lo, hi, open ? ')' : ']', text);
+        return false;
+    }
+    *out = (float)v;
+    return true;
+}
+
+bool cli_parse_vec3(const char *cmd, const char *flag, const char *text, float out[3]) {
+    const char *p = text;
+    for (int k = 0; k < 3; k++) {
+        char *end;
+        errno = 0;
+        double v = strtod(p, &end);
+        if (end == p || errno == ERANGE || !isfinite(v) || fabs(v) > 1e30 || *end != (k < 2 ? ',' : '\0')) {
+            fprintf(stderr, "raypack %s: %s expects three numbers x,y,z, got '%s'\n", cmd, flag, text);
+            return false;
+        }
+        out[k] = (float)v;
+        p = end + 1;
+    }
+    return true;
+}

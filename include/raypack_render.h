@@ -1,0 +1,186 @@
+/* raypack rendering: cameras, materials, textures, lights, integrators and the tile renderer, built
+ * on the public core API (raypack.h) and the loaders' flat scene data (raypack_io.h).
+ *
+ * A render scene turns an rp_scene_data into core geometries (triangles, spheres, cones as user
+ * geometry) plus the renderer's own tagged-union materials and lights, and commits it. rp_render
+ * then traces a frame on the device's threads, tile by tile; every random number is a function of
+ * (pixel, sample, dimension), so an image is bit-identical whatever the thread count.
+ *
+ * Ownership: a render scene borrows the rp_scene_data it was made from (positions are shared with
+ * the core, shading attributes, materials and textures are read in place): the data must stay alive
+ * and unchanged until the render scene is released.
+ */
+#ifndef RAYPACK_RENDER_H
+#define RAYPACK_RENDER_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "raypack.h"
+#include "raypack_io.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---- cameras ---------------------------------------------------------------------------------- */
+
+typedef enum rp_camera_type { RP_CAMERA_PINHOLE = 0 } rp_camera_type;
+
+/* The pinhole camera of DESIGN.md: eye, look-at point, up vector, vertical field of view. */
+typedef struct rp_pinhole_camera {
+    float eye[3], look[3], up[3];
+    float fov_deg;
+} rp_pinhole_camera;
+
+typedef struct rp_camera {
+    rp_camera_type type;
+    union {
+        rp_pinhole_camera pinhole;
+    };
+} rp_camera;
+
+/* ---- materials -------------------------------------------------------------------------------- */
+
+/* Every material has a local Phong lobe (kd, optional texture, ks, ns) lit by the point lights and
+ * an emission ke; the type says which perfect-specular transport it adds on top. */
+typedef enum rp_material_type {
+    RP_MATERIAL_DIFFUSE = 0,   /* kd only */
+    RP_MATERIAL_PHONG = 1,     /* kd + Phong highlight ks^ns */
+    RP_MATERIAL_MIRROR = 2,    /* Phong + mirror reflection weighted by kr */
+    RP_MATERIAL_DIELECTRIC = 3 /* Phong + Fresnel reflection and refraction (ior), tinted by kt */
+} rp_material_type;
+
+typedef struct rp_mirror_params {
+    float kr[3];
+} rp_mirror_params;
+
+typedef struct rp_dielectric_params {
+    float kt[3];
+    float ior;
+} rp_dielectric_params;
+
+typedef struct rp_material {
+    rp_material_type type;
+    float kd[3];
+    int32_t texture;    /* index into the scene's textures multiplying kd, or -1 */
+    float ks[3];
+    float ns;
+    float ke[3];
+    union {
+        rp_mirror_params mirror;
+        rp_dielectric_params dielectric;
+    };
+} rp_material;
+
+/* Maps a material as the scene file states it (MTL / NFF parameters) to a renderer material. */
+RP_API rp_material rp_material_from_data(const rp_material_data *data);
+
+/* ---- lights ----------------------------------------------------------------------------------- */
+
+typedef enum rp_light_source_type { RP_LIGHT_SOURCE_POINT = 0 } rp_light_source_type;
+
+typedef struct rp_point_light {
+    float position[3];
+    float intensity[3];
+    bool inverse_square; /* false: no distance falloff (the NFF convention of the scene files) */
+} rp_point_light;
+
+typedef struct rp_light_source {
+    rp_light_source_type type;
+    union {
+        rp_point_light point;
+    };
+} rp_light_source;
+
+/* ---- render scene ----------------------------------------------------------------------------- */
+
+typedef struct rp_render_scene rp_render_scene;
+
+typedef struct rp_render_scene_desc {
+    rp_scene_desc accel;  /* acceleration structure settings of the core scene */
+} rp_render_scene_desc;
+
+/* Returns the defaults for every zero field of desc (NULL gives all defaults). */
+RP_API rp_render_scene_desc rp_render_scene_desc_defaults(const rp_render_scene_desc *desc);
+/* Builds and commits a render scene from loaded data (borrowed, see above); NULL desc means the
+ * defaults. On failure returns NULL and writes a message into err. */
+RP_API rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *data,
+                                            const rp_render_scene_desc *desc, char *err,
+                                            size_t err_size);
+/* Frees the render scene and releases its core scene. */
+RP_API void rp_render_scene_release(rp_render_scene *scene);
+/* The committed core scene (not retained; valid while the render scene lives). */
+RP_API rp_scene *rp_render_scene_core(rp_render_scene *scene);
+/* The scene file's camera, or one that frames the scene's bounds when the file had none. */
+RP_API rp_camera rp_render_scene_default_camera(rp_render_scene *scene);
+/* The renderer's material of index i (i < material count of the data). */
+RP_API const rp_material *rp_render_scene_material(const rp_render_scene *scene, size_t i);
+
+/* ---- rendering -------------------------------------------------------------------------------- */
+
+typedef enum rp_integrator_type {
+    RP_INTEGRATOR_WHITTED = 0,  /* point lights, hard shadows, mirror reflection, refraction */
+    RP_INTEGRATOR_EYELIGHT = 1, /* primary rays only: |cos| between geometric normal and ray */
+    RP_INTEGRATOR_AOV = 2       /* one debug output of the primary hit, see rp_aov */
+} rp_integrator_type;
+
+typedef enum rp_aov {
+    RP_AOV_DEPTH = 0,  /* 1 channel: distance along the normalized primary ray, +inf on a miss */
+    RP_AOV_NORMAL = 1, /* 3 channels: shading normal mapped to [0,1] as 0.5 n + 0.5 */
+    RP_AOV_PRIMID = 2, /* 3 channels: a colour hashed from (geom_id, prim_id), black on a miss */
+    RP_AOV_ALBEDO = 3  /* 3 channels: the material's base colour, textures included */
+} rp_aov;
+
+typedef enum rp_ray_kind {
+    RP_RAY_PRIMARY = 0,
+    RP_RAY_SHADOW = 1,
+    RP_RAY_REFLECTION = 2,
+    RP_RAY_REFRACTION = 3,
+    RP_RAY_KIND_COUNT = 4
+} rp_ray_kind;
+
+/* Called while a frame renders, never by two threads at once; rays counts all kinds so far. */
+typedef void (*rp_render_progress_fn)(void *user, uint32_t tiles_done, uint32_t tiles_total,
+                                      uint64_t rays);
+
+typedef struct rp_render_desc {
+    int width, height;          /* 0: 512 */
+    int spp;                    /* samples per pixel, 0: 1 (pixel centre); more are jittered */
+    rp_integrator_type integrator;
+    rp_aov aov;                 /* with RP_INTEGRATOR_AOV; AOVs trace the pixel centre only */
+    int max_depth;              /* Whitted: reflection/refraction bounces; 0: 5, negative: none */
+    const rp_camera *camera;    /* NULL: rp_render_scene_default_camera */
+    int tile_size;              /* 0: 16 */
+    float ambient;              /* Whitted ambient term relative to kd; 0: 0.08, negative: none */
+    rp_render_progress_fn progress;
+    void *progress_user;
+} rp_render_desc;
+
+typedef struct rp_render_stats {
+    uint64_t rays[RP_RAY_KIND_COUNT];
+    double render_ms;
+} rp_render_stats;
+
+/* Returns the defaults for every zero field of desc (NULL gives all defaults). */
+RP_API rp_render_desc rp_render_desc_defaults(const rp_render_desc *desc);
+/* Channels per pixel of the frame desc describes: 1 for the depth AOV, else 3. */
+RP_API int rp_render_channels(const rp_render_desc *desc);
+/* Renders a frame into pixels (width * height * rp_render_channels floats, linear, top row first)
+ * on the device's threads. stats may be NULL. Returns false on bad arguments. */
+RP_API bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels,
+                      rp_render_stats *stats);
+
+/* ---- built-in scene --------------------------------------------------------------------------- */
+
+/* Fills out with the built-in demo scene (an ERW6-like room: boxes, a mirror, a glass sphere and a
+ * point light, camera included). Free it with rp_default_scene_free. */
+RP_API bool rp_default_scene(rp_scene_data *out);
+/* Frees the arrays of a scene made by rp_default_scene and zeroes it. */
+RP_API void rp_default_scene_free(rp_scene_data *scene);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* RAYPACK_RENDER_H */

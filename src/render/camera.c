@@ -1,0 +1,108 @@
+/* Pinhole camera of DESIGN.md, and the camera given to scenes that bring none. */
+#include "render.h"
+
+#include <float.h>
+
+void camera_setup(const rp_camera *cam, int width, int height, render_camera *out) {
+    switch (cam->type) {
+    case RP_CAMERA_PINHOLE: {
+        const rp_pinhole_camera *p = &cam->pinhole;
+        out->eye = v3_load(p->eye);
+        out->f = v3_normalize(v3_sub(v3_load(p->look), out->eye));
+        out->r = v3_normalize(v3_cross(out->f, v3_load(p->up)));
+        out->u = v3_cross(out->r, out->f);
+        out->tan_half = tanf(p->fov_deg * 0.5f * (3.14159265358979f / 180.0f));
+        break;
+    }
+    }
+    out->width = (float)width;
+    out->height = (float)height;
+    out->aspect = (float)width / (float)height;
+}
+
+/* dir = normalize(f + (2x/W - 1) tan(fov/2) (W/H) r + (1 - 2y/H) tan(fov/2) u), x and y already
+ * offset within the pixel (x + 0.5 for its centre). */
+void camera_ray(const render_camera *c, float x, float y, rp_ray *ray) {
+    float a = (2.0f * x / c->width - 1.0f) * c->tan_half * c->aspect;
+    float b = (1.0f - 2.0f * y / c->height) * c->tan_half;
+    v3 d = v3_normalize(v3_add(v3_add(c->f, v3_scale(c->r, a)), v3_scale(c->u, b)));
+    ray->org_x = c->eye.x;
+    ray->org_y = c->eye.y;
+    ray->org_z = c->eye.z;
+    ray->tnear = 0.0f;
+    ray->dir_x = d.x;
+    ray->dir_y = d.y;
+    ray->dir_z = d.z;
+    ray->time = 0.0f;
+    ray->tfar = INFINITY;
+    ray->mask = 0xFFFFFFFFu;
+    ray->id = 0;
+    ray->flags = 0;
+}
+
+/* Score of a view: primary hits on front faces minus hits on back faces, on a coarse grid. Closed
+ * meshes score the same from every side; a room open on one side (the Cornell box) is seen through
+ * its opening. */
+static int view_score(rp_scene *scene, const rp_camera *cam) {
+    enum { N = 12 };
+    render_camera rc;
+    camera_setup(cam, N, N, &rc);
+    rp_rayhit rh[N * N];
+    for (int y = 0; y < N; y++) {
+        for (int x = 0; x < N; x++) {
+            rp_rayhit *h = &rh[y * N + x];
+            camera_ray(&rc, (float)x + 0.5f, (float)y + 0.5f, &h->ray);
+            h->hit.geom_id = RP_INVALID_ID;
+            h->hit.prim_id = RP_INVALID_ID;
+            h->hit.inst_id = RP_INVALID_ID;
+        }
+    }
+    rp_intersect_array(scene, rh, N * N, RP_QUERY_INCOHERENT);
+    int score = 0;
+    for (int i = 0; i < N * N; i++) {
+        if (rh[i].hit.geom_id == RP_INVALID_ID) continue;
+        float d = rh[i].hit.Ng_x * rh[i].ray.dir_x + rh[i].hit.Ng_y * rh[i].ray.dir_y +
+                  rh[i].hit.Ng_z * rh[i].ray.dir_z;
+        score += d < 0.0f ? 1 : (d > 0.0f ? -1 : 0);
+    }
+    return score;
+}
+
+rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b) {
+    rp_camera cam = {.type = RP_CAMERA_PINHOLE};
+    rp_pinhole_camera *p = &cam.pinhole;
+    p->fov_deg = 45.0f;
+    if (!(b->lower_x <= b->upper_x && b->lower_y <= b->upper_y && b->lower_z <= b->upper_z)) {
+        float eye[3] = {0, 0, 5}, up[3] = {0, 1, 0};
+        for (int k = 0; k < 3; k++) {
+            p->eye[k] = eye[k];
+            p->look[k] = 0.0f;
+            p->up[k] = up[k];
+        }
+        return cam;
+    }
+    v3 lo = v3_make(b->lower_x, b->lower_y, b->lower_z);
+    v3 hi = v3_make(b->upper_x, b->upper_y, b->upper_z);
+    v3 c = v3_scale(v3_add(lo, hi), 0.5f);
+    float radius = 0.5f * v3_length(v3_sub(hi, lo));
+    if (!(radius > 0.0f)) radius = 1.0f;
+    float dist = radius / sinf(p->fov_deg * 0.5f * (3.14159265358979f / 180.0f));
+    /* Candidate directions, y up (the common convention); the first best one wins. */
+    static const float dirs[4][3] = {{0, 0, 1}, {0, 0, -1}, {1, 0, 0}, {-1, 0, 0}};
+    int best = -1, best_score = 0;
+    for (int i = 0; i < 4; i++) {
+        rp_camera cand = cam;
+        for (int k = 0; k < 3; k++) {
+            cand.pinhole.look[k] = v3_at(c, k);
+            cand.pinhole.eye[k] = v3_at(c, k) + dirs[i][k] * dist;
+            cand.pinhole.up[k] = k == 1 ? 1.0f : 0.0f;
+        }
+        int s = view_score(scene, &cand);
+        if (best < 0 || s > best_score) {
+            best = i;
+            best_score = s;
+            cam = cand;
+        }
+    }
+    return cam;
+}

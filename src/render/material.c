@@ -1,0 +1,72 @@
+/* Materials: mapping the scene files' parameters to the renderer's tagged union, textures, Fresnel. */
+#include "render.h"
+
+#include <string.h>
+
+static bool any_positive(const float c[3]) { return c[0] > 0.0f || c[1] > 0.0f || c[2] > 0.0f; }
+
+/* Picks the transport from what the file asks for: transmission wins over mirror reflection, which
+ * wins over a plain highlight (an NFF surface with T > 0 is glass whatever its Ks). */
+rp_material rp_material_from_data(const rp_material_data *d) {
+    rp_material m;
+    memset(&m, 0, sizeof m);
+    memcpy(m.kd, d->kd, sizeof m.kd);
+    memcpy(m.ks, d->ks, sizeof m.ks);
+    memcpy(m.ke, d->ke, sizeof m.ke);
+    m.ns = d->ns > 0.0f ? d->ns : 1.0f;
+    m.texture = d->map_kd;
+    if (any_positive(d->kt)) {
+        m.type = RP_MATERIAL_DIELECTRIC;
+        memcpy(m.dielectric.kt, d->kt, sizeof m.dielectric.kt);
+        m.dielectric.ior = d->ior > 0.0f ? d->ior : 1.5f;
+    } else if (any_positive(d->kr)) {
+        m.type = RP_MATERIAL_MIRROR;
+        memcpy(m.mirror.kr, d->kr, sizeof m.mirror.kr);
+    } else if (any_positive(d->ks)) {
+        m.type = RP_MATERIAL_PHONG;
+    } else {
+        m.type = RP_MATERIAL_DIFFUSE;
+    }
+    return m;
+}
+
+v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]) {
+    if (texture < 0 || (size_t)texture >= s->data->texture_count) return v3_make(1, 1, 1);
+    const rp_texture_data *t = &s->data->textures[texture];
+    if (!t->rgb || t->width <= 0 || t->height <= 0) return v3_make(1, 1, 1);
+    /* Repeat wrapping; v = 0 is the bottom row (OBJ), the data's first row is the top one. */
+    float fu = uv[0] - floorf(uv[0]), fv = uv[1] - floorf(uv[1]);
+    if (!(fu >= 0.0f && fu < 1.0f)) fu = 0.0f; /* NaN or a rounding of floor */
+    if (!(fv >= 0.0f && fv < 1.0f)) fv = 0.0f;
+    float x = fu * (float)t->width - 0.5f, y = (1.0f - fv) * (float)t->height - 0.5f;
+    float x0f = floorf(x), y0f = floorf(y);
+    float ax = x - x0f, ay = y - y0f;
+    int x0 = (int)x0f, y0 = (int)y0f;
+    int xs[2] = {x0, x0 + 1}, ys[2] = {y0, y0 + 1};
+    for (int i = 0; i < 2; i++) {
+        xs[i] = ((xs[i] % t->width) + t->width) % t->width;
+        ys[i] = ((ys[i] % t->height) + t->height) % t->height;
+    }
+    float w[4] = {(1 - ax) * (1 - ay), ax * (1 - ay), (1 - ax) * ay, ax * ay};
+    float c[3] = {0, 0, 0};
+    for (int j = 0; j < 4; j++) {
+        const uint8_t *px = t->rgb + ((size_t)ys[j >> 1] * (size_t)t->width + (size_t)xs[j & 1]) * 3;
+        for (int k = 0; k < 3; k++) c[k] += w[j] * s->srgb_to_linear[px[k]];
+    }
+    return v3_make(c[0], c[1], c[2]);
+}
+
+v3 material_albedo(const rp_render_scene *s, const rp_material *m, const render_surface *surf) {
+    v3 kd = v3_load(m->kd);
+    if (m->texture >= 0 && surf->has_uv) kd = v3_mul(kd, material_texture(s, m->texture, surf->uv));
+    return kd;
+}
+
+float material_fresnel(float cos_i, float eta) {
+    float sin2_t = eta * eta * (1.0f - cos_i * cos_i);
+    if (sin2_t >= 1.0f) return 1.0f; /* total internal reflection */
+    float cos_t = sqrtf(1.0f - sin2_t);
+    float rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    float rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    return 0.5f * (rs * rs + rp * rp);
+}

@@ -1,0 +1,221 @@
+/* Render scene: core geometries from the loaders' flat data, materials, lights, shading points. */
+#include "render.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+rp_render_scene_desc rp_render_scene_desc_defaults(const rp_render_scene_desc *desc) {
+    rp_render_scene_desc d;
+    memset(&d, 0, sizeof d);
+    if (desc) d = *desc;
+    d.accel = rp_scene_desc_defaults(&d.accel);
+    return d;
+}
+
+static float srgb_decode(float c) {
+    return c <= 0.04045f ? c / 12.92f : powf((c + 0.055f) / 1.055f, 2.4f);
+}
+
+static void scene_free(rp_render_scene *s) {
+    if (!s) return;
+    if (s->scene) rp_scene_release(s->scene);
+    if (s->device) rp_device_release(s->device);
+    free(s->materials);
+    free(s->lights);
+    free(s->cones);
+    free(s);
+}
+
+/* Frees a half-built scene and reports why; returns NULL for the caller to return. */
+static rp_render_scene *fail(rp_render_scene *s, char *err, size_t err_size, const char *msg) {
+    if (err && err_size) snprintf(err, err_size, "%s", msg);
+    scene_free(s);
+    return NULL;
+}
+
+/* Attaches a geometry, committing it first; returns its geom_id or RP_INVALID_ID. */
+static uint32_t attach(rp_render_scene *s, rp_geometry *g) {
+    rp_geometry_commit(g);
+    uint32_t id = rp_scene_attach(s->scene, g);
+    rp_geometry_release(g);
+    return id;
+}
+
+static bool build_geometry(rp_render_scene *s, const rp_scene_data *d) {
+    if (d->triangle_count > 0) {
+        rp_geometry *g = rp_geometry_new(s->device, RP_GEOMETRY_TRIANGLE);
+        if (!g) return false;
+        rp_geometry_set_buffer(g, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, d->positions, 0, 0, d->vertex_count);
+        rp_geometry_set_buffer(g, RP_BUFFER_INDEX, RP_FORMAT_UINT3, d->indices, 0, 0, d->triangle_count);
+        s->geom_ids[RENDER_GEOM_TRIANGLES] = attach(s, g);
+        if (s->geom_ids[RENDER_GEOM_TRIANGLES] == RP_INVALID_ID) return false;
+    }
+    if (d->sphere_count > 0) {
+        rp_geometry *g = rp_geometry_new(s->device, RP_GEOMETRY_SPHERE);
+        if (!g) return false;
+        float *v = rp_geometry_new_buffer(g, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT4, 0, d->sphere_count);
+        if (!v) {
+            rp_geometry_release(g);
+            return false;
+        }
+        for (size_t i = 0; i < d->sphere_count; i++) {
+            memcpy(v + 4 * i, d->spheres[i].center, 3 * sizeof(float));
+            v[4 * i + 3] = fabsf(d->spheres[i].radius);
+        }
+        s->geom_ids[RENDER_GEOM_SPHERES] = attach(s, g);
+        if (s->geom_ids[RENDER_GEOM_SPHERES] == RP_INVALID_ID) return false;
+    }
+    if (d->cone_count > 0) {
+        s->cones = calloc(d->cone_count, sizeof *s->cones);
+        if (!s->cones) return false;
+        for (size_t i = 0; i < d->cone_count; i++) cone_prepare(&d->cones[i], &s->cones[i]);
+        rp_geometry *g = rp_geometry_new(s->device, RP_GEOMETRY_USER);
+        if (!g) return false;
+        rp_geometry_set_user(g, (uint32_t)d->cone_count, cone_bounds, cone_intersect, cone_occluded, s->cones);
+        s->geom_ids[RENDER_GEOM_CONES] = attach(s, g);
+        if (s->geom_ids[RENDER_GEOM_CONES] == RP_INVALID_ID) return false;
+    }
+    return true;
+}
+
+rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *data,
+                                     const rp_render_scene_desc *desc, char *err, size_t err_size) {
+    if (!device || !data) {
+        return fail(NULL, err, err_size, "rp_render_scene_new: no device or no scene data");
+    }
+    rp_render_scene_desc dd = rp_render_scene_desc_defaults(desc);
+    rp_render_scene *s = calloc(1, sizeof *s);
+    if (!s) return fail(NULL, err, err_size, "out of memory");
+    rp_device_retain(device);
+    s->device = device;
+    s->data = data;
+    for (int k = 0; k < 3; k++) s->geom_ids[k] = RP_INVALID_ID;
+    for (int i = 0; i < 256; i++) s->srgb_to_linear[i] = srgb_decode((float)i / 255.0f);
+
+    size_t nm = data->material_count > 0 ? data->material_count : 1;
+    s->materials = calloc(nm, sizeof *s->materials);
+    if (!s->materials) return fail(s, err, err_size, "out of memory");
+    for (size_t i = 0; i < data->material_count; i++) s->materials[i] = rp_material_from_data(&data->materials[i]);
+    if (data->material_count == 0) {
+        s->materials[0] = (rp_material){.type = RP_MATERIAL_DIFFUSE, .kd = {0.8f, 0.8f, 0.8f}, .texture = -1};
+    }
+
+    s->light_count = data->light_count;
+    if (s->light_count) {
+        s->lights = calloc(s->light_count, sizeof *s->lights);
+        if (!s->lights) return fail(s, err, err_size, "out of memory");
+    }
+    for (size_t i = 0; i < s->light_count; i++) {
+        const rp_light_data *l = &data->lights[i];
+        switch (l->type) {
+        case RP_LIGHT_DATA_POINT:
+            s->lights[i].type = RP_LIGHT_SOURCE_POINT;
+            memcpy(s->lights[i].point.position, l->position, sizeof l->position);
+            memcpy(s->lights[i].point.intensity, l->color, sizeof l->color);
+            s->lights[i].point.inverse_square = false;
+            break;
+        }
+    }
+
+    s->scene = rp_scene_new(device, &dd.accel);
+    if (!s->scene) return fail(s, err, err_size, "cannot create a scene (out of memory)");
+    if (!build_geometry(s, data)) {
+        char msg[160];
+        snprintf(msg, sizeof msg, "cannot create the scene's geometry: %s", rp_error_string(rp_device_get_error(device)));
+        return fail(s, err, err_size, msg);
+    }
+    rp_error e = rp_scene_commit(s->scene);
+    if (e != RP_ERROR_NONE) {
+        char msg[160];
+        snprintf(msg, sizeof msg, "scene commit failed: %s", rp_error_string(e));
+        return fail(s, err, err_size, msg);
+    }
+    rp_scene_get_bounds(s->scene, &s->bounds);
+    /* Offsets of secondary rays scale with the largest coordinate: float spacing grows with it. */
+    const rp_bounds *b = &s->bounds;
+    const float bv[6] = {b->lower_x, b->lower_y, b->lower_z, b->upper_x, b->upper_y, b->upper_z};
+    float m = 1e-3f;
+    for (int k = 0; k < 6; k++) {
+        if (isfinite(bv[k]) && fabsf(bv[k]) > m) m = fabsf(bv[k]);
+    }
+    s->scale = m;
+    return s;
+}
+
+void rp_render_scene_release(rp_render_scene *scene) { scene_free(scene); }
+
+rp_scene *rp_render_scene_core(rp_render_scene *scene) { return scene ? scene->scene : NULL; }
+
+const rp_material *rp_render_scene_material(const rp_render_scene *scene, size_t i) {
+    size_t n = scene->data->material_count > 0 ? scene->data->material_count : 1;
+    return i < n ? &scene->materials[i] : &scene->materials[0];
+}
+
+rp_camera rp_render_scene_default_camera(rp_render_scene *scene) {
+    const rp_camera_data *c = &scene->data->camera;
+    if (c->valid) {
+        rp_camera cam = {.type = RP_CAMERA_PINHOLE};
+        memcpy(cam.pinhole.eye, c->eye, sizeof c->eye);
+        memcpy(cam.pinhole.look, c->look, sizeof c->look);
+        memcpy(cam.pinhole.up, c->up, sizeof c->up);
+        cam.pinhole.fov_deg = c->fov_deg;
+        return cam;
+    }
+    return camera_frame_bounds(scene->scene, &scene->bounds);
+}
+
+static v3 corner3(const float *a, const uint32_t *idx, uint32_t prim, int corner) {
+    return v3_load(a + 3 * (size_t)idx[3 * (size_t)prim + (size_t)corner]);
+}
+
+void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hit, render_surface *out) {
+    const rp_scene_data *d = s->data;
+    v3 dir = v3_make(ray->dir_x, ray->dir_y, ray->dir_z);
+    out->p = v3_madd(v3_make(ray->org_x, ray->org_y, ray->org_z), dir, ray->tfar);
+    v3 ng = v3_make(hit->Ng_x, hit->Ng_y, hit->Ng_z);
+    v3 ns = v3_make(0, 0, 0);
+    out->has_uv = false;
+    out->uv[0] = out->uv[1] = 0.0f;
+    out->material = 0;
+    uint32_t prim = hit->prim_id;
+    if (hit->geom_id == s->geom_ids[RENDER_GEOM_TRIANGLES] && prim < d->triangle_count) {
+        float b0 = 1.0f - hit->u - hit->v, b1 = hit->u, b2 = hit->v;
+        if (d->normals && d->normal_indices) {
+            ns = v3_add(v3_add(v3_scale(corner3(d->normals, d->normal_indices, prim, 0), b0),
+                               v3_scale(corner3(d->normals, d->normal_indices, prim, 1), b1)),
+                        v3_scale(corner3(d->normals, d->normal_indices, prim, 2), b2));
+        }
+        if (d->texcoords && d->texcoord_indices) {
+            const uint32_t *ti = d->texcoord_indices + 3 * (size_t)prim;
+            const float *t0 = d->texcoords + 2 * (size_t)ti[0], *t1 = d->texcoords + 2 * (size_t)ti[1],
+                        *t2 = d->texcoords + 2 * (size_t)ti[2];
+            out->uv[0] = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
+            out->uv[1] = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
+            out->has_uv = true;
+        }
+        if (d->tri_materials) out->material = d->tri_materials[prim];
+    } else if (hit->geom_id == s->geom_ids[RENDER_GEOM_SPHERES] && prim < d->sphere_count) {
+        const rp_sphere_data *sp = &d->spheres[prim];
+        ng = v3_sub(out->p, v3_load(sp->center));
+        out->material = sp->material;
+    } else if (hit->geom_id == s->geom_ids[RENDER_GEOM_CONES] && prim < d->cone_count) {
+        out->material = d->cones[prim].material;
+    }
+    size_t nm = d->material_count > 0 ? d->material_count : 1;
+    if (out->material >= nm) out->material = 0;
+
+    ng = v3_normalize(ng);
+    if (!(v3_dot(ng, ng) > 0.5f)) ng = v3_neg(dir); /* zero-area or NaN normal */
+    ns = v3_normalize(ns);
+    if (!(v3_dot(ns, ns) > 0.5f)) ns = ng;
+    if (v3_dot(ns, ng) < 0.0f) ns = v3_neg(ns); /* stored normals wound against the face */
+    out->ns_raw = ns;
+    out->entering = v3_dot(ng, dir) < 0.0f;
+    if (!out->entering) {
+        ng = v3_neg(ng);
+        ns = v3_neg(ns);
+    }
+    out->ng = ng;
+    out->ns = ns;
+}

@@ -1,0 +1,401 @@
+// rp-test: labels=bench timeout=600
+/* Runs the built `raypack bench` on small scenes, plain and --vs embree, and checks that it exits 0,
+ * that its JSON has the documented keys and that every mode and engine found the same hits. Its
+ * speed is not checked: tests do not time. */
+#include "rp_test.h"
+
+#include <errno.h>
+#include <limits.h>
+#include <math.h>
+#include <stdbool.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+/* ---- a small JSON reader (objects, arrays, strings, numbers, literals) -------------------------- */
+
+typedef enum jtype { J_NULL, J_BOOL, J_NUMBER, J_STRING, J_ARRAY, J_OBJECT } jtype;
+
+typedef struct jvalue {
+    jtype type;
+    double number;
+    char *string;          /* J_STRING */
+    struct jvalue *items;  /* J_ARRAY / J_OBJECT values */
+    char **keys;           /* J_OBJECT keys */
+    size_t count;
+} jvalue;
+
+typedef struct jparser {
+    const char *p;
+    int depth;
+} jparser;
+
+/* Recursive: containers hold values. */
+static bool json_value(jparser *ps, jvalue *out);
+
+/* Skips whitespace. */
+static void json_ws(jparser *ps) {
+    while (*ps->p == ' ' || *ps->p == '\n' || *ps->p == '\r' || *ps->p == '\t') ps->p++;
+}
+
+/* Reads a string literal; \u escapes are kept as '?' (the bench writes none but control chars). */
+static bool json_string(jparser *ps, char **out) {
+    if (*ps->p != '"') return false;
+    ps->p++;
+    size_t cap = 16, n = 0;
+    char *s = malloc(cap);
+    if (!s) return false;
+    while (*ps->p && *ps->p != '"') {
+        char c = *ps->p++;
+        if (c == '\\') {
+            c = *ps->p++;
+            if (c == 'u') {
+                for (int k = 0; k < 4; k++)
+                    if (*ps->p) ps->p++;
+                c = '?';
+            } else if (c == 'n') {
+                c = '\n';
+            } else if (c == 't') {
+                c = '\t';
+            } else if (c == '\0') {
+                break;
+            }
+        }
+        if (n + 2 > cap) {
+            char *t = realloc(s, cap *= 2);
+            if (!t) {
+                free(s);
+                return false;
+            }
+            s = t;
+        }
+        s[n++] = c;
+    }
+    if (*ps->p != '"') {
+        free(s);
+        return false;
+    }
+    ps->p++;
+    s[n] = '\0';
+    *out = s;
+    return true;
+}
+
+/* Appends a value (and key) to an array or object. */
+static bool json_push(jvalue *v, char *key, const jvalue *item) {
+    jvalue *items = realloc(v->items, (v->count + 1) * sizeof *items);
+    if (!items) return false;
+    v->items = items;
+    if (v->type == J_OBJECT) {
+        char **keys = realloc(v->keys, (v->count + 1) * sizeof *keys);
+        if (!keys) return false;
+        v->keys = keys;
+        v->keys[v->count] = key;
+    }
+    v->items[v->count++] = *item;
+    return true;
+}
+
+/* Frees a parsed value and everything below it. */
+static void json_free(jvalue *v) {
+    free(v->string);
+    for (size_t i = 0; i < v->count; i++) {
+        json_free(&v->items[i]);
+        if (v->keys) free(v->keys[i]);
+    }
+    free(v->items);
+    free(v->keys);
+    memset(v, 0, sizeof *v);
+}
+
+/* Reads the members of an array or object after its opening bracket. */
+static bool json_container(jparser *ps, jvalue *out, bool object) {
+    char close = object ? '}' : ']';
+    out->type = object ? J_OBJECT : J_ARRAY;
+    json_ws(ps);
+    if (*ps->p == close) {
+        ps->p++;
+        return true;
+    }
+    for (;;) {
+        char *key = NULL;
+        json_ws(ps);
+        if (object) {
+            if (!json_string(ps, &key)) return false;
+            json_ws(ps);
+            if (*ps->p++ != ':') {
+                free(key);
+                return false;
+            }
+        }
+        jvalue item;
+        memset(&item, 0, sizeof item);
+        if (!json_value(ps, &item) || !json_push(out, key, &item)) {
+            free(key);
+            json_free(&item);
+            return false;
+        }
+        json_ws(ps);
+        if (*ps->p == ',') {
+            ps->p++;
+            continue;
+        }
+        if (*ps->p++ != close) return false;
+        return true;
+    }
+}
+
+/* Reads any value. */
+static bool json_value(jparser *ps, jvalue *out) {
+    memset(out, 0, sizeof *out);
+    if (++ps->depth > 64) return false;
+    json_ws(ps);
+    bool ok = false;
+    char c = *ps->p;
+    if (c == '{' || c == '[') {
+        ps->p++;
+        ok = json_container(ps, out, c == '{');
+    } else if (c == '"') {
+        out->type = J_STRING;
+        ok = json_string(ps, &out->string);
+    } else if (strncmp(ps->p, "true", 4) == 0 || strncmp(ps->p, "false", 5) == 0) {
+        out->type = J_BOOL;
+        out->number = c == 't';
+        ps->p += c == 't' ? 4 : 5;
+        ok = true;
+    } else if (strncmp(ps->p, "null", 4) == 0) {
+        ps->p += 4;
+        ok = true;
+    } else {
+        char *end;
+        out->type = J_NUMBER;
+        out->number = strtod(ps->p, &end);
+        ok = end != ps->p;
+        ps->p = end;
+    }
+    ps->depth--;
+    return ok;
+}
+
+/* Member `key` of an object, or NULL. */
+static const jvalue *json_get(const jvalue *v, const char *key) {
+    if (!v || v->type != J_OBJECT) return NULL;
+    for (size_t i = 0; i < v->count; i++)
+        if (strcmp(v->keys[i], key) == 0) return &v->items[i];
+    return NULL;
+}
+
+/* A number member, or NAN when missing or not a number. */
+static double json_num(const jvalue *v, const char *key) {
+    const jvalue *m = json_get(v, key);
+    return m && m->type == J_NUMBER ? m->number : NAN;
+}
+
+/* Parses a whole file; false when it cannot be read or is not one JSON value. */
+static bool json_load(const char *path, jvalue *out) {
+    FILE *f = fopen(path, "rb");
+    if (!f) return false;
+    fseek(f, 0, SEEK_END);
+    long size = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    char *text = size >= 0 ? malloc((size_t)size + 1) : NULL;
+    bool ok = text && fread(text, 1, (size_t)size, f) == (size_t)size;
+    fclose(f);
+    if (ok) {
+        text[size] = '\0';
+        jparser ps = {text, 0};
+        ok = json_value(&ps, out);
+        json_ws(&ps);
+        ok = ok && *ps.p == '\0';
+        if (!ok) json_free(out);
+    }
+    free(text);
+    return ok;
+}
+
+/* ---- running the CLI ---------------------------------------------------------------------------- */
+
+/* The `raypack` binary: next to the tests folder of this build, else a preset build of the source. */
+static bool find_cli(char *out, size_t size) {
+    char exe[PATH_MAX];
+    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+    if (n > 0) {
+        exe[n] = '\0';
+        char *slash = strrchr(exe, '/');
+        if (slash) {
+            *slash = '\0'; /* build/<preset>/tests */
+            snprintf(out, size, "%s/../raypack", exe);
+            if (access(out, X_OK) == 0) return true;
+        }
+    }
+    const char *src = getenv("RP_SOURCE_DIR");
+    const char *presets[] = {"release", "debug", "asan", "bench"};
+    for (size_t i = 0; src && i < sizeof presets / sizeof presets[0]; i++) {
+        snprintf(out, size, "%s/build/%s/raypack", src, presets[i]);
+        if (access(out, X_OK) == 0) return true;
+    }
+    return false;
+}
+
+/* Folder for this test's outputs (RP_TEST_TMP from CTest, else /tmp). */
+static const char *tmp_dir(void) {
+    const char *dir = getenv("RP_TEST_TMP");
+    if (!dir || !*dir) return "/tmp";
+    mkdir(dir, 0755);
+    return dir;
+}
+
+/* Runs a command line, output into log; returns its exit status (-1 if it did not exit). */
+static int run(const char *cmd, const char *log) {
+    char full[4096];
+    snprintf(full, sizeof full, "%s > '%s' 2>&1", cmd, log);
+    int st = system(full);
+    if (st == -1 || !WIFEXITED(st)) return -1;
+    return WEXITSTATUS(st);
+}
+
+/* Prints a log file (when a check failed, so the reason shows in CTest's output). */
+static void dump(const char *log) {
+    FILE *f = fopen(log, "r");
+    if (!f) return;
+    char line[512];
+    while (fgets(line, sizeof line, f)) fputs(line, stderr);
+    fclose(f);
+}
+
+/* True when the log says raypack was built without Embree. */
+static bool log_says_no_embree(const char *log) {
+    FILE *f = fopen(log, "r");
+    if (!f) return false;
+    char line[512];
+    bool found = false;
+    while (!found && fgets(line, sizeof line, f)) found = strstr(line, "built without Embree") != NULL;
+    fclose(f);
+    return found;
+}
+
+static const char *kinds[4] = {"primary", "shadow", "reflection", "diffuse"};
+
+/* Plain bench: every ray set has rays, no mismatches and a positive single-ray median. */
+static void check_plain_json(const jvalue *root, const char *what) {
+    CHECKF(json_get(root, "scene") && json_get(root, "scene")->type == J_STRING, "%s: scene", what);
+    CHECKF(json_num(root, "threads") >= 1, "%s: threads", what);
+    const jvalue *build = json_get(root, "build");
+    CHECKF(json_num(build, "raypack_ms") >= 0, "%s: build.raypack_ms", what);
+    CHECKF(json_num(build, "raypack_bytes") > 0, "%s: build.raypack_bytes", what);
+    const jvalue *rays = json_get(root, "rays");
+    for (int k = 0; k < 4; k++) {
+        const jvalue *r = json_get(rays, kinds[k]);
+        CHECKF(r != NULL, "%s: rays.%s", what, kinds[k]);
+        CHECKF(json_num(r, "count") > 0 || k == 1, "%s: rays.%s.count", what, kinds[k]);
+        CHECKF(json_num(r, "mismatches") == 0, "%s: rays.%s.mismatches", what, kinds[k]);
+        const jvalue *single = json_get(json_get(json_get(r, "modes"), "single"), "threads_1");
+        CHECKF(json_num(single, "mrays_median") >= 0, "%s: rays.%s.modes.single.threads_1", what,
+               kinds[k]);
+        CHECKF(json_get(json_get(r, "modes"), "packet16") != NULL, "%s: rays.%s.modes.packet16", what,
+               kinds[k]);
+    }
+}
+
+/* --vs embree: the shape of the issue, and zero mismatches on every set. */
+static void check_vs_json(const jvalue *root, const char *what) {
+    CHECKF(json_get(root, "scene") && json_get(root, "scene")->type == J_STRING, "%s: scene", what);
+    CHECKF(json_num(root, "threads") >= 1, "%s: threads", what);
+    const jvalue *build = json_get(root, "build");
+    const char *build_keys[] = {"raypack_ms", "embree_ms", "embree_hq_ms", "raypack_bytes",
+                                "embree_bytes"};
+    for (size_t i = 0; i < sizeof build_keys / sizeof build_keys[0]; i++)
+        CHECKF(json_num(build, build_keys[i]) >= 0, "%s: build.%s", what, build_keys[i]);
+    const jvalue *rays = json_get(root, "rays");
+    for (int k = 0; k < 4; k++) {
+        const jvalue *r = json_get(rays, kinds[k]);
+        CHECKF(r != NULL, "%s: rays.%s", what, kinds[k]);
+        CHECKF(json_num(r, "count") > 0 || k == 1, "%s: rays.%s.count", what, kinds[k]);
+        CHECKF(json_num(r, "mismatches") == 0, "%s: rays.%s.mismatches = %g", what, kinds[k],
+               json_num(r, "mismatches"));
+        const jvalue *rp = json_get(r, "raypack"), *emb = json_get(r, "embree");
+        CHECKF(json_get(rp, "mode") && json_get(rp, "mode")->type == J_STRING, "%s: rays.%s.raypack.mode",
+               what, kinds[k]);
+        CHECKF(json_get(emb, "api") && json_get(emb, "api")->type == J_STRING, "%s: rays.%s.embree.api",
+               what, kinds[k]);
+        const char *stats[] = {"mrays_median", "mrays_min", "mrays_max"};
+        for (int s = 0; s < 3; s++) {
+            CHECKF(json_num(rp, stats[s]) >= 0, "%s: rays.%s.raypack.%s", what, kinds[k], stats[s]);
+            CHECKF(json_num(emb, stats[s]) >= 0, "%s: rays.%s.embree.%s", what, kinds[k], stats[s]);
+        }
+        CHECKF(json_num(rp, "mrays_min") <= json_num(rp, "mrays_max"), "%s: rays.%s min <= max", what,
+               kinds[k]);
+        const jvalue *all = json_get(r, "embree_all");
+        CHECKF(json_num(all, k == 1 ? "rtcOccluded1" : "rtcIntersect1") >= 0 &&
+                   json_num(all, k == 1 ? "rtcOccluded16" : "rtcIntersect16") >= 0,
+               "%s: rays.%s.embree_all", what, kinds[k]);
+        CHECKF(json_num(r, "ratio") >= 0, "%s: rays.%s.ratio", what, kinds[k]);
+    }
+}
+
+/* Runs one bench and checks its exit status and JSON; false when Embree was asked for and is absent. */
+static bool bench_case(const char *cli, const char *scene, const char *name, bool vs, int size) {
+    char json[1024], log[1024], cmd[4096];
+    const char *dir = tmp_dir();
+    snprintf(json, sizeof json, "%s/bench_%s.json", dir, name);
+    snprintf(log, sizeof log, "%s/bench_%s.log", dir, name);
+    remove(json);
+    snprintf(cmd, sizeof cmd,
+             "'%s' bench %s%s%s --width %d --height %d --repeats 1 --warmup 0 --threads 2%s --json '%s'",
+             cli, scene ? "'" : "", scene ? scene : "", scene ? "'" : "", size, size,
+             vs ? " --vs embree" : "", json);
+    int rc = run(cmd, log);
+    if (vs && rc != 0 && log_says_no_embree(log)) {
+        printf("%s: raypack was built without Embree, --vs embree skipped\n", name);
+        return false;
+    }
+    CHECKF(rc == 0, "%s: `%s` exited with %d", name, cmd, rc);
+    jvalue root;
+    bool parsed = json_load(json, &root);
+    CHECKF(parsed, "%s: %s is not valid JSON", name, json);
+    if (parsed) {
+        if (vs)
+            check_vs_json(&root, name);
+        else
+            check_plain_json(&root, name);
+        json_free(&root);
+    }
+    if (rc != 0 || !parsed) dump(log);
+    return true;
+}
+
+int main(void) {
+    char cli[PATH_MAX + 64];
+    if (!find_cli(cli, sizeof cli)) {
+        fprintf(stderr, "raypack binary not found next to this test or under $RP_SOURCE_DIR/build\n");
+        CHECK(0);
+        return RP_TEST_END();
+    }
+    printf("cli: %s\n", cli);
+    bool small = rp_test_sanitized();
+    int size = small ? 32 : 128;
+    char cornell_buf[1024], teapot_buf[1024];
+    const char *cornell = rp_test_scene("cornell_box/cornell_box.obj", cornell_buf, sizeof cornell_buf);
+    const char *teapot = rp_test_scene("spd_teapot.nff.gz", teapot_buf, sizeof teapot_buf);
+    CHECK(cornell != NULL);
+    CHECK(teapot != NULL);
+
+    /* The generated scene of `make bench`, and scenes with (teapot) and without (Cornell) a camera. */
+    bench_case(cli, NULL, "default", false, small ? 16 : 64);
+    if (cornell) bench_case(cli, cornell, "cornell", false, size);
+    if (cornell && bench_case(cli, cornell, "cornell_vs_embree", true, size) && teapot)
+        bench_case(cli, teapot, "teapot_vs_embree", true, size);
+
+    /* Usage errors and missing files fail. */
+    char cmd[sizeof cli + 128], log[1024];
+    snprintf(log, sizeof log, "%s/bench_errors.log", tmp_dir());
+    snprintf(cmd, sizeof cmd, "'%s' bench --no-such-flag", cli);
+    CHECK(run(cmd, log) != 0);
+    snprintf(cmd, sizeof cmd, "'%s' bench --threads 0", cli);
+    CHECK(run(cmd, log) != 0);
+    snprintf(cmd, sizeof cmd, "'%s' bench --vs nothing", cli);
+    CHECK(run(cmd, log) != 0);
+    snprintf(cmd, sizeof cmd, "'%s' bench /no/such/scene.obj --width 8 --height 8", cli);
+    CHECK(run(cmd, log) != 0);
+    return RP_TEST_END();
+}

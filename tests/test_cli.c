@@ -1,0 +1,161 @@
+/* The `raypack` command: exit status and message for every class of bad input (2 for usage errors,
+ * 1 for load and write failures), --help everywhere, and small renders, AOVs and --stats-json that
+ * work. The binary is found beside the tests folder of the build (build/<preset>/raypack), or at
+ * $RP_CLI when set. */
+#include <limits.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "raypack_io.h"
+#include "rp_test.h"
+
+static char exe[1024];
+static char tmp[1024];
+static char output[16384];
+
+/* Runs `raypack ARGS` with stdout and stderr captured together; returns its exit status. */
+static int run(const char *args) {
+    if (strlen(args) > 8192) return -1;
+    char cmd[1024 + 8192 + 16];
+    snprintf(cmd, sizeof cmd, "'%s' %s 2>&1", exe, args);
+    FILE *p = popen(cmd, "r");
+    if (!p) return -1;
+    size_t n = fread(output, 1, sizeof output - 1, p);
+    output[n] = '\0';
+    int st = pclose(p);
+    return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+}
+
+#define EXPECT(args, status, text)                                                                          \
+    do {                                                                                                    \
+        int rc_ = run(args);                                                                                \
+        CHECKF(rc_ == (status) && strstr(output, (text)) != NULL,                                           \
+               "raypack %s: exit %d (expected %d), output lacks '%s':\n%s", args, rc_, status, text, output); \
+    } while (0)
+
+static bool find_exe(void) {
+    const char *env = getenv("RP_CLI");
+    if (env) {
+        snprintf(exe, sizeof exe, "%s", env);
+    } else {
+        char self[900];
+        ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+        if (n <= 0) return false;
+        self[n] = '\0';
+        char *slash = strrchr(self, '/'); /* build/<preset>/tests/test_cli */
+        if (!slash) return false;
+        *slash = '\0';
+        snprintf(exe, sizeof exe, "%s/../raypack", self);
+    }
+    return access(exe, X_OK) == 0;
+}
+
+int main(void) {
+    if (!find_exe()) {
+        fprintf(stderr, "raypack binary not found at %s\n", exe);
+        CHECK(!"raypack binary built");
+        return RP_TEST_END();
+    }
+    const char *dir = getenv("RP_TEST_TMP");
+    snprintf(tmp, 900, "%s", dir ? dir : "/tmp/raypack_test_cli");
+    mkdir(tmp, 0777);
+    char args[8192], buf[512];
+    const char *cornell = rp_test_scene("cornell_box/cornell_box.obj", buf, sizeof buf);
+
+    /* Help and dispatch. */
+    EXPECT("--help", 0, "render");
+    EXPECT("render --help", 0, "--width");
+    EXPECT("info --help", 0, "usage: raypack info");
+    EXPECT("bench --help", 0, "usage");
+    EXPECT("", 2, "usage: raypack");
+    EXPECT("frobnicate", 2, "unknown command 'frobnicate'");
+
+    /* Usage errors: exit 2, naming what was expected. */
+    EXPECT("render --width -5", 2, "--width expects an integer in [1, 16384], got '-5'");
+    EXPECT("render --width abc", 2, "--width expects an integer");
+    EXPECT("render --width", 2, "--width expects a value");
+    EXPECT("render --height 0", 2, "--height expects an integer");
+    EXPECT("render --fov 0", 2, "--fov expects a number in (0, 180)");
+    EXPECT("render --fov 180", 2, "--fov expects a number");
+    EXPECT("render --threads 100000", 2, "--threads expects an integer in [0, 1024]");
+    EXPECT("render --spp 0", 2, "--spp expects an integer");
+    EXPECT("render --max-depth 1.5", 2, "--max-depth expects an integer");
+    EXPECT("render --eye 1,2", 2, "--eye expects three numbers");
+    EXPECT("render --integrator path", 2, "--integrator expects eyelight or whitted");
+    EXPECT("render --aov colour", 2, "--aov expects depth, normal, primid or albedo");
+    EXPECT("render --frobnicate", 2, "unknown option '--frobnicate'");
+    EXPECT("render a.obj b.obj", 2, "expected one SCENE");
+    EXPECT("render -o out.jpg", 2, "-o expects a file ending in .png, .pfm or .ppm");
+    EXPECT("info --threads -1", 2, "--threads expects an integer");
+    EXPECT("info --bogus", 2, "unknown option '--bogus'");
+
+    /* Load and write failures: exit 1. */
+    EXPECT("render /nonexistent/scene.obj", 1, "cannot open scene /nonexistent/scene.obj");
+    EXPECT("info /nonexistent/scene.obj", 1, "cannot open scene");
+    EXPECT("render -o /nonexistent-dir/x.png", 1, "cannot write /nonexistent-dir/x.png");
+    snprintf(args, sizeof args, "%s/dir.png", tmp);
+    mkdir(args, 0777);
+    snprintf(args, sizeof args, "render -o '%s/dir.png'", tmp);
+    EXPECT(args, 1, "is a directory");
+    /* A broken scene: the loader's "file:line: error: message" comes through. */
+    char broken[1100];
+    snprintf(broken, sizeof broken, "%s/broken.obj", tmp);
+    FILE *f = fopen(broken, "w");
+    if (f) {
+        fputs("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n", f);
+        fclose(f);
+    }
+    snprintf(args, sizeof args, "render '%s' -o '%s/broken.png' --quiet", broken, tmp);
+    EXPECT(args, 1, "broken.obj:4: error:");
+
+    /* Things that work. */
+    snprintf(args, sizeof args, "render --width 40 --height 30 -o '%s/room.ppm' --quiet", tmp);
+    EXPECT(args, 0, "");
+    char path[1100];
+    snprintf(path, sizeof path, "%s/room.ppm", tmp);
+    f = fopen(path, "rb");
+    CHECK(f != NULL);
+    if (f) {
+        char head[16] = "";
+        CHECK(fread(head, 1, 12, f) == 12 && memcmp(head, "P6\n40 30\n255", 12) == 0);
+        fclose(f);
+    }
+    snprintf(args, sizeof args, "render --width 40 -o '%s/room.png' --stats --stats-json '%s/stats.json'", tmp, tmp);
+    EXPECT(args, 0, "Mrays/s");
+    snprintf(path, sizeof path, "%s/stats.json", tmp);
+    f = fopen(path, "r");
+    CHECK(f != NULL);
+    if (f) {
+        char json[4096];
+        size_t n = fread(json, 1, sizeof json - 1, f);
+        json[n] = '\0';
+        CHECKF(strstr(json, "\"mrays_per_s\"") && strstr(json, "\"shadow\"") && strstr(json, "\"height\": 30"),
+               "%s", json);
+        fclose(f);
+    }
+    snprintf(args, sizeof args, "render --width 40 --height 30 --aov depth -o '%s/depth.pfm' --quiet", tmp);
+    EXPECT(args, 0, "");
+    snprintf(path, sizeof path, "%s/depth.pfm", tmp);
+    int w = 0, h = 0, c = 0;
+    char err[512] = "";
+    float *px = rp_image_read_pfm(path, &w, &h, &c, err, sizeof err);
+    CHECKF(px && w == 40 && h == 30 && c == 1, "%s", err);
+    free(px);
+    for (int i = 0; i < 3; i++) {
+        static const char *aovs[] = {"normal", "primid", "albedo"};
+        snprintf(args, sizeof args, "render --width 24 --height 16 --aov %s -o '%s/aov.png' --quiet", aovs[i], tmp);
+        EXPECT(args, 0, "");
+    }
+    if (cornell) {
+        snprintf(args, sizeof args, "info '%s'", cornell);
+        EXPECT(args, 0, "36 triangles");
+        EXPECT(args, 0, "SAH cost");
+        snprintf(args, sizeof args,
+                 "render '%s' --width 32 --height 32 --integrator eyelight --eye 278,273,-800 --look 278,273,0 "
+                 "--fov 39 --threads 2 -o '%s/cornell.png'",
+                 cornell, tmp);
+        EXPECT(args, 0, "primary 1024");
+    }
+    return RP_TEST_END();
+}

@@ -61,6 +61,26 @@ static void make_rays(const test_mesh *m, rp_ray *rays, uint32_t n, uint64_t see
                 d[a] = p[a] - o[a];
             }
         }
+        uint32_t block = i / 16;
+        if (block % 3 != 2) {
+            /* packets of 16 that a camera would make: a shared origin outside the bounds and
+             * directions around one aimed at a triangle (block % 3 == 0), or spread across
+             * octant borders (block % 3 == 1, exercising the per-octant split) */
+            test_rng pg = {seed * 977u + block};
+            float po[3], pd[3];
+            uint32_t t = test_rng_u32(&pg) % m->nt;
+            for (int a = 0; a < 3; a++) {
+                po[a] = lo[a] - (hi[a] - lo[a]) * 0.5f + (hi[a] - lo[a]) * 2.0f * test_rng_float(&pg);
+                pd[a] = m->v[3 * m->idx[3 * t] + a] - po[a];
+            }
+            float spread = block % 3 == 0 ? 0.02f : 1.0f;
+            float len = sqrtf(pd[0] * pd[0] + pd[1] * pd[1] + pd[2] * pd[2]);
+            for (int a = 0; a < 3; a++) {
+                o[a] = po[a];
+                d[a] = pd[a] / len + (test_rng_float(&g) - 0.5f) * spread;
+            }
+            if (block % 3 == 1) d[i % 3] = (test_rng_float(&g) - 0.5f) * 0.2f; /* straddle an axis */
+        }
         *r = (rp_ray){.org_x = o[0], .org_y = o[1], .org_z = o[2], .tnear = 0.0f, .dir_x = d[0], .dir_y = d[1],
                       .dir_z = d[2], .tfar = INFINITY, .mask = 0xFFFFFFFFu};
         if (i % 7 == 3) r->tfar = 0.5f; /* some finite segments, as for shadow rays */

@@ -288,6 +288,84 @@ RP_API void rp_intersect_array(rp_scene *scene, rp_rayhit *rayhits, size_t count
 /* An array of occlusion rays, traced on the calling thread (flags: rp_query_flags). */
 RP_API void rp_occluded_array(rp_scene *scene, rp_ray *rays, size_t count, uint32_t flags);
 
+/* ---- large ray packets (Overbeck, Ramamoorthi, Mark 2008) ------------------------------------ */
+
+/* A large packet is n x n rays (n a multiple of 4, 4..32) grouped by screen-space ancestry, stored
+ * as a structure of arrays of n*n entries. Ray (x, y) of the packet lives at rp_packet_n_index(n,
+ * x, y): 2x2 quads, then 4x4 tiles, in row order, so every run of 4, 8 or 16 entries is a compact
+ * SIMD ray of the paper. Arrays are caller-owned (or from rp_rayhit_n_alloc); rp_occluded_n reads
+ * only the ray arrays, so the hit arrays may be NULL there. */
+#define RP_PACKET_N_MAX 32
+/* BVH depths the counters tell apart; deeper levels are added to the last one. */
+#define RP_COUNTERS_N_DEPTH 64
+
+typedef struct rp_rayhit_n {
+    uint32_t n;                      /* rays per side: the packet holds n*n rays */
+    const int32_t *valid;            /* nonzero marks a live ray; NULL: all live */
+    float *org_x, *org_y, *org_z;    /* ray origins */
+    float *tnear;                    /* start of each segment */
+    float *dir_x, *dir_y, *dir_z;    /* ray directions (need not be normalized) */
+    float *tfar;                     /* end of each segment; the hit distance / -inf on return */
+    uint32_t *mask;                  /* NULL: 0xFFFFFFFF for every ray */
+    float *Ng_x, *Ng_y, *Ng_z;       /* geometric normals of the hits */
+    float *u, *v;                    /* barycentrics of the hits */
+    uint32_t *prim_id, *geom_id, *inst_id; /* geom_id stays as set when nothing is hit */
+} rp_rayhit_n;
+
+/* How a large packet walks the BVH (sec. 3 of the paper). */
+typedef enum rp_traversal {
+    RP_TRAVERSAL_AUTO = 0,      /* chosen per packet from its coherence (direction spread) */
+    RP_TRAVERSAL_MASKED = 1,    /* per-ray masks (sec. 3.1) */
+    RP_TRAVERSAL_RANGED = 2,    /* first active index, getFirstHit / getLastHit (sec. 3.2) */
+    RP_TRAVERSAL_PARTITION = 3, /* ray index list partitioned in place (sec. 3.3) */
+    RP_TRAVERSAL_SINGLE = 4,    /* every ray on its own, as rp_intersect1 */
+    RP_TRAVERSAL_SIMD = 5       /* every SIMD ray (4, 8 or 16 rays, the device's width) on its own */
+} rp_traversal;
+
+/* Which bounding frustum culls boxes and triangles (sec. 4); the frustum is always conservative. */
+typedef enum rp_frustum_kind {
+    RP_FRUSTUM_NONE = 0,        /* no culling */
+    RP_FRUSTUM_PRIMARY = 1,     /* common origin (pinhole camera): from the 4 corner rays */
+    RP_FRUSTUM_SHADOW = 2,      /* common end point `point` (a point light); segments end before it */
+    RP_FRUSTUM_SECONDARY = 3    /* any rays (reflection, refraction): near and far planes */
+} rp_frustum_kind;
+
+/* Work counters of large-packet traversal, summed over calls (Fig. 6 of the paper). Ray tests are
+ * counted in SIMD rays (one test of 4, 8 or 16 rays at once). Not thread safe: one per thread. */
+typedef struct rp_counters_n {
+    uint64_t packets, rays;
+    uint64_t box_tests;                   /* SIMD ray - box tests */
+    uint64_t tri_tests;                   /* SIMD ray - triangle tests */
+    uint64_t frustum_box_tests, frustum_box_culls;
+    uint64_t frustum_tri_tests, frustum_tri_culls;
+    uint64_t traversal[4];                /* packets traced by auto, masked, ranged, partition */
+    uint64_t box_tests_depth[RP_COUNTERS_N_DEPTH]; /* box_tests by depth of the box (root: 0) */
+    uint64_t tri_tests_depth[RP_COUNTERS_N_DEPTH]; /* tri_tests by depth of the leaf */
+} rp_counters_n;
+
+typedef struct rp_query_n_desc {
+    rp_traversal traversal;     /* 0: RP_TRAVERSAL_AUTO */
+    rp_frustum_kind frustum;    /* 0: RP_FRUSTUM_NONE */
+    float point[3];             /* RP_FRUSTUM_SHADOW: the point every ray heads to (the light) */
+    rp_counters_n *counters;    /* NULL: nothing is counted (and nothing is paid for it) */
+} rp_query_n_desc;
+
+/* Returns the defaults for every zero field of desc (NULL gives all defaults). */
+RP_API rp_query_n_desc rp_query_n_desc_defaults(const rp_query_n_desc *desc);
+/* Index in the packet's arrays of ray (x, y), 0 <= x, y < n. */
+RP_API uint32_t rp_packet_n_index(uint32_t n, uint32_t x, uint32_t y);
+/* Allocates every array of an n x n packet (64-byte aligned, one block from the device's
+ * allocator; valid and mask are left NULL); false on a bad n or out of memory. */
+RP_API bool rp_rayhit_n_alloc(rp_device *device, uint32_t n, rp_rayhit_n *out);
+/* Frees the arrays of rp_rayhit_n_alloc and zeroes *packet. */
+RP_API void rp_rayhit_n_free(rp_device *device, rp_rayhit_n *packet);
+/* Closest hits of a large packet: the same hits as rp_intersect1 on each ray, whatever the mode. */
+RP_API void rp_intersect_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *packet);
+/* Any hits of a large packet: sets tfar = -inf on occluded rays, as rp_occluded1. */
+RP_API void rp_occluded_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *packet);
+/* Adds the counts of src to dst (to merge per-thread counters). */
+RP_API void rp_counters_n_add(rp_counters_n *dst, const rp_counters_n *src);
+
 #ifdef __cplusplus
 }
 #endif

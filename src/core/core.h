@@ -53,6 +53,7 @@ struct rp_scene {
     rp_accel accel;
     /* storage behind accel */
     bvhw tri_bvh, prim_bvh;
+    bvh2 tri_bvh2;        /* binary BVH of the triangles, leaves rewritten to tri4 blocks (large packets) */
     tri4 *tris;
     size_t tri_block_count;
     prim_ref *prims;

@@ -42,6 +42,7 @@ void scene_free_accel(rp_scene *s) {
     const sys_allocator *a = &s->device->alloc;
     bvhw_free(a, &s->tri_bvh);
     bvhw_free(a, &s->prim_bvh);
+    if (s->tri_bvh2.nodes) bvh2_free(a, &s->tri_bvh2);
     sys_free(a, s->tris, s->tri_block_count * sizeof(tri4));
     sys_free(a, s->prims, s->prim_count * sizeof(prim_ref));
     s->tris = NULL, s->prims = NULL;
@@ -195,6 +196,7 @@ typedef struct tri_pack_ctx {
     const prim_ref *refs;
     tri4 *blocks;
     uint32_t next, capacity;
+    uint32_t *leaf_blocks; /* per binary node: first block << 4 | blocks, for the large packets */
 } tri_pack_ctx;
 
 /* Leaf payload of the triangle BVH: its triangles packed 4 to a block. */
@@ -204,6 +206,7 @@ static bool tri_leaf(void *user, const bvh_node *leaf, uint32_t *first, uint32_t
     if (c->next + blocks > c->capacity) return false;
     *first = c->next;
     *items = blocks;
+    c->leaf_blocks[leaf - c->bvh->nodes] = c->next << 4 | blocks;
     for (uint32_t b = 0; b < blocks; b++) {
         tri4 *t = &c->blocks[c->next + b];
         memset(t, 0, sizeof *t);
@@ -352,10 +355,19 @@ rp_error scene_build(rp_scene *s) {
             tri_pack_ctx pc = {.scene = s, .bvh = &b2, .refs = tris.refs};
             pc.capacity = b2.leaf_count + tris.count / 4 + 1;
             pc.blocks = sys_alloc(a, (size_t)pc.capacity * sizeof(tri4));
-            if (!pc.blocks || !bvhw_from_bvh2(a, &b2, width, tri_leaf, &pc, &s->tri_bvh)) {
+            pc.leaf_blocks = sys_alloc(a, (size_t)b2.node_count * sizeof(uint32_t));
+            if (!pc.blocks || !pc.leaf_blocks || !bvhw_from_bvh2(a, &b2, width, tri_leaf, &pc, &s->tri_bvh)) {
                 sys_free(a, pc.blocks, (size_t)pc.capacity * sizeof(tri4));
                 err = RP_ERROR_OUT_OF_MEMORY;
             } else {
+                /* keep the binary BVH for large packets, its leaves pointing at the tri4 blocks */
+                for (uint32_t i = 0; i < b2.node_count; i++) {
+                    if (b2.nodes[i].count == 0) continue;
+                    b2.nodes[i].index = pc.leaf_blocks[i] >> 4;
+                    b2.nodes[i].count = pc.leaf_blocks[i] & 15u;
+                }
+                sys_free(a, b2.prims, (size_t)(b2.prim_count ? b2.prim_count : 1) * sizeof(uint32_t));
+                b2.prims = NULL; /* the leaves no longer index it */
                 s->tris = pc.blocks;
                 s->tri_block_count = pc.capacity;
                 st.triangles = tris.count;
@@ -364,9 +376,12 @@ rp_error scene_build(rp_scene *s) {
                 st.leaves = b2.leaf_count;
                 st.depth = b2.depth;
                 st.sah_cost = b2.sah_cost;
-                st.bytes = s->tri_bvh.bytes + (size_t)pc.next * sizeof(tri4);
+                st.bytes = s->tri_bvh.bytes + (size_t)pc.next * sizeof(tri4) + (size_t)b2.node_count * sizeof(bvh_node);
+                s->tri_bvh2 = b2;
+                b2.nodes = NULL;
             }
-            bvh2_free(a, &b2);
+            sys_free(a, pc.leaf_blocks, (size_t)b2.node_count * sizeof(uint32_t));
+            if (b2.nodes) bvh2_free(a, &b2);
         }
     }
     if (err == RP_ERROR_NONE && prims.count) {
@@ -403,6 +418,7 @@ rp_error scene_build(rp_scene *s) {
         .width = width,
         .nodes = s->tri_bvh.nodes,
         .tris = s->tris,
+        .nodes2 = s->tri_bvh2.nodes,
         .pnodes = s->prim_bvh.nodes,
         .prims = s->prims,
         .prim_intersect = sphere_intersect_cb,

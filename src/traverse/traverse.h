@@ -32,6 +32,7 @@ struct rp_accel {
     int width;                 /* 4, 8 or 16 */
     const void *nodes;         /* NULL when the scene has no triangles */
     const tri4 *tris;
+    const void *nodes2;        /* the binary BVH (bvh_node), leaves: tri4 blocks [index, index + count) */
     /* spheres and user primitives: BVH4 of prim_refs */
     const void *pnodes;        /* NULL when there are none */
     const prim_ref *prims;

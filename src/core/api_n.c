@@ -1,0 +1,234 @@
+/* Large ray packets (Overbeck, Ramamoorthi, Mark 2008): argument checks, the frustum, the choice
+ * of traversal, then the device's packet kernels (src/traverse/packet_n.inc). */
+#include <math.h>
+#include <string.h>
+
+#include "core/core.h"
+#include "traverse/packet_n.h"
+
+rp_query_n_desc rp_query_n_desc_defaults(const rp_query_n_desc *desc) {
+    rp_query_n_desc d = desc ? *desc : (rp_query_n_desc){0};
+    return d; /* every zero field is already its default: auto, no frustum, no counters */
+}
+
+uint32_t rp_packet_n_index(uint32_t n, uint32_t x, uint32_t y) {
+    /* 4x4 tiles in row order; inside a tile, 2x2 quads in row order; inside a quad, row order */
+    uint32_t tile = (y >> 2) * (n >> 2) + (x >> 2);
+    uint32_t quad = ((y >> 1) & 1) * 2 + ((x >> 1) & 1);
+    return tile * 16 + quad * 4 + (y & 1) * 2 + (x & 1);
+}
+
+static bool n_ok(uint32_t n) { return n >= 4 && n <= RP_PACKET_N_MAX && n % 4 == 0; }
+
+/* Float arrays of a packet, in order: org xyz, tnear, dir xyz, tfar, Ng xyz, u, v; then the
+ * uint32_t arrays prim_id, geom_id, inst_id. */
+#define PACKET_ARRAYS 16
+
+bool rp_rayhit_n_alloc(rp_device *device, uint32_t n, rp_rayhit_n *out) {
+    if (!out) return false;
+    memset(out, 0, sizeof *out);
+    if (!device) return false;
+    if (!n_ok(n)) {
+        device_error(device, RP_ERROR_INVALID_ARGUMENT, "rp_rayhit_n_alloc: n must be a multiple of 4 in 4..32");
+        return false;
+    }
+    size_t each = (size_t)n * n * 4; /* a multiple of 64 bytes */
+    char *mem = sys_alloc(&device->alloc, each * PACKET_ARRAYS);
+    if (!mem) {
+        device_error(device, RP_ERROR_OUT_OF_MEMORY, "rp_rayhit_n_alloc");
+        return false;
+    }
+    float **f[13] = {&out->org_x, &out->org_y, &out->org_z, &out->tnear, &out->dir_x, &out->dir_y, &out->dir_z,
+                     &out->tfar, &out->Ng_x, &out->Ng_y, &out->Ng_z, &out->u, &out->v};
+    for (int i = 0; i < 13; i++) *f[i] = (float *)(void *)(mem + (size_t)i * each);
+    out->prim_id = (uint32_t *)(void *)(mem + 13 * each);
+    out->geom_id = (uint32_t *)(void *)(mem + 14 * each);
+    out->inst_id = (uint32_t *)(void *)(mem + 15 * each);
+    out->n = n;
+    return true;
+}
+
+void rp_rayhit_n_free(rp_device *device, rp_rayhit_n *packet) {
+    if (!device || !packet || !packet->org_x) return;
+    size_t each = (size_t)packet->n * packet->n * 4;
+    sys_free(&device->alloc, packet->org_x, each * PACKET_ARRAYS);
+    memset(packet, 0, sizeof *packet);
+}
+
+void rp_counters_n_add(rp_counters_n *dst, const rp_counters_n *src) {
+    if (!dst || !src) return;
+    const uint64_t *s = (const uint64_t *)src;
+    uint64_t *d = (uint64_t *)dst;
+    for (size_t i = 0; i < sizeof *dst / sizeof(uint64_t); i++) d[i] += s[i];
+}
+
+static const rp_kernels_n *kernels_n(const rp_device *device) {
+    switch (device->kernels->isa) {
+    case 16: return &rp_kernels_n_avx512;
+    case 8: return &rp_kernels_n_avx2;
+    case 4: return &rp_kernels_n_sse;
+    default: return &rp_kernels_n_scalar;
+    }
+}
+
+static bool packet_ok(rp_scene *scene, const rp_rayhit_n *p, bool hits, const char *fn) {
+    if (!scene) return false;
+    if (!p || !n_ok(p->n) || !p->org_x || !p->org_y || !p->org_z || !p->tnear || !p->dir_x || !p->dir_y ||
+        !p->dir_z || !p->tfar ||
+        (hits && (!p->Ng_x || !p->Ng_y || !p->Ng_z || !p->u || !p->v || !p->prim_id || !p->geom_id || !p->inst_id))) {
+        device_error(scene->device, RP_ERROR_INVALID_ARGUMENT, fn);
+        return false;
+    }
+    if (!scene->committed) {
+        device_error(scene->device, RP_ERROR_NOT_COMMITTED, fn);
+        return false;
+    }
+    return true;
+}
+
+static bool live(const rp_rayhit_n *p, uint32_t i) {
+    return (!p->valid || p->valid[i]) && p->tnear[i] <= p->tfar[i];
+}
+
+/* RP_TRAVERSAL_SINGLE and RP_TRAVERSAL_SIMD: the rays without the large packet. */
+static void trace_small(rp_scene *scene, rp_traversal mode, rp_rayhit_n *p, bool any) {
+    const rp_kernels *k = scene->device->kernels;
+    const rp_accel *acc = &scene->accel;
+    uint32_t count = p->n * p->n;
+    if (mode == RP_TRAVERSAL_SINGLE) {
+        for (uint32_t q = 0; q < count; q++) {
+            if (!live(p, q)) continue;
+            rp_rayhit one;
+            memset(&one, 0, sizeof one);
+            one.ray.org_x = p->org_x[q], one.ray.org_y = p->org_y[q], one.ray.org_z = p->org_z[q];
+            one.ray.dir_x = p->dir_x[q], one.ray.dir_y = p->dir_y[q], one.ray.dir_z = p->dir_z[q];
+            one.ray.tnear = p->tnear[q], one.ray.tfar = p->tfar[q];
+            one.ray.mask = p->mask ? p->mask[q] : 0xFFFFFFFFu;
+            one.hit.geom_id = RP_INVALID_ID;
+            if (any) {
+                k->occluded1(acc, &one.ray);
+                p->tfar[q] = one.ray.tfar;
+                continue;
+            }
+            k->intersect1(acc, &one);
+            if (one.hit.geom_id == RP_INVALID_ID) continue;
+            p->tfar[q] = one.ray.tfar;
+            p->u[q] = one.hit.u, p->v[q] = one.hit.v;
+            p->Ng_x[q] = one.hit.Ng_x, p->Ng_y[q] = one.hit.Ng_y, p->Ng_z[q] = one.hit.Ng_z;
+            p->geom_id[q] = one.hit.geom_id, p->prim_id[q] = one.hit.prim_id, p->inst_id[q] = one.hit.inst_id;
+        }
+        return;
+    }
+    int w = k->isa >= 16 ? 16 : k->isa >= 8 ? 8 : 4;
+    for (uint32_t base = 0; base < count; base += (uint32_t)w) {
+        rp_rayhit16 s; /* large enough for 4 and 8; the smaller layouts are filled in place */
+        int32_t valid[16];
+        int any_live = 0;
+        /* fill as rp_rayhit16 fields and copy into the narrow layout below */
+        for (int j = 0; j < w; j++) {
+            uint32_t q = base + (uint32_t)j;
+            valid[j] = live(p, q) ? -1 : 0;
+            any_live |= valid[j];
+            s.ray.org_x[j] = p->org_x[q], s.ray.org_y[j] = p->org_y[q], s.ray.org_z[j] = p->org_z[q];
+            s.ray.dir_x[j] = p->dir_x[q], s.ray.dir_y[j] = p->dir_y[q], s.ray.dir_z[j] = p->dir_z[q];
+            s.ray.tnear[j] = p->tnear[q], s.ray.tfar[j] = p->tfar[q], s.ray.time[j] = 0.0f;
+            s.ray.mask[j] = p->mask ? p->mask[q] : 0xFFFFFFFFu, s.ray.id[j] = 0, s.ray.flags[j] = 0;
+            s.hit.geom_id[j] = RP_INVALID_ID;
+        }
+        if (!any_live) continue;
+#define NARROW(W)                                                                                   \
+    do {                                                                                            \
+        rp_rayhit##W r;                                                                             \
+        memcpy(r.ray.org_x, s.ray.org_x, sizeof r.ray.org_x);                                       \
+        memcpy(r.ray.org_y, s.ray.org_y, sizeof r.ray.org_y);                                       \
+        memcpy(r.ray.org_z, s.ray.org_z, sizeof r.ray.org_z);                                       \
+        memcpy(r.ray.dir_x, s.ray.dir_x, sizeof r.ray.dir_x);                                       \
+        memcpy(r.ray.dir_y, s.ray.dir_y, sizeof r.ray.dir_y);                                       \
+        memcpy(r.ray.dir_z, s.ray.dir_z, sizeof r.ray.dir_z);                                       \
+        memcpy(r.ray.tnear, s.ray.tnear, sizeof r.ray.tnear);                                       \
+        memcpy(r.ray.tfar, s.ray.tfar, sizeof r.ray.tfar);                                          \
+        memcpy(r.ray.time, s.ray.time, sizeof r.ray.time);                                          \
+        memcpy(r.ray.mask, s.ray.mask, sizeof r.ray.mask);                                          \
+        memcpy(r.ray.id, s.ray.id, sizeof r.ray.id);                                                \
+        memcpy(r.ray.flags, s.ray.flags, sizeof r.ray.flags);                                       \
+        memcpy(r.hit.geom_id, s.hit.geom_id, sizeof r.hit.geom_id);                                 \
+        if (any) {                                                                                  \
+            k->occluded##W(acc, valid, &r.ray);                                                     \
+        } else {                                                                                    \
+            k->intersect##W(acc, valid, &r);                                                        \
+        }                                                                                           \
+        memcpy(s.ray.tfar, r.ray.tfar, sizeof r.ray.tfar);                                          \
+        memcpy(s.hit.Ng_x, r.hit.Ng_x, sizeof r.hit.Ng_x);                                          \
+        memcpy(s.hit.Ng_y, r.hit.Ng_y, sizeof r.hit.Ng_y);                                          \
+        memcpy(s.hit.Ng_z, r.hit.Ng_z, sizeof r.hit.Ng_z);                                          \
+        memcpy(s.hit.u, r.hit.u, sizeof r.hit.u);                                                   \
+        memcpy(s.hit.v, r.hit.v, sizeof r.hit.v);                                                   \
+        memcpy(s.hit.prim_id, r.hit.prim_id, sizeof r.hit.prim_id);                                 \
+        memcpy(s.hit.geom_id, r.hit.geom_id, sizeof r.hit.geom_id);                                 \
+        memcpy(s.hit.inst_id, r.hit.inst_id, sizeof r.hit.inst_id);                                 \
+    } while (0)
+        if (w == 16) {
+            if (any) k->occluded16(acc, valid, &s.ray);
+            else k->intersect16(acc, valid, &s);
+        } else if (w == 8) {
+            NARROW(8);
+        } else {
+            NARROW(4);
+        }
+#undef NARROW
+        for (int j = 0; j < w; j++) {
+            uint32_t q = base + (uint32_t)j;
+            if (!valid[j]) continue;
+            if (any) {
+                p->tfar[q] = s.ray.tfar[j];
+                continue;
+            }
+            if (s.hit.geom_id[j] == RP_INVALID_ID) continue;
+            p->tfar[q] = s.ray.tfar[j];
+            p->u[q] = s.hit.u[j], p->v[q] = s.hit.v[j];
+            p->Ng_x[q] = s.hit.Ng_x[j], p->Ng_y[q] = s.hit.Ng_y[j], p->Ng_z[q] = s.hit.Ng_z[j];
+            p->geom_id[q] = s.hit.geom_id[j], p->prim_id[q] = s.hit.prim_id[j], p->inst_id[q] = s.hit.inst_id[j];
+        }
+    }
+}
+
+static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p, bool any) {
+    rp_query_n_desc d = rp_query_n_desc_defaults(desc);
+    if (d.traversal == RP_TRAVERSAL_SINGLE || d.traversal == RP_TRAVERSAL_SIMD) {
+        trace_small(scene, d.traversal, p, any);
+        return;
+    }
+    /* a packet too small for frustum tests to pay (packet_n.inc) gets none */
+    rp_frustum_kind kind = p->n * p->n >= FRUSTUM_MIN_RAYS ? d.frustum : RP_FRUSTUM_NONE;
+    frustum_req q;
+    frustum_req_init(&q, kind, d.point, &scene->bounds);
+    q.auto_spread = AUTO_RANGED_CELLS / sqrtf((float)(scene->stats.leaves > 1 ? scene->stats.leaves : 1));
+    pkt_alg alg = PKT_AUTO;
+    switch (d.traversal) {
+    case RP_TRAVERSAL_MASKED: alg = PKT_MASKED; break;
+    case RP_TRAVERSAL_RANGED: alg = PKT_RANGED; break;
+    case RP_TRAVERSAL_PARTITION: alg = PKT_PARTITION; break;
+    case RP_TRAVERSAL_AUTO:
+    case RP_TRAVERSAL_SINGLE:
+    case RP_TRAVERSAL_SIMD: alg = PKT_AUTO; break;
+    }
+    rp_counters_n *c = d.counters;
+    if (c) {
+        c->packets++;
+        c->rays += p->n * p->n;
+    }
+    const rp_kernels_n *k = kernels_n(scene->device);
+    if (any) {
+        k->occluded_n(&scene->accel, &q, alg, p, c);
+    } else {
+        k->intersect_n(&scene->accel, &q, alg, p, c);
+    }
+}
+
+void rp_intersect_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *packet) {
+    if (packet_ok(scene, packet, true, "rp_intersect_n")) trace_n(scene, desc, packet, false);
+}
+
+void rp_occluded_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *packet) {
+    if (packet_ok(scene, packet, false, "rp_occluded_n")) trace_n(scene, desc, packet, true);
+}

@@ -1,0 +1,287 @@
+// rp-test: labels=core timeout=900
+/* Large ray packets (Overbeck et al. 2008): every traversal mode (masked, ranged, partition, auto,
+ * single, simd), packet size 4x4..32x32, ray type (primary, shadow to a point light, reflection,
+ * refraction), with frusta on and off, on every ISA, against rp_intersect1 / rp_occluded1 ray by
+ * ray on shared scenes: identical geom_id, prim_id, t, u, v and Ng. Then conservativeness: packets
+ * that break each frustum's assumptions (jittered primary rays, random cones, random secondary
+ * rays) traced with frusta, every ray checked on its own, and the frusta shown to cull. */
+#include <math.h>
+
+#include "mesh_gen.h"
+#include "raypack.h"
+#include "raypack_io.h"
+#include "rp_test.h"
+#include "sys/sys.h"
+
+#include "packets_n_gen.h"
+
+typedef struct result {
+    uint32_t bad, bad_dead, bad_occl, rays;
+} result;
+
+/* Traces the image in n x n packets with one mode and compares ray by ray. */
+static void run_packets(rp_device *dev, rp_scene *scene, const test_ray *rays, int res, uint32_t n,
+                        const rp_query_n_desc *desc, rp_counters_n *cnt, result *res_out) {
+    rp_rayhit_n p;
+    CHECK(rp_rayhit_n_alloc(dev, n, &p));
+    int32_t *valid = malloc(sizeof(int32_t) * n * n);
+    rp_query_n_desc d = *desc;
+    d.counters = cnt;
+    for (int py = 0; py + (int)n <= res; py += (int)n)
+        for (int px = 0; px + (int)n <= res; px += (int)n) {
+            for (int pass = 0; pass < 2; pass++) {
+                for (uint32_t y = 0; y < n; y++)
+                    for (uint32_t x = 0; x < n; x++) {
+                        uint32_t q = rp_packet_n_index(n, x, y);
+                        const test_ray *t = &rays[(py + (int)y) * res + px + (int)x];
+                        valid[q] = t->live ? -1 : 0;
+                        p.org_x[q] = t->ray.org_x, p.org_y[q] = t->ray.org_y, p.org_z[q] = t->ray.org_z;
+                        p.dir_x[q] = t->ray.dir_x, p.dir_y[q] = t->ray.dir_y, p.dir_z[q] = t->ray.dir_z;
+                        p.tnear[q] = t->ray.tnear, p.tfar[q] = t->live ? t->ray.tfar : 42.0f;
+                        p.geom_id[q] = RP_INVALID_ID, p.prim_id[q] = 777u;
+                    }
+                p.valid = valid;
+                if (pass == 0) rp_intersect_n(scene, &d, &p);
+                else rp_occluded_n(scene, &d, &p);
+                for (uint32_t y = 0; y < n; y++)
+                    for (uint32_t x = 0; x < n; x++) {
+                        uint32_t q = rp_packet_n_index(n, x, y);
+                        const test_ray *t = &rays[(py + (int)y) * res + px + (int)x];
+                        if (!t->live) {
+                            res_out->bad_dead += p.tfar[q] != 42.0f || p.geom_id[q] != RP_INVALID_ID || p.prim_id[q] != 777u;
+                            continue;
+                        }
+                        if (pass == 1) {
+                            res_out->bad_occl += (p.tfar[q] == -INFINITY) != t->occluded;
+                            continue;
+                        }
+                        res_out->rays++;
+                        const rp_rayhit *r = &t->ref;
+                        bool same = p.geom_id[q] == r->hit.geom_id;
+                        if (same && r->hit.geom_id != RP_INVALID_ID)
+                            same = p.prim_id[q] == r->hit.prim_id && p.tfar[q] == r->ray.tfar && p.u[q] == r->hit.u &&
+                                   p.v[q] == r->hit.v && p.Ng_x[q] == r->hit.Ng_x && p.Ng_y[q] == r->hit.Ng_y &&
+                                   p.Ng_z[q] == r->hit.Ng_z;
+                        if (!same && getenv("RP_TEST_VERBOSE"))
+                            fprintf(stderr, "pixel %d,%d: ref geom %u prim %u t %.9g, got geom %u prim %u t %.9g\n",
+                                    px + (int)x, py + (int)y, r->hit.geom_id, r->hit.prim_id, (double)r->ray.tfar,
+                                    p.geom_id[q], p.prim_id[q], (double)p.tfar[q]);
+                        res_out->bad += !same;
+                    }
+            }
+        }
+    free(valid);
+    rp_rayhit_n_free(dev, &p);
+}
+
+static void check_world(const world *w, int res, bool all_isas) {
+    int isas[4] = {1, 4, 8, 16};
+    float diag = sqrtf((w->hi[0] - w->lo[0]) * (w->hi[0] - w->lo[0]) + (w->hi[1] - w->lo[1]) * (w->hi[1] - w->lo[1]) +
+                       (w->hi[2] - w->lo[2]) * (w->hi[2] - w->lo[2]));
+    for (int ii = 0; ii < 4; ii++) {
+        if (isas[ii] > sys_cpu_simd_width()) continue;
+        if (!all_isas && isas[ii] != sys_cpu_simd_width()) continue;
+        rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 1, .isa = isas[ii]});
+        rp_scene *scene = make_scene(dev, &w->sd);
+        test_ray *rays[RAY_TYPES];
+        for (int t = 0; t < RAY_TYPES; t++) {
+            rays[t] = malloc(sizeof(test_ray) * (size_t)(res * res));
+            make_rays(w, scene, t, res, 1e-4f * diag, rays[0], rays[t]);
+        }
+        uint32_t hits[RAY_TYPES] = {0};
+        for (int t = 0; t < RAY_TYPES; t++)
+            for (int i = 0; i < res * res; i++) hits[t] += rays[t][i].live && rays[t][i].ref.hit.geom_id != RP_INVALID_ID;
+        CHECKF(hits[0] > (uint32_t)(res * res / 4), "%s: only %u primary hits", w->name, hits[0]);
+        for (int t = 0; t < RAY_TYPES; t++) {
+            uint64_t culls = 0;
+            for (uint32_t n = 4; n <= 32; n *= 2) {
+                for (size_t m = 0; m < sizeof modes / sizeof modes[0]; m++) {
+                    for (int fr = 0; fr < 2; fr++) {
+                        rp_query_n_desc d = {.traversal = modes[m], .frustum = fr ? ray_frustum[t] : RP_FRUSTUM_NONE};
+                        memcpy(d.point, w->light, sizeof d.point);
+                        rp_counters_n c;
+                        memset(&c, 0, sizeof c);
+                        result r = {0};
+                        run_packets(dev, scene, rays[t], res, n, &d, &c, &r);
+                        culls += c.frustum_box_culls + c.frustum_tri_culls;
+                        uint64_t sum = 0;
+                        for (int k = 0; k < RP_COUNTERS_N_DEPTH; k++) sum += c.box_tests_depth[k];
+                        CHECKF(r.bad == 0 && r.bad_dead == 0 && r.bad_occl == 0,
+                               "%s isa %d %s %ux%u %s frustum %s: %u of %u hits differ, %u occlusions, %u dead rays written",
+                               w->name, isas[ii], ray_names[t], n, n, mode_names[m], fr ? "on" : "off", r.bad, r.rays,
+                               r.bad_occl, r.bad_dead);
+                        CHECK(sum == c.box_tests);
+                        if (modes[m] <= RP_TRAVERSAL_PARTITION && modes[m] != RP_TRAVERSAL_AUTO)
+                            CHECK(c.packets > 0 && c.box_tests > 0);
+                    }
+                }
+            }
+            /* frusta must do something on primary and shadow packets */
+            if (t <= RAY_SHADOW) CHECKF(culls > 0, "%s %s: frusta culled nothing", w->name, ray_names[t]);
+            printf("%s isa %d %s: %u hits, %llu frustum culls\n", w->name, isas[ii], ray_names[t], hits[t],
+                   (unsigned long long)culls);
+        }
+        CHECK(rp_device_get_error(dev) == RP_ERROR_NONE);
+        for (int t = 0; t < RAY_TYPES; t++) free(rays[t]);
+        rp_scene_release(scene);
+        rp_device_release(dev);
+    }
+}
+
+/* Conservativeness: packets that do not look like the textbook case, traced with every frustum
+ * kind that applies; every ray must still get its single-ray hit, and the frusta must cull. */
+static void check_conservative(const world *w, int packets) {
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 1});
+    rp_scene *scene = make_scene(dev, &w->sd);
+    test_rng g = {99};
+    const uint32_t n = 8;
+    test_ray *rays = malloc(sizeof(test_ray) * n * n);
+    uint32_t bad = 0, total = 0;
+    uint64_t culls[RAY_TYPES] = {0};
+    float c[3], e[3];
+    for (int a = 0; a < 3; a++) c[a] = 0.5f * (w->lo[a] + w->hi[a]), e[a] = w->hi[a] - w->lo[a];
+    for (int k = 0; k < packets; k++) {
+        int kind = k % 3; /* 0: jittered primary, 1: random shadow cone, 2: random secondary */
+        float spread = test_rng_float(&g) < 0.5f ? 0.002f : 0.1f;
+        float org[3], aim[3];
+        for (int a = 0; a < 3; a++) {
+            org[a] = c[a] + (test_rng_float(&g) - 0.5f) * e[a] * 0.9f;
+            aim[a] = c[a] + (test_rng_float(&g) - 0.5f) * e[a] * 0.5f;
+        }
+        int res = 256, px = (int)(test_rng_u32(&g) % (uint32_t)(res - (int)n)), py = (int)(test_rng_u32(&g) % (uint32_t)(res - (int)n));
+        for (uint32_t i = 0; i < n * n; i++) {
+            test_ray *t = &rays[i];
+            memset(t, 0, sizeof *t);
+            t->live = true;
+            uint32_t x = i % n, y = i / n;
+            float d[3];
+            if (kind == 0) {
+                primary_ray(w, px + (int)x, py + (int)y, res, test_rng_float(&g), test_rng_float(&g), &t->ray);
+            } else {
+                float o[3];
+                for (int a = 0; a < 3; a++) {
+                    d[a] = aim[a] - org[a] + (test_rng_float(&g) - 0.5f) * spread * e[a] * 4.0f;
+                    o[a] = kind == 2 ? org[a] + (test_rng_float(&g) - 0.5f) * spread * e[a] : org[a];
+                }
+                if (kind == 1) {
+                    /* shadow rays from scattered points towards the light `aim` */
+                    float p[3];
+                    for (int a = 0; a < 3; a++) p[a] = aim[a] - d[a];
+                    for (int a = 0; a < 3; a++) d[a] = aim[a] - p[a];
+                    t->ray = (rp_ray){.org_x = p[0], .org_y = p[1], .org_z = p[2], .tnear = 0.0f, .dir_x = d[0],
+                                      .dir_y = d[1], .dir_z = d[2], .tfar = 1.0f, .mask = 0xFFFFFFFFu};
+                } else {
+                    t->ray = (rp_ray){.org_x = o[0], .org_y = o[1], .org_z = o[2], .tnear = 0.0f, .dir_x = d[0],
+                                      .dir_y = d[1], .dir_z = d[2], .tfar = INFINITY, .mask = 0xFFFFFFFFu};
+                }
+            }
+            (void)x, (void)y;
+            reference(scene, t);
+        }
+        /* rays are stored in packet order directly: rays[q] is ray q */
+        rp_rayhit_n p;
+        rp_rayhit_n_alloc(dev, n, &p);
+        for (int pass = 0; pass < 2; pass++) {
+            int type = kind == 0 ? RAY_PRIMARY : kind == 1 ? RAY_SHADOW : RAY_REFLECT;
+            rp_frustum_kind fk = pass == 0 ? ray_frustum[type] : RP_FRUSTUM_SECONDARY;
+            for (size_t m = 0; m < 3; m++) {
+                rp_counters_n cnt;
+                memset(&cnt, 0, sizeof cnt);
+                rp_query_n_desc d = {.traversal = modes[m], .frustum = fk, .counters = &cnt};
+                memcpy(d.point, aim, sizeof d.point);
+                for (int occ = 0; occ < 2; occ++) {
+                    for (uint32_t q = 0; q < n * n; q++) {
+                        const rp_ray *r = &rays[q].ray;
+                        p.org_x[q] = r->org_x, p.org_y[q] = r->org_y, p.org_z[q] = r->org_z;
+                        p.dir_x[q] = r->dir_x, p.dir_y[q] = r->dir_y, p.dir_z[q] = r->dir_z;
+                        p.tnear[q] = r->tnear, p.tfar[q] = r->tfar, p.geom_id[q] = RP_INVALID_ID;
+                    }
+                    if (occ) rp_occluded_n(scene, &d, &p);
+                    else rp_intersect_n(scene, &d, &p);
+                    uint32_t bad_before = bad;
+                    for (uint32_t q = 0; q < n * n; q++) {
+                        const test_ray *t = &rays[q];
+                        total++;
+                        if (occ) bad += (p.tfar[q] == -INFINITY) != t->occluded;
+                        else bad += p.geom_id[q] != t->ref.hit.geom_id ||
+                                    (t->ref.hit.geom_id != RP_INVALID_ID &&
+                                     (p.prim_id[q] != t->ref.hit.prim_id || p.tfar[q] != t->ref.ray.tfar));
+                    }
+                    if (bad != bad_before && getenv("RP_TEST_VERBOSE"))
+                        fprintf(stderr, "%s packet %d kind %d frustum %d %s %s: %u lost\n", w->name, k, kind, (int)fk,
+                                mode_names[m], occ ? "occluded" : "intersect", bad - bad_before);
+                }
+                culls[type] += cnt.frustum_box_culls + cnt.frustum_tri_culls;
+            }
+        }
+        rp_rayhit_n_free(dev, &p);
+    }
+    CHECKF(bad == 0, "%s: frustum culling lost %u of %u hits", w->name, bad, total);
+    for (int t = 0; t < 3; t++) CHECKF(culls[t] > 0, "%s: %s frusta never culled", w->name, ray_names[t]);
+    printf("%s: conservativeness, %d packets, %u rays checked, culls %llu %llu %llu\n", w->name, packets, total,
+           (unsigned long long)culls[0], (unsigned long long)culls[1], (unsigned long long)culls[2]);
+    free(rays);
+    rp_scene_release(scene);
+    rp_device_release(dev);
+}
+
+static void check_api(void) {
+    rp_device *dev = rp_device_new(NULL);
+    rp_rayhit_n p;
+    CHECK(!rp_rayhit_n_alloc(dev, 6, &p));
+    CHECK(rp_device_get_error(dev) == RP_ERROR_INVALID_ARGUMENT);
+    CHECK(rp_rayhit_n_alloc(dev, 4, &p));
+    rp_scene *scene = rp_scene_new(dev, NULL);
+    rp_intersect_n(scene, NULL, &p); /* not committed */
+    CHECK(rp_device_get_error(dev) == RP_ERROR_NOT_COMMITTED);
+    rp_intersect_n(scene, NULL, NULL);
+    CHECK(rp_device_get_error(dev) == RP_ERROR_INVALID_ARGUMENT);
+    /* the index covers every ray once */
+    for (uint32_t n = 4; n <= 32; n += 4) {
+        uint32_t seen = 0, bad = 0;
+        uint8_t *hit = calloc(n * n, 1);
+        for (uint32_t y = 0; y < n; y++)
+            for (uint32_t x = 0; x < n; x++) {
+                uint32_t q = rp_packet_n_index(n, x, y);
+                if (q >= n * n || hit[q]) bad++;
+                else hit[q] = 1, seen++;
+            }
+        CHECKF(bad == 0 && seen == n * n, "rp_packet_n_index(%u) is not a permutation", n);
+        free(hit);
+    }
+    rp_query_n_desc d = rp_query_n_desc_defaults(NULL);
+    CHECK(d.traversal == RP_TRAVERSAL_AUTO && d.frustum == RP_FRUSTUM_NONE && d.counters == NULL);
+    rp_rayhit_n_free(dev, &p);
+    rp_scene_release(scene);
+    rp_device_release(dev);
+}
+
+int main(void) {
+    bool small = rp_test_sanitized();
+    check_api();
+    world w;
+    if (load_world("stanford_bunny_bun_zipper.ply.gz", "bunny", &w)) {
+        check_world(&w, small ? 32 : 64, !small);
+        check_conservative(&w, small ? 30 : 300);
+        rp_scene_data_free(&w.sd);
+    } else {
+        CHECK(!"bunny loads");
+    }
+    if (load_world("spd_rings_s5.nff.gz", "rings", &w)) {
+        check_world(&w, small ? 32 : 64, false);
+        if (!small) check_conservative(&w, 150);
+        rp_scene_data_free(&w.sd);
+    } else {
+        CHECK(!"rings loads");
+    }
+    if (!small) {
+        if (load_world("conference_geom.obj.gz", "conference", &w)) {
+            check_world(&w, 64, false);
+            check_conservative(&w, 150);
+            rp_scene_data_free(&w.sd);
+        } else {
+            CHECK(!"conference loads");
+        }
+    }
+    return RP_TEST_END();
+}

@@ -7,7 +7,7 @@
 
 #include <stdint.h>
 #include <string.h>
-#if defined(__SSE4_2__) || defined(__AVX2__) || defined(__AVX512F__)
+#if defined(__SSE__)
 #include <immintrin.h>
 #endif
 
@@ -53,14 +53,14 @@ SIMD_DEFINE_LOADS_(16)
 
 /* min / max: IEEE minps semantics (the second operand is returned when either is NaN). */
 static inline vf4 vf4_min(vf4 a, vf4 b) {
-#if defined(__SSE4_2__)
+#if defined(__SSE__)
     return (vf4)_mm_min_ps((__m128)a, (__m128)b);
 #else
     return vf4_select(a < b, a, b);
 #endif
 }
 static inline vf4 vf4_max(vf4 a, vf4 b) {
-#if defined(__SSE4_2__)
+#if defined(__SSE__)
     return (vf4)_mm_max_ps((__m128)a, (__m128)b);
 #else
     return vf4_select(a > b, a, b);

@@ -5,13 +5,18 @@
 #include <string.h>
 
 #include "accel/bvh/bvh.h"
+#include "simd/simd.h"
 
 #define MAX_BINS 64
 #define MEDIAN_DEPTH 64 /* past this depth, split at the median to bound the depth */
 
+/* A primitive box in SIMD form (w lanes unused), so unions are two min/max instructions. */
+typedef struct pbox {
+    vf4 lo, hi;
+} pbox;
+
 typedef struct build_ctx {
-    const box3 *boxes;
-    vec3 *centroids;
+    pbox *boxes; /* permuted with prims, so every pass over a node's range reads memory in order */
     uint32_t *prims;
     bvh_node *nodes;
     _Atomic uint32_t node_count;
@@ -27,20 +32,21 @@ typedef struct task {
     uint32_t node, begin, end, depth;
 } task;
 
-typedef struct bin {
-    box3 box;
-    uint32_t count;
-} bin;
+
+static inline vf4 centroid_of(const pbox *b) { return b->lo * 0.5f + b->hi * 0.5f; }
+
+static inline box3 box_of(vf4 lo, vf4 hi) { return (box3){v3(lo[0], lo[1], lo[2]), v3(hi[0], hi[1], hi[2])}; }
 
 static box3 prim_range_box(const build_ctx *c, uint32_t begin, uint32_t end, box3 *cbox) {
-    box3 b = box3_empty(), cb = box3_empty();
+    vf4 lo = vf4_splat(INFINITY), hi = vf4_splat(-INFINITY), clo = lo, chi = hi;
     for (uint32_t i = begin; i < end; i++) {
-        uint32_t p = c->prims[i];
-        b = box3_union(b, c->boxes[p]);
-        cb = box3_extend(cb, c->centroids[p]);
+        const pbox *b = &c->boxes[i];
+        vf4 ce = centroid_of(b);
+        lo = vf4_min(lo, b->lo), hi = vf4_max(hi, b->hi);
+        clo = vf4_min(clo, ce), chi = vf4_max(chi, ce);
     }
-    *cbox = cb;
-    return b;
+    *cbox = box_of(clo, chi);
+    return box_of(lo, hi);
 }
 
 static void set_node_box(bvh_node *n, box3 b) {
@@ -58,61 +64,80 @@ static void depth_max(build_ctx *c, uint32_t d) {
     }
 }
 
-/* Bin index of a centroid coordinate; clamped in float before the conversion so huge
- * coordinates (or an extent that overflowed) cannot make it undefined. */
-static inline int bin_of(float x, float lo, float scale, int bins) {
-    float f = (x - lo) * scale;
-    if (!(f > 0.0f)) return 0;
-    if (f >= (float)(bins - 1)) return bins - 1;
-    return (int)f;
+/* Bin indices of a centroid on the three axes; clamped in float before the conversion so
+ * huge coordinates (or an extent that overflowed) cannot make it undefined, and NaN goes to 0
+ * (maxps returns its second operand on NaN). Counting and partitioning both use it, so they
+ * always agree. */
+static inline vi4 bins_of(vf4 centroid, vf4 lo, vf4 scale, vf4 last) {
+    vf4 f = vf4_min(vf4_max((centroid - lo) * scale, vf4_splat(0.0f)), last);
+    return __builtin_convertvector(f, vi4);
+}
+
+static double half_area4(vf4 lo, vf4 hi) {
+    if (!(lo[0] <= hi[0])) return 0.0;
+    double dx = (double)hi[0] - lo[0], dy = (double)hi[1] - lo[1], dz = (double)hi[2] - lo[2];
+    return dx * dy + dy * dz + dz * dx;
 }
 
 /* Splits [begin, end) in place; returns the first index of the right half and the two boxes, or
- * 0 when no split was found (all centroids in one bin on every axis). */
+ * 0 when no split was found (all centroids in one bin on every axis). One pass bins all three
+ * axes at once. */
 static uint32_t split_sah(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox, box3 *lbox, box3 *rbox) {
+    /* small nodes: about one bin per primitive is as good, and the sweeps over empty bins
+     * dominated the build's time near the leaves */
     int nb = c->bins;
+    if ((uint32_t)nb > end - begin) nb = end - begin < 4 ? 4 : (int)(end - begin);
+    vf4 lo = {cbox.lo.x, cbox.lo.y, cbox.lo.z, 0.0f}, scale = vf4_splat(0.0f);
+    bool usable[3];
+    for (int axis = 0; axis < 3; axis++) {
+        double extent = (double)v3_get(cbox.hi, axis) - (double)v3_get(cbox.lo, axis);
+        float sc = extent > 0.0 ? (float)((double)nb * (1.0 - 1e-6) / extent) : 0.0f;
+        usable[axis] = sc > 0.0f && isfinite(sc);
+        scale[axis] = usable[axis] ? sc : 0.0f;
+    }
+    if (!usable[0] && !usable[1] && !usable[2]) return 0;
+    vf4 last = vf4_splat((float)(nb - 1));
+    vf4 blo[3][MAX_BINS], bhi[3][MAX_BINS];
+    uint32_t bcount[3][MAX_BINS];
+    for (int a = 0; a < 3; a++)
+        for (int b = 0; b < nb; b++) blo[a][b] = vf4_splat(INFINITY), bhi[a][b] = vf4_splat(-INFINITY), bcount[a][b] = 0;
+    for (uint32_t i = begin; i < end; i++) {
+        const pbox *p = &c->boxes[i];
+        vi4 b = bins_of(centroid_of(p), lo, scale, last);
+        for (int a = 0; a < 3; a++) {
+            int k = b[a];
+            blo[a][k] = vf4_min(blo[a][k], p->lo);
+            bhi[a][k] = vf4_max(bhi[a][k], p->hi);
+            bcount[a][k]++;
+        }
+    }
     double best_cost = INFINITY;
     int best_axis = -1, best_split = 0;
-    float scale[3], lo[3];
-    box3 best_l = box3_empty(), best_r = box3_empty();
+    vf4 best_llo = {0}, best_lhi = {0}, best_rlo = {0}, best_rhi = {0};
     for (int axis = 0; axis < 3; axis++) {
-        float clo = v3_get(cbox.lo, axis), chi = v3_get(cbox.hi, axis);
-        lo[axis] = clo;
-        double extent = (double)chi - (double)clo;
-        scale[axis] = 0.0f;
-        if (!(extent > 0.0)) continue;
-        scale[axis] = (float)((double)nb * (1.0 - 1e-6) / extent);
-        if (!(scale[axis] > 0.0f) || !isfinite(scale[axis])) continue;
-        bin bins[MAX_BINS];
-        for (int b = 0; b < nb; b++) bins[b].box = box3_empty(), bins[b].count = 0;
-        for (uint32_t i = begin; i < end; i++) {
-            uint32_t p = c->prims[i];
-            int b = bin_of(v3_get(c->centroids[p], axis), clo, scale[axis], nb);
-            bins[b].box = box3_union(bins[b].box, c->boxes[p]);
-            bins[b].count++;
-        }
+        if (!usable[axis]) continue;
         /* right-to-left sweep, then left-to-right with the cost of each border */
         double rarea[MAX_BINS];
         uint32_t rcount[MAX_BINS];
-        box3 racc = box3_empty(), rboxes[MAX_BINS];
+        vf4 rlo_acc = vf4_splat(INFINITY), rhi_acc = vf4_splat(-INFINITY), rlos[MAX_BINS], rhis[MAX_BINS];
         uint32_t rc = 0;
         for (int b = nb - 1; b > 0; b--) {
-            racc = box3_union(racc, bins[b].box);
-            rc += bins[b].count;
-            rarea[b] = box3_half_area(racc);
+            rlo_acc = vf4_min(rlo_acc, blo[axis][b]), rhi_acc = vf4_max(rhi_acc, bhi[axis][b]);
+            rc += bcount[axis][b];
+            rarea[b] = half_area4(rlo_acc, rhi_acc);
             rcount[b] = rc;
-            rboxes[b] = racc;
+            rlos[b] = rlo_acc, rhis[b] = rhi_acc;
         }
-        box3 lacc = box3_empty();
+        vf4 llo = vf4_splat(INFINITY), lhi = vf4_splat(-INFINITY);
         uint32_t lc = 0;
         for (int b = 1; b < nb; b++) {
-            lacc = box3_union(lacc, bins[b - 1].box);
-            lc += bins[b - 1].count;
+            llo = vf4_min(llo, blo[axis][b - 1]), lhi = vf4_max(lhi, bhi[axis][b - 1]);
+            lc += bcount[axis][b - 1];
             if (lc == 0 || rcount[b] == 0) continue;
-            double cost = box3_half_area(lacc) * lc + rarea[b] * rcount[b];
+            double cost = half_area4(llo, lhi) * lc + rarea[b] * rcount[b];
             if (cost < best_cost) {
                 best_cost = cost, best_axis = axis, best_split = b;
-                best_l = lacc, best_r = rboxes[b];
+                best_llo = llo, best_lhi = lhi, best_rlo = rlos[b], best_rhi = rhis[b];
             }
         }
     }
@@ -120,15 +145,17 @@ static uint32_t split_sah(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox,
     /* Hoare partition by bin */
     uint32_t i = begin, j = end;
     while (i < j) {
-        uint32_t p = c->prims[i];
-        if (bin_of(v3_get(c->centroids[p], best_axis), lo[best_axis], scale[best_axis], nb) < best_split) {
+        if (bins_of(centroid_of(&c->boxes[i]), lo, scale, last)[best_axis] < best_split) {
             i++;
         } else {
-            c->prims[i] = c->prims[--j];
-            c->prims[j] = p;
+            j--;
+            uint32_t p = c->prims[i];
+            c->prims[i] = c->prims[j], c->prims[j] = p;
+            pbox b = c->boxes[i];
+            c->boxes[i] = c->boxes[j], c->boxes[j] = b;
         }
     }
-    *lbox = best_l, *rbox = best_r;
+    *lbox = box_of(best_llo, best_lhi), *rbox = box_of(best_rlo, best_rhi);
     return i;
 }
 
@@ -216,9 +243,10 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
     uint32_t cap = n ? 2 * n - 1 : 1;
     out->nodes = sys_alloc(alloc, (size_t)cap * sizeof(bvh_node));
     out->prims = sys_alloc(alloc, (size_t)(n ? n : 1) * sizeof(uint32_t));
-    vec3 *centroids = sys_alloc(alloc, (size_t)(n ? n : 1) * sizeof(vec3));
-    if (!out->nodes || !out->prims || !centroids) {
-        sys_free(alloc, centroids, (size_t)(n ? n : 1) * sizeof(vec3));
+    size_t pbytes = (size_t)(n ? n : 1) * sizeof(pbox);
+    pbox *pboxes = sys_alloc(alloc, pbytes);
+    if (!out->nodes || !out->prims || !pboxes) {
+        sys_free(alloc, pboxes, pbytes);
         bvh2_free(alloc, out);
         return false;
     }
@@ -227,11 +255,12 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
     box3 root = box3_empty();
     for (uint32_t i = 0; i < n; i++) {
         out->prims[i] = i;
-        centroids[i] = v3_add(v3_mul(boxes[i].lo, 0.5f), v3_mul(boxes[i].hi, 0.5f));
+        pboxes[i].lo = (vf4){boxes[i].lo.x, boxes[i].lo.y, boxes[i].lo.z, 0.0f};
+        pboxes[i].hi = (vf4){boxes[i].hi.x, boxes[i].hi.y, boxes[i].hi.z, 0.0f};
         root = box3_union(root, boxes[i]);
     }
     build_ctx c = {
-        .boxes = boxes, .centroids = centroids, .prims = out->prims, .nodes = out->nodes,
+        .boxes = pboxes, .prims = out->prims, .nodes = out->nodes,
         .bins = desc->bins < 4 ? 4 : desc->bins > MAX_BINS ? MAX_BINS : desc->bins,
         .max_leaf = desc->max_leaf_size < 1 ? 1 : desc->max_leaf_size,
     };
@@ -252,7 +281,7 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
         if (!c.tasks || !queue) {
             sys_free(alloc, c.tasks, c.task_capacity * sizeof(task));
             sys_free(alloc, queue, c.task_capacity * sizeof(task));
-            sys_free(alloc, centroids, (size_t)n * sizeof(vec3));
+            sys_free(alloc, pboxes, pbytes);
             bvh2_free(alloc, out);
             return false;
         }
@@ -276,7 +305,7 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
     } else {
         build_subtree(&c, (task){0, 0, n, 0});
     }
-    sys_free(alloc, centroids, (size_t)n * sizeof(vec3));
+    sys_free(alloc, pboxes, pbytes);
     out->node_count = atomic_load(&c.node_count);
     out->depth = atomic_load(&c.depth);
     measure(out);

@@ -156,11 +156,20 @@ typedef struct rp_render_desc {
     float ambient;              /* Whitted ambient term relative to kd; 0: 0.08, negative: none */
     rp_render_progress_fn progress;
     void *progress_user;
+    /* Whitted traces n x n packets breadth first per ray kind (Overbeck et al. 2008): a tile block's
+     * primary packet, one shadow packet per light, then its reflection and refraction packets, down
+     * to max_depth. Every setting gives the same image. */
+    int packet;                 /* rays per packet side: 4, 8, 16 or 32; 0: 16; negative: one ray at
+                                 * a time, depth first (the reference tracer) */
+    rp_traversal traversal;     /* packet traversal of every ray kind; 0 (AUTO): chosen per kind */
+    bool no_frustum;            /* true: packets are traced without frustum culling */
+    bool count_work;            /* true: fill rp_render_stats.work (packet tracing only) */
 } rp_render_desc;
 
 typedef struct rp_render_stats {
     uint64_t rays[RP_RAY_KIND_COUNT];
     double render_ms;
+    rp_counters_n work[RP_RAY_KIND_COUNT]; /* traversal work per ray kind, with desc.count_work */
 } rp_render_stats;
 
 /* Returns the defaults for every zero field of desc (NULL gives all defaults). */
@@ -168,7 +177,8 @@ RP_API rp_render_desc rp_render_desc_defaults(const rp_render_desc *desc);
 /* Channels per pixel of the frame desc describes: 1 for the depth AOV, else 3. */
 RP_API int rp_render_channels(const rp_render_desc *desc);
 /* Renders a frame into pixels (width * height * rp_render_channels floats, linear, top row first)
- * on the device's threads. stats may be NULL. Returns false on bad arguments. */
+ * on the device's threads. stats may be NULL. Returns false on bad arguments (a packet size other
+ * than 4, 8, 16 or 32) or out of memory. */
 RP_API bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels,
                       rp_render_stats *stats);
 

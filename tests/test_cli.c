@@ -84,6 +84,10 @@ int main(void) {
     EXPECT("render --eye 1,2", 2, "--eye expects three numbers");
     EXPECT("render --integrator path", 2, "--integrator expects eyelight or whitted");
     EXPECT("render --aov colour", 2, "--aov expects depth, normal, primid or albedo");
+    EXPECT("render --traversal fast", 2, "--traversal expects auto, masked, ranged, partition, single or simd");
+    EXPECT("render --packet 12", 2, "--packet expects 4, 8, 16 or 32");
+    EXPECT("render --packet 64", 2, "--packet expects 4, 8, 16 or 32");
+    EXPECT("render --frustum yes", 2, "--frustum expects on or off");
     EXPECT("render --frobnicate", 2, "unknown option '--frobnicate'");
     EXPECT("render a.obj b.obj", 2, "expected one SCENE");
     EXPECT("render -o out.jpg", 2, "-o expects a file ending in .png, .pfm or .ppm");
@@ -123,17 +127,44 @@ int main(void) {
     }
     snprintf(args, sizeof args, "render --width 40 -o '%s/room.png' --stats --stats-json '%s/stats.json'", tmp, tmp);
     EXPECT(args, 0, "Mrays/s");
+    EXPECT(args, 0, "frustum box culls/tests");
+    EXPECT(args, 0, "box tests by BVH depth");
+    EXPECT(args, 0, "16x16 packets, auto traversal, frusta on");
     snprintf(path, sizeof path, "%s/stats.json", tmp);
     f = fopen(path, "r");
     CHECK(f != NULL);
     if (f) {
-        char json[4096];
+        static char json[65536];
         size_t n = fread(json, 1, sizeof json - 1, f);
         json[n] = '\0';
         CHECKF(strstr(json, "\"mrays_per_s\"") && strstr(json, "\"shadow\"") && strstr(json, "\"height\": 30"),
                "%s", json);
+        CHECKF(strstr(json, "\"work\"") && strstr(json, "\"box_tests_depth\": [") &&
+                   strstr(json, "\"frustum_tri_culls\"") && strstr(json, "\"traversal\": \"auto\""),
+               "%s", json);
         fclose(f);
     }
+    /* every traversal, packet size and frustum setting writes the same image */
+    snprintf(args, sizeof args, "render --width 40 --height 30 -o '%s/ref.pfm' --quiet", tmp);
+    EXPECT(args, 0, "");
+    static const char *modes[] = {"--traversal single --packet 4", "--traversal partition --packet 32 --frustum off",
+                                  "--traversal ranged --packet 8", "--traversal simd", "--traversal masked"};
+    snprintf(path, sizeof path, "%s/ref.pfm", tmp);
+    int rw = 0, rh = 0, rc = 0;
+    char rerr[512] = "";
+    float *ref = rp_image_read_pfm(path, &rw, &rh, &rc, rerr, sizeof rerr);
+    CHECKF(ref != NULL, "%s", rerr);
+    for (size_t i = 0; ref && i < sizeof modes / sizeof modes[0]; i++) {
+        snprintf(args, sizeof args, "render --width 40 --height 30 %s -o '%s/mode.pfm' --quiet", modes[i], tmp);
+        EXPECT(args, 0, "");
+        snprintf(path, sizeof path, "%s/mode.pfm", tmp);
+        int mw = 0, mh = 0, mc = 0;
+        float *px = rp_image_read_pfm(path, &mw, &mh, &mc, rerr, sizeof rerr);
+        CHECKF(px && mw == rw && mh == rh && mc == rc && memcmp(px, ref, sizeof(float) * (size_t)(rw * rh * rc)) == 0,
+               "%s: image differs from the default's", modes[i]);
+        free(px);
+    }
+    free(ref);
     snprintf(args, sizeof args, "render --width 40 --height 30 --aov depth -o '%s/depth.pfm' --quiet", tmp);
     EXPECT(args, 0, "");
     snprintf(path, sizeof path, "%s/depth.pfm", tmp);

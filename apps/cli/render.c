@@ -33,11 +33,18 @@ static void render_usage(FILE *out) {
             "  --aov NAME             debug output instead of shading: depth (PFM: distance along\n"
             "                         the primary ray, +inf on a miss), normal, primid or albedo\n"
             "  --threads N            worker threads, 1..%d; 0 for all hardware threads [0]\n"
+            "  --traversal NAME       how Whitted's ray packets walk the BVH: auto, masked, ranged,\n"
+            "                         partition, single (each ray alone) or simd (each SIMD ray\n"
+            "                         alone) [auto]; every choice gives the same image\n"
+            "  --packet N             Whitted traces packets of N x N rays, N = 4, 8, 16 or 32 [16]\n"
+            "  --frustum on|off       cull with the packets' frusta [on]\n"
             "  --eye X,Y,Z  --look X,Y,Z  --up X,Y,Z  --fov DEG\n"
             "                         camera (pinhole; vertical fov in (0, 180)); each replaces that\n"
             "                         part of the scene's camera, or of one framing the scene\n"
-            "  --stats                also print the BVH statistics\n"
-            "  --stats-json FILE      write times, ray counts and Mrays/s as JSON\n"
+            "  --stats                also print the BVH statistics and, per ray kind, the packets'\n"
+            "                         ray-box and ray-triangle tests, frustum culls and the tests by\n"
+            "                         BVH depth (counted in SIMD rays)\n"
+            "  --stats-json FILE      write times, ray counts, Mrays/s and those counters as JSON\n"
             "  --quiet                no progress and no report\n"
             "  -h, --help             this help\n"
             "\n"
@@ -58,7 +65,18 @@ typedef struct render_options {
     bool has_eye, has_look, has_up, has_fov;
     float eye[3], look[3], up[3], fov;
     bool stats, quiet;
+    rp_traversal traversal;
+    const char *traversal_name;
+    int packet;
+    bool no_frustum;
 } render_options;
+
+static const struct {
+    const char *name;
+    rp_traversal traversal;
+} TRAVERSALS[] = {{"auto", RP_TRAVERSAL_AUTO},           {"masked", RP_TRAVERSAL_MASKED},
+                  {"ranged", RP_TRAVERSAL_RANGED},       {"partition", RP_TRAVERSAL_PARTITION},
+                  {"single", RP_TRAVERSAL_SINGLE},       {"simd", RP_TRAVERSAL_SIMD}};
 
 /* Returns CLI_EXIT_OK when the options parsed, else the exit status. */
 static int parse_options(int argc, char **argv, render_options *o, bool *help) {
@@ -115,6 +133,40 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
             }
             if (!o->use_aov) {
                 fprintf(stderr, "raypack render: --aov expects depth, normal, primid or albedo, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
+        } else if (strcmp(a, "--traversal") == 0) {
+            VALUE();
+            o->traversal_name = NULL;
+            for (size_t k = 0; k < sizeof TRAVERSALS / sizeof TRAVERSALS[0]; k++) {
+                if (strcmp(v, TRAVERSALS[k].name) == 0) {
+                    o->traversal = TRAVERSALS[k].traversal;
+                    o->traversal_name = TRAVERSALS[k].name;
+                }
+            }
+            if (!o->traversal_name) {
+                fprintf(stderr, "raypack render: --traversal expects auto, masked, ranged, partition, single or "
+                                "simd, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
+        } else if (strcmp(a, "--packet") == 0) {
+            VALUE();
+            char *end;
+            long n = strtol(v, &end, 10);
+            if (end == v || *end != '\0' || (n != 4 && n != 8 && n != 16 && n != 32)) {
+                fprintf(stderr, "raypack render: --packet expects 4, 8, 16 or 32 (packets of N x N rays; the "
+                                "traversal kernels take sides that are multiples of 4, up to 32), got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
+            o->packet = (int)n;
+        } else if (strcmp(a, "--frustum") == 0) {
+            VALUE();
+            if (strcmp(v, "on") == 0) {
+                o->no_frustum = false;
+            } else if (strcmp(v, "off") == 0) {
+                o->no_frustum = true;
+            } else {
+                fprintf(stderr, "raypack render: --frustum expects on or off, got '%s'\n", v);
                 return CLI_EXIT_USAGE;
             }
         } else if (strcmp(a, "--eye") == 0) {
@@ -245,8 +297,85 @@ static void json_string(FILE *f, const char *s) {
     fputc('"', f);
 }
 
+static const char *const KIND_NAMES[RP_RAY_KIND_COUNT] = {"primary", "shadow", "reflection", "refraction"};
+
+/* Number of entries of a depth histogram up to its last nonzero one. */
+static int depth_used(const uint64_t *h) {
+    int n = RP_COUNTERS_N_DEPTH;
+    while (n > 0 && h[n - 1] == 0) n--;
+    return n;
+}
+
+/* A count in at most 6 characters (k, M, G suffixes), for the compact histograms. */
+static void print_count(uint64_t v) {
+    double d = (double)v;
+    if (v < 10000) printf("%llu", (unsigned long long)v);
+    else if (d < 1e6) printf("%.3gk", d / 1e3);
+    else if (d < 1e9) printf("%.3gM", d / 1e6);
+    else printf("%.3gG", d / 1e9);
+}
+
+/* Fig. 6 of the paper per ray kind: tests by BVH depth, root first, in one line each. */
+static void print_work(const rp_render_stats *rs) {
+    printf("work     %-10s %9s %13s %13s %25s %25s\n", "(SIMD rays)", "packets", "box tests", "tri tests",
+           "frustum box culls/tests", "frustum tri culls/tests");
+    for (int k = 0; k < RP_RAY_KIND_COUNT; k++) {
+        const rp_counters_n *c = &rs->work[k];
+        if (!c->packets) continue;
+        printf("         %-10s %9llu %13llu %13llu %12llu/%-12llu %12llu/%-12llu\n", KIND_NAMES[k],
+               (unsigned long long)c->packets, (unsigned long long)c->box_tests, (unsigned long long)c->tri_tests,
+               (unsigned long long)c->frustum_box_culls, (unsigned long long)c->frustum_box_tests,
+               (unsigned long long)c->frustum_tri_culls, (unsigned long long)c->frustum_tri_tests);
+    }
+    for (int which = 0; which < 2; which++) {
+        printf("%s\n", which ? "tri tests by leaf depth (root 0):" : "box tests by BVH depth (root 0):");
+        for (int k = 0; k < RP_RAY_KIND_COUNT; k++) {
+            const uint64_t *h = which ? rs->work[k].tri_tests_depth : rs->work[k].box_tests_depth;
+            int n = depth_used(h);
+            if (!n) continue;
+            printf("  %-10s", KIND_NAMES[k]);
+            for (int i = 0; i < n; i++) {
+                putchar(' ');
+                print_count(h[i]);
+            }
+            putchar('\n');
+        }
+    }
+}
+
+static void json_histogram(FILE *f, const uint64_t *h) {
+    int n = depth_used(h);
+    fputc('[', f);
+    for (int i = 0; i < n; i++) fprintf(f, "%s%llu", i ? ", " : "", (unsigned long long)h[i]);
+    fputc(']', f);
+}
+
+/* The work counters per ray kind as a JSON object. */
+static void json_work(FILE *f, const rp_render_stats *rs) {
+    fprintf(f, "  \"work\": {");
+    for (int k = 0; k < RP_RAY_KIND_COUNT; k++) {
+        const rp_counters_n *c = &rs->work[k];
+        fprintf(f, "%s\n    \"%s\": {\"packets\": %llu, \"rays\": %llu, \"box_tests\": %llu, \"tri_tests\": %llu, "
+                   "\"frustum_box_tests\": %llu, \"frustum_box_culls\": %llu, \"frustum_tri_tests\": %llu, "
+                   "\"frustum_tri_culls\": %llu,\n      \"traversal\": {\"auto\": %llu, \"masked\": %llu, "
+                   "\"ranged\": %llu, \"partition\": %llu},\n      \"box_tests_depth\": ",
+                k ? "," : "", KIND_NAMES[k], (unsigned long long)c->packets, (unsigned long long)c->rays,
+                (unsigned long long)c->box_tests, (unsigned long long)c->tri_tests,
+                (unsigned long long)c->frustum_box_tests, (unsigned long long)c->frustum_box_culls,
+                (unsigned long long)c->frustum_tri_tests, (unsigned long long)c->frustum_tri_culls,
+                (unsigned long long)c->traversal[0], (unsigned long long)c->traversal[1],
+                (unsigned long long)c->traversal[2], (unsigned long long)c->traversal[3]);
+        json_histogram(f, c->box_tests_depth);
+        fprintf(f, ",\n      \"tri_tests_depth\": ");
+        json_histogram(f, c->tri_tests_depth);
+        fputc('}', f);
+    }
+    fprintf(f, "\n  },\n");
+}
+
 int cli_render(int argc, char **argv) {
-    render_options o = {.output = "raypack.png", .max_depth = -1, .integrator = RP_INTEGRATOR_WHITTED, .integrator_name = "whitted"};
+    render_options o = {.output = "raypack.png", .max_depth = -1, .integrator = RP_INTEGRATOR_WHITTED,
+                        .integrator_name = "whitted", .traversal_name = "auto", .packet = 16};
     bool help = false;
     int rc = parse_options(argc, argv, &o, &help);
     if (rc != CLI_EXIT_OK) return rc;
@@ -328,6 +457,9 @@ int cli_render(int argc, char **argv) {
         .aov = o.aov, .camera = &cam,
         /* rp_render_desc: 0 is the default depth (5), negative is none. */
         .max_depth = o.max_depth < 0 ? 0 : (o.max_depth == 0 ? -1 : o.max_depth),
+        .packet = o.packet, .traversal = o.traversal, .no_frustum = o.no_frustum,
+        /* counting costs a little, so only when it is reported */
+        .count_work = o.stats || o.stats_json,
     };
     progress_state ps = {.start_ms = cli_now_ms(), .tty = isatty(2) != 0, .quiet = o.quiet, .last_quarter = 0};
     desc.progress = on_progress;
@@ -358,11 +490,14 @@ int cli_render(int argc, char **argv) {
     const char *scene_name = builtin ? "(built-in room)" : basename_of(o.scene);
     const char *mode = o.use_aov ? o.aov_name : o.integrator_name;
     int threads = rp_device_thread_count(device);
+    bool packets = !o.use_aov && o.integrator == RP_INTEGRATOR_WHITTED;
     if (!o.quiet) {
         printf("scene    %s: %zu triangles, %zu spheres, %zu cones, %zu materials, %zu lights\n", scene_name,
                data.triangle_count, data.sphere_count, data.cone_count, data.material_count, data.light_count);
         printf("image    %s: %dx%d, %d spp, %s", o.output, w, h, o.use_aov ? 1 : (o.spp ? o.spp : 1), mode);
-        if (!o.use_aov && o.integrator == RP_INTEGRATOR_WHITTED) printf(" (max depth %d)", o.max_depth < 0 ? 5 : o.max_depth);
+        if (packets)
+            printf(" (max depth %d, %dx%d packets, %s traversal, frusta %s)", o.max_depth < 0 ? 5 : o.max_depth,
+                   o.packet, o.packet, o.traversal_name, o.no_frustum ? "off" : "on");
         printf(", %d threads\n", threads);
         printf("time     load %.1f ms, build %.1f ms, render %.1f ms\n", load_ms, build_ms, rs.render_ms);
         printf("rays     primary %llu, shadow %llu, reflection %llu, refraction %llu, total %llu\n",
@@ -376,6 +511,7 @@ int cli_render(int argc, char **argv) {
                    (unsigned long long)sst.binary_nodes, (unsigned long long)sst.wide_nodes, sst.bvh_width,
                    (unsigned long long)sst.leaves, sst.depth, sst.sah_cost, (double)sst.bytes / 1048576.0,
                    sst.build_ms);
+            if (packets) print_work(&rs);
         }
     }
     if (o.stats_json) {
@@ -399,6 +535,11 @@ int cli_render(int argc, char **argv) {
                 (unsigned long long)rs.rays[RP_RAY_REFLECTION], (unsigned long long)rs.rays[RP_RAY_REFRACTION],
                 (unsigned long long)total);
         fprintf(f, "  \"mrays_per_s\": %.3f,\n", mrays);
+        if (packets) {
+            fprintf(f, "  \"packet\": %d,\n  \"traversal\": \"%s\",\n  \"frustum\": %s,\n", o.packet, o.traversal_name,
+                    o.no_frustum ? "false" : "true");
+            json_work(f, &rs);
+        }
         fprintf(f, "  \"bvh\": {\"binary_nodes\": %llu, \"wide_nodes\": %llu, \"leaves\": %llu, \"depth\": %u, "
                    "\"sah_cost\": %.4f, \"bytes\": %zu, \"build_ms\": %.3f}\n}\n",
                 (unsigned long long)sst.binary_nodes, (unsigned long long)sst.wide_nodes,

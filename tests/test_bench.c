@@ -1,5 +1,5 @@
 // rp-test: labels=bench timeout=600
-/* Runs the built `raypack bench` on small scenes, plain and --vs embree, and checks that it exits 0,
+/* Runs the built `raypack bench` on small scenes, plain, --vs embree and --grid, and checks that it exits 0,
  * that its JSON has the documented keys and that every mode and engine found the same hits. Its
  * speed is not checked: tests do not time. */
 #include "rp_test.h"
@@ -333,6 +333,62 @@ static void check_vs_json(const jvalue *root, const char *what) {
     }
 }
 
+/* --grid: every level, recursion type and table 2 entry, with the counters of the counted pass. */
+static void check_grid_json(const jvalue *root, const char *what) {
+    CHECKF(json_get(root, "scene") && json_get(root, "scene")->type == J_STRING, "%s: scene", what);
+    CHECKF(json_num(root, "mismatches") == 0, "%s: mismatches", what);
+    const char *levels[] = {"primary", "shadow", "refraction1", "refraction2", "reflection1", "reflection2"};
+    const char *counters[] = {"box_tests", "tri_tests", "frustum_box_culls", "frustum_tri_culls"};
+    for (size_t l = 0; l < sizeof levels / sizeof levels[0]; l++) {
+        const jvalue *lv = json_get(json_get(root, "levels"), levels[l]);
+        CHECKF(json_num(lv, "rays") >= 0, "%s: levels.%s.rays", what, levels[l]);
+        const jvalue *configs = json_get(lv, "configs");
+        CHECKF(configs && configs->count == 34, "%s: levels.%s.configs: 34 of them", what, levels[l]);
+        const jvalue *c = json_get(configs, "n16_auto_frustum");
+        CHECKF(json_num(c, "seconds_median") >= 0 && json_num(c, "mrays") >= 0, "%s: levels.%s n16_auto_frustum",
+               what, levels[l]);
+        for (size_t k = 0; k < sizeof counters / sizeof counters[0]; k++)
+            CHECKF(json_num(json_get(c, "counters"), counters[k]) >= 0, "%s: levels.%s counters.%s", what,
+                   levels[l], counters[k]);
+    }
+    CHECKF(json_num(json_get(json_get(root, "levels"), "primary"), "rays") > 0, "%s: primary rays", what);
+    const char *recursions[] = {"primary", "shadows", "refraction", "reflection"};
+    for (int r = 0; r < 4; r++) {
+        const jvalue *rec = json_get(json_get(root, "recursion"), recursions[r]);
+        const jvalue *configs = json_get(rec, "configs");
+        const char *names[] = {"single", "simd", "n4_masked", "n8_ranged_frustum", "n32_partition_frustum"};
+        for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
+            CHECKF(json_num(json_get(configs, names[i]), "mrays") >= 0, "%s: recursion.%s.configs.%s.mrays",
+                   what, recursions[r], names[i]);
+        const jvalue *t2 = json_get(json_get(root, "table2"), recursions[r]);
+        CHECKF(json_num(t2, "speedup") >= 0 && json_num(t2, "simd_mrays") >= 0, "%s: table2.%s", what,
+               recursions[r]);
+        CHECKF(json_get(t2, "best") && json_get(t2, "best")->type == J_STRING, "%s: table2.%s.best", what,
+               recursions[r]);
+    }
+}
+
+/* A tiny `bench --grid` run: exit status and the JSON's keys, not its speed. */
+static void grid_case(const char *cli, const char *scene, int size) {
+    char json[1024], log[1024], cmd[3 * PATH_MAX + 256];
+    const char *dir = tmp_dir();
+    snprintf(json, sizeof json, "%s/bench_grid.json", dir);
+    snprintf(log, sizeof log, "%s/bench_grid.log", dir);
+    remove(json);
+    snprintf(cmd, sizeof cmd, "'%s' bench '%s' --grid --width %d --height %d --repeats 1 --threads 2 --json '%s'",
+             cli, scene, size, size, json);
+    int rc = run(cmd, log);
+    CHECKF(rc == 0, "grid: `%s` exited with %d", cmd, rc);
+    jvalue root;
+    bool parsed = json_load(json, &root);
+    CHECKF(parsed, "grid: %s is not valid JSON", json);
+    if (parsed) {
+        check_grid_json(&root, "grid");
+        json_free(&root);
+    }
+    if (rc != 0 || !parsed) dump(log);
+}
+
 /* Runs one bench and checks its exit status and JSON; false when Embree was asked for and is absent. */
 static bool bench_case(const char *cli, const char *scene, const char *name, bool vs, int size) {
     char json[1024], log[1024], cmd[4096];
@@ -386,6 +442,8 @@ int main(void) {
     if (cornell && bench_case(cli, cornell, "cornell_vs_embree", true, size) && teapot)
         bench_case(cli, teapot, "teapot_vs_embree", true, size);
 
+    if (cornell) grid_case(cli, cornell, small ? 16 : 48);
+
     /* Usage errors and missing files fail. */
     char cmd[sizeof cli + 128], log[1024];
     snprintf(log, sizeof log, "%s/bench_errors.log", tmp_dir());
@@ -394,6 +452,8 @@ int main(void) {
     snprintf(cmd, sizeof cmd, "'%s' bench --threads 0", cli);
     CHECK(run(cmd, log) != 0);
     snprintf(cmd, sizeof cmd, "'%s' bench --vs nothing", cli);
+    CHECK(run(cmd, log) != 0);
+    snprintf(cmd, sizeof cmd, "'%s' bench --grid --vs embree", cli);
     CHECK(run(cmd, log) != 0);
     snprintf(cmd, sizeof cmd, "'%s' bench /no/such/scene.obj --width 8 --height 8", cli);
     CHECK(run(cmd, log) != 0);

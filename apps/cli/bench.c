@@ -436,7 +436,130 @@ static void rp_trace_array_incoherent(void *engine, const bench_rays *set, size_
     rp_trace_array(engine, set, first, n, out, scratch, RP_QUERY_INCOHERENT);
 }
 
-int bench_raypack_modes(rp_scene *scene, bool occlusion, bench_mode *modes, int max) {
+/* ---- large packets (Overbeck et al. 2008) -------------------------------------------------- */
+
+/* Packet arrays in a thread's scratch buffer: 17 ray and hit arrays of a 32x32 packet plus its
+ * valid mask, then the counters, all inside the BENCH_CHUNK * BENCH_SCRATCH_RAY_BYTES bytes. */
+#define BENCH_N_ARRAYS 18
+#define BENCH_COUNTERS_OFFSET ((size_t)BENCH_N_ARRAYS * RP_PACKET_N_MAX * RP_PACKET_N_MAX * 4)
+_Static_assert(BENCH_COUNTERS_OFFSET % 64 == 0 &&
+                   BENCH_COUNTERS_OFFSET + sizeof(rp_counters_n) <=
+                       (size_t)BENCH_CHUNK * BENCH_SCRATCH_RAY_BYTES,
+               "a 32x32 packet and the counters fit in a thread's scratch");
+
+rp_counters_n *bench_scratch_counters(void *scratch) {
+    return (rp_counters_n *)(void *)((char *)scratch + BENCH_COUNTERS_OFFSET);
+}
+
+void bench_n_engine_init(bench_n_engine *e, rp_scene *scene, uint32_t n, rp_traversal traversal,
+                         rp_frustum_kind frustum, const float *point) {
+    memset(e, 0, sizeof *e);
+    e->scene = scene;
+    e->n = n;
+    e->desc.traversal = traversal;
+    e->desc.frustum = frustum;
+    if (point) memcpy(e->desc.point, point, sizeof e->desc.point);
+    /* Packet p covers the block's pixels [px*n, px*n+n) x [py*n, py*n+n); its ray (x, y) is in the
+     * 4x4 tile (lx/4, ly/4) of the block at (lx%4, ly%4), as slot_pixel reads a chunk. */
+    uint32_t per_side = BENCH_BLOCK / n, per = n * n;
+    for (uint32_t p = 0; p < per_side * per_side; p++)
+        for (uint32_t y = 0; y < n; y++)
+            for (uint32_t x = 0; x < n; x++) {
+                uint32_t lx = (p % per_side) * n + x, ly = (p / per_side) * n + y;
+                uint32_t slot = ((ly / BENCH_TILE) * (BENCH_BLOCK / BENCH_TILE) + lx / BENCH_TILE) *
+                                    (BENCH_TILE * BENCH_TILE) +
+                                (ly % BENCH_TILE) * BENCH_TILE + lx % BENCH_TILE;
+                e->slot_of[p * per + rp_packet_n_index(n, x, y)] = (uint16_t)slot;
+            }
+}
+
+/* Points the arrays of an n x n packet into a thread's scratch; returns its valid mask. */
+static int32_t *packet_in_scratch(void *scratch, uint32_t n, rp_rayhit_n *p) {
+    char *mem = scratch;
+    size_t each = (size_t)n * n * 4;
+    float **f[13] = {&p->org_x, &p->org_y, &p->org_z, &p->tnear, &p->dir_x, &p->dir_y, &p->dir_z,
+                     &p->tfar, &p->Ng_x, &p->Ng_y, &p->Ng_z, &p->u, &p->v};
+    memset(p, 0, sizeof *p);
+    p->n = n;
+    for (int i = 0; i < 13; i++) *f[i] = (float *)(void *)(mem + (size_t)i * each);
+    p->prim_id = (uint32_t *)(void *)(mem + 13 * each);
+    p->geom_id = (uint32_t *)(void *)(mem + 14 * each);
+    p->inst_id = (uint32_t *)(void *)(mem + 15 * each);
+    int32_t *valid = (int32_t *)(void *)(mem + 16 * each);
+    p->valid = valid;
+    return valid;
+}
+
+/* One chunk in n x n packets built from the set's rays (the same numbers as every other mode);
+ * packets without a live ray are skipped, as by the other packet modes. */
+static void trace_n(const bench_n_engine *e, const bench_rays *set, size_t first, size_t count,
+                    bench_hits *out, void *scratch, bool occlusion) {
+    rp_rayhit_n p;
+    int32_t *valid = packet_in_scratch(scratch, e->n, &p);
+    rp_query_n_desc desc = e->desc;
+    desc.counters = e->count ? bench_scratch_counters(scratch) : NULL;
+    size_t per = (size_t)e->n * e->n;
+    for (size_t base = 0; base + per <= count; base += per) {
+        const uint16_t *slot_of = e->slot_of + base;
+        int32_t any = 0;
+        for (size_t q = 0; q < per; q++) {
+            size_t s = first + slot_of[q];
+            const bench_ray *b = &set->rays[s];
+            valid[q] = set->valid[s];
+            any |= valid[q];
+            p.org_x[q] = b->org[0];
+            p.org_y[q] = b->org[1];
+            p.org_z[q] = b->org[2];
+            p.tnear[q] = b->tnear;
+            p.dir_x[q] = b->dir[0];
+            p.dir_y[q] = b->dir[1];
+            p.dir_z[q] = b->dir[2];
+            p.tfar[q] = b->tfar;
+            p.geom_id[q] = RP_INVALID_ID;
+            p.prim_id[q] = RP_INVALID_ID;
+        }
+        if (!any) continue;
+        if (occlusion)
+            rp_occluded_n(e->scene, &desc, &p);
+        else
+            rp_intersect_n(e->scene, &desc, &p);
+        for (size_t q = 0; q < per; q++) {
+            if (!valid[q]) continue;
+            size_t s = first + slot_of[q];
+            bool hit = !occlusion && p.geom_id[q] != RP_INVALID_ID;
+            out->t[s] = occlusion ? p.tfar[q] : hit ? p.tfar[q] : INFINITY;
+            out->prim[s] = hit ? p.prim_id[q] : RP_INVALID_ID;
+        }
+    }
+}
+
+void bench_trace_n_intersect(void *engine, const bench_rays *set, size_t first, size_t n,
+                             bench_hits *out, void *scratch) {
+    trace_n(engine, set, first, n, out, scratch, false);
+}
+
+void bench_trace_n_occluded(void *engine, const bench_rays *set, size_t first, size_t n,
+                            bench_hits *out, void *scratch) {
+    trace_n(engine, set, first, n, out, scratch, true);
+}
+
+/* The frustum that bounds a set's packets: primary rays share the eye, shadow rays the light. */
+static rp_frustum_kind set_frustum(bench_kind kind) {
+    switch (kind) {
+    case BENCH_PRIMARY: return RP_FRUSTUM_PRIMARY;
+    case BENCH_SHADOW: return RP_FRUSTUM_SHADOW;
+    case BENCH_REFLECTION:
+    case BENCH_DIFFUSE:
+    case BENCH_KIND_COUNT: break;
+    }
+    return RP_FRUSTUM_SECONDARY;
+}
+
+int bench_raypack_modes(bench_ctx *ctx, const bench_rays *set, bench_mode *modes, int max) {
+    rp_scene *scene = ctx->scene;
+    bool occlusion = set->occlusion;
+    bench_n_engine *ne = ctx->n_engines[set->kind];
+    bench_trace_fn n_fn = occlusion ? bench_trace_n_occluded : bench_trace_n_intersect;
     const bench_mode all[] = {
         {"single", occlusion ? rp_trace_occluded1 : rp_trace_intersect1, scene},
         {"packet4", occlusion ? rp_trace_occluded4 : rp_trace_intersect4, scene},
@@ -444,9 +567,17 @@ int bench_raypack_modes(rp_scene *scene, bool occlusion, bench_mode *modes, int 
         {"packet16", occlusion ? rp_trace_occluded16 : rp_trace_intersect16, scene},
         {"array_coherent", rp_trace_array_coherent, scene},
         {"array_incoherent", rp_trace_array_incoherent, scene},
+        {"n16_auto_frustum", n_fn, &ne[0]},
+        {"n8_auto_frustum", n_fn, &ne[1]},
     };
     int n = (int)(sizeof all / sizeof all[0]);
     if (n > max) n = max;
+    /* The large-packet engines live in ctx so that the modes can point at them. */
+    if (n > 6) {
+        rp_frustum_kind fr = set_frustum(set->kind);
+        bench_n_engine_init(&ne[0], scene, 16, RP_TRAVERSAL_AUTO, fr, ctx->light);
+        bench_n_engine_init(&ne[1], scene, 8, RP_TRAVERSAL_AUTO, fr, ctx->light);
+    }
     for (int i = 0; i < n; i++) modes[i] = all[i];
     return n;
 }
@@ -598,8 +729,7 @@ static void slot_pixel(int width, size_t slot, int *x, int *y) {
          (int)(pix / BENCH_TILE);
 }
 
-/* Allocates an empty set covering the image in whole 32x32 blocks. */
-static bool rays_alloc(bench_rays *set, bench_kind kind, int width, int height) {
+bool bench_rays_alloc(bench_rays *set, bench_kind kind, int width, int height) {
     size_t blocks = (size_t)((width + BENCH_BLOCK - 1) / BENCH_BLOCK) *
                     (size_t)((height + BENCH_BLOCK - 1) / BENCH_BLOCK);
     memset(set, 0, sizeof *set);
@@ -612,8 +742,7 @@ static bool rays_alloc(bench_rays *set, bench_kind kind, int width, int height) 
     return set->rays && set->valid;
 }
 
-/* Frees a set. */
-static void rays_free(bench_rays *set) {
+void bench_rays_free(bench_rays *set) {
     free(set->rays);
     free(set->valid);
     memset(set, 0, sizeof *set);
@@ -753,11 +882,22 @@ static float rand_pixel(uint32_t pixel, uint32_t dim) {
     return (float)(h >> 8) * 0x1p-24f;
 }
 
-/* Shadow, reflection and diffuse rays from the reference primary hits: each leaves its hit point
- * on the side the primary ray came from, offset along the normal to avoid re-hitting its surface. */
-static void make_secondary(bench_ctx *ctx, bench_rays *set) {
-    const bench_rays *prim = &ctx->sets[BENCH_PRIMARY];
-    const bench_hits *hits = &ctx->ref[BENCH_PRIMARY];
+/* Refracted direction of unit d through a surface of facing normal n (dot(d, n) < 0), entering
+ * when the triangle's own normal faces d (ior 1.5 inside); false on total internal reflection. */
+static bool refract_dir(const float *d, const float *n, bool entering, float *out) {
+    float eta = entering ? 1.0f / 1.5f : 1.5f;
+    float cosi = -dot3(d, n);
+    float k = 1.0f - eta * eta * (1.0f - cosi * cosi);
+    if (k < 0.0f) return false;
+    for (int j = 0; j < 3; j++) out[j] = eta * d[j] + (eta * cosi - sqrtf(k)) * n[j];
+    normalize3(out);
+    return true;
+}
+
+/* Shadow, reflection, refraction and diffuse rays from reference hits: each leaves its hit point
+ * offset along the normal (to the side it goes to) so that it does not re-hit its surface. */
+void bench_make_next(const bench_ctx *ctx, const bench_rays *prim, const bench_hits *hits,
+                     bench_rays *set, bench_next how) {
     const bench_mesh *mesh = &ctx->mesh;
     float diag = 0.0f;
     for (int k = 0; k < 3; k++) diag += (mesh->upper[k] - mesh->lower[k]) * (mesh->upper[k] - mesh->lower[k]);
@@ -777,15 +917,18 @@ static void make_secondary(bench_ctx *ctx, bench_rays *set) {
         cross3(n, e1, e2);
         normalize3(n);
         if (dot3(n, n) == 0.0f) continue;
-        if (dot3(n, in->dir) > 0.0f)
+        bool entering = dot3(n, in->dir) < 0.0f;
+        if (!entering)
             for (int k = 0; k < 3; k++) n[k] = -n[k];
-        for (int k = 0; k < 3; k++) p[k] = in->org[k] + hits->t[i] * in->dir[k] + eps * n[k];
+        /* A refracted ray starts below the surface. */
+        float side = how == BENCH_NEXT_REFRACT ? -eps : eps;
+        for (int k = 0; k < 3; k++) p[k] = in->org[k] + hits->t[i] * in->dir[k] + side * n[k];
         bench_ray *out = &set->rays[i];
         memcpy(out->org, p, sizeof p);
         out->tnear = 0.0f;
         out->tfar = INFINITY;
-        switch (set->kind) {
-        case BENCH_SHADOW: {
+        switch (how) {
+        case BENCH_NEXT_SHADOW: {
             float d[3] = {ctx->light[0] - p[0], ctx->light[1] - p[1], ctx->light[2] - p[2]};
             float dist = sqrtf(dot3(d, d));
             /* A light behind the surface needs no ray. */
@@ -794,13 +937,19 @@ static void make_secondary(bench_ctx *ctx, bench_rays *set) {
             out->tfar = dist * (1.0f - 1e-4f);
             break;
         }
-        case BENCH_REFLECTION: {
+        case BENCH_NEXT_REFRACT: {
+            float d[3] = {in->dir[0], in->dir[1], in->dir[2]};
+            normalize3(d);
+            if (!refract_dir(d, n, entering, out->dir)) continue;
+            break;
+        }
+        case BENCH_NEXT_REFLECT: {
             float dn = dot3(in->dir, n);
             for (int k = 0; k < 3; k++) out->dir[k] = in->dir[k] - 2.0f * dn * n[k];
             normalize3(out->dir);
             break;
         }
-        case BENCH_DIFFUSE: {
+        case BENCH_NEXT_DIFFUSE: {
             int x, y;
             slot_pixel(ctx->opts.width, i, &x, &y);
             uint32_t pixel = (uint32_t)y * (uint32_t)ctx->opts.width + (uint32_t)x;
@@ -816,13 +965,18 @@ static void make_secondary(bench_ctx *ctx, bench_rays *set) {
             normalize3(out->dir);
             break;
         }
-        case BENCH_PRIMARY:
-        case BENCH_KIND_COUNT:
-            continue;
         }
         set->valid[i] = -1;
         set->count++;
     }
+}
+
+/* Shadow, reflection and diffuse rays from the reference primary hits. */
+static void make_secondary(bench_ctx *ctx, bench_rays *set) {
+    bench_next how = set->kind == BENCH_SHADOW       ? BENCH_NEXT_SHADOW
+                     : set->kind == BENCH_REFLECTION ? BENCH_NEXT_REFLECT
+                                                     : BENCH_NEXT_DIFFUSE;
+    bench_make_next(ctx, &ctx->sets[BENCH_PRIMARY], &ctx->ref[BENCH_PRIMARY], set, how);
 }
 
 /* ---- setting up a run ----------------------------------------------------------------------- */
@@ -833,8 +987,12 @@ static void usage(FILE *f) {
             "  Times raypack's query modes (single rays, 4/8/16-wide packets, ray arrays) on\n"
             "  primary, shadow, reflection and diffuse rays; no SCENE: a generated sphere field.\n"
             "  --vs embree        raypack against Embree on the same rays, in one process\n"
+            "  --grid             the experiment grid of Overbeck et al. 2008 (sec. 5): masked,\n"
+            "                     ranged, partition and auto traversal x 4x4..32x32 packets x\n"
+            "                     primary / +shadows / 2-deep refraction / 2-bounce reflection,\n"
+            "                     frusta off and on, against single and SIMD rays (repeats 3)\n"
             "  --threads N        tracing threads (default 2); plain bench also times 1 thread\n"
-            "  --repeats N        timed repeats per mode (default 5; median, min, max)\n"
+            "  --repeats N        timed repeats per mode (default 5, --grid 3; median, min, max)\n"
             "  --warmup N         untimed passes per mode first (default 1)\n"
             "  --width W --height H   primary rays (default 1024x1024)\n"
             "  --eye x,y,z --look x,y,z --up x,y,z --fov DEG   override the scene's camera\n"
@@ -860,6 +1018,10 @@ static int parse_args(int argc, char **argv, bench_opts *o) {
             o->scene_path = a;
             continue;
         }
+        if (strcmp(a, "--grid") == 0) {
+            o->grid = true;
+            continue;
+        }
         const char *val = cli_flag_value(cmd, argc, argv, &i);
         if (!val) return CLI_EXIT_USAGE;
         bool ok = true;
@@ -871,6 +1033,7 @@ static int parse_args(int argc, char **argv, bench_opts *o) {
             ok = cli_parse_int(cmd, a, val, 1, CLI_MAX_THREADS, &o->threads);
         } else if (strcmp(a, "--repeats") == 0) {
             ok = cli_parse_int(cmd, a, val, 1, 1000, &o->repeats);
+            o->repeats_set = true;
         } else if (strcmp(a, "--warmup") == 0) {
             ok = cli_parse_int(cmd, a, val, 0, 1000, &o->warmup);
         } else if (strcmp(a, "--width") == 0) {
@@ -998,18 +1161,18 @@ rp_scene *bench_build_raypack(bench_ctx *ctx, double *wall_ms, rp_scene_stats *s
 /* Generates the four ray sets; the secondary ones start at raypack's single-ray primary hits. */
 static bool make_ray_sets(bench_ctx *ctx) {
     for (int k = 0; k < BENCH_KIND_COUNT; k++)
-        if (!rays_alloc(&ctx->sets[k], (bench_kind)k, ctx->opts.width, ctx->opts.height) ||
+        if (!bench_rays_alloc(&ctx->sets[k], (bench_kind)k, ctx->opts.width, ctx->opts.height) ||
             !bench_hits_alloc(&ctx->ref[k], ctx->sets[k].slots))
             return false;
     finish_camera_and_light(ctx);
     make_primary(&ctx->sets[BENCH_PRIMARY], &ctx->camera, ctx->opts.width, ctx->opts.height);
     bench_mode single[1];
-    bench_raypack_modes(ctx->scene, false, single, 1);
+    bench_raypack_modes(ctx, &ctx->sets[BENCH_PRIMARY], single, 1);
     bench_trace_set(ctx, ctx->opts.threads, &single[0], &ctx->sets[BENCH_PRIMARY],
                     &ctx->ref[BENCH_PRIMARY]);
     for (int k = BENCH_SHADOW; k < BENCH_KIND_COUNT; k++) {
         make_secondary(ctx, &ctx->sets[k]);
-        bench_raypack_modes(ctx->scene, ctx->sets[k].occlusion, single, 1);
+        bench_raypack_modes(ctx, &ctx->sets[k], single, 1);
         bench_trace_set(ctx, ctx->opts.threads, &single[0], &ctx->sets[k], &ctx->ref[k]);
     }
     return true;
@@ -1018,7 +1181,7 @@ static bool make_ray_sets(bench_ctx *ctx) {
 /* Releases everything setup and the ray sets made, in reverse order. */
 static void teardown(bench_ctx *ctx) {
     for (int k = 0; k < BENCH_KIND_COUNT; k++) {
-        rays_free(&ctx->sets[k]);
+        bench_rays_free(&ctx->sets[k]);
         bench_hits_free(&ctx->ref[k]);
     }
     if (ctx->scratch.per_thread)
@@ -1085,7 +1248,7 @@ static int bench_core(bench_ctx *ctx) {
     int failed = 0;
     for (int k = 0; k < BENCH_KIND_COUNT; k++) {
         bench_rays *set = &ctx->sets[k];
-        nmodes[k] = bench_raypack_modes(ctx->scene, set->occlusion, modes[k], BENCH_MAX_MODES);
+        nmodes[k] = bench_raypack_modes(ctx, set, modes[k], BENCH_MAX_MODES);
         for (int m = 1; m < nmodes[k]; m++) {
             bench_trace_set(ctx, ctx->opts.threads, &modes[k][m], set, &hits);
             bench_diff d = bench_compare(&ctx->mesh, set, &ctx->ref[k], &hits);
@@ -1200,6 +1363,11 @@ int cli_bench(int argc, char **argv) {
     memset(&ctx, 0, sizeof ctx);
     int rc = parse_args(argc, argv, &ctx.opts);
     if (rc) return rc < 0 ? CLI_EXIT_OK : rc;
+    if (ctx.opts.grid && ctx.opts.vs_embree) {
+        fprintf(stderr, "raypack bench: --grid and --vs embree are separate runs\n");
+        return CLI_EXIT_USAGE;
+    }
+    if (ctx.opts.grid && !ctx.opts.repeats_set) ctx.opts.repeats = 3;
 #if !defined(RP_HAVE_EMBREE)
     if (ctx.opts.vs_embree) {
         fprintf(stderr, "raypack bench: --vs embree: raypack was built without Embree "
@@ -1219,7 +1387,7 @@ int cli_bench(int argc, char **argv) {
         return rc;
     }
 #endif
-    rc = bench_core(&ctx);
+    rc = ctx.opts.grid ? bench_grid(&ctx) : bench_core(&ctx);
     teardown(&ctx);
     return rc;
 }

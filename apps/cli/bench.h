@@ -24,6 +24,8 @@ typedef struct bench_opts {
     const char *scene_path;  /* NULL: the generated sphere field */
     const char *json_path;   /* NULL: no JSON */
     bool vs_embree;
+    bool grid;               /* --grid: the experiment grid of Overbeck et al. 2008, sec. 5 */
+    bool repeats_set;        /* --repeats was given (the grid's default differs) */
     int threads;             /* >= 1 */
     int repeats;             /* timed repeats per mode */
     int warmup;              /* untimed passes per mode before timing */
@@ -115,6 +117,28 @@ typedef struct bench_scratch {
     int threads;
 } bench_scratch;
 
+/* How a large-packet mode traces a set: n x n packets of screen tiles (n = 4, 8, 16 or 32 divides
+ * BENCH_BLOCK, so a chunk is a whole number of packets), with one rp_query_n_desc. slot_of maps
+ * packet-major, then rp_packet_n_index order to a slot of the chunk. */
+typedef struct bench_n_engine {
+    rp_scene *scene;
+    uint32_t n;
+    rp_query_n_desc desc;    /* counters: ignored (see count) */
+    bool count;              /* add the work to the tracing thread's bench_scratch_counters */
+    uint16_t slot_of[BENCH_CHUNK];
+} bench_n_engine;
+
+/* Large-packet modes each set gets in bench_raypack_modes: 16x16 and 8x8, auto, frustum on. */
+#define BENCH_N_MODES 2
+
+/* How bench_make_next makes a ray from the hit of its parent. */
+typedef enum bench_next {
+    BENCH_NEXT_SHADOW = 0,   /* to the light, ending just before it; none when the light is behind */
+    BENCH_NEXT_REFLECT = 1,  /* mirror reflection */
+    BENCH_NEXT_REFRACT = 2,  /* refraction only, ior 1.5 (none on total internal reflection) */
+    BENCH_NEXT_DIFFUSE = 3   /* cosine-distributed, random from (pixel, dimension) */
+} bench_next;
+
 /* Everything a run needs once the scene is loaded. */
 typedef struct bench_ctx {
     bench_opts opts;
@@ -128,6 +152,7 @@ typedef struct bench_ctx {
     bench_rays sets[BENCH_KIND_COUNT];
     bench_hits ref[BENCH_KIND_COUNT]; /* raypack's single-ray hits */
     bench_scratch scratch;
+    bench_n_engine n_engines[BENCH_KIND_COUNT][BENCH_N_MODES]; /* of bench_raypack_modes */
 } bench_ctx;
 
 /* Name of a ray set kind ("primary", ...). */
@@ -156,14 +181,37 @@ void bench_set_ftz(void);
 /* Writes a JSON string literal. */
 void bench_json_string(FILE *f, const char *s);
 
-/* raypack's query modes for a set (single, packet4/8/16, array with each hint); returns the count. */
-int bench_raypack_modes(rp_scene *scene, bool occlusion, bench_mode *modes, int max);
+/* raypack's query modes for a set of ctx (single, packet4/8/16, array with each hint, then 16x16
+ * and 8x8 large packets with auto traversal and the set's frustum); returns the count. */
+int bench_raypack_modes(bench_ctx *ctx, const bench_rays *set, bench_mode *modes, int max);
+/* Fills a large-packet engine; frustum RP_FRUSTUM_SHADOW heads to `point` (may be NULL otherwise). */
+void bench_n_engine_init(bench_n_engine *e, rp_scene *scene, uint32_t n, rp_traversal traversal,
+                         rp_frustum_kind frustum, const float *point);
+/* Trace functions of a bench_n_engine: rp_intersect_n and rp_occluded_n on whole chunks. */
+void bench_trace_n_intersect(void *engine, const bench_rays *set, size_t first, size_t n,
+                             bench_hits *out, void *scratch);
+/* See bench_trace_n_intersect. */
+void bench_trace_n_occluded(void *engine, const bench_rays *set, size_t first, size_t n,
+                            bench_hits *out, void *scratch);
+/* The counters kept in a thread's scratch buffer, where counted large-packet modes add their work. */
+rp_counters_n *bench_scratch_counters(void *scratch);
+/* Allocates an empty set of a kind covering the image in whole 32x32 blocks. */
+bool bench_rays_alloc(bench_rays *set, bench_kind kind, int width, int height);
+/* Frees a set. */
+void bench_rays_free(bench_rays *set);
+/* Fills out (allocated, empty) with the rays leaving the hits of parent: one per slot whose parent
+ * ray hit a triangle, from the hit point offset along the normal to the side the ray leaves to. */
+void bench_make_next(const bench_ctx *ctx, const bench_rays *parent, const bench_hits *parent_hits,
+                     bench_rays *out, bench_next how);
 /* Builds raypack's scene over ctx->mesh on ctx->device; NULL (after a message) on error. */
 rp_scene *bench_build_raypack(bench_ctx *ctx, double *wall_ms, rp_scene_stats *stats);
 /* Generates the ray sets and raypack's single-ray reference hits (needs ctx->scene). */
 bool bench_make_ray_sets(bench_ctx *ctx);
 /* Prints the scene, camera, light and device lines. */
 void bench_print_header(const bench_ctx *ctx);
+
+/* `raypack bench --grid`: the paper's experiment grid (bench_grid.c); returns the exit code. */
+int bench_grid(bench_ctx *ctx);
 
 #if defined(RP_HAVE_EMBREE)
 /* `raypack bench --vs embree`: both engines on the same rays; returns the exit code. */

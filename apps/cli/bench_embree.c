@@ -446,7 +446,7 @@ int bench_vs_embree(bench_ctx *ctx) {
         r->engine.scene = emb_scene;
         r->engine.flags = set->coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT
                                         : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
-        r->rp_count = bench_raypack_modes(ctx->scene, set->occlusion, r->rp_modes, EMB_MAX_MODES);
+        r->rp_count = bench_raypack_modes(ctx, set, r->rp_modes, EMB_MAX_MODES);
         r->emb_count = emb_modes(&r->engine, set->occlusion, r->emb_modes);
         for (int m = 1; m < r->rp_count; m++) {
             bench_trace_set(ctx, ctx->opts.threads, &r->rp_modes[m], set, &hits);

@@ -1,0 +1,353 @@
+/* `raypack bench SCENE --grid`: the experiment grid of Overbeck, Ramamoorthi and Mark 2008, sec. 5.
+ * Masked, ranged, partition and auto traversal x 4x4..32x32 packets x frusta off and on, and single
+ * and SIMD rays as baselines, on four kinds of ray recursion: primary rays; primary rays and
+ * point-light shadows; 2-deep refraction with every surface refractive (ior 1.5, refraction only,
+ * as sec. 5.1); 2-bounce reflection with every surface a mirror. The bench makes the rays itself,
+ * level by level from single-ray hits (no renderer), checks every configuration's hits against
+ * them, then times each level; a recursion type's time is the sum of its levels' median times. */
+#include "bench.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Levels of rays; a recursion type is a list of them (the primary level serves all four). */
+enum {
+    GRID_PRIMARY,
+    GRID_SHADOW,
+    GRID_REFRACT1,
+    GRID_REFRACT2,
+    GRID_REFLECT1,
+    GRID_REFLECT2,
+    GRID_LEVELS
+};
+static const char *const grid_level_names[GRID_LEVELS] = {"primary",     "shadow",      "refraction1",
+                                                         "refraction2", "reflection1", "reflection2"};
+
+enum { GRID_RECURSIONS = 4, GRID_MAX_DEPTH = 3 };
+static const char *const grid_recursion_names[GRID_RECURSIONS] = {"primary", "shadows", "refraction",
+                                                                  "reflection"};
+/* Levels of each recursion type, -1 terminated. */
+static const int grid_recursion_levels[GRID_RECURSIONS][GRID_MAX_DEPTH + 1] = {
+    {GRID_PRIMARY, -1, -1, -1},
+    {GRID_PRIMARY, GRID_SHADOW, -1, -1},
+    {GRID_PRIMARY, GRID_REFRACT1, GRID_REFRACT2, -1},
+    {GRID_PRIMARY, GRID_REFLECT1, GRID_REFLECT2, -1},
+};
+
+/* Single and SIMD rays, then 4 algorithms x 4 sizes x frustum off/on. */
+enum { GRID_ALGORITHMS = 4, GRID_SIZES = 4, GRID_CONFIGS = 2 + GRID_ALGORITHMS * GRID_SIZES * 2 };
+static const rp_traversal grid_algorithms[GRID_ALGORITHMS] = {RP_TRAVERSAL_MASKED, RP_TRAVERSAL_RANGED,
+                                                              RP_TRAVERSAL_PARTITION, RP_TRAVERSAL_AUTO};
+static const char *const grid_algorithm_names[GRID_ALGORITHMS] = {"masked", "ranged", "partition", "auto"};
+static const uint32_t grid_sizes[GRID_SIZES] = {4, 8, 16, 32};
+
+/* One column of the grid. */
+typedef struct grid_config {
+    char name[32];
+    rp_traversal traversal;
+    uint32_t n;
+    bool frustum;
+} grid_config;
+
+/* One level of rays with its single-ray hits, and what each configuration did on it. */
+typedef struct grid_level {
+    bench_rays *set;
+    bench_hits *ref;
+    rp_frustum_kind frustum;   /* the level's frustum when frusta are on */
+    bench_stat seconds[GRID_CONFIGS];
+    rp_counters_n counters[GRID_CONFIGS];
+} grid_level;
+
+typedef struct grid_run {
+    bench_ctx *ctx;
+    grid_config configs[GRID_CONFIGS];
+    grid_level levels[GRID_LEVELS];
+    bench_rays own_sets[GRID_LEVELS];  /* the levels bench_make_ray_sets does not make */
+    bench_hits own_refs[GRID_LEVELS];
+    bench_n_engine engine;             /* the configuration being traced */
+} grid_run;
+
+/* The 34 configurations: baselines first, then by algorithm, size and frustum. */
+static void grid_make_configs(grid_config *c) {
+    c[0] = (grid_config){"single", RP_TRAVERSAL_SINGLE, 16, false};
+    c[1] = (grid_config){"simd", RP_TRAVERSAL_SIMD, 16, false};
+    int i = 2;
+    for (int a = 0; a < GRID_ALGORITHMS; a++)
+        for (int s = 0; s < GRID_SIZES; s++)
+            for (int f = 0; f < 2; f++, i++) {
+                c[i].traversal = grid_algorithms[a];
+                c[i].n = grid_sizes[s];
+                c[i].frustum = f != 0;
+                snprintf(c[i].name, sizeof c[i].name, "n%u_%s%s", grid_sizes[s], grid_algorithm_names[a],
+                         f ? "_frustum" : "");
+            }
+}
+
+/* Index of a configuration, -1 when absent. */
+static int grid_find(const grid_run *g, rp_traversal traversal, uint32_t n, bool frustum) {
+    for (int i = 0; i < GRID_CONFIGS; i++)
+        if (g->configs[i].traversal == traversal && g->configs[i].n == n && g->configs[i].frustum == frustum)
+            return i;
+    return -1;
+}
+
+/* The mode tracing level l with configuration c (through g->engine, valid until the next call). */
+static bench_mode grid_mode(grid_run *g, int l, int c, bool count) {
+    const grid_config *cfg = &g->configs[c];
+    const grid_level *lv = &g->levels[l];
+    bench_n_engine_init(&g->engine, g->ctx->scene, cfg->n, cfg->traversal,
+                        cfg->frustum ? lv->frustum : RP_FRUSTUM_NONE, g->ctx->light);
+    g->engine.count = count;
+    bench_mode m = {cfg->name, lv->set->occlusion ? bench_trace_n_occluded : bench_trace_n_intersect,
+                    &g->engine};
+    return m;
+}
+
+/* Makes a level from the hits of its parent, with its single-ray hits. */
+static bool grid_make_level(grid_run *g, int l, int parent, bench_next how) {
+    bench_ctx *ctx = g->ctx;
+    bench_rays *set = &g->own_sets[l];
+    bench_hits *ref = &g->own_refs[l];
+    if (!bench_rays_alloc(set, BENCH_REFLECTION, ctx->opts.width, ctx->opts.height) ||
+        !bench_hits_alloc(ref, set->slots))
+        return false;
+    bench_make_next(ctx, g->levels[parent].set, g->levels[parent].ref, set, how);
+    bench_mode single[1];
+    bench_raypack_modes(ctx, set, single, 1);
+    bench_trace_set(ctx, ctx->opts.threads, &single[0], set, ref);
+    g->levels[l] = (grid_level){.set = set, .ref = ref, .frustum = RP_FRUSTUM_SECONDARY};
+    return true;
+}
+
+/* Every level: primary, shadow and first reflection from the plain bench's sets, the rest here. */
+static bool grid_make_levels(grid_run *g) {
+    bench_ctx *ctx = g->ctx;
+    if (!bench_make_ray_sets(ctx)) return false;
+    g->levels[GRID_PRIMARY] = (grid_level){.set = &ctx->sets[BENCH_PRIMARY], .ref = &ctx->ref[BENCH_PRIMARY],
+                                           .frustum = RP_FRUSTUM_PRIMARY};
+    g->levels[GRID_SHADOW] = (grid_level){.set = &ctx->sets[BENCH_SHADOW], .ref = &ctx->ref[BENCH_SHADOW],
+                                          .frustum = RP_FRUSTUM_SHADOW};
+    g->levels[GRID_REFLECT1] = (grid_level){.set = &ctx->sets[BENCH_REFLECTION],
+                                            .ref = &ctx->ref[BENCH_REFLECTION], .frustum = RP_FRUSTUM_SECONDARY};
+    return grid_make_level(g, GRID_REFLECT2, GRID_REFLECT1, BENCH_NEXT_REFLECT) &&
+           grid_make_level(g, GRID_REFRACT1, GRID_PRIMARY, BENCH_NEXT_REFRACT) &&
+           grid_make_level(g, GRID_REFRACT2, GRID_REFRACT1, BENCH_NEXT_REFRACT);
+}
+
+/* Every configuration on every level against the single-ray hits; false on any mismatch. */
+static bool grid_check(grid_run *g, bench_hits *hits) {
+    bench_ctx *ctx = g->ctx;
+    bool ok = true;
+    for (int l = 0; l < GRID_LEVELS; l++) {
+        const grid_level *lv = &g->levels[l];
+        for (int c = 0; c < GRID_CONFIGS; c++) {
+            bench_mode m = grid_mode(g, l, c, false);
+            bench_trace_set(ctx, ctx->opts.threads, &m, lv->set, hits);
+            bench_diff d = bench_compare(&ctx->mesh, lv->set, lv->ref, hits);
+            if (d.total == 0) continue;
+            fprintf(stderr,
+                    "raypack bench: %s rays: %s disagrees with single rays on %zu of %zu (hit/miss %zu, "
+                    "distance %zu, primitive %zu)\n",
+                    grid_level_names[l], m.name, d.total, lv->set->count, d.hit_miss, d.distance, d.primitive);
+            bench_print_mismatches(&ctx->mesh, lv->set, lv->ref, hits, "single", m.name, 3);
+            ok = false;
+        }
+    }
+    return ok;
+}
+
+/* Times every configuration on every level: the check pass was the first warm-up, --warmup adds
+ * the rest; then `repeats` rounds, configurations taking turns so that drift hits them alike.
+ * Then one counted pass each, apart from the timed ones. */
+static bool grid_time(grid_run *g, bench_hits *hits) {
+    bench_ctx *ctx = g->ctx;
+    int reps = ctx->opts.repeats, threads = ctx->opts.threads;
+    double *samples = calloc((size_t)reps * GRID_CONFIGS, sizeof *samples);
+    if (!samples) return false;
+    for (int l = 0; l < GRID_LEVELS; l++) {
+        grid_level *lv = &g->levels[l];
+        for (int w = 1; w < ctx->opts.warmup; w++)
+            for (int c = 0; c < GRID_CONFIGS; c++) {
+                bench_mode m = grid_mode(g, l, c, false);
+                bench_trace_set(ctx, threads, &m, lv->set, hits);
+            }
+        for (int r = 0; r < reps; r++)
+            for (int c = 0; c < GRID_CONFIGS; c++) {
+                bench_mode m = grid_mode(g, l, c, false);
+                samples[(size_t)c * (size_t)reps + (size_t)r] = bench_trace_set(ctx, threads, &m, lv->set, hits);
+            }
+        for (int c = 0; c < GRID_CONFIGS; c++) {
+            lv->seconds[c] = bench_stats(samples + (size_t)c * (size_t)reps, reps);
+            for (int t = 0; t < ctx->scratch.threads; t++)
+                memset(bench_scratch_counters(ctx->scratch.per_thread[t]), 0, sizeof(rp_counters_n));
+            bench_mode m = grid_mode(g, l, c, true);
+            bench_trace_set(ctx, threads, &m, lv->set, hits);
+            memset(&lv->counters[c], 0, sizeof lv->counters[c]);
+            for (int t = 0; t < ctx->scratch.threads; t++)
+                rp_counters_n_add(&lv->counters[c], bench_scratch_counters(ctx->scratch.per_thread[t]));
+        }
+    }
+    free(samples);
+    return true;
+}
+
+/* Live rays of a recursion type. */
+static size_t grid_rays(const grid_run *g, int r) {
+    size_t n = 0;
+    for (const int *l = grid_recursion_levels[r]; *l >= 0; l++) n += g->levels[*l].set->count;
+    return n;
+}
+
+/* Seconds of a recursion type with a configuration: the sum of its levels' medians. */
+static double grid_seconds(const grid_run *g, int r, int c) {
+    double s = 0.0;
+    for (const int *l = grid_recursion_levels[r]; *l >= 0; l++) s += g->levels[*l].seconds[c].median;
+    return s;
+}
+
+/* Mrays/s of a recursion type with a configuration. */
+static double grid_mrays(const grid_run *g, int r, int c) {
+    double s = grid_seconds(g, r, c);
+    return s > 0.0 ? (double)grid_rays(g, r) / s * 1e-6 : 0.0;
+}
+
+/* Table 2 of the paper for one recursion type: the best 16x16 algorithm with frusta on. */
+static int grid_best16(const grid_run *g, int r) {
+    int best = -1;
+    for (int a = 0; a < GRID_ALGORITHMS; a++) {
+        int c = grid_find(g, grid_algorithms[a], 16, true);
+        if (c >= 0 && (best < 0 || grid_mrays(g, r, c) > grid_mrays(g, r, best))) best = c;
+    }
+    return best;
+}
+
+/* The grid table, then table 2. */
+static void grid_print(const grid_run *g) {
+    printf("\nlive rays:");
+    for (int l = 0; l < GRID_LEVELS; l++) printf(" %s %zu", grid_level_names[l], g->levels[l].set->count);
+    printf("\n\n%-22s", "Mrays/s");
+    for (int r = 0; r < GRID_RECURSIONS; r++) printf(" %11s", grid_recursion_names[r]);
+    printf("\n");
+    for (int c = 0; c < GRID_CONFIGS; c++) {
+        printf("%-22s", g->configs[c].name);
+        for (int r = 0; r < GRID_RECURSIONS; r++) printf(" %11.2f", grid_mrays(g, r, c));
+        printf("\n");
+    }
+    int simd = grid_find(g, RP_TRAVERSAL_SIMD, 16, false);
+    printf("\ntable 2: 16x16 packets, best algorithm, frusta on, over single SIMD rays (width %d)\n",
+           rp_device_isa(g->ctx->device));
+    printf("%-11s %10s %-22s %10s %8s\n", "recursion", "simd", "best 16x16", "Mrays/s", "speedup");
+    for (int r = 0; r < GRID_RECURSIONS; r++) {
+        int b = grid_best16(g, r);
+        double s = grid_mrays(g, r, simd), p = grid_mrays(g, r, b);
+        printf("%-11s %10.2f %-22s %10.2f %8.2f\n", grid_recursion_names[r], s, g->configs[b].name, p,
+               s > 0.0 ? p / s : 0.0);
+    }
+}
+
+/* The counters of one configuration on one level, totals (divide by the level's rays for rates). */
+static void grid_json_counters(FILE *f, const rp_counters_n *c) {
+    fprintf(f,
+            "{\"packets\": %llu, \"box_tests\": %llu, \"tri_tests\": %llu, \"frustum_box_tests\": %llu, "
+            "\"frustum_box_culls\": %llu, \"frustum_tri_tests\": %llu, \"frustum_tri_culls\": %llu}",
+            (unsigned long long)c->packets, (unsigned long long)c->box_tests, (unsigned long long)c->tri_tests,
+            (unsigned long long)c->frustum_box_tests, (unsigned long long)c->frustum_box_culls,
+            (unsigned long long)c->frustum_tri_tests, (unsigned long long)c->frustum_tri_culls);
+}
+
+/* --json: levels (per ray type: seconds, Mrays/s, counters), recursion types, table 2. */
+static bool grid_write_json(const grid_run *g) {
+    const bench_ctx *ctx = g->ctx;
+    FILE *f = fopen(ctx->opts.json_path, "w");
+    if (!f) {
+        fprintf(stderr, "raypack bench: cannot write %s: %s\n", ctx->opts.json_path, strerror(errno));
+        return false;
+    }
+    fprintf(f, "{\"scene\": ");
+    bench_json_string(f, ctx->scene_name);
+    fprintf(f, ", \"triangles\": %zu, \"threads\": %d, \"width\": %d, \"height\": %d, \"repeats\": %d, "
+               "\"simd_width\": %d, \"mismatches\": 0,\n \"levels\": {",
+            ctx->mesh.triangle_count, ctx->opts.threads, ctx->opts.width, ctx->opts.height, ctx->opts.repeats,
+            rp_device_isa(ctx->device));
+    for (int l = 0; l < GRID_LEVELS; l++) {
+        const grid_level *lv = &g->levels[l];
+        fprintf(f, "%s\n  \"%s\": {\"rays\": %zu, \"configs\": {", l ? "," : "", grid_level_names[l],
+                lv->set->count);
+        for (int c = 0; c < GRID_CONFIGS; c++) {
+            bench_stat s = lv->seconds[c];
+            fprintf(f, "%s\n   \"%s\": {\"seconds_median\": %.6f, \"seconds_min\": %.6f, \"seconds_max\": %.6f, "
+                       "\"mrays\": %.4f, \"counters\": ",
+                    c ? "," : "", g->configs[c].name, s.median, s.min, s.max,
+                    s.median > 0.0 ? (double)lv->set->count / s.median * 1e-6 : 0.0);
+            grid_json_counters(f, &lv->counters[c]);
+            fprintf(f, "}");
+        }
+        fprintf(f, "}}");
+    }
+    fprintf(f, "\n },\n \"recursion\": {");
+    for (int r = 0; r < GRID_RECURSIONS; r++) {
+        fprintf(f, "%s\n  \"%s\": {\"rays\": %zu, \"levels\": [", r ? "," : "", grid_recursion_names[r],
+                grid_rays(g, r));
+        for (const int *l = grid_recursion_levels[r]; *l >= 0; l++)
+            fprintf(f, "%s\"%s\"", l == grid_recursion_levels[r] ? "" : ", ", grid_level_names[*l]);
+        fprintf(f, "], \"configs\": {");
+        for (int c = 0; c < GRID_CONFIGS; c++)
+            fprintf(f, "%s\n   \"%s\": {\"seconds\": %.6f, \"mrays\": %.4f}", c ? "," : "", g->configs[c].name,
+                    grid_seconds(g, r, c), grid_mrays(g, r, c));
+        fprintf(f, "}}");
+    }
+    fprintf(f, "\n },\n \"table2\": {");
+    int simd = grid_find(g, RP_TRAVERSAL_SIMD, 16, false);
+    for (int r = 0; r < GRID_RECURSIONS; r++) {
+        int b = grid_best16(g, r);
+        double s = grid_mrays(g, r, simd), p = grid_mrays(g, r, b);
+        fprintf(f, "%s\n  \"%s\": {\"simd_mrays\": %.4f, \"best\": \"%s\", \"best_mrays\": %.4f, \"speedup\": %.4f}",
+                r ? "," : "", grid_recursion_names[r], s, g->configs[b].name, p, s > 0.0 ? p / s : 0.0);
+    }
+    fprintf(f, "\n }\n}\n");
+    if (fclose(f) != 0) {
+        fprintf(stderr, "raypack bench: cannot write %s\n", ctx->opts.json_path);
+        return false;
+    }
+    return true;
+}
+
+int bench_grid(bench_ctx *ctx) {
+    double build_ms;
+    rp_scene_stats st;
+    memset(&st, 0, sizeof st);
+    ctx->scene = bench_build_raypack(ctx, &build_ms, &st);
+    if (!ctx->scene) return 1;
+    grid_run *g = calloc(1, sizeof *g);
+    bench_hits hits = {NULL, NULL};
+    int rc = 1;
+    if (!g) goto done;
+    g->ctx = ctx;
+    grid_make_configs(g->configs);
+    if (!grid_make_levels(g) || !bench_hits_alloc(&hits, ctx->sets[0].slots)) {
+        fprintf(stderr, "raypack bench: out of memory\n");
+        goto done;
+    }
+    bench_print_header(ctx);
+    printf("build     %.2f ms, %llu triangles, depth %u, SAH %.2f\n", build_ms,
+           (unsigned long long)st.triangles, st.depth, st.sah_cost);
+    if (!grid_check(g, &hits)) goto done;
+    printf("check     %d configurations x %d levels find the single-ray hits on every ray\n", GRID_CONFIGS,
+           GRID_LEVELS);
+    fflush(stdout);
+    if (!grid_time(g, &hits)) goto done;
+    grid_print(g);
+    rc = 0;
+    if (ctx->opts.json_path && !grid_write_json(g)) rc = 1;
+done:
+    bench_hits_free(&hits);
+    if (g)
+        for (int l = 0; l < GRID_LEVELS; l++) {
+            bench_rays_free(&g->own_sets[l]);
+            bench_hits_free(&g->own_refs[l]);
+        }
+    free(g);
+    return rc;
+}

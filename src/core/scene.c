@@ -424,6 +424,10 @@ rp_error scene_build(rp_scene *s) {
         .prim_intersect = sphere_intersect_cb,
         .prim_occluded = sphere_occluded_cb,
         .scene = s,
+        /* 1% of the scene's diagonal: a 4x4 tile of hit points is well inside it */
+        .coherent_extent = 0.01f * sqrtf((bounds.hi.x - bounds.lo.x) * (bounds.hi.x - bounds.lo.x) +
+                                         (bounds.hi.y - bounds.lo.y) * (bounds.hi.y - bounds.lo.y) +
+                                         (bounds.hi.z - bounds.lo.z) * (bounds.hi.z - bounds.lo.z)),
     };
     return RP_ERROR_NONE;
 }

@@ -39,6 +39,7 @@ struct rp_accel {
     prim_intersect_fn prim_intersect;
     prim_occluded_fn prim_occluded;
     const void *scene;         /* the rp_scene, for the primitive callbacks */
+    float coherent_extent;     /* packets whose origins spread further are traced ray by ray */
 };
 
 typedef struct rp_kernels {

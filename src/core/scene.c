@@ -368,6 +368,13 @@ rp_error scene_build(rp_scene *s) {
                 }
                 sys_free(a, b2.prims, (size_t)(b2.prim_count ? b2.prim_count : 1) * sizeof(uint32_t));
                 b2.prims = NULL; /* the leaves no longer index it */
+                /* keep only the blocks the leaves use (the capacity was an upper bound) */
+                tri4 *exact = sys_alloc(a, (size_t)pc.next * sizeof(tri4));
+                if (exact) {
+                    memcpy(exact, pc.blocks, (size_t)pc.next * sizeof(tri4));
+                    sys_free(a, pc.blocks, (size_t)pc.capacity * sizeof(tri4));
+                    pc.blocks = exact, pc.capacity = pc.next;
+                }
                 s->tris = pc.blocks;
                 s->tri_block_count = pc.capacity;
                 st.triangles = tris.count;

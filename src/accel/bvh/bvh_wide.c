@@ -130,6 +130,14 @@ bool bvhw_from_bvh2(const sys_allocator *alloc, const bvh2 *src, int width, bvhw
         sys_free(alloc, c.nodes, bytes);
         return false;
     }
+    /* the array was sized for the binary tree's inner nodes; keep only the nodes made */
+    size_t used = (size_t)c.node_count * c.stride;
+    void *exact = sys_alloc(alloc, used);
+    if (exact) {
+        memcpy(exact, c.nodes, used);
+        sys_free(alloc, c.nodes, bytes);
+        c.nodes = exact, bytes = used;
+    }
     out->width = width;
     out->nodes = c.nodes;
     out->node_count = c.node_count;

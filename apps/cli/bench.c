@@ -279,13 +279,6 @@ static inline void fill_rp_ray(rp_ray *r, const bench_ray *b, size_t slot) {
     r->flags = 0;
 }
 
-/* True when any lane of a packet is live (packets of misses are skipped, as by Embree). */
-static inline bool any_valid(const int32_t *valid, int width) {
-    int32_t any = 0;
-    for (int k = 0; k < width; k++) any |= valid[k];
-    return any != 0;
-}
-
 /* rp_intersect1, one ray at a time. */
 static void rp_trace_intersect1(void *engine, const bench_rays *set, size_t first, size_t n,
                                 bench_hits *out, void *scratch) {
@@ -327,7 +320,7 @@ static void rp_trace_occluded1(void *engine, const bench_rays *set, size_t first
         rp_scene *scene = engine;                                                                \
         for (size_t base = first; base < first + n; base += W) {                                 \
             const int32_t *valid = set->valid + base;                                            \
-            if (!any_valid(valid, W)) continue;                                                  \
+            if (!bench_any_valid(valid, W)) continue;                                                  \
             rp_rayhit##W p;                                                                      \
             for (int k = 0; k < W; k++) {                                                        \
                 const bench_ray *b = &set->rays[base + (size_t)k];                               \
@@ -361,7 +354,7 @@ static void rp_trace_occluded1(void *engine, const bench_rays *set, size_t first
         rp_scene *scene = engine;                                                                \
         for (size_t base = first; base < first + n; base += W) {                                 \
             const int32_t *valid = set->valid + base;                                            \
-            if (!any_valid(valid, W)) continue;                                                  \
+            if (!bench_any_valid(valid, W)) continue;                                                  \
             rp_ray##W p;                                                                         \
             for (int k = 0; k < W; k++) {                                                        \
                 const bench_ray *b = &set->rays[base + (size_t)k];                               \

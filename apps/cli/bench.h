@@ -218,4 +218,11 @@ int bench_grid(bench_ctx *ctx);
 int bench_vs_embree(bench_ctx *ctx);
 #endif
 
+/* True when any lane of a packet is live: packets of misses are skipped, by both engines alike. */
+static inline bool bench_any_valid(const int32_t *valid, int width) {
+    int32_t any = 0;
+    for (int k = 0; k < width; k++) any |= valid[k];
+    return any != 0;
+}
+
 #endif /* RP_CLI_BENCH_H */

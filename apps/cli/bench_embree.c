@@ -84,13 +84,6 @@ static inline void emb_fill_ray(struct RTCRay *r, const bench_ray *b, size_t slo
     r->flags = 0;
 }
 
-/* Same skip rule as raypack's packet modes. */
-static inline bool emb_any_valid(const int32_t *valid, int width) {
-    int32_t any = 0;
-    for (int k = 0; k < width; k++) any |= valid[k];
-    return any != 0;
-}
-
 /* rtcIntersect1, one ray at a time. */
 static void emb_trace_intersect1(void *engine, const bench_rays *set, size_t first, size_t n,
                                  bench_hits *out, void *scratch) {
@@ -141,7 +134,7 @@ static void emb_trace_occluded1(void *engine, const bench_rays *set, size_t firs
         ctx.flags = e->flags;                                                                    \
         for (size_t base = first; base < first + n; base += W) {                                 \
             const int32_t *valid = set->valid + base;                                            \
-            if (!emb_any_valid(valid, W)) continue;                                              \
+            if (!bench_any_valid(valid, W)) continue;                                              \
             struct RTCRayHit##W p;                                                               \
             for (int k = 0; k < W; k++) {                                                        \
                 const bench_ray *b = &set->rays[base + (size_t)k];                               \
@@ -178,7 +171,7 @@ static void emb_trace_occluded1(void *engine, const bench_rays *set, size_t firs
         ctx.flags = e->flags;                                                                    \
         for (size_t base = first; base < first + n; base += W) {                                 \
             const int32_t *valid = set->valid + base;                                            \
-            if (!emb_any_valid(valid, W)) continue;                                              \
+            if (!bench_any_valid(valid, W)) continue;                                              \
             struct RTCRay##W p;                                                                  \
             for (int k = 0; k < W; k++) {                                                        \
                 const bench_ray *b = &set->rays[base + (size_t)k];                               \

@@ -26,18 +26,7 @@ void camera_ray(const render_camera *c, float x, float y, rp_ray *ray) {
     float a = (2.0f * x / c->width - 1.0f) * c->tan_half * c->aspect;
     float b = (1.0f - 2.0f * y / c->height) * c->tan_half;
     v3 d = v3_normalize(v3_add(v3_add(c->f, v3_scale(c->r, a)), v3_scale(c->u, b)));
-    ray->org_x = c->eye.x;
-    ray->org_y = c->eye.y;
-    ray->org_z = c->eye.z;
-    ray->tnear = 0.0f;
-    ray->dir_x = d.x;
-    ray->dir_y = d.y;
-    ray->dir_z = d.z;
-    ray->time = 0.0f;
-    ray->tfar = INFINITY;
-    ray->mask = 0xFFFFFFFFu;
-    ray->id = 0;
-    ray->flags = 0;
+    render_ray_init(ray, c->eye, d, INFINITY);
 }
 
 /* Score of a view: primary hits on front faces minus hits on back faces, on a coarse grid. Closed

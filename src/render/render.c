@@ -97,20 +97,6 @@ static double now_ms(void) {
 /* Distance secondary rays start off the surface, along the geometric normal. */
 static float ray_offset(const rp_render_scene *s) { return 2e-5f * s->scale; }
 
-static void ray_init(rp_ray *r, v3 org, v3 dir, float tfar) {
-    r->org_x = org.x;
-    r->org_y = org.y;
-    r->org_z = org.z;
-    r->tnear = 0.0f;
-    r->dir_x = dir.x;
-    r->dir_y = dir.y;
-    r->dir_z = dir.z;
-    r->time = 0.0f;
-    r->tfar = tfar;
-    r->mask = 0xFFFFFFFFu;
-    r->id = 0;
-    r->flags = 0;
-}
 
 /* Shading of a Whitted hit without the rays it spawns: the local terms, the shading point the
  * shadow rays start from, and the reflection and refraction rays with their weights. */
@@ -212,7 +198,7 @@ static bool whitted_light(const render_frame *f, const whitted_slot *o, const rp
     v3 l = v3_scale(to, 1.0f / dist);
     float cos_s = v3_dot(o->ns, l);
     if (cos_s <= 0.0f || v3_dot(o->ng, l) <= 0.0f) return false;
-    ray_init(sr, o->org, l, dist * (1.0f - 1e-5f) - eps);
+    render_ray_init(sr, o->org, l, dist * (1.0f - 1e-5f) - eps);
     if (inverse_square) intensity = v3_scale(intensity, 1.0f / (dist * dist));
     v3 term = v3_scale(o->kd, cos_s);
     if (o->highlight) {
@@ -255,7 +241,7 @@ static v3 whitted_shade(const render_frame *f, render_thread *th, const rp_ray *
 static v3 whitted_trace(const render_frame *f, render_thread *th, v3 org, v3 dir, rp_ray_kind kind,
                         int depth, float weight) {
     rp_rayhit rh;
-    ray_init(&rh.ray, org, dir, INFINITY);
+    render_ray_init(&rh.ray, org, dir, INFINITY);
     rh.hit.geom_id = RP_INVALID_ID;
     rh.hit.prim_id = RP_INVALID_ID;
     rh.hit.inst_id = RP_INVALID_ID;
@@ -399,7 +385,7 @@ static bool packet_trace(const render_frame *f, render_thread *th, int level, rp
     for (uint32_t q = 0; q < nn; q++) {
         if (!lv->valid[q]) continue;
         rp_ray ray;
-        ray_init(&ray, v3_make(p->org_x[q], p->org_y[q], p->org_z[q]), v3_make(p->dir_x[q], p->dir_y[q], p->dir_z[q]),
+        render_ray_init(&ray, v3_make(p->org_x[q], p->org_y[q], p->org_z[q]), v3_make(p->dir_x[q], p->dir_y[q], p->dir_z[q]),
                  p->tfar[q]);
         ray.tnear = p->tnear[q];
         rp_hit hit = {.Ng_x = p->Ng_x[q], .Ng_y = p->Ng_y[q], .Ng_z = p->Ng_z[q], .u = p->u[q], .v = p->v[q],
@@ -635,7 +621,7 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
         /* Inside a building the raised light could end up in a wall or on the floor above: then
          * it sits at the eye itself. */
         rp_ray probe;
-        ray_init(&probe, f->cam.eye, f->cam.u, 0.25f * dist);
+        render_ray_init(&probe, f->cam.eye, f->cam.u, 0.25f * dist);
         rp_occluded1(scene->scene, &probe);
         if (probe.tfar < 0.0f) pos = f->cam.eye;
         f->headlight.type = RP_LIGHT_SOURCE_POINT;

@@ -101,6 +101,22 @@ typedef struct render_camera {
     float tan_half, aspect, width, height;
 } render_camera;
 void camera_setup(const rp_camera *cam, int width, int height, render_camera *out);
+/* A ray from org along dir over [0, tfar], visible to every geometry. */
+static inline void render_ray_init(rp_ray *r, v3 org, v3 dir, float tfar) {
+    r->org_x = org.x;
+    r->org_y = org.y;
+    r->org_z = org.z;
+    r->tnear = 0.0f;
+    r->dir_x = dir.x;
+    r->dir_y = dir.y;
+    r->dir_z = dir.z;
+    r->time = 0.0f;
+    r->tfar = tfar;
+    r->mask = 0xFFFFFFFFu;
+    r->id = 0;
+    r->flags = 0;
+}
+
 void camera_ray(const render_camera *c, float x, float y, rp_ray *ray);
 /* A camera framing the bounds of a committed scene (camera.c). */
 rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b);

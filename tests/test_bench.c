@@ -365,6 +365,21 @@ static void check_grid_json(const jvalue *root, const char *what) {
                recursions[r]);
         CHECKF(json_get(t2, "best") && json_get(t2, "best")->type == J_STRING, "%s: table2.%s.best", what,
                recursions[r]);
+        /* auto against the best other configuration: named configurations, and the ratio of their
+         * recursion Mrays/s */
+        const jvalue *au = json_get(json_get(root, "auto"), recursions[r]);
+        const jvalue *ba = json_get(au, "best_auto"), *bo = json_get(au, "best_other");
+        CHECKF(ba && ba->type == J_STRING && strstr(ba->string, "auto") && bo && bo->type == J_STRING &&
+                   !strstr(bo->string, "auto"),
+               "%s: auto.%s names its configurations", what, recursions[r]);
+        if (ba && ba->type == J_STRING && bo && bo->type == J_STRING) {
+            double a = json_num(json_get(configs, ba->string), "mrays"), b = json_num(json_get(configs, bo->string), "mrays");
+            double ratio = json_num(au, "ratio");
+            CHECKF(b > 0 && fabs(ratio - a / b) <= 1e-3 * ratio + 1e-4, "%s: auto.%s.ratio %g, configs give %g / %g",
+                   what, recursions[r], ratio, a, b);
+            double x = json_num(json_get(au, "same_setting"), "n16_auto_frustum");
+            CHECKF(x > 0 && json_get(au, "same_setting")->count == 8, "%s: auto.%s.same_setting", what, recursions[r]);
+        }
     }
 }
 

@@ -223,6 +223,52 @@ static int grid_best16(const grid_run *g, int r) {
     return best;
 }
 
+/* Best fixed configuration (masked, ranged or partition) at size n and frustum setting fr; with
+ * n == 0 the best of every configuration that is not auto, single and SIMD rays included. */
+static int grid_best_fixed(const grid_run *g, int r, uint32_t n, bool fr) {
+    int best = -1;
+    for (int c = 0; c < GRID_CONFIGS; c++) {
+        const grid_config *k = &g->configs[c];
+        if (k->traversal == RP_TRAVERSAL_AUTO) continue;
+        if (n && (k->n != n || k->frustum != fr || k->traversal == RP_TRAVERSAL_SINGLE ||
+                  k->traversal == RP_TRAVERSAL_SIMD))
+            continue;
+        if (best < 0 || grid_mrays(g, r, c) > grid_mrays(g, r, best)) best = c;
+    }
+    return best;
+}
+
+/* Best auto configuration of a recursion type. */
+static int grid_best_auto(const grid_run *g, int r) {
+    int best = -1;
+    for (int c = 0; c < GRID_CONFIGS; c++)
+        if (g->configs[c].traversal == RP_TRAVERSAL_AUTO && (best < 0 || grid_mrays(g, r, c) > grid_mrays(g, r, best)))
+            best = c;
+    return best;
+}
+
+/* Auto against the best fixed algorithm at each packet size and frustum setting, then the best
+ * auto configuration against the best configuration that is not auto (single and SIMD rays too). */
+static void grid_print_auto(const grid_run *g) {
+    printf("\nauto / best fixed algorithm at the same packet size and frustum setting (+f: frusta on)\n%-11s",
+           "recursion");
+    for (int s = 0; s < GRID_SIZES; s++)
+        for (int f = 0; f < 2; f++) printf(" %5u%s", grid_sizes[s], f ? "+f" : "  ");
+    printf("  best auto / best other (configurations)\n");
+    for (int r = 0; r < GRID_RECURSIONS; r++) {
+        printf("%-11s", grid_recursion_names[r]);
+        for (int s = 0; s < GRID_SIZES; s++)
+            for (int f = 0; f < 2; f++) {
+                int a = grid_find(g, RP_TRAVERSAL_AUTO, grid_sizes[s], f != 0);
+                int b = grid_best_fixed(g, r, grid_sizes[s], f != 0);
+                printf(" %7.2f", grid_mrays(g, r, a) / grid_mrays(g, r, b));
+            }
+        int a = grid_best_auto(g, r), b = grid_best_fixed(g, r, 0, false);
+        printf("  %.2f (%s %.2f / %s %.2f)\n", grid_mrays(g, r, a) / grid_mrays(g, r, b), g->configs[a].name,
+               grid_mrays(g, r, a), g->configs[b].name, grid_mrays(g, r, b));
+    }
+}
+
 /* The grid table, then table 2. */
 static void grid_print(const grid_run *g) {
     printf("\nlive rays:");
@@ -245,6 +291,7 @@ static void grid_print(const grid_run *g) {
         printf("%-11s %10.2f %-22s %10.2f %8.2f\n", grid_recursion_names[r], s, g->configs[b].name, p,
                s > 0.0 ? p / s : 0.0);
     }
+    grid_print_auto(g);
 }
 
 /* The counters of one configuration on one level, totals (divide by the level's rays for rates). */
@@ -305,6 +352,21 @@ static bool grid_write_json(const grid_run *g) {
         double s = grid_mrays(g, r, simd), p = grid_mrays(g, r, b);
         fprintf(f, "%s\n  \"%s\": {\"simd_mrays\": %.4f, \"best\": \"%s\", \"best_mrays\": %.4f, \"speedup\": %.4f}",
                 r ? "," : "", grid_recursion_names[r], s, g->configs[b].name, p, s > 0.0 ? p / s : 0.0);
+    }
+    fprintf(f, "\n },\n \"auto\": {");
+    for (int r = 0; r < GRID_RECURSIONS; r++) {
+        int a = grid_best_auto(g, r), b = grid_best_fixed(g, r, 0, false);
+        fprintf(f, "%s\n  \"%s\": {\"best_auto\": \"%s\", \"best_other\": \"%s\", \"ratio\": %.4f, \"same_setting\": {",
+                r ? "," : "", grid_recursion_names[r], g->configs[a].name, g->configs[b].name,
+                grid_mrays(g, r, a) / grid_mrays(g, r, b));
+        for (int sz = 0; sz < GRID_SIZES; sz++)
+            for (int fr = 0; fr < 2; fr++) {
+                int x = grid_find(g, RP_TRAVERSAL_AUTO, grid_sizes[sz], fr != 0);
+                int y = grid_best_fixed(g, r, grid_sizes[sz], fr != 0);
+                fprintf(f, "%s\"%s\": %.4f", sz + fr ? ", " : "", g->configs[x].name,
+                        grid_mrays(g, r, x) / grid_mrays(g, r, y));
+            }
+        fprintf(f, "}}");
     }
     fprintf(f, "\n }\n}\n");
     if (fclose(f) != 0) {

@@ -223,28 +223,32 @@ static int grid_best16(const grid_run *g, int r) {
     return best;
 }
 
-/* Best fixed configuration (masked, ranged or partition) at size n and frustum setting fr; with
- * n == 0 the best of every configuration that is not auto, single and SIMD rays included. */
-static int grid_best_fixed(const grid_run *g, int r, uint32_t n, bool fr) {
+/* Which configurations a "best of" looks at: the auto ones, or the others (n == 0: all of them,
+ * single and SIMD rays included; else masked, ranged and partition at size n, frusta fr). */
+static bool grid_pick(const grid_config *k, bool autos, uint32_t n, bool fr) {
+    if ((k->traversal == RP_TRAVERSAL_AUTO) != autos) return false;
+    if (autos || !n) return true;
+    return k->n == n && k->frustum == fr && k->traversal != RP_TRAVERSAL_SINGLE && k->traversal != RP_TRAVERSAL_SIMD;
+}
+
+/* The fastest configuration grid_pick takes for a recursion type. */
+static int grid_best_of(const grid_run *g, int r, bool autos, uint32_t n, bool fr) {
     int best = -1;
-    for (int c = 0; c < GRID_CONFIGS; c++) {
-        const grid_config *k = &g->configs[c];
-        if (k->traversal == RP_TRAVERSAL_AUTO) continue;
-        if (n && (k->n != n || k->frustum != fr || k->traversal == RP_TRAVERSAL_SINGLE ||
-                  k->traversal == RP_TRAVERSAL_SIMD))
-            continue;
-        if (best < 0 || grid_mrays(g, r, c) > grid_mrays(g, r, best)) best = c;
-    }
+    for (int c = 0; c < GRID_CONFIGS; c++)
+        if (grid_pick(&g->configs[c], autos, n, fr) && (best < 0 || grid_mrays(g, r, c) > grid_mrays(g, r, best)))
+            best = c;
     return best;
 }
 
-/* Best auto configuration of a recursion type. */
-static int grid_best_auto(const grid_run *g, int r) {
-    int best = -1;
-    for (int c = 0; c < GRID_CONFIGS; c++)
-        if (g->configs[c].traversal == RP_TRAVERSAL_AUTO && (best < 0 || grid_mrays(g, r, c) > grid_mrays(g, r, best)))
-            best = c;
-    return best;
+/* Mrays/s of configuration a over that of b (0 when b took no time). */
+static double grid_ratio(const grid_run *g, int r, int a, int b) {
+    double y = grid_mrays(g, r, b);
+    return y > 0.0 ? grid_mrays(g, r, a) / y : 0.0;
+}
+
+/* Auto at size n with frusta fr over the best fixed algorithm at the same setting. */
+static double grid_auto_same(const grid_run *g, int r, uint32_t n, bool fr) {
+    return grid_ratio(g, r, grid_find(g, RP_TRAVERSAL_AUTO, n, fr), grid_best_of(g, r, false, n, fr));
 }
 
 /* Auto against the best fixed algorithm at each packet size and frustum setting, then the best
@@ -258,13 +262,9 @@ static void grid_print_auto(const grid_run *g) {
     for (int r = 0; r < GRID_RECURSIONS; r++) {
         printf("%-11s", grid_recursion_names[r]);
         for (int s = 0; s < GRID_SIZES; s++)
-            for (int f = 0; f < 2; f++) {
-                int a = grid_find(g, RP_TRAVERSAL_AUTO, grid_sizes[s], f != 0);
-                int b = grid_best_fixed(g, r, grid_sizes[s], f != 0);
-                printf(" %7.2f", grid_mrays(g, r, a) / grid_mrays(g, r, b));
-            }
-        int a = grid_best_auto(g, r), b = grid_best_fixed(g, r, 0, false);
-        printf("  %.2f (%s %.2f / %s %.2f)\n", grid_mrays(g, r, a) / grid_mrays(g, r, b), g->configs[a].name,
+            for (int f = 0; f < 2; f++) printf(" %7.2f", grid_auto_same(g, r, grid_sizes[s], f != 0));
+        int a = grid_best_of(g, r, true, 0, false), b = grid_best_of(g, r, false, 0, false);
+        printf("  %.2f (%s %.2f / %s %.2f)\n", grid_ratio(g, r, a, b), g->configs[a].name,
                grid_mrays(g, r, a), g->configs[b].name, grid_mrays(g, r, b));
     }
 }
@@ -355,17 +355,15 @@ static bool grid_write_json(const grid_run *g) {
     }
     fprintf(f, "\n },\n \"auto\": {");
     for (int r = 0; r < GRID_RECURSIONS; r++) {
-        int a = grid_best_auto(g, r), b = grid_best_fixed(g, r, 0, false);
+        int a = grid_best_of(g, r, true, 0, false), b = grid_best_of(g, r, false, 0, false);
         fprintf(f, "%s\n  \"%s\": {\"best_auto\": \"%s\", \"best_other\": \"%s\", \"ratio\": %.4f, \"same_setting\": {",
                 r ? "," : "", grid_recursion_names[r], g->configs[a].name, g->configs[b].name,
-                grid_mrays(g, r, a) / grid_mrays(g, r, b));
+                grid_ratio(g, r, a, b));
         for (int sz = 0; sz < GRID_SIZES; sz++)
-            for (int fr = 0; fr < 2; fr++) {
-                int x = grid_find(g, RP_TRAVERSAL_AUTO, grid_sizes[sz], fr != 0);
-                int y = grid_best_fixed(g, r, grid_sizes[sz], fr != 0);
-                fprintf(f, "%s\"%s\": %.4f", sz + fr ? ", " : "", g->configs[x].name,
-                        grid_mrays(g, r, x) / grid_mrays(g, r, y));
-            }
+            for (int fr = 0; fr < 2; fr++)
+                fprintf(f, "%s\"%s\": %.4f", sz + fr ? ", " : "",
+                        g->configs[grid_find(g, RP_TRAVERSAL_AUTO, grid_sizes[sz], fr != 0)].name,
+                        grid_auto_same(g, r, grid_sizes[sz], fr != 0));
         fprintf(f, "}}");
     }
     fprintf(f, "\n }\n}\n");

@@ -31,7 +31,9 @@ typedef struct bvh2 {
 
 typedef struct bvh_build_desc {
     int bins;          /* per axis, 4..64 */
-    int max_leaf_size; /* primitives per leaf, 1..60 */
+    int max_leaf_size; /* most primitives per leaf, 1..60; the SAH decides below it */
+    int block_size;    /* primitives intersected together (4 for tri4 leaves); 0: 1 */
+    float trav_cost;   /* cost of a node relative to one block intersection; 0: 1 */
 } bvh_build_desc;
 
 /* Builds over n boxes (none empty or non-finite); uses the pool's threads when pool != NULL.

@@ -22,6 +22,8 @@ typedef struct build_ctx {
     _Atomic uint32_t node_count;
     int bins;
     int max_leaf;
+    uint32_t block;    /* primitives per intersection block */
+    double trav_cost;  /* of one node, in block intersections */
     /* subtrees deferred to the threads */
     struct task *tasks;
     uint32_t task_count, task_capacity;
@@ -82,7 +84,10 @@ static double half_area4(vf4 lo, vf4 hi) {
 /* Splits [begin, end) in place; returns the first index of the right half and the two boxes, or
  * 0 when no split was found (all centroids in one bin on every axis). One pass bins all three
  * axes at once. */
-static uint32_t split_sah(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox, box3 *lbox, box3 *rbox) {
+static inline double blocks_of(const build_ctx *c, uint32_t n) { return (double)((n + c->block - 1) / c->block); }
+
+static uint32_t split_sah(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox, box3 *lbox, box3 *rbox,
+                          double *split_cost) {
     /* small nodes: about one bin per primitive is as good, and the sweeps over empty bins
      * dominated the build's time near the leaves */
     int nb = c->bins;
@@ -134,7 +139,7 @@ static uint32_t split_sah(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox,
             llo = vf4_min(llo, blo[axis][b - 1]), lhi = vf4_max(lhi, bhi[axis][b - 1]);
             lc += bcount[axis][b - 1];
             if (lc == 0 || rcount[b] == 0) continue;
-            double cost = half_area4(llo, lhi) * lc + rarea[b] * rcount[b];
+            double cost = half_area4(llo, lhi) * blocks_of(c, lc) + rarea[b] * blocks_of(c, rcount[b]);
             if (cost < best_cost) {
                 best_cost = cost, best_axis = axis, best_split = b;
                 best_llo = llo, best_lhi = lhi, best_rlo = rlos[b], best_rhi = rhis[b];
@@ -142,6 +147,7 @@ static uint32_t split_sah(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox,
         }
     }
     if (best_axis < 0) return 0;
+    *split_cost = best_cost;
     /* Hoare partition by bin */
     uint32_t i = begin, j = end;
     while (i < j) {
@@ -164,7 +170,7 @@ static int build_node(build_ctx *c, const task *t, task out[2]) {
     uint32_t n = t->end - t->begin;
     bvh_node *node = &c->nodes[t->node];
     depth_max(c, t->depth + 1);
-    if (n <= (uint32_t)c->max_leaf) {
+    if (n <= 1) {
         node->index = t->begin;
         node->count = n;
         return 0;
@@ -174,8 +180,22 @@ static int build_node(build_ctx *c, const task *t, task out[2]) {
     uint32_t mid = 0;
     if (t->depth < MEDIAN_DEPTH) {
         box3 b = prim_range_box(c, t->begin, t->end, &cbox);
-        (void)b;
-        mid = split_sah(c, t->begin, t->end, cbox, &lbox, &rbox);
+        double split_cost = INFINITY;
+        mid = split_sah(c, t->begin, t->end, cbox, &lbox, &rbox, &split_cost);
+        /* SAH termination (in block intersections, as Embree's builders): a leaf when it is
+         * no costlier than the best split and small enough */
+        double area = box3_half_area(b);
+        if (n <= (uint32_t)c->max_leaf &&
+            (mid == 0 || area * blocks_of(c, n) <= area * c->trav_cost + split_cost)) {
+            /* the split may have permuted the range; a leaf does not care */
+            node->index = t->begin;
+            node->count = n;
+            return 0;
+        }
+    } else if (n <= (uint32_t)c->max_leaf) {
+        node->index = t->begin;
+        node->count = n;
+        return 0;
     }
     if (mid == 0) {
         /* identical centroids, or too deep: halve the range (order within it is arbitrary) */
@@ -263,6 +283,8 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
         .boxes = pboxes, .prims = out->prims, .nodes = out->nodes,
         .bins = desc->bins < 4 ? 4 : desc->bins > MAX_BINS ? MAX_BINS : desc->bins,
         .max_leaf = desc->max_leaf_size < 1 ? 1 : desc->max_leaf_size,
+        .block = desc->block_size < 1 ? 1u : (uint32_t)desc->block_size,
+        .trav_cost = desc->trav_cost > 0.0f ? desc->trav_cost : 1.0,
     };
     atomic_store(&c.node_count, 1);
     atomic_store(&c.depth, 0);

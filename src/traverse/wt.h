@@ -1,0 +1,76 @@
+/* The watertight ray-triangle test (Woop, Benthin, Wald 2013) on N SIMD lanes, shared by the
+ * single-ray and small-packet kernels (kernels.inc) and the large packets (packet_n.inc). It is
+ * the arithmetic of tri_intersect_ref, so every kernel returns the same hits bit for bit.
+ * Included once per ISA translation unit, after simd/simd.h; WT_DEFINE(N) makes wt_N. */
+#ifndef RP_WT_H
+#define RP_WT_H
+
+#include "simd/simd.h"
+#include "sys/sys.h"
+
+/* Double-precision fallback of the edge functions when one is exactly 0 (sec. 4.1 of the paper):
+ * decides edge and vertex hits consistently for neighbouring triangles. */
+static inline void wt_refine(float Ax, float Ay, float Bx, float By, float Cx, float Cy, float *U, float *V,
+                             float *W) {
+    *U = (float)((double)Cx * (double)By - (double)Cy * (double)Bx);
+    *V = (float)((double)Ax * (double)Cy - (double)Ay * (double)Cx);
+    *W = (float)((double)Bx * (double)Ay - (double)By * (double)Ax);
+}
+
+/* wt_N: a*, b*, c* are the vertices minus the ray origin, already permuted so that z is the ray's
+ * dominant axis; s* the shear constants. Returns the lanes hit, with t, u, v; when no lane passes
+ * the edge tests it returns at once (t, u, v are 0), so the distance and its divisions are paid
+ * only by leaves with a candidate. The exact-zero refinement is a separate, cold function that
+ * takes and returns the edge functions by value, so the hot path keeps them in registers. */
+#define WT_DEFINE(N)                                                                              \
+    typedef struct wt_edges##N {                                                                  \
+        vf##N U, V, W;                                                                            \
+    } wt_edges##N;                                                                                \
+    __attribute__((noinline, cold)) static wt_edges##N wt_fix_##N(                                \
+        vf##N Ax, vf##N Ay, vf##N Bx, vf##N By, vf##N Cx, vf##N Cy, wt_edges##N e, uint32_t z) {  \
+        do {                                                                                      \
+            uint32_t i = simd_ctz(z);                                                             \
+            z &= z - 1;                                                                           \
+            float u_, v_, w_;                                                                     \
+            wt_refine(Ax[i], Ay[i], Bx[i], By[i], Cx[i], Cy[i], &u_, &v_, &w_);                   \
+            e.U[i] = u_, e.V[i] = v_, e.W[i] = w_;                                                \
+        } while (z);                                                                              \
+        return e;                                                                                 \
+    }                                                                                             \
+    RP_INLINE vi##N wt_##N(vf##N ax, vf##N ay, vf##N az, vf##N bx, vf##N by, vf##N bz, vf##N cx,  \
+                           vf##N cy, vf##N cz, vf##N sx, vf##N sy, vf##N sz, vf##N *t, vf##N *u,  \
+                           vf##N *v) {                                                            \
+        vf##N Ax = ax - sx * az, Ay = ay - sy * az;                                               \
+        vf##N Bx = bx - sx * bz, By = by - sy * bz;                                               \
+        vf##N Cx = cx - sx * cz, Cy = cy - sy * cz;                                               \
+        vf##N U = Cx * By - Cy * Bx, V = Ax * Cy - Ay * Cx, W = Bx * Ay - By * Ax;                \
+        vf##N zero = vf##N##_splat(0.0f);                                                         \
+        uint32_t z = vi##N##_movemask((U == zero) | (V == zero) | (W == zero));                   \
+        if (RP_UNLIKELY(z)) {                                                                     \
+            wt_edges##N e = wt_fix_##N(Ax, Ay, Bx, By, Cx, Cy, (wt_edges##N){U, V, W}, z);        \
+            U = e.U, V = e.V, W = e.W;                                                            \
+        }                                                                                         \
+        vi##N ok = ~(((U < zero) | (V < zero) | (W < zero)) & ((U > zero) | (V > zero) | (W > zero))); \
+        vf##N det = U + V + W;                                                                    \
+        ok &= det != zero;                                                                        \
+        if (!vi##N##_movemask(ok)) {                                                              \
+            *t = zero, *u = zero, *v = zero;                                                      \
+            return ok;                                                                            \
+        }                                                                                         \
+        /* distance from the plane, N.(v0 - o) / N.d with d = (sx, sy, 1) / sz: exact for      \
+         * axis-aligned planes, unlike the sheared sum of the paper, which cancels badly for   \
+         * rays starting near a large triangle (short secondary rays) */                     \
+        vf##N e1x = bx - ax, e1y = by - ay, e1z = bz - az;                                        \
+        vf##N e2x = cx - ax, e2y = cy - ay, e2z = cz - az;                                        \
+        vf##N nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x; \
+        vf##N na = nx * ax + ny * ay + nz * az;                                                   \
+        vf##N nd = nx * sx + ny * sy + nz;                                                        \
+        ok &= nd != zero;                                                                         \
+        *t = (na * sz) / nd;                                                                      \
+        vf##N rcp = vf##N##_splat(1.0f) / det;                                                    \
+        *u = V * rcp;                                                                             \
+        *v = W * rcp;                                                                             \
+        return ok;                                                                                \
+    }
+
+#endif

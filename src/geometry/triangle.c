@@ -32,7 +32,7 @@ bool tri_intersect_ref(const float org[3], const float dir[3], float tnear, floa
     if ((U < 0.0f || V < 0.0f || W < 0.0f) && (U > 0.0f || V > 0.0f || W > 0.0f)) return false;
     float det = U + V + W;
     if (det == 0.0f) return false;
-    /* distance from the plane (see WT_DEFINE in traverse/kernels.inc for why) */
+    /* distance from the plane (see WT_DEFINE in traverse/wt.h for why) */
     float e1x = bx - ax, e1y = by - ay, e1z = bz - az;
     float e2x = cx - ax, e2y = cy - ay, e2z = cz - az;
     float nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;

@@ -190,25 +190,26 @@ static bool load_triangle(const rp_geometry *g, uint32_t prim, vec3 v[3]) {
     return true;
 }
 
+/* Packing of the triangle BVH's leaves into tri4 blocks. A leaf's first block comes from a prefix
+ * sum over the leaves in primitive order, so the blocks are allocated exactly and filled by all
+ * threads at once (filling was a third of a serial commit: every triangle's vertices are read
+ * through its index buffer). */
 typedef struct tri_pack_ctx {
     const rp_scene *scene;
     const bvh2 *bvh;
     const prim_ref *refs;
     tri4 *blocks;
-    uint32_t next, capacity;
-    uint32_t *leaf_blocks; /* per binary node: first block << 4 | blocks, for the large packets */
+    uint32_t *first_block; /* per primitive position: the first block of the leaf starting there */
+    uint32_t block_count;
+    uint32_t chunks;       /* of the node array, one task each */
 } tri_pack_ctx;
 
-/* Leaf payload of the triangle BVH: its triangles packed 4 to a block. */
-static bool tri_leaf(void *user, const bvh_node *leaf, uint32_t *first, uint32_t *items) {
-    tri_pack_ctx *c = user;
-    uint32_t n = leaf->count, blocks = (n + 3) / 4;
-    if (c->next + blocks > c->capacity) return false;
-    *first = c->next;
-    *items = blocks;
-    c->leaf_blocks[leaf - c->bvh->nodes] = c->next << 4 | blocks;
+static inline bool tri_is_leaf(const bvh_node *n) { return n->count != 0; }
+
+static void tri_fill_leaf(const tri_pack_ctx *c, const bvh_node *leaf) {
+    uint32_t n = leaf->count, blocks = (n + 3) / 4, first = c->first_block[leaf->index];
     for (uint32_t b = 0; b < blocks; b++) {
-        tri4 *t = &c->blocks[c->next + b];
+        tri4 *t = &c->blocks[first + b];
         memset(t, 0, sizeof *t);
         for (uint32_t j = 0; j < 4; j++) {
             uint32_t k = b * 4 + j;
@@ -225,7 +226,40 @@ static bool tri_leaf(void *user, const bvh_node *leaf, uint32_t *first, uint32_t
             t->geom[j] = r.geom, t->prim[j] = r.prim, t->mask[j] = g->mask;
         }
     }
-    c->next += blocks;
+}
+
+static void tri_pack_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    const tri_pack_ctx *c = user;
+    uint64_t n = c->bvh->node_count;
+    uint32_t begin = (uint32_t)(n * index / c->chunks), end = (uint32_t)(n * (index + 1) / c->chunks);
+    for (uint32_t i = begin; i < end; i++)
+        if (tri_is_leaf(&c->bvh->nodes[i])) tri_fill_leaf(c, &c->bvh->nodes[i]);
+}
+
+/* Numbers the blocks of every leaf; false when out of memory. */
+static bool tri_pack_plan(const sys_allocator *a, tri_pack_ctx *c) {
+    const bvh2 *b = c->bvh;
+    c->first_block = sys_alloc(a, (size_t)b->prim_count * sizeof(uint32_t));
+    if (!c->first_block) return false;
+    memset(c->first_block, 0, (size_t)b->prim_count * sizeof(uint32_t));
+    for (uint32_t i = 0; i < b->node_count; i++)
+        if (tri_is_leaf(&b->nodes[i])) c->first_block[b->nodes[i].index] = (b->nodes[i].count + 3) / 4;
+    uint32_t sum = 0;
+    for (uint32_t p = 0; p < b->prim_count; p++) {
+        uint32_t k = c->first_block[p];
+        c->first_block[p] = sum;
+        sum += k;
+    }
+    c->block_count = sum;
+    return true;
+}
+
+/* Leaf payload of the triangle BVH: its blocks, numbered by tri_pack_plan. */
+static bool tri_leaf(void *user, const bvh_node *leaf, uint32_t *first, uint32_t *items) {
+    const tri_pack_ctx *c = user;
+    *first = c->first_block[leaf->index];
+    *items = (leaf->count + 3) / 4;
     return true;
 }
 
@@ -364,41 +398,39 @@ rp_error scene_build(rp_scene *s) {
             err = RP_ERROR_OUT_OF_MEMORY;
         } else {
             tri_pack_ctx pc = {.scene = s, .bvh = &b2, .refs = tris.refs};
-            pc.capacity = b2.leaf_count + tris.count / 4 + 1;
-            pc.blocks = sys_alloc(a, (size_t)pc.capacity * sizeof(tri4));
-            pc.leaf_blocks = sys_alloc(a, (size_t)b2.node_count * sizeof(uint32_t));
-            if (!pc.blocks || !pc.leaf_blocks || !bvhw_from_bvh2(a, &b2, width, tri_leaf, &pc, &s->tri_bvh)) {
-                sys_free(a, pc.blocks, (size_t)pc.capacity * sizeof(tri4));
+            bool ok = tri_pack_plan(a, &pc);
+            if (ok) pc.blocks = sys_alloc(a, (size_t)(pc.block_count ? pc.block_count : 1) * sizeof(tri4));
+            ok = ok && pc.blocks;
+            if (ok) {
+                pc.chunks = pool ? (uint32_t)sys_pool_threads(pool) * 8 : 1;
+                if (pool) sys_pool_parallel_for(pool, pc.chunks, tri_pack_task, &pc);
+                else tri_pack_task(&pc, 0, 0);
+            }
+            if (!ok || !bvhw_from_bvh2(a, &b2, width, tri_leaf, &pc, &s->tri_bvh)) {
+                sys_free(a, pc.blocks, (size_t)(pc.block_count ? pc.block_count : 1) * sizeof(tri4));
                 err = RP_ERROR_OUT_OF_MEMORY;
             } else {
                 /* keep the binary BVH for large packets, its leaves pointing at the tri4 blocks */
                 for (uint32_t i = 0; i < b2.node_count; i++) {
-                    if (b2.nodes[i].count == 0) continue;
-                    b2.nodes[i].index = pc.leaf_blocks[i] >> 4;
-                    b2.nodes[i].count = pc.leaf_blocks[i] & 15u;
+                    if (!tri_is_leaf(&b2.nodes[i])) continue;
+                    b2.nodes[i].count = (b2.nodes[i].count + 3) / 4;
+                    b2.nodes[i].index = pc.first_block[b2.nodes[i].index];
                 }
                 sys_free(a, b2.prims, (size_t)(b2.prim_count ? b2.prim_count : 1) * sizeof(uint32_t));
                 b2.prims = NULL; /* the leaves no longer index it */
-                /* keep only the blocks the leaves use (the capacity was an upper bound) */
-                tri4 *exact = sys_alloc(a, (size_t)pc.next * sizeof(tri4));
-                if (exact) {
-                    memcpy(exact, pc.blocks, (size_t)pc.next * sizeof(tri4));
-                    sys_free(a, pc.blocks, (size_t)pc.capacity * sizeof(tri4));
-                    pc.blocks = exact, pc.capacity = pc.next;
-                }
                 s->tris = pc.blocks;
-                s->tri_block_count = pc.capacity;
+                s->tri_block_count = pc.block_count ? pc.block_count : 1;
                 st.triangles = tris.count;
                 st.binary_nodes = b2.node_count;
                 st.wide_nodes = s->tri_bvh.node_count;
                 st.leaves = b2.leaf_count;
                 st.depth = b2.depth;
                 st.sah_cost = b2.sah_cost;
-                st.bytes = s->tri_bvh.bytes + (size_t)pc.next * sizeof(tri4) + (size_t)b2.node_count * sizeof(bvh_node);
+                st.bytes = s->tri_bvh.bytes + (size_t)pc.block_count * sizeof(tri4) + (size_t)b2.node_count * sizeof(bvh_node);
                 s->tri_bvh2 = b2;
                 b2.nodes = NULL;
             }
-            sys_free(a, pc.leaf_blocks, (size_t)b2.node_count * sizeof(uint32_t));
+            sys_free(a, pc.first_block, (size_t)b2.prim_count * sizeof(uint32_t));
             if (b2.nodes) bvh2_free(a, &b2);
         }
     }

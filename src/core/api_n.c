@@ -202,7 +202,10 @@ static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p
     rp_frustum_kind kind = p->n * p->n >= FRUSTUM_MIN_RAYS ? d.frustum : RP_FRUSTUM_NONE;
     frustum_req q;
     frustum_req_init(&q, kind, d.point, &scene->bounds);
-    q.auto_spread = AUTO_RANGED_CELLS / sqrtf((float)(scene->stats.leaves > 1 ? scene->stats.leaves : 1));
+    /* cells of 4 triangles, the leaves the constant was fitted with (leaves now end by the SAH and
+     * their number no longer follows the scene's density the same way) */
+    float cells = (float)scene->stats.triangles / 4.0f;
+    q.auto_spread = AUTO_RANGED_CELLS / sqrtf(cells > 1.0f ? cells : 1.0f);
     pkt_alg alg = PKT_AUTO;
     switch (d.traversal) {
     case RP_TRAVERSAL_MASKED: alg = PKT_MASKED; break;

@@ -23,8 +23,8 @@ typedef struct rp_kernels_n {
 #define FRUSTUM_MIN_RAYS 32
 /* Auto traversal (beyond the paper, whose authors chose per scene): a packet of up to 16x16 rays
  * goes to Ranged when its direction spread (slope extent across the dominant axis) times
- * sqrt(leaves of the BVH) is at most this, i.e. when its footprint crosses at most about this many
- * leaf cells over the scene's extent; any other packet goes to Partition (sec. 5.2 and Table 1:
+ * sqrt(triangles / 4) is at most this, i.e. when its footprint crosses at most about this many
+ * 4-triangle cells over the scene's extent; any other packet goes to Partition (sec. 5.2 and Table 1:
  * Ranged wins while the rays stay together, Partition degrades gracefully as they part). Fitted
  * on bunny, conference and rings (test_packets_n_bench, RP_BENCH_COMPARE=1). */
 #define AUTO_RANGED_CELLS 120.0f

@@ -168,6 +168,32 @@ static inline float vf16_reduce_max(vf16 a) {
     return r;
 }
 
+/* Square roots (correctly rounded, as sqrtf). */
+static inline vf4 vf4_sqrt(vf4 a) {
+#if defined(__SSE__)
+    return (vf4)_mm_sqrt_ps((__m128)a);
+#else
+    for (int i = 0; i < 4; i++) a[i] = __builtin_sqrtf(a[i]);
+    return a;
+#endif
+}
+static inline vf8 vf8_sqrt(vf8 a) {
+#if defined(__AVX__)
+    return (vf8)_mm256_sqrt_ps((__m256)a);
+#else
+    for (int i = 0; i < 8; i++) a[i] = __builtin_sqrtf(a[i]);
+    return a;
+#endif
+}
+static inline vf16 vf16_sqrt(vf16 a) {
+#if defined(__AVX512F__)
+    return (vf16)_mm512_sqrt_ps((__m512)a);
+#else
+    for (int i = 0; i < 16; i++) a[i] = __builtin_sqrtf(a[i]);
+    return a;
+#endif
+}
+
 static inline uint32_t simd_ctz(uint32_t x) { return (uint32_t)__builtin_ctz(x); }
 static inline uint32_t simd_popcount(uint32_t x) { return (uint32_t)__builtin_popcount(x); }
 

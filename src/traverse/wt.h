@@ -37,6 +37,28 @@ static inline void wt_refine(float Ax, float Ay, float Bx, float By, float Cx, f
         } while (z);                                                                              \
         return e;                                                                                 \
     }                                                                                             \
+    /* Per lane: the dominant axis kz of d, kx and ky (swapped when d_kz < 0) and the shear        \
+     * (d_kx, d_ky, 1) / d_kz, the rule of tri_intersect_ref, lane for lane the same results. */ \
+    RP_INLINE void wt_axes_##N(vf##N d0, vf##N d1, vf##N d2, vi##N *kx, vi##N *ky, vi##N *kz,     \
+                               vf##N *sx, vf##N *sy, vf##N *sz) {                                 \
+        vf##N a0 = vf##N##_abs(d0), a1 = vf##N##_abs(d1), a2 = vf##N##_abs(d2);                   \
+        vi##N y_gt = a1 > a0;                                                                     \
+        vi##N z = y_gt & vi##N##_splat(1);                                                        \
+        z = vi##N##_select(a2 > vf##N##_select(y_gt, a1, a0), vi##N##_splat(2), z);               \
+        vi##N x = vi##N##_select(z == 2, vi##N##_splat(0), z + 1);                                \
+        vi##N y = vi##N##_select(x == 2, vi##N##_splat(0), x + 1);                                \
+        vf##N dz = vf##N##_select(z == 0, d0, vf##N##_select(z == 1, d1, d2));                    \
+        vi##N neg = dz < vf##N##_splat(0.0f);                                                     \
+        *kx = vi##N##_select(neg, y, x), *ky = vi##N##_select(neg, x, y), *kz = z;                \
+        vf##N dx = vf##N##_select(*kx == 0, d0, vf##N##_select(*kx == 1, d1, d2));                \
+        vf##N dy = vf##N##_select(*ky == 0, d0, vf##N##_select(*ky == 1, d1, d2));                \
+        *sx = dx / dz, *sy = dy / dz, *sz = vf##N##_splat(1.0f) / dz;                             \
+    }                                                                                             \
+    /* 1 / d per lane with tiny components replaced (safe_rcp), so no 0 * inf makes a NaN. */   \
+    RP_INLINE vf##N wt_rcp_##N(vf##N d) {                                                         \
+        vi##N tiny = vf##N##_abs(d) < vf##N##_splat(1e-18f);                                      \
+        return vf##N##_splat(1.0f) / vf##N##_select(tiny, vf##N##_xorsign(vf##N##_splat(1e-18f), d), d); \
+    }                                                                                             \
     RP_INLINE vi##N wt_##N(vf##N ax, vf##N ay, vf##N az, vf##N bx, vf##N by, vf##N bz, vf##N cx,  \
                            vf##N cy, vf##N cz, vf##N sx, vf##N sy, vf##N sz, vf##N *t, vf##N *u,  \
                            vf##N *v) {                                                            \

@@ -288,6 +288,26 @@ static int quality_bins(rp_build_quality q) {
     return 16;
 }
 
+/* How far apart a small packet's origins may lie for its interval traversal to stay tight: 1% of
+ * the scene's diagonal, but no more than twice the mean size (longest side) of the triangle
+ * leaves. A large ground plane made the diagonal 30x the size of spd_tree's branches, and the
+ * intervals of packets spread over the tree then covered most of it (shadow packets 4x slower
+ * than single rays). */
+static float coherent_extent(const rp_scene *s, box3 bounds) {
+    vec3 e = v3_sub(bounds.hi, bounds.lo);
+    double ext = 0.01 * sqrt((double)e.x * e.x + (double)e.y * e.y + (double)e.z * e.z);
+    double sum = 0.0;
+    uint32_t leaves = 0;
+    for (uint32_t i = 0; i < s->tri_bvh2.node_count; i++) {
+        const bvh_node *n = &s->tri_bvh2.nodes[i];
+        if (n->count == 0) continue;
+        double side = fmax((double)n->hi[0] - n->lo[0], fmax((double)n->hi[1] - n->lo[1], (double)n->hi[2] - n->lo[2]));
+        if (isfinite(side)) sum += side, leaves++;
+    }
+    if (leaves && 2.0 * sum / leaves < ext) ext = 2.0 * sum / leaves;
+    return (float)ext;
+}
+
 rp_error scene_build(rp_scene *s) {
     const sys_allocator *a = &s->device->alloc;
     rp_scene_stats st = {0};
@@ -474,10 +494,7 @@ rp_error scene_build(rp_scene *s) {
         .prim_intersect = sphere_intersect_cb,
         .prim_occluded = sphere_occluded_cb,
         .scene = s,
-        /* 1% of the scene's diagonal: a 4x4 tile of hit points is well inside it */
-        .coherent_extent = 0.01f * sqrtf((bounds.hi.x - bounds.lo.x) * (bounds.hi.x - bounds.lo.x) +
-                                         (bounds.hi.y - bounds.lo.y) * (bounds.hi.y - bounds.lo.y) +
-                                         (bounds.hi.z - bounds.lo.z) * (bounds.hi.z - bounds.lo.z)),
+        .coherent_extent = coherent_extent(s, bounds),
     };
     return RP_ERROR_NONE;
 }

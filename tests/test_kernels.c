@@ -62,10 +62,29 @@ static void make_rays(const test_mesh *m, rp_ray *rays, uint32_t n, uint64_t see
             }
         }
         uint32_t block = i / 16;
-        if (block % 3 != 2) {
+        if (block % 4 == 3) {
+            /* shadow rays: from points on the mesh, spread over it, to one light far outside
+             * (one direction from spread origins: per-ray-mask traversal), the segments ending
+             * at the light or halfway */
+            test_rng pg = {seed * 1361u + block};
+            float light[3];
+            for (int a = 0; a < 3; a++) light[a] = hi[a] + (hi[a] - lo[a]) * (2.0f + test_rng_float(&pg));
+            uint32_t t = test_rng_u32(&g) % m->nt;
+            float b1 = test_rng_float(&g), b2 = test_rng_float(&g);
+            if (b1 + b2 > 1.0f) b1 = 1.0f - b1, b2 = 1.0f - b2;
+            for (int a = 0; a < 3; a++) {
+                float v0 = m->v[3 * m->idx[3 * t] + a], v1 = m->v[3 * m->idx[3 * t + 1] + a], v2 = m->v[3 * m->idx[3 * t + 2] + a];
+                o[a] = v0 + b1 * (v1 - v0) + b2 * (v2 - v0);
+                d[a] = light[a] - o[a];
+            }
+            *r = (rp_ray){.org_x = o[0], .org_y = o[1], .org_z = o[2], .tnear = 1e-3f, .dir_x = d[0], .dir_y = d[1],
+                          .dir_z = d[2], .tfar = i % 2 ? 1.0f : 0.5f, .mask = 0xFFFFFFFFu};
+            continue;
+        }
+        if (block % 4 != 2) {
             /* packets of 16 that a camera would make: a shared origin outside the bounds and
-             * directions around one aimed at a triangle (block % 3 == 0), or spread across
-             * octant borders (block % 3 == 1, exercising the per-octant split) */
+             * directions around one aimed at a triangle (block % 4 == 0), or spread across
+             * octant borders (block % 4 == 1, exercising the per-octant split) */
             test_rng pg = {seed * 977u + block};
             float po[3], pd[3];
             uint32_t t = test_rng_u32(&pg) % m->nt;
@@ -73,13 +92,13 @@ static void make_rays(const test_mesh *m, rp_ray *rays, uint32_t n, uint64_t see
                 po[a] = lo[a] - (hi[a] - lo[a]) * 0.5f + (hi[a] - lo[a]) * 2.0f * test_rng_float(&pg);
                 pd[a] = m->v[3 * m->idx[3 * t] + a] - po[a];
             }
-            float spread = block % 3 == 0 ? 0.02f : 1.0f;
+            float spread = block % 4 == 0 ? 0.02f : 1.0f;
             float len = sqrtf(pd[0] * pd[0] + pd[1] * pd[1] + pd[2] * pd[2]);
             for (int a = 0; a < 3; a++) {
                 o[a] = po[a];
                 d[a] = pd[a] / len + (test_rng_float(&g) - 0.5f) * spread;
             }
-            if (block % 3 == 1) d[i % 3] = (test_rng_float(&g) - 0.5f) * 0.2f; /* straddle an axis */
+            if (block % 4 == 1) d[i % 3] = (test_rng_float(&g) - 0.5f) * 0.2f; /* straddle an axis */
         }
         *r = (rp_ray){.org_x = o[0], .org_y = o[1], .org_z = o[2], .tnear = 0.0f, .dir_x = d[0], .dir_y = d[1],
                       .dir_z = d[2], .tfar = INFINITY, .mask = 0xFFFFFFFFu};

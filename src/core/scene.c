@@ -308,48 +308,133 @@ static float coherent_extent(const rp_scene *s, box3 bounds) {
     return (float)ext;
 }
 
+/* The triangles of every triangle geometry, gathered by all threads: each task takes a range of
+ * the triangles (numbered geometry after geometry), writes its valid ones at the start of its
+ * range, and the ranges are then closed up in order, so the result is the serial one. */
+typedef struct tri_gather_job {
+    const rp_scene *s;
+    const uint32_t *geom_ids; /* the triangle geometries, in order */
+    const uint64_t *first;    /* first triangle number of each, and the total last */
+    uint64_t total;
+    uint32_t chunks;
+    gather *out;              /* capacity total */
+    uint32_t *valid;          /* per task: triangles kept */
+    uint64_t *rejected, *degenerate;
+    box3 *bounds;
+} tri_gather_job;
+
+static void tri_gather_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    const tri_gather_job *j = user;
+    uint64_t b = j->total * index / j->chunks, e = j->total * (index + 1) / j->chunks;
+    uint32_t k = 0;
+    while (j->first[k + 1] <= b && j->first[k + 1] < j->total) k++;
+    uint64_t w = b, rejected = 0, degenerate = 0;
+    box3 bounds = box3_empty();
+    for (uint64_t q = b; q < e; q++) {
+        while (q >= j->first[k + 1]) k++;
+        const rp_geometry *g = j->s->geoms[j->geom_ids[k]];
+        uint32_t p = (uint32_t)(q - j->first[k]);
+        vec3 v[3];
+        if (!load_triangle(g, p, v)) {
+            rejected++;
+            continue;
+        }
+        /* two equal vertices: zero area, never hit by the watertight test (one edge function and
+         * the determinant are exactly 0), so it is left out */
+        if (v3_eq(v[0], v[1]) || v3_eq(v[1], v[2]) || v3_eq(v[2], v[0])) {
+            degenerate++;
+            continue;
+        }
+        box3 box = {v3_min(v[0], v3_min(v[1], v[2])), v3_max(v[0], v3_max(v[1], v[2]))};
+        bounds = box3_union(bounds, box);
+        j->out->boxes[w] = box;
+        j->out->refs[w] = (prim_ref){j->geom_ids[k], p};
+        w++;
+    }
+    j->valid[index] = (uint32_t)(w - b);
+    j->rejected[index] = rejected, j->degenerate[index] = degenerate, j->bounds[index] = bounds;
+}
+
+static rp_error gather_triangles(const rp_scene *s, sys_pool *pool, gather *out, rp_scene_stats *st, box3 *bounds) {
+    const sys_allocator *a = &s->device->alloc;
+    uint32_t geoms = 0;
+    for (uint32_t gi = 0; gi < s->geom_count; gi++) {
+        const rp_geometry *g = s->geoms[gi];
+        if (!g || g->type != RP_GEOMETRY_TRIANGLE) continue;
+        if (!g->buffers[0].set || !g->buffers[1].set || g->buffers[RP_BUFFER_INDEX].count > 0xFFFFFFF0u)
+            return RP_ERROR_INVALID_GEOMETRY;
+        geoms++;
+    }
+    if (!geoms) return RP_ERROR_NONE;
+    uint32_t threads = pool ? (uint32_t)sys_pool_threads(pool) : 1;
+    tri_gather_job j = {.s = s, .out = out};
+    size_t idb = (size_t)geoms * sizeof(uint32_t), fb = ((size_t)geoms + 1) * sizeof(uint64_t);
+    uint32_t *ids = sys_alloc(a, idb);
+    uint64_t *first = sys_alloc(a, fb);
+    if (!ids || !first) {
+        sys_free(a, ids, idb), sys_free(a, first, fb);
+        return RP_ERROR_OUT_OF_MEMORY;
+    }
+    uint32_t k = 0;
+    uint64_t total = 0;
+    for (uint32_t gi = 0; gi < s->geom_count; gi++) {
+        const rp_geometry *g = s->geoms[gi];
+        if (!g || g->type != RP_GEOMETRY_TRIANGLE) continue;
+        ids[k] = gi, first[k] = total, k++;
+        total += g->buffers[RP_BUFFER_INDEX].count;
+    }
+    first[k] = total;
+    rp_error err = RP_ERROR_NONE;
+    if (total > 0xFFFFFFF0u) err = RP_ERROR_OUT_OF_MEMORY; /* more than a gather can count */
+    j.geom_ids = ids, j.first = first, j.total = total;
+    j.chunks = total >= 65536 ? threads * 8 : 1;
+    size_t cb = (size_t)j.chunks * (2 * sizeof(uint64_t) + sizeof(uint32_t) + sizeof(box3));
+    char *per = err == RP_ERROR_NONE && total ? sys_alloc(a, cb) : NULL;
+    if (err == RP_ERROR_NONE && total) {
+        out->capacity = (uint32_t)total;
+        out->boxes = sys_alloc(a, (size_t)total * sizeof *out->boxes);
+        out->refs = sys_alloc(a, (size_t)total * sizeof *out->refs);
+        if (!per || !out->boxes || !out->refs) err = RP_ERROR_OUT_OF_MEMORY;
+    }
+    if (err == RP_ERROR_NONE && total) {
+        j.rejected = (uint64_t *)per, j.degenerate = j.rejected + j.chunks;
+        j.bounds = (box3 *)(j.degenerate + j.chunks);
+        j.valid = (uint32_t *)(j.bounds + j.chunks);
+        if (j.chunks > 1) sys_pool_parallel_for(pool, j.chunks, tri_gather_task, &j);
+        else tri_gather_task(&j, 0, 0);
+        uint32_t pos = 0;
+        for (uint32_t c = 0; c < j.chunks; c++) {
+            uint64_t b = total * c / j.chunks;
+            memmove(&out->boxes[pos], &out->boxes[b], (size_t)j.valid[c] * sizeof *out->boxes);
+            memmove(&out->refs[pos], &out->refs[b], (size_t)j.valid[c] * sizeof *out->refs);
+            pos += j.valid[c];
+            st->rejected_prims += j.rejected[c], st->degenerate_prims += j.degenerate[c];
+            *bounds = box3_union(*bounds, j.bounds[c]);
+        }
+        out->count = pos;
+    }
+    sys_free(a, per, cb);
+    sys_free(a, ids, idb), sys_free(a, first, fb);
+    return err;
+}
+
 rp_error scene_build(rp_scene *s) {
     const sys_allocator *a = &s->device->alloc;
     rp_scene_stats st = {0};
     gather tris = {0}, prims = {0};
     rp_error err = RP_ERROR_NONE;
     box3 bounds = box3_empty();
+    /* share the device's threads unless a parallel_for is running (commit called from a task) */
+    bool locked = pthread_mutex_trylock(&s->device->pool_lock) == 0;
+    sys_pool *pool = locked ? s->device->pool : NULL;
     /* collect valid primitives */
+    err = gather_triangles(s, pool, &tris, &st, &bounds);
     for (uint32_t gi = 0; gi < s->geom_count && err == RP_ERROR_NONE; gi++) {
         rp_geometry *g = s->geoms[gi];
         if (!g) continue;
         switch (g->type) {
-        case RP_GEOMETRY_TRIANGLE: {
-            if (!g->buffers[0].set || !g->buffers[1].set) {
-                err = RP_ERROR_INVALID_GEOMETRY;
-                break;
-            }
-            size_t n = g->buffers[RP_BUFFER_INDEX].count;
-            if (n > 0xFFFFFFF0u) {
-                err = RP_ERROR_INVALID_GEOMETRY;
-                break;
-            }
-            for (uint32_t p = 0; p < (uint32_t)n; p++) {
-                vec3 v[3];
-                if (!load_triangle(g, p, v)) {
-                    st.rejected_prims++;
-                    continue;
-                }
-                box3 b = {v3_min(v[0], v3_min(v[1], v[2])), v3_max(v[0], v3_max(v[1], v[2]))};
-                /* two equal vertices: zero area, never hit by the watertight test (one edge
-                 * function and the determinant are exactly 0), so it is left out */
-                if (v3_eq(v[0], v[1]) || v3_eq(v[1], v[2]) || v3_eq(v[2], v[0])) {
-                    st.degenerate_prims++;
-                    continue;
-                }
-                bounds = box3_union(bounds, b);
-                if (!gather_push(a, &tris, b, gi, p)) {
-                    err = RP_ERROR_OUT_OF_MEMORY;
-                    break;
-                }
-            }
-            break;
-        }
+        case RP_GEOMETRY_TRIANGLE: break; /* gathered above */
         case RP_GEOMETRY_SPHERE: {
             if (!g->buffers[0].set) {
                 err = RP_ERROR_INVALID_GEOMETRY;
@@ -402,9 +487,6 @@ rp_error scene_build(rp_scene *s) {
                  (unsigned long long)st.rejected_prims);
         device_log(s->device, RP_LOG_WARNING, msg);
     }
-    /* share the device's threads unless a parallel_for is running (commit called from a task) */
-    bool locked = err == RP_ERROR_NONE && pthread_mutex_trylock(&s->device->pool_lock) == 0;
-    sys_pool *pool = locked ? s->device->pool : NULL;
     bvh_build_desc bd = {.bins = quality_bins(s->desc.quality), .max_leaf_size = s->desc.max_leaf_size};
     /* leaves end where the SAH says (a node costs half a tri4 block, a whole one at low quality), up to max_leaf_size: long
      * thin triangles whose boxes overlap (spd_rings' cylinders, spd_tree's branches) are

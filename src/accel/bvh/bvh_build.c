@@ -8,6 +8,8 @@
 #include "simd/simd.h"
 
 #define MAX_BINS 64
+#define PAR_MIN 65536u     /* nodes this large (at the top of the tree) are binned by all threads */
+#define PAR_CHUNKS 32u
 #define MEDIAN_DEPTH 64 /* past this depth, split at the median to bound the depth */
 
 /* A primitive box in SIMD form (w lanes unused), so unions are two min/max instructions. */
@@ -24,6 +26,9 @@ typedef struct build_ctx {
     int max_leaf;
     uint32_t block;    /* primitives per intersection block */
     double trav_cost;  /* of one node, in block intersections */
+    /* the threads, while the top of the tree is split (NULL after) */
+    sys_pool *top_pool;
+    const sys_allocator *alloc;
     /* subtrees deferred to the threads */
     struct task *tasks;
     uint32_t task_count, task_capacity;
@@ -39,7 +44,8 @@ static inline vf4 centroid_of(const pbox *b) { return b->lo * 0.5f + b->hi * 0.5
 
 static inline box3 box_of(vf4 lo, vf4 hi) { return (box3){v3(lo[0], lo[1], lo[2]), v3(hi[0], hi[1], hi[2])}; }
 
-static box3 prim_range_box(const build_ctx *c, uint32_t begin, uint32_t end, box3 *cbox) {
+/* Box and centroid box of [begin, end) as four vectors: lo, hi, centroid lo, centroid hi. */
+static void range_boxes(const build_ctx *c, uint32_t begin, uint32_t end, vf4 out[4]) {
     vf4 lo = vf4_splat(INFINITY), hi = vf4_splat(-INFINITY), clo = lo, chi = hi;
     for (uint32_t i = begin; i < end; i++) {
         const pbox *b = &c->boxes[i];
@@ -47,8 +53,48 @@ static box3 prim_range_box(const build_ctx *c, uint32_t begin, uint32_t end, box
         lo = vf4_min(lo, b->lo), hi = vf4_max(hi, b->hi);
         clo = vf4_min(clo, ce), chi = vf4_max(chi, ce);
     }
-    *cbox = box_of(clo, chi);
-    return box_of(lo, hi);
+    out[0] = lo, out[1] = hi, out[2] = clo, out[3] = chi;
+}
+
+/* A reduction over the primitives of a large node, as PAR_CHUNKS tasks on the pool. */
+typedef struct par_job {
+    const build_ctx *c;
+    uint32_t begin, end;
+    vf4 lo, scale, last; /* binning */
+    int nb;
+    void *out;           /* PAR_CHUNKS results */
+} par_job;
+
+static void par_range(const par_job *j, uint32_t index, uint32_t *b, uint32_t *e) {
+    uint64_t n = j->end - j->begin;
+    *b = j->begin + (uint32_t)(n * index / PAR_CHUNKS), *e = j->begin + (uint32_t)(n * (index + 1) / PAR_CHUNKS);
+}
+
+static void boxes_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    const par_job *j = user;
+    uint32_t b, e;
+    par_range(j, index, &b, &e);
+    range_boxes(j->c, b, e, (vf4 *)j->out + 4 * index);
+}
+
+static box3 prim_range_box(const build_ctx *c, uint32_t begin, uint32_t end, box3 *cbox) {
+    vf4 r[4];
+    vf4 *parts = c->top_pool && end - begin >= PAR_MIN ? sys_alloc(c->alloc, PAR_CHUNKS * 4 * sizeof(vf4)) : NULL;
+    if (parts) {
+        par_job j = {.c = c, .begin = begin, .end = end, .out = parts};
+        sys_pool_parallel_for(c->top_pool, PAR_CHUNKS, boxes_task, &j);
+        for (int k = 0; k < 4; k++) r[k] = parts[k];
+        for (uint32_t i = 1; i < PAR_CHUNKS; i++) {
+            r[0] = vf4_min(r[0], parts[4 * i]), r[1] = vf4_max(r[1], parts[4 * i + 1]);
+            r[2] = vf4_min(r[2], parts[4 * i + 2]), r[3] = vf4_max(r[3], parts[4 * i + 3]);
+        }
+        sys_free(c->alloc, parts, PAR_CHUNKS * 4 * sizeof(vf4));
+    } else {
+        range_boxes(c, begin, end, r);
+    }
+    *cbox = box_of(r[2], r[3]);
+    return box_of(r[0], r[1]);
 }
 
 static void set_node_box(bvh_node *n, box3 b) {
@@ -81,6 +127,46 @@ static double half_area4(vf4 lo, vf4 hi) {
     return dx * dy + dy * dz + dz * dx;
 }
 
+/* Bins of the three axes: the union of the boxes and the count of the primitives whose centroid
+ * falls in each. */
+typedef struct bins {
+    vf4 lo[3][MAX_BINS], hi[3][MAX_BINS];
+    uint32_t count[3][MAX_BINS];
+} bins;
+
+static void bin_range(const build_ctx *c, uint32_t begin, uint32_t end, vf4 lo, vf4 scale, vf4 last, int nb,
+                      bins *out) {
+    for (int a = 0; a < 3; a++)
+        for (int k = 0; k < nb; k++) out->lo[a][k] = vf4_splat(INFINITY), out->hi[a][k] = vf4_splat(-INFINITY), out->count[a][k] = 0;
+    for (uint32_t i = begin; i < end; i++) {
+        const pbox *p = &c->boxes[i];
+        vi4 b = bins_of(centroid_of(p), lo, scale, last);
+        for (int a = 0; a < 3; a++) {
+            int k = b[a];
+            out->lo[a][k] = vf4_min(out->lo[a][k], p->lo);
+            out->hi[a][k] = vf4_max(out->hi[a][k], p->hi);
+            out->count[a][k]++;
+        }
+    }
+}
+
+static void bins_merge(bins *dst, const bins *src, int nb) {
+    for (int a = 0; a < 3; a++)
+        for (int k = 0; k < nb; k++) {
+            dst->lo[a][k] = vf4_min(dst->lo[a][k], src->lo[a][k]);
+            dst->hi[a][k] = vf4_max(dst->hi[a][k], src->hi[a][k]);
+            dst->count[a][k] += src->count[a][k];
+        }
+}
+
+static void bins_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    const par_job *j = user;
+    uint32_t b, e;
+    par_range(j, index, &b, &e);
+    bin_range(j->c, b, e, j->lo, j->scale, j->last, j->nb, (bins *)j->out + index);
+}
+
 /* Splits [begin, end) in place; returns the first index of the right half and the two boxes, or
  * 0 when no split was found (all centroids in one bin on every axis). One pass bins all three
  * axes at once. */
@@ -102,20 +188,19 @@ static uint32_t split_sah(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox,
     }
     if (!usable[0] && !usable[1] && !usable[2]) return 0;
     vf4 last = vf4_splat((float)(nb - 1));
-    vf4 blo[3][MAX_BINS], bhi[3][MAX_BINS];
-    uint32_t bcount[3][MAX_BINS];
-    for (int a = 0; a < 3; a++)
-        for (int b = 0; b < nb; b++) blo[a][b] = vf4_splat(INFINITY), bhi[a][b] = vf4_splat(-INFINITY), bcount[a][b] = 0;
-    for (uint32_t i = begin; i < end; i++) {
-        const pbox *p = &c->boxes[i];
-        vi4 b = bins_of(centroid_of(p), lo, scale, last);
-        for (int a = 0; a < 3; a++) {
-            int k = b[a];
-            blo[a][k] = vf4_min(blo[a][k], p->lo);
-            bhi[a][k] = vf4_max(bhi[a][k], p->hi);
-            bcount[a][k]++;
-        }
+    bins acc;
+    bins *parts = c->top_pool && end - begin >= PAR_MIN ? sys_alloc(c->alloc, PAR_CHUNKS * sizeof(bins)) : NULL;
+    if (parts) {
+        par_job j = {.c = c, .begin = begin, .end = end, .lo = lo, .scale = scale, .last = last, .nb = nb, .out = parts};
+        sys_pool_parallel_for(c->top_pool, PAR_CHUNKS, bins_task, &j);
+        acc = parts[0];
+        for (uint32_t i = 1; i < PAR_CHUNKS; i++) bins_merge(&acc, &parts[i], nb);
+        sys_free(c->alloc, parts, PAR_CHUNKS * sizeof(bins));
+    } else {
+        bin_range(c, begin, end, lo, scale, last, nb, &acc);
     }
+    vf4 (*blo)[MAX_BINS] = acc.lo, (*bhi)[MAX_BINS] = acc.hi;
+    uint32_t (*bcount)[MAX_BINS] = acc.count;
     double best_cost = INFINITY;
     int best_axis = -1, best_split = 0;
     vf4 best_llo = {0}, best_lhi = {0}, best_rlo = {0}, best_rhi = {0};
@@ -283,6 +368,7 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
         .boxes = pboxes, .prims = out->prims, .nodes = out->nodes,
         .bins = desc->bins < 4 ? 4 : desc->bins > MAX_BINS ? MAX_BINS : desc->bins,
         .max_leaf = desc->max_leaf_size < 1 ? 1 : desc->max_leaf_size,
+        .alloc = alloc,
         .block = desc->block_size < 1 ? 1u : (uint32_t)desc->block_size,
         .trav_cost = desc->trav_cost > 0.0f ? desc->trav_cost : 1.0,
     };
@@ -309,6 +395,7 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
         }
         uint32_t qhead = 0, qtail = 0;
         queue[qtail++] = (task){0, 0, n, 0};
+        c.top_pool = pool;
         while (qhead < qtail) {
             task t = queue[qhead++];
             if (t.end - t.begin <= grain || qtail + 2 > c.task_capacity || c.task_count + 2 > c.task_capacity) {
@@ -321,6 +408,7 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
                 queue[qtail++] = kids[1];
             }
         }
+        c.top_pool = NULL; /* the subtrees run on the pool themselves */
         sys_pool_parallel_for(pool, c.task_count, build_task, &c);
         sys_free(alloc, c.tasks, c.task_capacity * sizeof(task));
         sys_free(alloc, queue, c.task_capacity * sizeof(task));

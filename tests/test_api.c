@@ -290,42 +290,64 @@ int main(void) {
     CHECK(rh.hit.prim_id == 0 && fabsf(rh.ray.tfar - 1.0f) < 1e-6f); /* every sliver covers it */
     rp_scene_release(fan);
 
-    /* 200000 triangles in two geometries, gathered by several tasks: every 7th degenerate, every
-     * 11th with a bad index, counted across the tasks; the kept ones still hit where they lie */
-    rp_scene *bigs = rp_scene_new(dev, NULL);
-    uint32_t big_n = 100000;
-    for (int gk = 0; gk < 2; gk++) {
-        rp_geometry *bg = rp_geometry_new(dev, RP_GEOMETRY_TRIANGLE);
-        float *bv = rp_geometry_new_buffer(bg, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, 0, 3 * big_n);
-        uint32_t *bi = rp_geometry_new_buffer(bg, RP_BUFFER_INDEX, RP_FORMAT_UINT3, 0, big_n);
-        for (uint32_t i = 0; i < big_n; i++) {
-            float x = (float)(i % 1000), y = (float)(i / 1000) + 200.0f * (float)gk;
-            float tv9[9] = {x, y, 0, x + 0.9f, y, 0, x, y + 0.9f, 0};
-            if (i % 7 == 0) tv9[3] = tv9[0], tv9[4] = tv9[1], tv9[5] = tv9[2];
-            memcpy(bv + 9 * i, tv9, sizeof tv9);
-            bi[3 * i] = 3 * i, bi[3 * i + 1] = 3 * i + 1, bi[3 * i + 2] = i % 11 == 5 ? 3 * big_n + 7 : 3 * i + 2;
+    {
+        /* 200000 triangles in two geometries, gathered by several tasks: every 7th degenerate, every
+         * 11th with a bad index, counted across the tasks; the kept ones still hit where they lie; on
+         * one thread the same tree (the threads only share the work) */
+        uint32_t big_n = 100000;
+        float *gv[2];
+        uint32_t *gi[2];
+        for (int gk = 0; gk < 2; gk++) {
+            gv[gk] = malloc((size_t)big_n * 9 * sizeof(float));
+            gi[gk] = malloc((size_t)big_n * 3 * sizeof(uint32_t));
+            for (uint32_t i = 0; i < big_n; i++) {
+                float x = (float)(i % 1000), y = (float)(i / 1000) + 200.0f * (float)gk;
+                float tv9[9] = {x, y, 0, x + 0.9f, y, 0, x, y + 0.9f, 0};
+                if (i % 7 == 0) tv9[3] = tv9[0], tv9[4] = tv9[1], tv9[5] = tv9[2];
+                memcpy(gv[gk] + 9 * i, tv9, sizeof tv9);
+                gi[gk][3 * i] = 3 * i, gi[gk][3 * i + 1] = 3 * i + 1;
+                gi[gk][3 * i + 2] = i % 11 == 5 ? 3 * big_n + 7 : 3 * i + 2;
+            }
         }
-        rp_scene_attach(bigs, bg);
-        rp_geometry_release(bg);
+        rp_device *dev1 = rp_device_new(&(rp_device_desc){.threads = 1});
+        rp_scene_stats st1 = {0};
+        for (int pass = 0; pass < 2; pass++) {
+            rp_device *d = pass ? dev1 : dev;
+            rp_scene *bigs = rp_scene_new(d, NULL);
+            for (int gk = 0; gk < 2; gk++) {
+                rp_geometry *bg = rp_geometry_new(d, RP_GEOMETRY_TRIANGLE);
+                rp_geometry_set_buffer(bg, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, gv[gk], 0, 0, 3 * big_n);
+                rp_geometry_set_buffer(bg, RP_BUFFER_INDEX, RP_FORMAT_UINT3, gi[gk], 0, 0, big_n);
+                rp_geometry_commit(bg);
+                rp_scene_attach(bigs, bg);
+                rp_geometry_release(bg);
+            }
+            CHECK(rp_scene_commit(bigs) == RP_ERROR_NONE);
+            rp_scene_get_stats(bigs, pass ? &st1 : &st);
+            rh = ray_at(123.2f, 245.2f, -1, 0, 0, 1); /* triangle 45123 of the second geometry */
+            rp_intersect1(bigs, &rh);
+            CHECK(rh.hit.geom_id == 1 && rh.hit.prim_id == 45123);
+            rh = ray_at(77.2f, 0.2f, -1, 0, 0, 1); /* triangle 77: degenerate */
+            rp_intersect1(bigs, &rh);
+            CHECK(rh.hit.geom_id == RP_INVALID_ID);
+            rp_scene_release(bigs);
+        }
+        uint64_t ndeg = 0, nbad = 0;
+        for (uint32_t i = 0; i < big_n; i++) {
+            if (i % 11 == 5) nbad++;
+            else if (i % 7 == 0) ndeg++;
+        }
+        CHECKF(st.degenerate_prims == 2 * ndeg && st.rejected_prims == 2 * nbad &&
+                   st.triangles == 2 * (big_n - ndeg - nbad),
+               "big: %llu triangles, %llu degenerate, %llu rejected", (unsigned long long)st.triangles,
+               (unsigned long long)st.degenerate_prims, (unsigned long long)st.rejected_prims);
+        CHECKF(st1.triangles == st.triangles && st1.binary_nodes == st.binary_nodes && st1.leaves == st.leaves &&
+                   st1.depth == st.depth && st1.sah_cost == st.sah_cost,
+               "1 thread: %llu nodes, SAH %.6f; 3 threads: %llu nodes, SAH %.6f", (unsigned long long)st1.binary_nodes,
+               st1.sah_cost, (unsigned long long)st.binary_nodes, st.sah_cost);
+        rp_device_release(dev1);
+        for (int gk = 0; gk < 2; gk++) free(gv[gk]), free(gi[gk]);
     }
-    CHECK(rp_scene_commit(bigs) == RP_ERROR_NONE);
-    rp_scene_get_stats(bigs, &st);
-    uint64_t ndeg = 0, nbad = 0;
-    for (uint32_t i = 0; i < big_n; i++) {
-        if (i % 11 == 5) nbad++;
-        else if (i % 7 == 0) ndeg++;
-    }
-    CHECKF(st.degenerate_prims == 2 * ndeg && st.rejected_prims == 2 * nbad &&
-               st.triangles == 2 * (big_n - ndeg - nbad),
-           "big: %llu triangles, %llu degenerate, %llu rejected", (unsigned long long)st.triangles,
-           (unsigned long long)st.degenerate_prims, (unsigned long long)st.rejected_prims);
-    rh = ray_at(123.2f, 245.2f, -1, 0, 0, 1); /* triangle 45123 of the second geometry */
-    rp_intersect1(bigs, &rh);
-    CHECK(rh.hit.geom_id == 1 && rh.hit.prim_id == 45123);
-    rh = ray_at(77.2f, 0.2f, -1, 0, 0, 1); /* triangle 77: degenerate */
-    rp_intersect1(bigs, &rh);
-    CHECK(rh.hit.geom_id == RP_INVALID_ID);
-    rp_scene_release(bigs);
 
     /* short rays starting near a large triangle keep an accurate distance (a reflection ray
      * leaving a wall towards a big floor 0.03 away), compared with the plane distance in double */

@@ -194,6 +194,29 @@ static inline vf16 vf16_sqrt(vf16 a) {
 #endif
 }
 
+/* Two 4-lane halves loaded into one 8-lane vector (lo in lanes 0-3). */
+static inline vf8 vf8_load2(const float *lo, const float *hi) {
+#if defined(__AVX__)
+    return (vf8)_mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(lo)), _mm_loadu_ps(hi), 1);
+#else
+    vf8 r;
+    memcpy(&r, lo, 16);
+    memcpy((char *)&r + 16, hi, 16);
+    return r;
+#endif
+}
+static inline vi8 vi8_load2(const void *lo, const void *hi) {
+#if defined(__AVX__)
+    return (vi8)_mm256_insertf128_si256(_mm256_castsi128_si256(_mm_loadu_si128((const __m128i *)lo)),
+                                        _mm_loadu_si128((const __m128i *)hi), 1);
+#else
+    vi8 r;
+    memcpy(&r, lo, 16);
+    memcpy((char *)&r + 16, hi, 16);
+    return r;
+#endif
+}
+
 static inline uint32_t simd_ctz(uint32_t x) { return (uint32_t)__builtin_ctz(x); }
 static inline uint32_t simd_popcount(uint32_t x) { return (uint32_t)__builtin_popcount(x); }
 

@@ -327,8 +327,7 @@ static void tri_gather_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     const tri_gather_job *j = user;
     uint64_t b = j->total * index / j->chunks, e = j->total * (index + 1) / j->chunks;
-    uint32_t k = 0;
-    while (j->first[k + 1] <= b && j->first[k + 1] < j->total) k++;
+    uint32_t k = 0; /* the geometry of triangle q, advanced in the loop */
     uint64_t w = b, rejected = 0, degenerate = 0;
     box3 bounds = box3_empty();
     for (uint64_t q = b; q < e; q++) {

@@ -225,6 +225,13 @@ static void tri_fill_leaf(const tri_pack_ctx *c, const bvh_node *leaf) {
             }
             t->geom[j] = r.geom, t->prim[j] = r.prim, t->mask[j] = g->mask;
         }
+        /* unused lanes repeat lane 0 with mask 0 (never hit): zeroed lanes made every edge
+         * function exactly 0, so each test of a partly filled block took the watertight test's
+         * double-precision refinement */
+        for (uint32_t j = n - b * 4; j < 4; j++) {
+            for (int q = 0; q < 9; q++) t->v[q][j] = t->v[q][0];
+            t->geom[j] = t->geom[0], t->prim[j] = t->prim[0], t->mask[j] = 0;
+        }
     }
 }
 
@@ -500,15 +507,25 @@ rp_error scene_build(rp_scene *s) {
         } else {
             tri_pack_ctx pc = {.scene = s, .bvh = &b2, .refs = tris.refs};
             bool ok = tri_pack_plan(a, &pc);
-            if (ok) pc.blocks = sys_alloc(a, (size_t)(pc.block_count ? pc.block_count : 1) * sizeof(tri4));
+            /* one zeroed block past the end: the 8-lane leaf tests read a pair of blocks, and a
+             * leaf's odd last block is paired with whatever follows it (those lanes masked off) */
+            size_t alloc_blocks = (size_t)pc.block_count + 1;
+            if (ok) pc.blocks = sys_alloc(a, alloc_blocks * sizeof(tri4));
             ok = ok && pc.blocks;
+            if (ok) {
+                /* NaN vertices: no edge function is 0, so no refinement; mask 0 */
+                tri4 *pad = &pc.blocks[pc.block_count];
+                memset(pad, 0, sizeof *pad);
+                for (int q = 0; q < 9; q++)
+                    for (int j = 0; j < 4; j++) pad->v[q][j] = NAN;
+            }
             if (ok) {
                 pc.chunks = pool ? (uint32_t)sys_pool_threads(pool) * 8 : 1;
                 if (pool) sys_pool_parallel_for(pool, pc.chunks, tri_pack_task, &pc);
                 else tri_pack_task(&pc, 0, 0);
             }
             if (!ok || !bvhw_from_bvh2(a, &b2, width, tri_leaf, &pc, &s->tri_bvh)) {
-                sys_free(a, pc.blocks, (size_t)(pc.block_count ? pc.block_count : 1) * sizeof(tri4));
+                sys_free(a, pc.blocks, alloc_blocks * sizeof(tri4));
                 err = RP_ERROR_OUT_OF_MEMORY;
             } else {
                 /* keep the binary BVH for large packets, its leaves pointing at the tri4 blocks */
@@ -520,7 +537,7 @@ rp_error scene_build(rp_scene *s) {
                 sys_free(a, b2.prims, (size_t)(b2.prim_count ? b2.prim_count : 1) * sizeof(uint32_t));
                 b2.prims = NULL; /* the leaves no longer index it */
                 s->tris = pc.blocks;
-                s->tri_block_count = pc.block_count ? pc.block_count : 1;
+                s->tri_block_count = alloc_blocks;
                 st.triangles = tris.count;
                 st.binary_nodes = b2.node_count;
                 st.wide_nodes = s->tri_bvh.node_count;

@@ -29,7 +29,11 @@ bool tri_intersect_ref(const float org[3], const float dir[3], float tnear, floa
         V = (float)((double)Ax * (double)Cy - (double)Ay * (double)Cx);
         W = (float)((double)Bx * (double)Ay - (double)By * (double)Ax);
     }
-    if ((U < 0.0f || V < 0.0f || W < 0.0f) && (U > 0.0f || V > 0.0f || W > 0.0f)) return false;
+    /* some edge function negative and some positive: outside. Written as the kernels' minps /
+     * maxps (a < b ? a : b), so a NaN (overflow) is decided the same way there and here. */
+    float m1 = V < W ? V : W, mn = U < m1 ? U : m1;
+    float M1 = V > W ? V : W, mx = U > M1 ? U : M1;
+    if (mn < 0.0f && mx > 0.0f) return false;
     float det = U + V + W;
     if (det == 0.0f) return false;
     /* distance from the plane (see WT_DEFINE in traverse/wt.h for why) */

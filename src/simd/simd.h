@@ -32,7 +32,9 @@ typedef int32_t vi16 __attribute__((vector_size(64)));
     }                                                                                           \
     static inline void vf##W##_store(float *p, vf##W v) { memcpy(p, &v, sizeof v); }         \
     static inline void vi##W##_store(void *p, vi##W v) { memcpy(p, &v, sizeof v); }           \
-    static inline vf##W vf##W##_splat(float x) { return (vf##W){0} + x; }                    \
+    /* x - 0 rather than 0 + x: the same value for every x but -0 (kept), and GCC folds it, where \
+     * 0 + x costs an add before every broadcast */                                             \
+    static inline vf##W vf##W##_splat(float x) { return x - (vf##W){0}; }                    \
     static inline vi##W vi##W##_splat(int32_t x) { return (vi##W){0} + x; }                  \
     /* Lanes where m is all ones take a, others b. */                                          \
     static inline vf##W vf##W##_select(vi##W m, vf##W a, vf##W b) {                           \

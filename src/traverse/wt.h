@@ -72,9 +72,11 @@ static inline void wt_refine(float Ax, float Ay, float Bx, float By, float Cx, f
             wt_edges##N e = wt_fix_##N(Ax, Ay, Bx, By, Cx, Cy, (wt_edges##N){U, V, W}, z);        \
             U = e.U, V = e.V, W = e.W;                                                            \
         }                                                                                         \
-        vi##N ok = ~(((U < zero) | (V < zero) | (W < zero)) & ((U > zero) | (V > zero) | (W > zero))); \
+        /* some edge function negative and some positive: outside. As min / max (minps: a NaN  \
+         * operand yields the other one), the same decision as tri_intersect_ref's. */           \
+        vf##N mn = vf##N##_min(U, vf##N##_min(V, W)), mx = vf##N##_max(U, vf##N##_max(V, W));     \
         vf##N det = U + V + W;                                                                    \
-        ok &= det != zero;                                                                        \
+        vi##N ok = ~((mn < zero) & (mx > zero)) & (det != zero);                                  \
         if (!vi##N##_movemask(ok)) {                                                              \
             *t = zero, *u = zero, *v = zero;                                                      \
             return ok;                                                                            \

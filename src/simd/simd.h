@@ -18,20 +18,20 @@ typedef int32_t vi8 __attribute__((vector_size(32)));
 typedef float vf16 __attribute__((vector_size(64)));
 typedef int32_t vi16 __attribute__((vector_size(64)));
 
-/* Unaligned-friendly loads/stores of packets. */
+/* Unaligned loads/stores of packets through 4-byte-aligned, may_alias vector types (the GCC/Clang
+ * idiom for movups): memcpy into a vector sometimes came out as an integer load, a store to the
+ * stack and a float reload. */
+typedef float vf4u __attribute__((vector_size(16), aligned(4), may_alias));
+typedef int32_t vi4u __attribute__((vector_size(16), aligned(4), may_alias));
+typedef float vf8u __attribute__((vector_size(32), aligned(4), may_alias));
+typedef int32_t vi8u __attribute__((vector_size(32), aligned(4), may_alias));
+typedef float vf16u __attribute__((vector_size(64), aligned(4), may_alias));
+typedef int32_t vi16u __attribute__((vector_size(64), aligned(4), may_alias));
 #define SIMD_DEFINE_LOADS_(W)                                                                  \
-    static inline vf##W vf##W##_load(const float *p) {                                        \
-        vf##W v;                                                                                \
-        memcpy(&v, p, sizeof v);                                                                \
-        return v;                                                                               \
-    }                                                                                           \
-    static inline vi##W vi##W##_load(const void *p) {                                         \
-        vi##W v;                                                                                \
-        memcpy(&v, p, sizeof v);                                                                \
-        return v;                                                                               \
-    }                                                                                           \
-    static inline void vf##W##_store(float *p, vf##W v) { memcpy(p, &v, sizeof v); }         \
-    static inline void vi##W##_store(void *p, vi##W v) { memcpy(p, &v, sizeof v); }           \
+    static inline vf##W vf##W##_load(const float *p) { return *(const vf##W##u *)p; }         \
+    static inline vi##W vi##W##_load(const void *p) { return *(const vi##W##u *)p; }          \
+    static inline void vf##W##_store(float *p, vf##W v) { *(vf##W##u *)p = v; }               \
+    static inline void vi##W##_store(void *p, vi##W v) { *(vi##W##u *)p = v; }                \
     /* x - 0 rather than 0 + x: the same value for every x but -0 (kept), and GCC folds it, where \
      * 0 + x costs an add before every broadcast */                                             \
     static inline vf##W vf##W##_splat(float x) { return x - (vf##W){0}; }                    \

@@ -154,6 +154,34 @@ static inline float vf16_reduce_min(vf16 a) {
     return r;
 }
 
+/* Horizontal minimum for heuristics (traversal order): a tree of minps, whose handling of NaN
+ * differs from vf*_reduce_min's; never for results. */
+static inline float vf4_hmin_fast(vf4 a) {
+#if defined(__SSE__)
+    __m128 x = (__m128)a;
+    x = _mm_min_ps(x, _mm_movehl_ps(x, x));
+    x = _mm_min_ss(x, _mm_shuffle_ps(x, x, 1));
+    return _mm_cvtss_f32(x);
+#else
+    return vf4_reduce_min(a);
+#endif
+}
+static inline float vf8_hmin_fast(vf8 a) {
+#if defined(__AVX__)
+    __m128 x = _mm_min_ps(_mm256_castps256_ps128((__m256)a), _mm256_extractf128_ps((__m256)a, 1));
+    return vf4_hmin_fast((vf4)x);
+#else
+    return vf8_reduce_min(a);
+#endif
+}
+static inline float vf16_hmin_fast(vf16 a) {
+#if defined(__AVX512F__)
+    return _mm512_reduce_min_ps((__m512)a);
+#else
+    return vf16_reduce_min(a);
+#endif
+}
+
 static inline float vf4_reduce_max(vf4 a) {
     float r = a[0];
     for (int i = 1; i < 4; i++) r = a[i] > r ? a[i] : r;

@@ -1,6 +1,7 @@
 /* Binned SAH builder (Wald 2007): per node, primitives are binned by centroid along each axis and
- * the split of least SAH cost among bin borders is taken. The top of the tree is split on the
- * calling thread until there are enough subtrees, which the device's threads then build. */
+ * the split of least SAH cost among bin borders is taken. The top of the tree is split level by
+ * level (large nodes binned by all threads, then a node per thread) until there are enough
+ * subtrees, which the device's threads then build. */
 #include <math.h>
 #include <string.h>
 
@@ -319,6 +320,21 @@ static void build_task(void *user, uint32_t index, uint32_t thread) {
     build_subtree(c, c->tasks[index]);
 }
 
+/* One level of the top of the tree: node `index` of `in` split into out[2 index], out[2 index + 1]. */
+#define LEVEL_MAX 256u /* nodes split per level; 2 LEVEL_MAX + subtrees fit the task array */
+typedef struct level_job {
+    build_ctx *c;
+    const task *in;
+    task *out;
+    uint8_t *split;
+} level_job;
+
+static void level_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    level_job *j = user;
+    j->split[index] = build_node(j->c, &j->in[index], &j->out[2 * index]) == 2;
+}
+
 /* SAH cost and leaf count, recursively with an explicit stack. */
 static void measure(bvh2 *b) {
     double root_area = box3_half_area(node_box(&b->nodes[0]));
@@ -342,6 +358,31 @@ static void measure(bvh2 *b) {
     b->sah_cost = root_area > 0.0 ? cost / root_area : 0.0;
 }
 
+/* Primitive boxes in SIMD form, the identity permutation and the root box, by chunks. */
+typedef struct init_job {
+    const box3 *boxes;
+    pbox *pboxes;
+    uint32_t *prims;
+    uint32_t n, chunks; /* chunks: 0 means PAR_CHUNKS */
+    box3 part[PAR_CHUNKS];
+} init_job;
+
+static void init_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    init_job *j = user;
+    uint64_t chunks = j->chunks ? j->chunks : PAR_CHUNKS;
+    uint32_t b = (uint32_t)(j->n * index / chunks), e = (uint32_t)(j->n * (index + 1) / chunks);
+    box3 r = box3_empty();
+    for (uint32_t i = b; i < e; i++) {
+        const box3 *x = &j->boxes[i];
+        j->prims[i] = i;
+        j->pboxes[i].lo = (vf4){x->lo.x, x->lo.y, x->lo.z, 0.0f};
+        j->pboxes[i].hi = (vf4){x->hi.x, x->hi.y, x->hi.z, 0.0f};
+        r = box3_union(r, *x);
+    }
+    j->part[index] = r;
+}
+
 bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, uint32_t n,
                const bvh_build_desc *desc, bvh2 *out) {
     memset(out, 0, sizeof *out);
@@ -358,11 +399,16 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
     out->node_capacity = cap;
     out->prim_count = n;
     box3 root = box3_empty();
-    for (uint32_t i = 0; i < n; i++) {
-        out->prims[i] = i;
-        pboxes[i].lo = (vf4){boxes[i].lo.x, boxes[i].lo.y, boxes[i].lo.z, 0.0f};
-        pboxes[i].hi = (vf4){boxes[i].hi.x, boxes[i].hi.y, boxes[i].hi.z, 0.0f};
-        root = box3_union(root, boxes[i]);
+    init_job ij = {.boxes = boxes, .pboxes = pboxes, .prims = out->prims, .n = n};
+    if (pool && sys_pool_threads(pool) > 1 && n >= PAR_MIN) {
+        /* on all threads: a serial pass (and its page faults) over millions of boxes was a
+         * tenth of a large build on two threads */
+        sys_pool_parallel_for(pool, PAR_CHUNKS, init_task, &ij);
+        for (uint32_t i = 0; i < PAR_CHUNKS; i++) root = box3_union(root, ij.part[i]);
+    } else {
+        ij.chunks = 1;
+        init_task(&ij, 0, 0);
+        root = ij.part[0];
     }
     build_ctx c = {
         .boxes = pboxes, .prims = out->prims, .nodes = out->nodes,
@@ -380,38 +426,54 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
 
     int threads = pool ? sys_pool_threads(pool) : 1;
     if (threads > 1 && n > 4096) {
-        /* split breadth first until the open subtrees are small enough to balance the threads */
+        /* Split level by level until the open subtrees are small enough to balance the threads.
+         * A level with fewer nodes than threads is split node by node, each binned by all
+         * threads; a level with more is split a node per thread (the partitions of the top
+         * levels had run on one thread while the others waited). */
         uint32_t grain = n / (uint32_t)(threads * 16);
         if (grain < 1024) grain = 1024;
         c.task_capacity = 1024;
+        size_t qbytes = (size_t)LEVEL_MAX * 2 * sizeof(task);
         c.tasks = sys_alloc(alloc, c.task_capacity * sizeof(task));
-        task *queue = sys_alloc(alloc, c.task_capacity * sizeof(task));
-        if (!c.tasks || !queue) {
+        task *level = sys_alloc(alloc, qbytes), *kids = sys_alloc(alloc, qbytes);
+        if (!c.tasks || !level || !kids) {
             sys_free(alloc, c.tasks, c.task_capacity * sizeof(task));
-            sys_free(alloc, queue, c.task_capacity * sizeof(task));
+            sys_free(alloc, level, qbytes);
+            sys_free(alloc, kids, qbytes);
             sys_free(alloc, pboxes, pbytes);
             bvh2_free(alloc, out);
             return false;
         }
-        uint32_t qhead = 0, qtail = 0;
-        queue[qtail++] = (task){0, 0, n, 0};
-        c.top_pool = pool;
-        while (qhead < qtail) {
-            task t = queue[qhead++];
-            if (t.end - t.begin <= grain || qtail + 2 > c.task_capacity || c.task_count + 2 > c.task_capacity) {
-                c.tasks[c.task_count++] = t;
-                continue;
+        uint8_t split[LEVEL_MAX];
+        uint32_t ln = 1;
+        level[0] = (task){0, 0, n, 0};
+        while (ln) {
+            /* small nodes become subtree tasks, and so does any node whose two children might
+             * not fit the task array (every open node still needs a slot there) */
+            uint32_t wn = 0;
+            for (uint32_t i = 0; i < ln; i++) {
+                bool room = wn < LEVEL_MAX && c.task_count + 2 * (wn + 1) + (ln - i - 1) <= c.task_capacity;
+                if (level[i].end - level[i].begin <= grain || !room) c.tasks[c.task_count++] = level[i];
+                else level[wn++] = level[i];
             }
-            task kids[2];
-            if (build_node(&c, &t, kids) == 2) {
-                queue[qtail++] = kids[0];
-                queue[qtail++] = kids[1];
+            if (!wn) break;
+            level_job job = {.c = &c, .in = level, .out = kids, .split = split};
+            if (wn < (uint32_t)threads) {
+                c.top_pool = pool;
+                for (uint32_t i = 0; i < wn; i++) level_task(&job, i, 0);
+            } else {
+                c.top_pool = NULL;
+                sys_pool_parallel_for(pool, wn, level_task, &job);
             }
+            ln = 0;
+            for (uint32_t i = 0; i < wn; i++)
+                if (split[i]) level[ln++] = kids[2 * i], level[ln++] = kids[2 * i + 1];
         }
         c.top_pool = NULL; /* the subtrees run on the pool themselves */
         sys_pool_parallel_for(pool, c.task_count, build_task, &c);
         sys_free(alloc, c.tasks, c.task_capacity * sizeof(task));
-        sys_free(alloc, queue, c.task_capacity * sizeof(task));
+        sys_free(alloc, level, qbytes);
+        sys_free(alloc, kids, qbytes);
     } else {
         build_subtree(&c, (task){0, 0, n, 0});
     }

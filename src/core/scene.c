@@ -507,19 +507,17 @@ rp_error scene_build(rp_scene *s) {
         } else {
             tri_pack_ctx pc = {.scene = s, .bvh = &b2, .refs = tris.refs};
             bool ok = tri_pack_plan(a, &pc);
-            /* one zeroed block past the end: the 8-lane leaf tests read a pair of blocks, and a
-             * leaf's odd last block is paired with whatever follows it (those lanes masked off) */
+            /* one padding block past the end: the 8-lane leaf tests read a pair of blocks, and a
+             * leaf's odd last block is paired with whatever follows it (those lanes masked off);
+             * NaN vertices, so no edge function is exactly 0 there (no refinement), mask 0 */
             size_t alloc_blocks = (size_t)pc.block_count + 1;
             if (ok) pc.blocks = sys_alloc(a, alloc_blocks * sizeof(tri4));
             ok = ok && pc.blocks;
             if (ok) {
-                /* NaN vertices: no edge function is 0, so no refinement; mask 0 */
                 tri4 *pad = &pc.blocks[pc.block_count];
                 memset(pad, 0, sizeof *pad);
                 for (int q = 0; q < 9; q++)
                     for (int j = 0; j < 4; j++) pad->v[q][j] = NAN;
-            }
-            if (ok) {
                 pc.chunks = pool ? (uint32_t)sys_pool_threads(pool) * 8 : 1;
                 if (pool) sys_pool_parallel_for(pool, pc.chunks, tri_pack_task, &pc);
                 else tri_pack_task(&pc, 0, 0);

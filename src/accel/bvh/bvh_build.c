@@ -363,15 +363,15 @@ typedef struct init_job {
     const box3 *boxes;
     pbox *pboxes;
     uint32_t *prims;
-    uint32_t n, chunks; /* chunks: 0 means PAR_CHUNKS */
+    uint32_t n, chunks; /* at most PAR_CHUNKS */
     box3 part[PAR_CHUNKS];
 } init_job;
 
 static void init_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     init_job *j = user;
-    uint64_t chunks = j->chunks ? j->chunks : PAR_CHUNKS;
-    uint32_t b = (uint32_t)(j->n * index / chunks), e = (uint32_t)(j->n * (index + 1) / chunks);
+    uint64_t n = j->n;
+    uint32_t b = (uint32_t)(n * index / j->chunks), e = (uint32_t)(n * (index + 1) / j->chunks);
     box3 r = box3_empty();
     for (uint32_t i = b; i < e; i++) {
         const box3 *x = &j->boxes[i];
@@ -399,17 +399,14 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
     out->node_capacity = cap;
     out->prim_count = n;
     box3 root = box3_empty();
-    init_job ij = {.boxes = boxes, .pboxes = pboxes, .prims = out->prims, .n = n};
-    if (pool && sys_pool_threads(pool) > 1 && n >= PAR_MIN) {
-        /* on all threads: a serial pass (and its page faults) over millions of boxes was a
-         * tenth of a large build on two threads */
-        sys_pool_parallel_for(pool, PAR_CHUNKS, init_task, &ij);
-        for (uint32_t i = 0; i < PAR_CHUNKS; i++) root = box3_union(root, ij.part[i]);
-    } else {
-        ij.chunks = 1;
-        init_task(&ij, 0, 0);
-        root = ij.part[0];
-    }
+    /* large inputs on all threads: a serial pass (and its page faults) over millions of boxes
+     * was a tenth of a large build on two threads */
+    bool par_init = pool && sys_pool_threads(pool) > 1 && n >= PAR_MIN;
+    init_job ij = {.boxes = boxes, .pboxes = pboxes, .prims = out->prims, .n = n,
+                   .chunks = par_init ? PAR_CHUNKS : 1};
+    if (par_init) sys_pool_parallel_for(pool, ij.chunks, init_task, &ij);
+    else init_task(&ij, 0, 0);
+    for (uint32_t i = 0; i < ij.chunks; i++) root = box3_union(root, ij.part[i]);
     build_ctx c = {
         .boxes = pboxes, .prims = out->prims, .nodes = out->nodes,
         .bins = desc->bins < 4 ? 4 : desc->bins > MAX_BINS ? MAX_BINS : desc->bins,

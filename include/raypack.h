@@ -315,12 +315,14 @@ typedef struct rp_rayhit_n {
 
 /* How a large packet walks the BVH (sec. 3 of the paper). */
 typedef enum rp_traversal {
-    RP_TRAVERSAL_AUTO = 0,      /* chosen per packet from its coherence (direction spread) */
+    RP_TRAVERSAL_AUTO = 0,      /* per packet from its coherence (direction spread): span or partition */
     RP_TRAVERSAL_MASKED = 1,    /* per-ray masks (sec. 3.1) */
     RP_TRAVERSAL_RANGED = 2,    /* first active index, getFirstHit / getLastHit (sec. 3.2) */
     RP_TRAVERSAL_PARTITION = 3, /* ray index list partitioned in place (sec. 3.3) */
     RP_TRAVERSAL_SINGLE = 4,    /* every ray on its own, as rp_intersect1 */
-    RP_TRAVERSAL_SIMD = 5       /* every SIMD ray (4, 8 or 16 rays, the device's width) on its own */
+    RP_TRAVERSAL_SIMD = 5,      /* every SIMD ray (4, 8 or 16 rays, the device's width) on its own */
+    RP_TRAVERSAL_SPAN = 6       /* Ranged narrowed from both ends, leaves tested on the rays that hit
+                                   their box (beyond the paper; auto's choice for coherent packets) */
 } rp_traversal;
 
 /* Which bounding frustum culls boxes and triangles (sec. 4); the frustum is always conservative. */
@@ -339,7 +341,7 @@ typedef struct rp_counters_n {
     uint64_t tri_tests;                   /* SIMD ray - triangle tests */
     uint64_t frustum_box_tests, frustum_box_culls;
     uint64_t frustum_tri_tests, frustum_tri_culls;
-    uint64_t traversal[4];                /* packets traced by auto, masked, ranged, partition */
+    uint64_t traversal[5];                /* packets traced by auto, masked, ranged, partition, span */
     uint64_t box_tests_depth[RP_COUNTERS_N_DEPTH]; /* box_tests by depth of the box (root: 0) */
     uint64_t tri_tests_depth[RP_COUNTERS_N_DEPTH]; /* tri_tests by depth of the leaf */
 } rp_counters_n;

@@ -17,8 +17,9 @@ static const char *ray_names[RAY_TYPES] = {"primary", "shadow", "reflection", "r
 static const rp_frustum_kind ray_frustum[RAY_TYPES] = {RP_FRUSTUM_PRIMARY, RP_FRUSTUM_SHADOW, RP_FRUSTUM_SECONDARY,
                                                        RP_FRUSTUM_SECONDARY};
 static const rp_traversal modes[] = {RP_TRAVERSAL_MASKED, RP_TRAVERSAL_RANGED, RP_TRAVERSAL_PARTITION,
-                                     RP_TRAVERSAL_AUTO, RP_TRAVERSAL_SINGLE, RP_TRAVERSAL_SIMD};
-static const char *mode_names[] = {"masked", "ranged", "partition", "auto", "single", "simd"};
+                                     RP_TRAVERSAL_SPAN,   RP_TRAVERSAL_AUTO,   RP_TRAVERSAL_SINGLE,
+                                     RP_TRAVERSAL_SIMD};
+static const char *mode_names[] = {"masked", "ranged", "partition", "span", "auto", "single", "simd"};
 
 /* One ray of the image, with its single-ray reference answers. */
 typedef struct test_ray {

@@ -343,7 +343,7 @@ static void check_grid_json(const jvalue *root, const char *what) {
         const jvalue *lv = json_get(json_get(root, "levels"), levels[l]);
         CHECKF(json_num(lv, "rays") >= 0, "%s: levels.%s.rays", what, levels[l]);
         const jvalue *configs = json_get(lv, "configs");
-        CHECKF(configs && configs->count == 34, "%s: levels.%s.configs: 34 of them", what, levels[l]);
+        CHECKF(configs && configs->count == 42, "%s: levels.%s.configs: 42 of them", what, levels[l]);
         const jvalue *c = json_get(configs, "n16_auto_frustum");
         CHECKF(json_num(c, "seconds_median") >= 0 && json_num(c, "mrays") >= 0, "%s: levels.%s n16_auto_frustum",
                what, levels[l]);
@@ -356,7 +356,8 @@ static void check_grid_json(const jvalue *root, const char *what) {
     for (int r = 0; r < 4; r++) {
         const jvalue *rec = json_get(json_get(root, "recursion"), recursions[r]);
         const jvalue *configs = json_get(rec, "configs");
-        const char *names[] = {"single", "simd", "n4_masked", "n8_ranged_frustum", "n32_partition_frustum"};
+        const char *names[] = {"single", "simd", "n4_masked", "n8_ranged_frustum", "n32_partition_frustum",
+                               "n16_span_frustum"};
         for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
             CHECKF(json_num(json_get(configs, names[i]), "mrays") >= 0, "%s: recursion.%s.configs.%s.mrays",
                    what, recursions[r], names[i]);

@@ -93,7 +93,7 @@ static void check_world(const world *w, int res, bool all_isas) {
             for (int i = 0; i < res * res; i++) hits[t] += rays[t][i].live && rays[t][i].ref.hit.geom_id != RP_INVALID_ID;
         CHECKF(hits[0] > (uint32_t)(res * res / 4), "%s: only %u primary hits", w->name, hits[0]);
         for (int t = 0; t < RAY_TYPES; t++) {
-            uint64_t culls = 0;
+            uint64_t culls = 0, auto_span = 0;
             for (uint32_t n = 4; n <= 32; n *= 2) {
                 for (size_t m = 0; m < sizeof modes / sizeof modes[0]; m++) {
                     for (int fr = 0; fr < 2; fr++) {
@@ -111,11 +111,19 @@ static void check_world(const world *w, int res, bool all_isas) {
                                w->name, isas[ii], ray_names[t], n, n, mode_names[m], fr ? "on" : "off", r.bad, r.rays,
                                r.bad_occl, r.bad_dead);
                         CHECK(sum == c.box_tests);
-                        if (modes[m] <= RP_TRAVERSAL_PARTITION && modes[m] != RP_TRAVERSAL_AUTO)
+                        if (modes[m] != RP_TRAVERSAL_AUTO && modes[m] != RP_TRAVERSAL_SINGLE &&
+                            modes[m] != RP_TRAVERSAL_SIMD)
                             CHECK(c.packets > 0 && c.box_tests > 0);
+                        if (modes[m] == RP_TRAVERSAL_AUTO) {
+                            /* every packet of auto went to Span or Partition */
+                            CHECK(c.traversal[0] == c.packets && c.traversal[3] + c.traversal[4] == c.packets);
+                            auto_span += c.traversal[4];
+                        }
                     }
                 }
             }
+            /* auto takes Span for coherent packets */
+            if (t == RAY_PRIMARY) CHECKF(auto_span > 0, "%s: auto never chose span for primary packets", w->name);
             /* frusta must do something on primary and shadow packets */
             if (t <= RAY_SHADOW) CHECKF(culls > 0, "%s %s: frusta culled nothing", w->name, ray_names[t]);
             printf("%s isa %d %s: %u hits, %llu frustum culls\n", w->name, isas[ii], ray_names[t], hits[t],
@@ -184,7 +192,7 @@ static void check_conservative(const world *w, int packets) {
         for (int pass = 0; pass < 2; pass++) {
             int type = kind == 0 ? RAY_PRIMARY : kind == 1 ? RAY_SHADOW : RAY_REFLECT;
             rp_frustum_kind fk = pass == 0 ? ray_frustum[type] : RP_FRUSTUM_SECONDARY;
-            for (size_t m = 0; m < 3; m++) {
+            for (size_t m = 0; m < 5; m++) { /* the packet algorithms and auto */
                 rp_counters_n cnt;
                 memset(&cnt, 0, sizeof cnt);
                 rp_query_n_desc d = {.traversal = modes[m], .frustum = fk, .counters = &cnt};

@@ -7,7 +7,7 @@
  *   RP_BENCH_SCENES=bunny,conference,rings RP_BENCH_RES=512 RP_BENCH_REPS=3 ./test_packets_n_bench
  * RP_BENCH_N=16 and RP_BENCH_FRUSTUM=0|1 keep one packet size / frustum setting; RP_BENCH_COUNTERS=1
  * adds the work counters (box and triangle tests per ray, frustum culls); RP_BENCH_COMPARE=1 times
- * simd, masked, ranged, partition and auto in round-robin on one setting (default 16x16, frusta on). */
+ * simd, masked, ranged, partition, span and auto in round-robin on one setting (default 16x16, frusta on). */
 #include <math.h>
 #include <time.h>
 
@@ -62,18 +62,18 @@ static int env_int(const char *name, int def) {
     return s ? atoi(s) : def;
 }
 
-/* Masked, ranged, partition, auto and simd on one packet size and frustum setting, in
+/* Masked, ranged, partition, span, auto and simd on one packet size and frustum setting, in
  * round-robin so that the machine's drift hits them alike: best time of `reps` rounds each. */
 static void compare_modes(rp_device *dev, rp_scene *scene, const world *w, test_ray *rays[RAY_TYPES], int res,
                           uint32_t n, int fr, int reps) {
-    static const size_t cmp[5] = {5, 0, 1, 2, 3};
+    static const size_t cmp[6] = {6, 0, 1, 2, 3, 4};
     printf("  round-robin, %ux%u, frustum %s, best of %d: Mrays/s\n", n, n, fr ? "on" : "off", reps);
     for (int t = 0; t < RAY_TYPES; t++) {
         uint32_t live = 0;
         for (int i = 0; i < res * res; i++) live += rays[t][i].live;
-        double best[5] = {1e30, 1e30, 1e30, 1e30, 1e30};
+        double best[6] = {1e30, 1e30, 1e30, 1e30, 1e30, 1e30};
         for (int r = 0; r < reps; r++)
-            for (int c = 0; c < 5; c++) {
+            for (int c = 0; c < 6; c++) {
                 rp_query_n_desc d = {.traversal = modes[cmp[c]], .frustum = fr ? ray_frustum[t] : RP_FRUSTUM_NONE};
                 memcpy(d.point, w->light, sizeof d.point);
                 uint32_t bad = 0;
@@ -83,12 +83,12 @@ static void compare_modes(rp_device *dev, rp_scene *scene, const world *w, test_
             }
         double fixed = 0.0;
         printf("    %-10s", ray_names[t]);
-        for (int c = 0; c < 5; c++) {
+        for (int c = 0; c < 6; c++) {
             double mr = live / best[c] * 1e-6;
-            if (c >= 1 && c <= 3 && mr > fixed) fixed = mr;
+            if (c >= 1 && c <= 4 && mr > fixed) fixed = mr;
             printf(" %s %6.2f", mode_names[cmp[c]], mr);
         }
-        printf("  | auto / best fixed %.2f\n", live / best[4] * 1e-6 / fixed);
+        printf("  | auto / best fixed %.2f\n", live / best[5] * 1e-6 / fixed);
     }
 }
 
@@ -119,8 +119,8 @@ static void bench_world(const world *w, int res, int reps) {
         bool occ = t == RAY_SHADOW;
         double base = 0.0;
         printf("  %s (%s, %u rays)\n", ray_names[t], occ ? "occluded" : "intersect", live);
-        static const size_t order[6] = {4, 5, 0, 1, 2, 3}; /* single, simd first: simd is the baseline */
-        for (size_t o = 0; o < 6; o++) {
+        static const size_t order[7] = {5, 6, 0, 1, 2, 3, 4}; /* single, simd first: simd is the baseline */
+        for (size_t o = 0; o < 7; o++) {
             size_t m = order[o];
             bool small = modes[m] == RP_TRAVERSAL_SINGLE || modes[m] == RP_TRAVERSAL_SIMD;
             printf("    %-9s", mode_names[m]);
@@ -144,12 +144,12 @@ static void bench_world(const world *w, int res, int reps) {
                         trace(dev, scene, rays[t], res, n, &d, occ, NULL);
                         d.counters = NULL;
                         printf("\n      [%s %u f%c: per ray: box %.2f tri %.2f; frustum box %.3f/%.3f tri %.3f/%.3f "
-                               "(tests/culls); packets masked/ranged/partition %llu/%llu/%llu]",
+                               "(tests/culls); packets masked/ranged/partition/span %llu/%llu/%llu/%llu]",
                                mode_names[m], n, fr ? '+' : '-', (double)c.box_tests / live, (double)c.tri_tests / live,
                                (double)c.frustum_box_tests / live, (double)c.frustum_box_culls / live,
                                (double)c.frustum_tri_tests / live, (double)c.frustum_tri_culls / live,
                                (unsigned long long)c.traversal[1], (unsigned long long)c.traversal[2],
-                               (unsigned long long)c.traversal[3]);
+                               (unsigned long long)c.traversal[3], (unsigned long long)c.traversal[4]);
                     }
                     double mr = live / best * 1e-6;
                     if (modes[m] == RP_TRAVERSAL_SIMD) base = mr;

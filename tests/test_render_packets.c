@@ -1,6 +1,6 @@
 /* Whitted in n x n packets (Overbeck et al. 2008) gives the image of the depth-first single-ray
  * tracer bit for bit (float framebuffer), for every traversal (auto, masked, ranged, partition,
- * single, simd), packet side 4..32 and frusta on and off, on the built-in room and shared scenes;
+ * span, single, simd), packet side 4..32 and frusta on and off, on the built-in room and shared scenes;
  * images whose size is no multiple of the packet side test the partial blocks at the edges. Also:
  * counting work does not change the image, and it counts each ray kind. */
 #include <math.h>
@@ -12,7 +12,8 @@
 #include "rp_test.h"
 
 static const rp_traversal TRAVERSALS[] = {RP_TRAVERSAL_AUTO,      RP_TRAVERSAL_MASKED, RP_TRAVERSAL_RANGED,
-                                          RP_TRAVERSAL_PARTITION, RP_TRAVERSAL_SINGLE, RP_TRAVERSAL_SIMD};
+                                          RP_TRAVERSAL_PARTITION, RP_TRAVERSAL_SPAN,   RP_TRAVERSAL_SINGLE,
+                                          RP_TRAVERSAL_SIMD};
 static const int PACKETS[] = {4, 8, 16, 32};
 
 static void check_scene(rp_device *dev, const char *name, const rp_scene_data *data, int w, int h) {

@@ -981,7 +981,7 @@ static void usage(FILE *f) {
             "  primary, shadow, reflection and diffuse rays; no SCENE: a generated sphere field.\n"
             "  --vs embree        raypack against Embree on the same rays, in one process\n"
             "  --grid             the experiment grid of Overbeck et al. 2008 (sec. 5): masked,\n"
-            "                     ranged, partition and auto traversal x 4x4..32x32 packets x\n"
+            "                     ranged, partition, span and auto traversal x 4x4..32x32 packets x\n"
             "                     primary / +shadows / 2-deep refraction / 2-bounce reflection,\n"
             "                     frusta off and on, against single and SIMD rays (repeats 3)\n"
             "  --threads N        tracing threads (default 2); plain bench also times 1 thread\n"

@@ -1,5 +1,5 @@
 /* `raypack bench SCENE --grid`: the experiment grid of Overbeck, Ramamoorthi and Mark 2008, sec. 5.
- * Masked, ranged, partition and auto traversal x 4x4..32x32 packets x frusta off and on, and single
+ * Masked, ranged, partition, span and auto traversal x 4x4..32x32 packets x frusta off and on, and single
  * and SIMD rays as baselines, on four kinds of ray recursion: primary rays; primary rays and
  * point-light shadows; 2-deep refraction with every surface refractive (ior 1.5, refraction only,
  * as sec. 5.1); 2-bounce reflection with every surface a mirror. The bench makes the rays itself,
@@ -36,11 +36,12 @@ static const int grid_recursion_levels[GRID_RECURSIONS][GRID_MAX_DEPTH + 1] = {
     {GRID_PRIMARY, GRID_REFLECT1, GRID_REFLECT2, -1},
 };
 
-/* Single and SIMD rays, then 4 algorithms x 4 sizes x frustum off/on. */
-enum { GRID_ALGORITHMS = 4, GRID_SIZES = 4, GRID_CONFIGS = 2 + GRID_ALGORITHMS * GRID_SIZES * 2 };
+/* Single and SIMD rays, then 5 algorithms x 4 sizes x frustum off/on. */
+enum { GRID_ALGORITHMS = 5, GRID_SIZES = 4, GRID_CONFIGS = 2 + GRID_ALGORITHMS * GRID_SIZES * 2 };
 static const rp_traversal grid_algorithms[GRID_ALGORITHMS] = {RP_TRAVERSAL_MASKED, RP_TRAVERSAL_RANGED,
-                                                              RP_TRAVERSAL_PARTITION, RP_TRAVERSAL_AUTO};
-static const char *const grid_algorithm_names[GRID_ALGORITHMS] = {"masked", "ranged", "partition", "auto"};
+                                                              RP_TRAVERSAL_PARTITION, RP_TRAVERSAL_SPAN,
+                                                              RP_TRAVERSAL_AUTO};
+static const char *const grid_algorithm_names[GRID_ALGORITHMS] = {"masked", "ranged", "partition", "span", "auto"};
 static const uint32_t grid_sizes[GRID_SIZES] = {4, 8, 16, 32};
 
 /* One column of the grid. */
@@ -158,6 +159,21 @@ static bool grid_check(grid_run *g, bench_hits *hits) {
     return ok;
 }
 
+/* The r-th stride coprime to GRID_CONFIGS (1 first): k * stride visits every configuration once. */
+static int grid_stride(int r) {
+    int s = 0;
+    for (int found = -1; found < r % GRID_CONFIGS;) {
+        s++;
+        int a = s, b = GRID_CONFIGS;
+        while (b) {
+            int t = a % b;
+            a = b, b = t;
+        }
+        if (a == 1) found++;
+    }
+    return s;
+}
+
 /* Times every configuration on every level: the check pass was the first warm-up, --warmup adds
  * the rest; then `repeats` rounds, configurations taking turns so that drift hits them alike.
  * Then one counted pass each, apart from the timed ones. */
@@ -174,7 +190,9 @@ static bool grid_time(grid_run *g, bench_hits *hits) {
                 bench_trace_set(ctx, threads, &m, lv->set, hits);
             }
         for (int r = 0; r < reps; r++)
-            for (int c = 0; c < GRID_CONFIGS; c++) {
+            for (int k = 0, step = grid_stride(r); k < GRID_CONFIGS; k++) {
+                /* each round in another order, so that no configuration always follows the same one */
+                int c = (k * step + r) % GRID_CONFIGS;
                 bench_mode m = grid_mode(g, l, c, false);
                 samples[(size_t)c * (size_t)reps + (size_t)r] = bench_trace_set(ctx, threads, &m, lv->set, hits);
             }

@@ -34,8 +34,9 @@ static void render_usage(FILE *out) {
             "                         the primary ray, +inf on a miss), normal, primid or albedo\n"
             "  --threads N            worker threads, 1..%d; 0 for all hardware threads [0]\n"
             "  --traversal NAME       how Whitted's ray packets walk the BVH: auto, masked, ranged,\n"
-            "                         partition, single (each ray alone) or simd (each SIMD ray\n"
-            "                         alone) [auto]; every choice gives the same image\n"
+            "                         partition, span (ranged narrowed from both ends), single\n"
+            "                         (each ray alone) or simd (each SIMD ray alone) [auto];\n"
+            "                         every choice gives the same image\n"
             "  --packet N             Whitted traces packets of N x N rays, N = 4, 8, 16 or 32 [16]\n"
             "  --frustum on|off       cull with the packets' frusta [on]\n"
             "  --eye X,Y,Z  --look X,Y,Z  --up X,Y,Z  --fov DEG\n"
@@ -76,7 +77,8 @@ static const struct {
     rp_traversal traversal;
 } TRAVERSALS[] = {{"auto", RP_TRAVERSAL_AUTO},           {"masked", RP_TRAVERSAL_MASKED},
                   {"ranged", RP_TRAVERSAL_RANGED},       {"partition", RP_TRAVERSAL_PARTITION},
-                  {"single", RP_TRAVERSAL_SINGLE},       {"simd", RP_TRAVERSAL_SIMD}};
+                  {"span", RP_TRAVERSAL_SPAN},           {"single", RP_TRAVERSAL_SINGLE},
+                  {"simd", RP_TRAVERSAL_SIMD}};
 
 /* Returns CLI_EXIT_OK when the options parsed, else the exit status. */
 static int parse_options(int argc, char **argv, render_options *o, bool *help) {
@@ -145,8 +147,8 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
                 }
             }
             if (!o->traversal_name) {
-                fprintf(stderr, "raypack render: --traversal expects auto, masked, ranged, partition, single or "
-                                "simd, got '%s'\n", v);
+                fprintf(stderr, "raypack render: --traversal expects auto, masked, ranged, partition, span, single "
+                                "or simd, got '%s'\n", v);
                 return CLI_EXIT_USAGE;
             }
         } else if (strcmp(a, "--packet") == 0) {
@@ -358,13 +360,14 @@ static void json_work(FILE *f, const rp_render_stats *rs) {
         fprintf(f, "%s\n    \"%s\": {\"packets\": %llu, \"rays\": %llu, \"box_tests\": %llu, \"tri_tests\": %llu, "
                    "\"frustum_box_tests\": %llu, \"frustum_box_culls\": %llu, \"frustum_tri_tests\": %llu, "
                    "\"frustum_tri_culls\": %llu,\n      \"traversal\": {\"auto\": %llu, \"masked\": %llu, "
-                   "\"ranged\": %llu, \"partition\": %llu},\n      \"box_tests_depth\": ",
+                   "\"ranged\": %llu, \"partition\": %llu, \"span\": %llu},\n      \"box_tests_depth\": ",
                 k ? "," : "", KIND_NAMES[k], (unsigned long long)c->packets, (unsigned long long)c->rays,
                 (unsigned long long)c->box_tests, (unsigned long long)c->tri_tests,
                 (unsigned long long)c->frustum_box_tests, (unsigned long long)c->frustum_box_culls,
                 (unsigned long long)c->frustum_tri_tests, (unsigned long long)c->frustum_tri_culls,
                 (unsigned long long)c->traversal[0], (unsigned long long)c->traversal[1],
-                (unsigned long long)c->traversal[2], (unsigned long long)c->traversal[3]);
+                (unsigned long long)c->traversal[2], (unsigned long long)c->traversal[3],
+                (unsigned long long)c->traversal[4]);
         json_histogram(f, c->box_tests_depth);
         fprintf(f, ",\n      \"tri_tests_depth\": ");
         json_histogram(f, c->tri_tests_depth);

@@ -202,15 +202,15 @@ static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p
     rp_frustum_kind kind = p->n * p->n >= FRUSTUM_MIN_RAYS ? d.frustum : RP_FRUSTUM_NONE;
     frustum_req q;
     frustum_req_init(&q, kind, d.point, &scene->bounds);
-    /* cells of 4 triangles, the leaves the constant was fitted with (leaves now end by the SAH and
-     * their number no longer follows the scene's density the same way) */
+    /* cells of 4 triangles (a measure of the scene's density; the SAH sizes the real leaves) */
     float cells = (float)scene->stats.triangles / 4.0f;
-    q.auto_spread = AUTO_RANGED_CELLS / sqrtf(cells > 1.0f ? cells : 1.0f);
+    q.auto_span = AUTO_SPAN_CELLS / sqrtf(cells > 1.0f ? cells : 1.0f);
     pkt_alg alg = PKT_AUTO;
     switch (d.traversal) {
     case RP_TRAVERSAL_MASKED: alg = PKT_MASKED; break;
     case RP_TRAVERSAL_RANGED: alg = PKT_RANGED; break;
     case RP_TRAVERSAL_PARTITION: alg = PKT_PARTITION; break;
+    case RP_TRAVERSAL_SPAN: alg = PKT_SPAN; break;
     case RP_TRAVERSAL_AUTO:
     case RP_TRAVERSAL_SINGLE:
     case RP_TRAVERSAL_SIMD: alg = PKT_AUTO; break;

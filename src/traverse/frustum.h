@@ -27,7 +27,7 @@ typedef struct frustum_req {
     float point[3];   /* shadow: the common end point */
     float scale;      /* largest coordinate magnitude of the scene (and the point): the rounding scale */
     float lo[3], hi[3]; /* the scene's bounds (sec. 4.3's far plane) */
-    float auto_spread;  /* auto traversal: the largest direction spread traced with Ranged */
+    float auto_span;    /* auto traversal: the largest direction spread traced with Span */
 } frustum_req;
 
 /* The u and v axes across dominant axis k. */

@@ -6,8 +6,9 @@
 #include "traverse/frustum.h"
 #include "traverse/traverse.h"
 
-/* The three algorithms of sec. 3 and the per-packet choice, as indices of rp_counters_n.traversal. */
-typedef enum pkt_alg { PKT_AUTO = 0, PKT_MASKED = 1, PKT_RANGED = 2, PKT_PARTITION = 3 } pkt_alg;
+/* The three algorithms of sec. 3, Span (Ranged narrowed from both ends, packet_n.inc) and the
+ * per-packet choice, as indices of rp_counters_n.traversal. */
+typedef enum pkt_alg { PKT_AUTO = 0, PKT_MASKED = 1, PKT_RANGED = 2, PKT_PARTITION = 3, PKT_SPAN = 4 } pkt_alg;
 
 typedef struct rp_kernels_n {
     const char *name;
@@ -21,13 +22,13 @@ typedef struct rp_kernels_n {
 
 /* Frusta are tested only where they can spare this many ray tests (see packet_n.inc). */
 #define FRUSTUM_MIN_RAYS 32
-/* Auto traversal (beyond the paper, whose authors chose per scene): a packet of up to 16x16 rays
- * goes to Ranged when its direction spread (slope extent across the dominant axis) times
- * sqrt(triangles / 4) is at most this, i.e. when its footprint crosses at most about this many
- * 4-triangle cells over the scene's extent; any other packet goes to Partition (sec. 5.2 and Table 1:
- * Ranged wins while the rays stay together, Partition degrades gracefully as they part). Fitted
- * on bunny, conference and rings (test_packets_n_bench, RP_BENCH_COMPARE=1). */
-#define AUTO_RANGED_CELLS 120.0f
+/* Auto traversal (beyond the paper, whose authors chose per scene): a packet goes to Span when its
+ * direction spread (slope extent across the dominant axis) times sqrt(triangles / 4) is at most
+ * this, i.e. when its footprint crosses at most about this many 4-triangle cells over the scene's
+ * extent; any other packet (and one whose rays face apart) goes to Partition, which degrades
+ * gracefully as the rays part (sec. 5.2 and Table 1). Span beat Partition at 16x16 and 32x32 on
+ * the coherent rays of every scene `raypack bench --grid` was run on. */
+#define AUTO_SPAN_CELLS 120.0f
 
 extern const rp_kernels_n rp_kernels_n_scalar, rp_kernels_n_sse, rp_kernels_n_avx2, rp_kernels_n_avx512;
 

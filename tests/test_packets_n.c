@@ -136,6 +136,30 @@ static void check_world(const world *w, int res, bool all_isas) {
     }
 }
 
+/* Traces the n x n rays (rays[q] is ray q) as packet p and returns how many answers differ from the
+ * single-ray ones: the closest hit (geometry, primitive, distance), or occlusion when occ. */
+static uint32_t trace_compare(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit_n *p, const test_ray *rays,
+                              bool occ) {
+    const uint32_t count = p->n * p->n;
+    for (uint32_t q = 0; q < count; q++) {
+        const rp_ray *r = &rays[q].ray;
+        p->org_x[q] = r->org_x, p->org_y[q] = r->org_y, p->org_z[q] = r->org_z;
+        p->dir_x[q] = r->dir_x, p->dir_y[q] = r->dir_y, p->dir_z[q] = r->dir_z;
+        p->tnear[q] = r->tnear, p->tfar[q] = r->tfar, p->geom_id[q] = RP_INVALID_ID;
+    }
+    if (occ) rp_occluded_n(scene, d, p);
+    else rp_intersect_n(scene, d, p);
+    uint32_t bad = 0;
+    for (uint32_t q = 0; q < count; q++) {
+        const test_ray *t = &rays[q];
+        if (occ) bad += (p->tfar[q] == -INFINITY) != t->occluded;
+        else bad += p->geom_id[q] != t->ref.hit.geom_id ||
+                    (t->ref.hit.geom_id != RP_INVALID_ID &&
+                     (p->prim_id[q] != t->ref.hit.prim_id || p->tfar[q] != t->ref.ray.tfar));
+    }
+    return bad;
+}
+
 /* Conservativeness: packets that do not look like the textbook case, traced with every frustum
  * kind that applies; every ray must still get its single-ray hit, and the frusta must cull. */
 static void check_conservative(const world *w, int packets) {
@@ -198,23 +222,9 @@ static void check_conservative(const world *w, int packets) {
                 rp_query_n_desc d = {.traversal = modes[m], .frustum = fk, .counters = &cnt};
                 memcpy(d.point, aim, sizeof d.point);
                 for (int occ = 0; occ < 2; occ++) {
-                    for (uint32_t q = 0; q < n * n; q++) {
-                        const rp_ray *r = &rays[q].ray;
-                        p.org_x[q] = r->org_x, p.org_y[q] = r->org_y, p.org_z[q] = r->org_z;
-                        p.dir_x[q] = r->dir_x, p.dir_y[q] = r->dir_y, p.dir_z[q] = r->dir_z;
-                        p.tnear[q] = r->tnear, p.tfar[q] = r->tfar, p.geom_id[q] = RP_INVALID_ID;
-                    }
-                    if (occ) rp_occluded_n(scene, &d, &p);
-                    else rp_intersect_n(scene, &d, &p);
                     uint32_t bad_before = bad;
-                    for (uint32_t q = 0; q < n * n; q++) {
-                        const test_ray *t = &rays[q];
-                        total++;
-                        if (occ) bad += (p.tfar[q] == -INFINITY) != t->occluded;
-                        else bad += p.geom_id[q] != t->ref.hit.geom_id ||
-                                    (t->ref.hit.geom_id != RP_INVALID_ID &&
-                                     (p.prim_id[q] != t->ref.hit.prim_id || p.tfar[q] != t->ref.ray.tfar));
-                    }
+                    bad += trace_compare(scene, &d, &p, rays, occ != 0);
+                    total += n * n;
                     if (bad != bad_before && getenv("RP_TEST_VERBOSE"))
                         fprintf(stderr, "%s packet %d kind %d frustum %d %s %s: %u lost\n", w->name, k, kind, (int)fk,
                                 mode_names[m], occ ? "occluded" : "intersect", bad - bad_before);
@@ -264,9 +274,110 @@ static void check_api(void) {
     rp_device_release(dev);
 }
 
+/* Rays through the shared vertices and edges of a jittered, tilted grid mesh, from one apex: primary
+ * packets from it and shadow packets towards it (origins beyond the mesh). The single-ray kernel is
+ * watertight, so every such ray hits; the packets' frusta and the leaves' edge-plane (cone) test
+ * must not lose one to rounding, whatever the algorithm. */
+static void check_cone_edges(void) {
+    enum { G = 33, N = 16 };
+    float *pos = malloc(sizeof(float) * 3 * G * G);
+    uint32_t *idx = malloc(sizeof(uint32_t) * 6 * (G - 1) * (G - 1));
+    uint32_t seed = 12345;
+    const float ex[3] = {0.9f, 0.2f, 0.3f}, ey[3] = {-0.25f, 0.95f, 0.1f}, base[3] = {-14.3f, -15.1f, 40.7f};
+    for (int j = 0; j < G; j++)
+        for (int i = 0; i < G; i++) {
+            float jit[3];
+            for (int a = 0; a < 3; a++) {
+                seed = seed * 1664525u + 1013904223u;
+                jit[a] = ((float)(seed >> 8) / 16777216.0f - 0.5f) * 0.3f;
+            }
+            for (int a = 0; a < 3; a++)
+                pos[3 * (j * G + i) + a] = base[a] + ((float)i + jit[0]) * ex[a] + ((float)j + jit[1]) * ey[a] + jit[2];
+        }
+    size_t tc = 0;
+    for (int j = 0; j + 1 < G; j++)
+        for (int i = 0; i + 1 < G; i++) {
+            uint32_t v00 = (uint32_t)(j * G + i), v10 = v00 + 1, v01 = v00 + G, v11 = v01 + 1;
+            uint32_t t[6] = {v00, v10, v11, v00, v11, v01};
+            memcpy(idx + 3 * tc, t, sizeof t);
+            tc += 2;
+        }
+    /* the targets: interior vertices, then midpoints of interior edges */
+    size_t max_targets = 4 * G * G, nt = 0;
+    float *target = malloc(sizeof(float) * 3 * max_targets);
+    for (int j = 1; j + 1 < G; j++)
+        for (int i = 1; i + 1 < G; i++) {
+            const float *v = pos + 3 * (j * G + i);
+            memcpy(target + 3 * nt++, v, 3 * sizeof(float));
+            const int nb[3][2] = {{1, 0}, {0, 1}, {1, 1}};
+            for (int k = 0; k < 3; k++) {
+                if (i + nb[k][0] >= G - 1 || j + nb[k][1] >= G - 1) continue;
+                const float *w = pos + 3 * ((j + nb[k][1]) * G + i + nb[k][0]);
+                for (int a = 0; a < 3; a++) target[3 * nt + a] = 0.5f * (v[a] + w[a]);
+                nt++;
+            }
+        }
+    const float apex[3] = {1.7f, 2.3f, -3.1f};
+    int isas[4] = {1, 4, 8, 16};
+    for (int ii = 0; ii < 4; ii++) {
+        if (isas[ii] > sys_cpu_simd_width()) continue;
+        rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 1, .isa = isas[ii]});
+        rp_scene *scene = make_scene(dev, &(rp_scene_data){.positions = pos, .vertex_count = G * G, .indices = idx,
+                                                          .triangle_count = tc});
+        rp_rayhit_n p;
+        CHECK(rp_rayhit_n_alloc(dev, N, &p));
+        uint32_t bad = 0, missed = 0, total = 0, culls = 0;
+        for (int shadow = 0; shadow < 2; shadow++)
+            for (size_t first = 0; first < nt; first += N * N) {
+                test_ray rays[N * N];
+                for (uint32_t q = 0; q < N * N; q++) {
+                    const float *tg = target + 3 * ((first + q) % nt);
+                    rp_ray r = {.tnear = 0.0f, .tfar = INFINITY, .mask = 0xFFFFFFFFu};
+                    if (!shadow) {
+                        r.org_x = apex[0], r.org_y = apex[1], r.org_z = apex[2];
+                        r.dir_x = tg[0] - apex[0], r.dir_y = tg[1] - apex[1], r.dir_z = tg[2] - apex[2];
+                    } else {
+                        float o[3];
+                        for (int a = 0; a < 3; a++) o[a] = apex[a] + 1.25f * (tg[a] - apex[a]);
+                        r.org_x = o[0], r.org_y = o[1], r.org_z = o[2];
+                        r.dir_x = apex[0] - o[0], r.dir_y = apex[1] - o[1], r.dir_z = apex[2] - o[2];
+                        r.tfar = 0.999f;
+                    }
+                    rays[q] = (test_ray){.ray = r, .live = true};
+                    reference(scene, &rays[q]);
+                    missed += shadow ? !rays[q].occluded : rays[q].ref.hit.geom_id == RP_INVALID_ID;
+                }
+                for (size_t m = 0; m < 5; m++) { /* the packet algorithms and auto */
+                    rp_counters_n cnt;
+                    memset(&cnt, 0, sizeof cnt);
+                    rp_query_n_desc d = {.traversal = modes[m],
+                                         .frustum = shadow ? RP_FRUSTUM_SHADOW : RP_FRUSTUM_PRIMARY,
+                                         .counters = &cnt};
+                    memcpy(d.point, apex, sizeof d.point);
+                    bad += trace_compare(scene, &d, &p, rays, shadow != 0);
+                    total += N * N;
+                    culls += (uint32_t)(cnt.frustum_box_culls + cnt.frustum_tri_culls);
+                }
+            }
+        CHECKF(missed == 0, "isa %d: %u rays through the mesh's vertices and edges escape single-ray tests",
+               isas[ii], missed);
+        CHECKF(bad == 0, "isa %d: %u of %u packet rays through vertices and edges differ from single rays",
+               isas[ii], bad, total);
+        printf("cone edges, isa %d: %u rays through vertices and edges, %u differ, frustum culls %u\n", isas[ii],
+               total, bad, culls);
+        rp_rayhit_n_free(dev, &p);
+        rp_scene_release(scene);
+        rp_device_release(dev);
+    }
+    free(target);
+    free(idx);
+    free(pos);
+}
+
 int main(void) {
     bool small = rp_test_sanitized();
     check_api();
+    check_cone_edges();
     world w;
     if (load_world("stanford_bunny_bun_zipper.ply.gz", "bunny", &w)) {
         check_world(&w, small ? 32 : 64, !small);

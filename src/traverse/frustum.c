@@ -60,6 +60,8 @@ void frustum_apex(frustum *f, const float apex[3], int k, float s, const float l
     float lo1[2] = {lo0[0] + slo[0], lo0[1] + slo[1]}, hi1[2] = {hi0[0] + shi[0], hi0[1] + shi[1]};
     float k0 = s * apex[k];
     set_planes(f, k, s, k0, k0 + 1.0f, lo0, hi0, lo1, hi1, scale);
+    f->cone = true;
+    memcpy(f->apex, apex, sizeof f->apex);
 }
 
 void frustum_near_far(frustum *f, int k, float s, float k0, float k1, const float lo0[2], const float hi0[2],
@@ -68,6 +70,7 @@ void frustum_near_far(frustum *f, int k, float s, float k0, float k1, const floa
     widen(a0, b0, WIDEN_ABS * scale);
     widen(a1, b1, WIDEN_ABS * scale);
     set_planes(f, k, s, k0, k1, a0, b0, a1, b1, scale);
+    f->cone = false;
 }
 
 void frustum_req_init(frustum_req *q, rp_frustum_kind kind, const float point[3], const rp_bounds *b) {

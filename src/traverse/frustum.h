@@ -16,6 +16,8 @@
 
 typedef struct frustum {
     bool valid;       /* false: nothing bounds the packet, so nothing is culled */
+    bool cone;        /* an apex frustum: every ray's line passes through apex (within rounding) */
+    float apex[3];
     float n[4][3];    /* plane normals (unit length); inside: n . p + d >= 0 */
     float d[4];
     float tol;        /* a point is outside a plane when n . p + d < -tol */
@@ -36,7 +38,8 @@ static inline void frustum_axes(int k, int *iu, int *iv) {
     *iv = k == 2 ? 1 : 2;
 }
 
-/* Apex frustum: the cone from apex through slopes [lo, hi] (of (u, v) per unit of s * k). */
+/* Apex frustum: the cone from apex through slopes [lo, hi] (of (u, v) per unit of s * k); sets
+ * cone and apex. */
 void frustum_apex(frustum *f, const float apex[3], int k, float s, const float lo[2], const float hi[2], float scale);
 /* Near/far frustum (sec. 4.3): rectangle r0 on the plane s * p_k = k0 (behind every origin), r1 on
  * s * p_k = k1 > k0 (beyond the scene). */

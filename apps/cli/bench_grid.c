@@ -68,6 +68,8 @@ typedef struct grid_run {
     bench_rays own_sets[GRID_LEVELS];  /* the levels bench_make_ray_sets does not make */
     bench_hits own_refs[GRID_LEVELS];
     bench_n_engine engine;             /* the configuration being traced */
+    double paired[GRID_RECURSIONS];    /* grid_pair: best auto over best other, timed in pairs */
+    double paired_same[GRID_RECURSIONS][GRID_SIZES * 2]; /* and auto over the best fixed per setting */
 } grid_run;
 
 /* The 34 configurations: baselines first, then by algorithm, size and frustum. */
@@ -264,26 +266,67 @@ static double grid_ratio(const grid_run *g, int r, int a, int b) {
     return y > 0.0 ? grid_mrays(g, r, a) / y : 0.0;
 }
 
-/* Auto at size n with frusta fr over the best fixed algorithm at the same setting. */
+/* Mrays/s of configuration a over b on recursion r, timed head to head: `rounds` rounds, each
+ * tracing every level of the recursion with a and with b (which goes first alternates); from the
+ * medians of the round totals. t: scratch of 2 * rounds. */
+static double grid_pair_one(grid_run *g, bench_hits *hits, int r, int a, int b, int rounds, double *t) {
+    const int c[2] = {a, b};
+    memset(t, 0, sizeof *t * (size_t)rounds * 2);
+    for (int k = 0; k < rounds; k++)
+        for (int i = 0; i < 2; i++) {
+            int w = (i + k) & 1;
+            for (const int *l = grid_recursion_levels[r]; *l >= 0; l++) {
+                bench_mode m = grid_mode(g, *l, c[w], false);
+                t[w * rounds + k] += bench_trace_set(g->ctx, g->ctx->opts.threads, &m, g->levels[*l].set, hits);
+            }
+        }
+    double ta = bench_stats(t, rounds).median, tb = bench_stats(t + rounds, rounds).median;
+    return ta > 0.0 ? tb / ta : 0.0;
+}
+
+/* The grid's rounds leave a few percent of drift between configurations, and the best of several
+ * configurations is biased upward by it; so auto is timed again head to head against the
+ * configuration it is compared with: the best auto against the best other one, and auto at each
+ * packet size and frustum setting against the best fixed algorithm there. */
+static bool grid_pair(grid_run *g, bench_hits *hits, int rounds) {
+    double *t = calloc((size_t)rounds * 2, sizeof *t);
+    if (!t) return false;
+    for (int r = 0; r < GRID_RECURSIONS; r++) {
+        g->paired[r] = grid_pair_one(g, hits, r, grid_best_of(g, r, true, 0, false),
+                                     grid_best_of(g, r, false, 0, false), rounds, t);
+        for (int s = 0; s < GRID_SIZES; s++)
+            for (int f = 0; f < 2; f++)
+                g->paired_same[r][2 * s + f] =
+                    grid_pair_one(g, hits, r, grid_find(g, RP_TRAVERSAL_AUTO, grid_sizes[s], f != 0),
+                                  grid_best_of(g, r, false, grid_sizes[s], f != 0), rounds, t);
+    }
+    free(t);
+    return true;
+}
+
+/* Auto at size n with frusta fr over the best fixed algorithm at the same setting, timed in pairs. */
 static double grid_auto_same(const grid_run *g, int r, uint32_t n, bool fr) {
-    return grid_ratio(g, r, grid_find(g, RP_TRAVERSAL_AUTO, n, fr), grid_best_of(g, r, false, n, fr));
+    for (int s = 0; s < GRID_SIZES; s++)
+        if (grid_sizes[s] == n) return g->paired_same[r][2 * s + fr];
+    return 0.0;
 }
 
 /* Auto against the best fixed algorithm at each packet size and frustum setting, then the best
  * auto configuration against the best configuration that is not auto (single and SIMD rays too). */
 static void grid_print_auto(const grid_run *g) {
-    printf("\nauto / best fixed algorithm at the same packet size and frustum setting (+f: frusta on)\n%-11s",
+    printf("\nauto / best fixed algorithm at the same packet size and frustum setting (+f: frusta on), timed\n"
+           "in pairs after the grid\n%-11s",
            "recursion");
     for (int s = 0; s < GRID_SIZES; s++)
         for (int f = 0; f < 2; f++) printf(" %5u%s", grid_sizes[s], f ? "+f" : "  ");
-    printf("  best auto / best other (configurations)\n");
+    printf("  best auto / best other (configurations); in pairs\n");
     for (int r = 0; r < GRID_RECURSIONS; r++) {
         printf("%-11s", grid_recursion_names[r]);
         for (int s = 0; s < GRID_SIZES; s++)
             for (int f = 0; f < 2; f++) printf(" %7.2f", grid_auto_same(g, r, grid_sizes[s], f != 0));
         int a = grid_best_of(g, r, true, 0, false), b = grid_best_of(g, r, false, 0, false);
-        printf("  %.2f (%s %.2f / %s %.2f)\n", grid_ratio(g, r, a, b), g->configs[a].name,
-               grid_mrays(g, r, a), g->configs[b].name, grid_mrays(g, r, b));
+        printf("  %.2f (%s %.2f / %s %.2f); %.2f\n", grid_ratio(g, r, a, b), g->configs[a].name,
+               grid_mrays(g, r, a), g->configs[b].name, grid_mrays(g, r, b), g->paired[r]);
     }
 }
 
@@ -374,9 +417,11 @@ static bool grid_write_json(const grid_run *g) {
     fprintf(f, "\n },\n \"auto\": {");
     for (int r = 0; r < GRID_RECURSIONS; r++) {
         int a = grid_best_of(g, r, true, 0, false), b = grid_best_of(g, r, false, 0, false);
-        fprintf(f, "%s\n  \"%s\": {\"best_auto\": \"%s\", \"best_other\": \"%s\", \"ratio\": %.4f, \"same_setting\": {",
+        fprintf(f,
+                "%s\n  \"%s\": {\"best_auto\": \"%s\", \"best_other\": \"%s\", \"ratio\": %.4f, \"paired_ratio\": %.4f, "
+                "\"same_setting\": {",
                 r ? "," : "", grid_recursion_names[r], g->configs[a].name, g->configs[b].name,
-                grid_ratio(g, r, a, b));
+                grid_ratio(g, r, a, b), g->paired[r]);
         for (int sz = 0; sz < GRID_SIZES; sz++)
             for (int fr = 0; fr < 2; fr++)
                 fprintf(f, "%s\"%s\": %.4f", sz + fr ? ", " : "",
@@ -415,7 +460,7 @@ int bench_grid(bench_ctx *ctx) {
     printf("check     %d configurations x %d levels find the single-ray hits on every ray\n", GRID_CONFIGS,
            GRID_LEVELS);
     fflush(stdout);
-    if (!grid_time(g, &hits)) goto done;
+    if (!grid_time(g, &hits) || !grid_pair(g, &hits, 3 * ctx->opts.repeats + 1)) goto done;
     grid_print(g);
     rc = 0;
     if (ctx->opts.json_path && !grid_write_json(g)) rc = 1;

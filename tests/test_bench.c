@@ -378,7 +378,9 @@ static void check_grid_json(const jvalue *root, const char *what) {
             double ratio = json_num(au, "ratio");
             CHECKF(b > 0 && fabs(ratio - a / b) <= 1e-3 * ratio + 1e-4, "%s: auto.%s.ratio %g, configs give %g / %g",
                    what, recursions[r], ratio, a, b);
-            CHECKF(json_num(au, "paired_ratio") > 0, "%s: auto.%s.paired_ratio", what, recursions[r]);
+            const jvalue *pa = json_get(au, "paired_auto");
+            CHECKF(json_num(au, "paired_ratio") > 0 && pa && pa->type == J_STRING && strstr(pa->string, "auto"),
+                   "%s: auto.%s.paired_auto, paired_ratio", what, recursions[r]);
             double x = json_num(json_get(au, "same_setting"), "n16_auto_frustum");
             CHECKF(x > 0 && json_get(au, "same_setting")->count == 8, "%s: auto.%s.same_setting", what, recursions[r]);
         }

@@ -284,16 +284,23 @@ static double grid_pair_one(grid_run *g, bench_hits *hits, int r, int a, int b, 
     return ta > 0.0 ? tb / ta : 0.0;
 }
 
+/* Auto in place of the best configuration that is not auto: auto at its packet size and frustum
+ * setting, or the best auto when it is single or SIMD rays. */
+static int grid_auto_for(const grid_run *g, int r) {
+    const grid_config *b = &g->configs[grid_best_of(g, r, false, 0, false)];
+    if (b->traversal == RP_TRAVERSAL_SINGLE || b->traversal == RP_TRAVERSAL_SIMD) return grid_best_of(g, r, true, 0, false);
+    return grid_find(g, RP_TRAVERSAL_AUTO, b->n, b->frustum);
+}
+
 /* The grid's rounds leave a few percent of drift between configurations, and the best of several
  * configurations is biased upward by it; so auto is timed again head to head against the
- * configuration it is compared with: the best auto against the best other one, and auto at each
- * packet size and frustum setting against the best fixed algorithm there. */
+ * configuration it is compared with: auto in place of the best other configuration (grid_auto_for),
+ * and auto at each packet size and frustum setting against the best fixed algorithm there. */
 static bool grid_pair(grid_run *g, bench_hits *hits, int rounds) {
     double *t = calloc((size_t)rounds * 2, sizeof *t);
     if (!t) return false;
     for (int r = 0; r < GRID_RECURSIONS; r++) {
-        g->paired[r] = grid_pair_one(g, hits, r, grid_best_of(g, r, true, 0, false),
-                                     grid_best_of(g, r, false, 0, false), rounds, t);
+        g->paired[r] = grid_pair_one(g, hits, r, grid_auto_for(g, r), grid_best_of(g, r, false, 0, false), rounds, t);
         for (int s = 0; s < GRID_SIZES; s++)
             for (int f = 0; f < 2; f++)
                 g->paired_same[r][2 * s + f] =
@@ -319,14 +326,15 @@ static void grid_print_auto(const grid_run *g) {
            "recursion");
     for (int s = 0; s < GRID_SIZES; s++)
         for (int f = 0; f < 2; f++) printf(" %5u%s", grid_sizes[s], f ? "+f" : "  ");
-    printf("  best auto / best other (configurations); in pairs\n");
+    printf("  best auto / best other (configurations); in pairs: auto in its place\n");
     for (int r = 0; r < GRID_RECURSIONS; r++) {
         printf("%-11s", grid_recursion_names[r]);
         for (int s = 0; s < GRID_SIZES; s++)
             for (int f = 0; f < 2; f++) printf(" %7.2f", grid_auto_same(g, r, grid_sizes[s], f != 0));
         int a = grid_best_of(g, r, true, 0, false), b = grid_best_of(g, r, false, 0, false);
-        printf("  %.2f (%s %.2f / %s %.2f); %.2f\n", grid_ratio(g, r, a, b), g->configs[a].name,
-               grid_mrays(g, r, a), g->configs[b].name, grid_mrays(g, r, b), g->paired[r]);
+        printf("  %.2f (%s %.2f / %s %.2f); %s %.2f\n", grid_ratio(g, r, a, b), g->configs[a].name,
+               grid_mrays(g, r, a), g->configs[b].name, grid_mrays(g, r, b), g->configs[grid_auto_for(g, r)].name,
+               g->paired[r]);
     }
 }
 
@@ -418,10 +426,10 @@ static bool grid_write_json(const grid_run *g) {
     for (int r = 0; r < GRID_RECURSIONS; r++) {
         int a = grid_best_of(g, r, true, 0, false), b = grid_best_of(g, r, false, 0, false);
         fprintf(f,
-                "%s\n  \"%s\": {\"best_auto\": \"%s\", \"best_other\": \"%s\", \"ratio\": %.4f, \"paired_ratio\": %.4f, "
-                "\"same_setting\": {",
+                "%s\n  \"%s\": {\"best_auto\": \"%s\", \"best_other\": \"%s\", \"ratio\": %.4f, \"paired_auto\": \"%s\", "
+                "\"paired_ratio\": %.4f, \"same_setting\": {",
                 r ? "," : "", grid_recursion_names[r], g->configs[a].name, g->configs[b].name,
-                grid_ratio(g, r, a, b), g->paired[r]);
+                grid_ratio(g, r, a, b), g->configs[grid_auto_for(g, r)].name, g->paired[r]);
         for (int sz = 0; sz < GRID_SIZES; sz++)
             for (int fr = 0; fr < 2; fr++)
                 fprintf(f, "%s\"%s\": %.4f", sz + fr ? ", " : "",

@@ -68,11 +68,11 @@ typedef struct grid_run {
     bench_rays own_sets[GRID_LEVELS];  /* the levels bench_make_ray_sets does not make */
     bench_hits own_refs[GRID_LEVELS];
     bench_n_engine engine;             /* the configuration being traced */
-    double paired[GRID_RECURSIONS];    /* grid_pair: best auto over best other, timed in pairs */
+    double paired[GRID_RECURSIONS];    /* grid_pair: auto in place of the best other, timed in pairs */
     double paired_same[GRID_RECURSIONS][GRID_SIZES * 2]; /* and auto over the best fixed per setting */
 } grid_run;
 
-/* The 34 configurations: baselines first, then by algorithm, size and frustum. */
+/* The 42 configurations: baselines first, then by algorithm, size and frustum. */
 static void grid_make_configs(grid_config *c) {
     c[0] = (grid_config){"single", RP_TRAVERSAL_SINGLE, 16, false};
     c[1] = (grid_config){"simd", RP_TRAVERSAL_SIMD, 16, false};
@@ -300,22 +300,20 @@ static bool grid_pair(grid_run *g, bench_hits *hits, int rounds) {
     double *t = calloc((size_t)rounds * 2, sizeof *t);
     if (!t) return false;
     for (int r = 0; r < GRID_RECURSIONS; r++) {
-        g->paired[r] = grid_pair_one(g, hits, r, grid_auto_for(g, r), grid_best_of(g, r, false, 0, false), rounds, t);
+        int best = grid_best_of(g, r, false, 0, false), a = grid_auto_for(g, r);
+        g->paired[r] = 0.0;
         for (int s = 0; s < GRID_SIZES; s++)
-            for (int f = 0; f < 2; f++)
-                g->paired_same[r][2 * s + f] =
-                    grid_pair_one(g, hits, r, grid_find(g, RP_TRAVERSAL_AUTO, grid_sizes[s], f != 0),
-                                  grid_best_of(g, r, false, grid_sizes[s], f != 0), rounds, t);
+            for (int f = 0; f < 2; f++) {
+                int af = grid_find(g, RP_TRAVERSAL_AUTO, grid_sizes[s], f != 0);
+                int bf = grid_best_of(g, r, false, grid_sizes[s], f != 0);
+                g->paired_same[r][2 * s + f] = grid_pair_one(g, hits, r, af, bf, rounds, t);
+                /* the best other packet configuration is the best fixed one at its setting */
+                if (af == a && bf == best) g->paired[r] = g->paired_same[r][2 * s + f];
+            }
+        if (g->paired[r] == 0.0) g->paired[r] = grid_pair_one(g, hits, r, a, best, rounds, t);
     }
     free(t);
     return true;
-}
-
-/* Auto at size n with frusta fr over the best fixed algorithm at the same setting, timed in pairs. */
-static double grid_auto_same(const grid_run *g, int r, uint32_t n, bool fr) {
-    for (int s = 0; s < GRID_SIZES; s++)
-        if (grid_sizes[s] == n) return g->paired_same[r][2 * s + fr];
-    return 0.0;
 }
 
 /* Auto against the best fixed algorithm at each packet size and frustum setting, then the best
@@ -330,7 +328,7 @@ static void grid_print_auto(const grid_run *g) {
     for (int r = 0; r < GRID_RECURSIONS; r++) {
         printf("%-11s", grid_recursion_names[r]);
         for (int s = 0; s < GRID_SIZES; s++)
-            for (int f = 0; f < 2; f++) printf(" %7.2f", grid_auto_same(g, r, grid_sizes[s], f != 0));
+            for (int f = 0; f < 2; f++) printf(" %7.2f", g->paired_same[r][2 * s + f]);
         int a = grid_best_of(g, r, true, 0, false), b = grid_best_of(g, r, false, 0, false);
         printf("  %.2f (%s %.2f / %s %.2f); %s %.2f\n", grid_ratio(g, r, a, b), g->configs[a].name,
                grid_mrays(g, r, a), g->configs[b].name, grid_mrays(g, r, b), g->configs[grid_auto_for(g, r)].name,
@@ -434,7 +432,7 @@ static bool grid_write_json(const grid_run *g) {
             for (int fr = 0; fr < 2; fr++)
                 fprintf(f, "%s\"%s\": %.4f", sz + fr ? ", " : "",
                         g->configs[grid_find(g, RP_TRAVERSAL_AUTO, grid_sizes[sz], fr != 0)].name,
-                        grid_auto_same(g, r, grid_sizes[sz], fr != 0));
+                        g->paired_same[r][2 * sz + fr]);
         fprintf(f, "}}");
     }
     fprintf(f, "\n }\n}\n");

@@ -522,7 +522,7 @@ rp_error scene_build(rp_scene *s) {
                 if (pool) sys_pool_parallel_for(pool, pc.chunks, tri_pack_task, &pc);
                 else tri_pack_task(&pc, 0, 0);
             }
-            if (!ok || !bvhw_from_bvh2(a, &b2, width, tri_leaf, &pc, &s->tri_bvh)) {
+            if (!ok || !bvhw_from_bvh2(a, pool, &b2, width, tri_leaf, &pc, &s->tri_bvh)) {
                 sys_free(a, pc.blocks, alloc_blocks * sizeof(tri4));
                 err = RP_ERROR_OUT_OF_MEMORY;
             } else {
@@ -561,7 +561,7 @@ rp_error scene_build(rp_scene *s) {
                 s->prim_count = prims.count;
                 for (uint32_t i = 0; i < prims.count; i++) s->prims[i] = prims.refs[b2.prims[i]];
             }
-            if (!s->prims || !bvhw_from_bvh2(a, &b2, 4, prim_leaf, NULL, &s->prim_bvh)) {
+            if (!s->prims || !bvhw_from_bvh2(a, pool, &b2, 4, prim_leaf, NULL, &s->prim_bvh)) {
                 err = RP_ERROR_OUT_OF_MEMORY;
             } else {
                 st.binary_nodes += b2.node_count;

@@ -65,8 +65,9 @@ typedef struct bvhw {
  * primitives (e.g. blocks of 4 triangles). Returns false if the leaf does not fit. */
 typedef bool (*bvhw_leaf_fn)(void *user, const bvh_node *leaf, uint32_t *first_item, uint32_t *items);
 
-/* Collapses a binary BVH into a wide one, opening the child of largest area first. */
-bool bvhw_from_bvh2(const sys_allocator *alloc, const bvh2 *src, int width, bvhw_leaf_fn leaf,
+/* Collapses a binary BVH into a wide one, opening the child of largest area first; uses the pool's
+ * threads when pool != NULL. */
+bool bvhw_from_bvh2(const sys_allocator *alloc, sys_pool *pool, const bvh2 *src, int width, bvhw_leaf_fn leaf,
                     void *leaf_user, bvhw *out);
 void bvhw_free(const sys_allocator *alloc, bvhw *bvh);
 

@@ -26,19 +26,48 @@ typedef struct build_ctx {
     int bins;
     int max_leaf;
     uint32_t block;    /* primitives per intersection block */
+    int block_shift;   /* log2(block) when block is a power of two, else -1 */
     double trav_cost;  /* of one node, in block intersections */
+    double inv_root_area; /* for the SAH cost's terms; 0 when the root has no area */
     /* the threads, while the top of the tree is split (NULL after) */
     sys_pool *top_pool;
     const sys_allocator *alloc;
     /* subtrees deferred to the threads */
     struct task *tasks;
+    struct tree_stats *task_stats; /* one per task */
     uint32_t task_count, task_capacity;
-    _Atomic uint32_t depth;
 } build_ctx;
 
+/* An open node: its range of primitives and the box of their centroids (its own box is in the
+ * node), which the partition that made it computed. */
 typedef struct task {
     uint32_t node, begin, end, depth;
+    box3 cbox;
 } task;
+
+/* The tree's SAH cost (inner nodes' half areas and leaves' half area x primitives, relative to
+ * the root's), leaves and depth, gathered while building. The cost is summed in fixed point
+ * (2^-32), so it does not depend on how the threads split the sum. */
+typedef struct tree_stats {
+    unsigned __int128 cost;
+    uint32_t leaves, depth;
+} tree_stats;
+
+static inline uint64_t cost_fixed(double area, double count, double inv_root) {
+    return (uint64_t)(area * count * inv_root * 0x1p32 + 0.5);
+}
+
+static void stats_merge(tree_stats *dst, const tree_stats *src) {
+    dst->cost += src->cost;
+    dst->leaves += src->leaves;
+    if (src->depth > dst->depth) dst->depth = src->depth;
+}
+
+static void stats_leaf(tree_stats *st, const task *t, box3 b, double inv_root) {
+    st->cost += cost_fixed(box3_half_area(b), (double)(t->end - t->begin), inv_root);
+    st->leaves++;
+    if (t->depth + 1 > st->depth) st->depth = t->depth + 1;
+}
 
 
 static inline vf4 centroid_of(const pbox *b) { return b->lo * 0.5f + b->hi * 0.5f; }
@@ -107,12 +136,6 @@ static box3 node_box(const bvh_node *n) {
     return (box3){v3(n->lo[0], n->lo[1], n->lo[2]), v3(n->hi[0], n->hi[1], n->hi[2])};
 }
 
-static void depth_max(build_ctx *c, uint32_t d) {
-    uint32_t cur = atomic_load_explicit(&c->depth, memory_order_relaxed);
-    while (d > cur && !atomic_compare_exchange_weak(&c->depth, &cur, d)) {
-    }
-}
-
 /* Bin indices of a centroid on the three axes; clamped in float before the conversion so
  * huge coordinates (or an extent that overflowed) cannot make it undefined, and NaN goes to 0
  * (maxps returns its second operand on NaN). Counting and partitioning both use it, so they
@@ -122,42 +145,44 @@ static inline vi4 bins_of(vf4 centroid, vf4 lo, vf4 scale, vf4 last) {
     return __builtin_convertvector(f, vi4);
 }
 
-static double half_area4(vf4 lo, vf4 hi) {
-    if (!(lo[0] <= hi[0])) return 0.0;
-    double dx = (double)hi[0] - lo[0], dy = (double)hi[1] - lo[1], dz = (double)hi[2] - lo[2];
-    return dx * dy + dy * dz + dz * dx;
-}
-
-/* Bins of the three axes: the union of the boxes and the count of the primitives whose centroid
- * falls in each. */
+/* Bins of the three axes: per bin, for each axis, the union of the boxes and the count of the
+ * primitives whose centroid falls in it (a lane per axis, so the sweeps run the axes together). */
 typedef struct bins {
-    vf4 lo[3][MAX_BINS], hi[3][MAX_BINS];
-    uint32_t count[3][MAX_BINS];
+    vf4 lo[MAX_BINS][3], hi[MAX_BINS][3];
+    vi4 count[MAX_BINS];
 } bins;
 
-static void bin_range(const build_ctx *c, uint32_t begin, uint32_t end, vf4 lo, vf4 scale, vf4 last, int nb,
-                      bins *out) {
-    for (int a = 0; a < 3; a++)
-        for (int k = 0; k < nb; k++) out->lo[a][k] = vf4_splat(INFINITY), out->hi[a][k] = vf4_splat(-INFINITY), out->count[a][k] = 0;
-    for (uint32_t i = begin; i < end; i++) {
-        const pbox *p = &c->boxes[i];
-        vi4 b = bins_of(centroid_of(p), lo, scale, last);
-        for (int a = 0; a < 3; a++) {
-            int k = b[a];
-            out->lo[a][k] = vf4_min(out->lo[a][k], p->lo);
-            out->hi[a][k] = vf4_max(out->hi[a][k], p->hi);
-            out->count[a][k]++;
-        }
+static void bins_clear(bins *b, int nb) {
+    for (int k = 0; k < nb; k++) {
+        for (int a = 0; a < 3; a++) b->lo[k][a] = vf4_splat(INFINITY), b->hi[k][a] = vf4_splat(-INFINITY);
+        b->count[k] = vi4_splat(0);
     }
 }
 
+RP_INLINE void bin_one(bins *restrict out, const pbox *p, vf4 lo, vf4 scale, vf4 last) {
+    vi4 b = bins_of(centroid_of(p), lo, scale, last);
+    for (int a = 0; a < 3; a++) {
+        int k = b[a];
+        out->lo[k][a] = vf4_min(out->lo[k][a], p->lo);
+        out->hi[k][a] = vf4_max(out->hi[k][a], p->hi);
+        out->count[k][a]++;
+    }
+}
+
+static void bin_range(const build_ctx *c, uint32_t begin, uint32_t end, vf4 lo, vf4 scale, vf4 last, int nb,
+                      bins *out) {
+    bins_clear(out, nb);
+    for (uint32_t i = begin; i < end; i++) bin_one(out, &c->boxes[i], lo, scale, last);
+}
+
 static void bins_merge(bins *dst, const bins *src, int nb) {
-    for (int a = 0; a < 3; a++)
-        for (int k = 0; k < nb; k++) {
-            dst->lo[a][k] = vf4_min(dst->lo[a][k], src->lo[a][k]);
-            dst->hi[a][k] = vf4_max(dst->hi[a][k], src->hi[a][k]);
-            dst->count[a][k] += src->count[a][k];
+    for (int k = 0; k < nb; k++) {
+        for (int a = 0; a < 3; a++) {
+            dst->lo[k][a] = vf4_min(dst->lo[k][a], src->lo[k][a]);
+            dst->hi[k][a] = vf4_max(dst->hi[k][a], src->hi[k][a]);
         }
+        dst->count[k] += src->count[k];
+    }
 }
 
 static void bins_task(void *user, uint32_t index, uint32_t thread) {
@@ -168,13 +193,42 @@ static void bins_task(void *user, uint32_t index, uint32_t thread) {
     bin_range(j->c, b, e, j->lo, j->scale, j->last, j->nb, (bins *)j->out + index);
 }
 
-/* Splits [begin, end) in place; returns the first index of the right half and the two boxes, or
- * 0 when no split was found (all centroids in one bin on every axis). One pass bins all three
- * axes at once. */
-static inline double blocks_of(const build_ctx *c, uint32_t n) { return (double)((n + c->block - 1) / c->block); }
+static inline uint32_t blocks_of(const build_ctx *c, uint32_t n) {
+    uint32_t m = n + c->block - 1;
+    return c->block_shift >= 0 ? m >> c->block_shift : m / c->block;
+}
 
-static uint32_t split_sah(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox, box3 *lbox, box3 *rbox,
-                          double *split_cost) {
+/* Half the surface areas of three boxes (one per axis's sweep), given their extents d[a] (lanes
+ * x, y, z), scaled by s: lane a of the result is box a's. Empty boxes (negative extents) give 0. */
+static inline vf4 half_areas3(const vf4 d[3], vf4 s) {
+    vf4 z = vf4_splat(0.0f);
+    vf4 d0 = vf4_max(d[0], z) * s, d1 = vf4_max(d[1], z) * s, d2 = vf4_max(d[2], z) * s;
+    vf4 t0 = __builtin_shufflevector(d0, d1, 0, 4, 1, 5), t1 = __builtin_shufflevector(d0, d1, 2, 6, 3, 7);
+    vf4 x = __builtin_shufflevector(t0, d2, 0, 1, 4, 4), y = __builtin_shufflevector(t0, d2, 2, 3, 5, 5);
+    vf4 w = __builtin_shufflevector(t1, d2, 0, 1, 6, 6);
+    return x * y + y * w + w * x;
+}
+
+/* Blocks of `block` primitives needed for counts c, per lane, as floats. */
+static inline vf4 blocks_v(const build_ctx *c, vi4 n) {
+    vi4 m = n + vi4_splat((int32_t)c->block - 1);
+    if (c->block_shift >= 0) return __builtin_convertvector(m >> c->block_shift, vf4);
+    return (vf4){(float)((uint32_t)m[0] / c->block), (float)((uint32_t)m[1] / c->block),
+                 (float)((uint32_t)m[2] / c->block), 0.0f};
+}
+
+/* The best binned SAH split of a node: the axis and the first bin of the right side, the binning
+ * that numbered the bins (the partition must use the same), the children's boxes and the cost. */
+typedef struct split_plan {
+    int axis, bin;
+    vf4 lo, scale, last;
+    box3 lbox, rbox;
+    double cost; /* half area x blocks, summed over the two sides */
+} split_plan;
+
+/* Finds the best split of [begin, end) whose centroids lie in cbox; false when there is none (all
+ * centroids in one bin on every axis). One pass bins all three axes at once. */
+static bool split_find(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox, box3 nbox, split_plan *out) {
     /* small nodes: about one bin per primitive is as good, and the sweeps over empty bins
      * dominated the build's time near the leaves */
     int nb = c->bins;
@@ -187,7 +241,7 @@ static uint32_t split_sah(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox,
         usable[axis] = sc > 0.0f && isfinite(sc);
         scale[axis] = usable[axis] ? sc : 0.0f;
     }
-    if (!usable[0] && !usable[1] && !usable[2]) return 0;
+    if (!usable[0] && !usable[1] && !usable[2]) return false;
     vf4 last = vf4_splat((float)(nb - 1));
     bins acc;
     bins *parts = c->top_pool && end - begin >= PAR_MIN ? sys_alloc(c->alloc, PAR_CHUNKS * sizeof(bins)) : NULL;
@@ -200,114 +254,155 @@ static uint32_t split_sah(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox,
     } else {
         bin_range(c, begin, end, lo, scale, last, nb, &acc);
     }
-    vf4 (*blo)[MAX_BINS] = acc.lo, (*bhi)[MAX_BINS] = acc.hi;
-    uint32_t (*bcount)[MAX_BINS] = acc.count;
-    double best_cost = INFINITY;
-    int best_axis = -1, best_split = 0;
-    vf4 best_llo = {0}, best_lhi = {0}, best_rlo = {0}, best_rhi = {0};
-    for (int axis = 0; axis < 3; axis++) {
-        if (!usable[axis]) continue;
-        /* right-to-left sweep, then left-to-right with the cost of each border */
-        double rarea[MAX_BINS];
-        uint32_t rcount[MAX_BINS];
-        vf4 rlo_acc = vf4_splat(INFINITY), rhi_acc = vf4_splat(-INFINITY), rlos[MAX_BINS], rhis[MAX_BINS];
-        uint32_t rc = 0;
-        for (int b = nb - 1; b > 0; b--) {
-            rlo_acc = vf4_min(rlo_acc, blo[axis][b]), rhi_acc = vf4_max(rhi_acc, bhi[axis][b]);
-            rc += bcount[axis][b];
-            rarea[b] = half_area4(rlo_acc, rhi_acc);
-            rcount[b] = rc;
-            rlos[b] = rlo_acc, rhis[b] = rhi_acc;
+    /* areas in float, relative to the node's largest extent (so no coordinates overflow them);
+     * the three axes are swept together, a lane each */
+    double ext = fmax((double)nbox.hi.x - nbox.lo.x, fmax((double)nbox.hi.y - nbox.lo.y, (double)nbox.hi.z - nbox.lo.z));
+    float inv = ext > 0.0 && isfinite(1.0 / ext) ? (float)(1.0 / ext) : 1.0f;
+    vf4 sinv = vf4_splat(inv), inf = vf4_splat(INFINITY), ninf = vf4_splat(-INFINITY);
+    vi4 zero = vi4_splat(0);
+    /* right-to-left sweep of areas and counts */
+    vf4 rcost[MAX_BINS];
+    vf4 blo[3] = {inf, inf, inf}, bhi[3] = {ninf, ninf, ninf}, d[3];
+    vi4 cnt = zero;
+    for (int b = nb - 1; b > 0; b--) {
+        for (int a = 0; a < 3; a++) {
+            blo[a] = vf4_min(blo[a], acc.lo[b][a]), bhi[a] = vf4_max(bhi[a], acc.hi[b][a]);
+            d[a] = bhi[a] - blo[a];
         }
-        vf4 llo = vf4_splat(INFINITY), lhi = vf4_splat(-INFINITY);
-        uint32_t lc = 0;
-        for (int b = 1; b < nb; b++) {
-            llo = vf4_min(llo, blo[axis][b - 1]), lhi = vf4_max(lhi, bhi[axis][b - 1]);
-            lc += bcount[axis][b - 1];
-            if (lc == 0 || rcount[b] == 0) continue;
-            double cost = half_area4(llo, lhi) * blocks_of(c, lc) + rarea[b] * blocks_of(c, rcount[b]);
-            if (cost < best_cost) {
-                best_cost = cost, best_axis = axis, best_split = b;
-                best_llo = llo, best_lhi = lhi, best_rlo = rlos[b], best_rhi = rhis[b];
-            }
-        }
+        cnt += acc.count[b];
+        rcost[b] = vf4_select(cnt > zero, half_areas3(d, sinv) * blocks_v(c, cnt), inf);
     }
-    if (best_axis < 0) return 0;
-    *split_cost = best_cost;
-    /* Hoare partition by bin */
-    uint32_t i = begin, j = end;
-    while (i < j) {
-        if (bins_of(centroid_of(&c->boxes[i]), lo, scale, last)[best_axis] < best_split) {
-            i++;
-        } else {
-            j--;
-            uint32_t p = c->prims[i];
-            c->prims[i] = c->prims[j], c->prims[j] = p;
-            pbox b = c->boxes[i];
-            c->boxes[i] = c->boxes[j], c->boxes[j] = b;
+    /* left-to-right with the cost of each border: per axis, the first least cost */
+    vi4 usable_m = {-(int)usable[0], -(int)usable[1], -(int)usable[2], 0};
+    vf4 best = inf;
+    vi4 best_b = zero;
+    for (int a = 0; a < 3; a++) blo[a] = inf, bhi[a] = ninf;
+    cnt = zero;
+    for (int b = 1; b < nb; b++) {
+        for (int a = 0; a < 3; a++) {
+            blo[a] = vf4_min(blo[a], acc.lo[b - 1][a]), bhi[a] = vf4_max(bhi[a], acc.hi[b - 1][a]);
+            d[a] = bhi[a] - blo[a];
         }
+        cnt += acc.count[b - 1];
+        vf4 cost = half_areas3(d, sinv) * blocks_v(c, cnt) + rcost[b];
+        vi4 better = (cost < best) & (cnt > zero) & usable_m;
+        best = vf4_select(better, cost, best);
+        best_b = vi4_select(better, vi4_splat(b), best_b);
     }
-    *lbox = box_of(best_llo, best_lhi), *rbox = box_of(best_rlo, best_rhi);
+    float best_cost = INFINITY;
+    int best_axis = -1, best_bin = 0;
+    for (int a = 0; a < 3; a++)
+        if (best[a] < best_cost) best_cost = best[a], best_axis = a, best_bin = best_b[a];
+    if (best_axis < 0) return false;
+    /* the two sides' boxes, from the bins */
+    vf4 llo = inf, lhi = ninf, rlo = inf, rhi = ninf;
+    for (int b = 0; b < nb; b++) {
+        if (b < best_bin) llo = vf4_min(llo, acc.lo[b][best_axis]), lhi = vf4_max(lhi, acc.hi[b][best_axis]);
+        else rlo = vf4_min(rlo, acc.lo[b][best_axis]), rhi = vf4_max(rhi, acc.hi[b][best_axis]);
+    }
+    *out = (split_plan){.axis = best_axis, .bin = best_bin, .lo = lo, .scale = scale, .last = last,
+                   .lbox = box_of(llo, lhi), .rbox = box_of(rlo, rhi),
+                   .cost = (double)best_cost * ext * ext};
+    return true;
+}
+
+/* Partitions [begin, end) by the split (branch-free: the side of a primitive is as good as random
+ * to the branch predictor), gathering each side's centroid box on the way; returns the first
+ * index of the right side. Inlined once per axis, so the lane is a constant. */
+RP_INLINE uint32_t partition_axis(pbox *restrict boxes, uint32_t *restrict prims, uint32_t begin, uint32_t end,
+                                  const split_plan *s, const int axis, box3 *lcbox, box3 *rcbox) {
+    vf4 inf = vf4_splat(INFINITY), ninf = vf4_splat(-INFINITY);
+    vf4 lclo = inf, lchi = ninf, rclo = inf, rchi = ninf;
+    vf4 lo = s->lo, scale = s->scale, last = s->last;
+    int bin = s->bin;
+    uint32_t i = begin;
+    for (uint32_t k = begin; k < end; k++) {
+        pbox x = boxes[k];
+        uint32_t p = prims[k];
+        vf4 ce = centroid_of(&x);
+        int left = bins_of(ce, lo, scale, last)[axis] < bin;
+        vi4 m = vi4_splat(-left);
+        lclo = vf4_min(lclo, vf4_select(m, ce, inf)), lchi = vf4_max(lchi, vf4_select(m, ce, ninf));
+        rclo = vf4_min(rclo, vf4_select(m, inf, ce)), rchi = vf4_max(rchi, vf4_select(m, ninf, ce));
+        /* Lomuto: swap with the first right-side element; i only advances past left ones */
+        boxes[k] = boxes[i], prims[k] = prims[i];
+        boxes[i] = x, prims[i] = p;
+        i += (uint32_t)left;
+    }
+    *lcbox = box_of(lclo, lchi), *rcbox = box_of(rclo, rchi);
     return i;
 }
 
+static uint32_t split_partition(build_ctx *c, uint32_t begin, uint32_t end, const split_plan *s, box3 *lcbox,
+                                box3 *rcbox) {
+    switch (s->axis) {
+    case 0: return partition_axis(c->boxes, c->prims, begin, end, s, 0, lcbox, rcbox);
+    case 1: return partition_axis(c->boxes, c->prims, begin, end, s, 1, lcbox, rcbox);
+    default: return partition_axis(c->boxes, c->prims, begin, end, s, 2, lcbox, rcbox);
+    }
+}
+
 /* Processes one node: makes it a leaf or splits it and returns its two children as tasks. */
-static int build_node(build_ctx *c, const task *t, task out[2]) {
+static int build_node(build_ctx *c, const task *t, task out[2], tree_stats *st) {
     uint32_t n = t->end - t->begin;
     bvh_node *node = &c->nodes[t->node];
-    depth_max(c, t->depth + 1);
+    /* the node's box is the union of its primitives' (the parent's bins gave it) */
+    box3 b = node_box(node);
     if (n <= 1) {
         node->index = t->begin;
         node->count = n;
+        stats_leaf(st, t, b, c->inv_root_area);
         return 0;
     }
-    box3 cbox;
-    box3 lbox, rbox;
+    box3 lbox, rbox, lcbox, rcbox;
     uint32_t mid = 0;
     if (t->depth < MEDIAN_DEPTH) {
-        box3 b = prim_range_box(c, t->begin, t->end, &cbox);
-        double split_cost = INFINITY;
-        mid = split_sah(c, t->begin, t->end, cbox, &lbox, &rbox, &split_cost);
+        split_plan sp;
+        bool found = split_find(c, t->begin, t->end, t->cbox, b, &sp);
         /* SAH termination (in block intersections, as Embree's builders): a leaf when it is
          * no costlier than the best split and small enough */
         double area = box3_half_area(b);
-        if (n <= (uint32_t)c->max_leaf &&
-            (mid == 0 || area * blocks_of(c, n) <= area * c->trav_cost + split_cost)) {
-            /* the split may have permuted the range; a leaf does not care */
+        if (n <= (uint32_t)c->max_leaf && (!found || area * blocks_of(c, n) <= area * c->trav_cost + sp.cost)) {
             node->index = t->begin;
             node->count = n;
+            stats_leaf(st, t, b, c->inv_root_area);
             return 0;
+        }
+        if (found) {
+            mid = split_partition(c, t->begin, t->end, &sp, &lcbox, &rcbox);
+            lbox = sp.lbox, rbox = sp.rbox;
         }
     } else if (n <= (uint32_t)c->max_leaf) {
         node->index = t->begin;
         node->count = n;
+        stats_leaf(st, t, b, c->inv_root_area);
         return 0;
     }
     if (mid == 0) {
         /* identical centroids, or too deep: halve the range (order within it is arbitrary) */
         mid = t->begin + n / 2;
-        box3 unused;
-        lbox = prim_range_box(c, t->begin, mid, &unused);
-        rbox = prim_range_box(c, mid, t->end, &unused);
+        lbox = prim_range_box(c, t->begin, mid, &lcbox);
+        rbox = prim_range_box(c, mid, t->end, &rcbox);
     }
+    st->cost += cost_fixed(box3_half_area(b), 1.0, c->inv_root_area);
     uint32_t first = atomic_fetch_add_explicit(&c->node_count, 2, memory_order_relaxed);
     node->index = first;
     node->count = 0;
     set_node_box(&c->nodes[first], lbox);
     set_node_box(&c->nodes[first + 1], rbox);
-    out[0] = (task){first, t->begin, mid, t->depth + 1};
-    out[1] = (task){first + 1, mid, t->end, t->depth + 1};
+    out[0] = (task){first, t->begin, mid, t->depth + 1, lcbox};
+    out[1] = (task){first + 1, mid, t->end, t->depth + 1, rcbox};
     return 2;
 }
 
-static void build_subtree(build_ctx *c, task root) {
+static void build_subtree(build_ctx *c, task root, tree_stats *st) {
     task stack[2 * BVHW_MAX_DEPTH + 8];
     uint32_t sp = 0;
     stack[sp++] = root;
     while (sp) {
         task t = stack[--sp];
         task kids[2];
-        if (build_node(c, &t, kids) == 2) {
+        if (build_node(c, &t, kids, st) == 2) {
             stack[sp++] = kids[1];
             stack[sp++] = kids[0];
         }
@@ -317,7 +412,7 @@ static void build_subtree(build_ctx *c, task root) {
 static void build_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     build_ctx *c = user;
-    build_subtree(c, c->tasks[index]);
+    build_subtree(c, c->tasks[index], &c->task_stats[index]);
 }
 
 /* One level of the top of the tree: node `index` of `in` split into out[2 index], out[2 index + 1]. */
@@ -327,35 +422,13 @@ typedef struct level_job {
     const task *in;
     task *out;
     uint8_t *split;
+    tree_stats *stats; /* one per node of the level */
 } level_job;
 
 static void level_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     level_job *j = user;
-    j->split[index] = build_node(j->c, &j->in[index], &j->out[2 * index]) == 2;
-}
-
-/* SAH cost and leaf count, recursively with an explicit stack. */
-static void measure(bvh2 *b) {
-    double root_area = box3_half_area(node_box(&b->nodes[0]));
-    double cost = 0.0;
-    uint32_t leaves = 0;
-    uint32_t stack[2 * BVHW_MAX_DEPTH + 8], sp = 0;
-    stack[sp++] = 0;
-    while (sp) {
-        const bvh_node *n = &b->nodes[stack[--sp]];
-        double a = box3_half_area(node_box(n));
-        if (n->count || n->index == 0) {
-            leaves++;
-            cost += a * n->count;
-        } else {
-            cost += a;
-            stack[sp++] = n->index;
-            stack[sp++] = n->index + 1;
-        }
-    }
-    b->leaf_count = leaves;
-    b->sah_cost = root_area > 0.0 ? cost / root_area : 0.0;
+    j->split[index] = build_node(j->c, &j->in[index], &j->out[2 * index], &j->stats[index]) == 2;
 }
 
 /* Primitive boxes in SIMD form, the identity permutation and the root box, by chunks. */
@@ -364,7 +437,7 @@ typedef struct init_job {
     pbox *pboxes;
     uint32_t *prims;
     uint32_t n, chunks; /* at most PAR_CHUNKS */
-    box3 part[PAR_CHUNKS];
+    box3 part[PAR_CHUNKS], cpart[PAR_CHUNKS]; /* boxes and centroid boxes */
 } init_job;
 
 static void init_task(void *user, uint32_t index, uint32_t thread) {
@@ -372,15 +445,18 @@ static void init_task(void *user, uint32_t index, uint32_t thread) {
     init_job *j = user;
     uint64_t n = j->n;
     uint32_t b = (uint32_t)(n * index / j->chunks), e = (uint32_t)(n * (index + 1) / j->chunks);
-    box3 r = box3_empty();
+    vf4 lo = vf4_splat(INFINITY), hi = vf4_splat(-INFINITY), clo = lo, chi = hi;
     for (uint32_t i = b; i < e; i++) {
         const box3 *x = &j->boxes[i];
+        pbox *p = &j->pboxes[i];
         j->prims[i] = i;
-        j->pboxes[i].lo = (vf4){x->lo.x, x->lo.y, x->lo.z, 0.0f};
-        j->pboxes[i].hi = (vf4){x->hi.x, x->hi.y, x->hi.z, 0.0f};
-        r = box3_union(r, *x);
+        p->lo = (vf4){x->lo.x, x->lo.y, x->lo.z, 0.0f};
+        p->hi = (vf4){x->hi.x, x->hi.y, x->hi.z, 0.0f};
+        vf4 ce = centroid_of(p);
+        lo = vf4_min(lo, p->lo), hi = vf4_max(hi, p->hi);
+        clo = vf4_min(clo, ce), chi = vf4_max(chi, ce);
     }
-    j->part[index] = r;
+    j->part[index] = box_of(lo, hi), j->cpart[index] = box_of(clo, chi);
 }
 
 bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, uint32_t n,
@@ -406,21 +482,26 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
                    .chunks = par_init ? PAR_CHUNKS : 1};
     if (par_init) sys_pool_parallel_for(pool, ij.chunks, init_task, &ij);
     else init_task(&ij, 0, 0);
-    for (uint32_t i = 0; i < ij.chunks; i++) root = box3_union(root, ij.part[i]);
+    box3 croot = box3_empty();
+    for (uint32_t i = 0; i < ij.chunks; i++) root = box3_union(root, ij.part[i]), croot = box3_union(croot, ij.cpart[i]);
     build_ctx c = {
         .boxes = pboxes, .prims = out->prims, .nodes = out->nodes,
         .bins = desc->bins < 4 ? 4 : desc->bins > MAX_BINS ? MAX_BINS : desc->bins,
         .max_leaf = desc->max_leaf_size < 1 ? 1 : desc->max_leaf_size,
         .alloc = alloc,
         .block = desc->block_size < 1 ? 1u : (uint32_t)desc->block_size,
+        .block_shift = -1,
         .trav_cost = desc->trav_cost > 0.0f ? desc->trav_cost : 1.0,
     };
+    double root_area = box3_half_area(root);
+    c.inv_root_area = root_area > 0.0 && isfinite(1.0 / root_area) ? 1.0 / root_area : 0.0;
+    if ((c.block & (c.block - 1)) == 0) c.block_shift = __builtin_ctz(c.block);
     atomic_store(&c.node_count, 1);
-    atomic_store(&c.depth, 0);
     set_node_box(&out->nodes[0], root);
     out->nodes[0].index = 0;
     out->nodes[0].count = n;
 
+    tree_stats st = {0};
     int threads = pool ? sys_pool_threads(pool) : 1;
     if (threads > 1 && n > 4096) {
         /* Split level by level until the open subtrees are small enough to balance the threads.
@@ -432,9 +513,11 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
         c.task_capacity = 1024;
         size_t qbytes = (size_t)LEVEL_MAX * 2 * sizeof(task);
         c.tasks = sys_alloc(alloc, c.task_capacity * sizeof(task));
+        c.task_stats = sys_calloc(alloc, c.task_capacity * sizeof(tree_stats));
         task *level = sys_alloc(alloc, qbytes), *kids = sys_alloc(alloc, qbytes);
-        if (!c.tasks || !level || !kids) {
+        if (!c.tasks || !c.task_stats || !level || !kids) {
             sys_free(alloc, c.tasks, c.task_capacity * sizeof(task));
+            sys_free(alloc, c.task_stats, c.task_capacity * sizeof(tree_stats));
             sys_free(alloc, level, qbytes);
             sys_free(alloc, kids, qbytes);
             sys_free(alloc, pboxes, pbytes);
@@ -443,7 +526,7 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
         }
         uint8_t split[LEVEL_MAX];
         uint32_t ln = 1;
-        level[0] = (task){0, 0, n, 0};
+        level[0] = (task){0, 0, n, 0, croot};
         while (ln) {
             /* small nodes become subtree tasks, and so does any node whose two children might
              * not fit the task array (every open node still needs a slot there) */
@@ -454,7 +537,8 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
                 else level[wn++] = level[i];
             }
             if (!wn) break;
-            level_job job = {.c = &c, .in = level, .out = kids, .split = split};
+            tree_stats lstats[LEVEL_MAX] = {{0}};
+            level_job job = {.c = &c, .in = level, .out = kids, .split = split, .stats = lstats};
             if (wn < (uint32_t)threads) {
                 c.top_pool = pool;
                 for (uint32_t i = 0; i < wn; i++) level_task(&job, i, 0);
@@ -463,21 +547,26 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
                 sys_pool_parallel_for(pool, wn, level_task, &job);
             }
             ln = 0;
-            for (uint32_t i = 0; i < wn; i++)
+            for (uint32_t i = 0; i < wn; i++) {
+                stats_merge(&st, &lstats[i]);
                 if (split[i]) level[ln++] = kids[2 * i], level[ln++] = kids[2 * i + 1];
+            }
         }
         c.top_pool = NULL; /* the subtrees run on the pool themselves */
         sys_pool_parallel_for(pool, c.task_count, build_task, &c);
+        for (uint32_t i = 0; i < c.task_count; i++) stats_merge(&st, &c.task_stats[i]);
         sys_free(alloc, c.tasks, c.task_capacity * sizeof(task));
+        sys_free(alloc, c.task_stats, c.task_capacity * sizeof(tree_stats));
         sys_free(alloc, level, qbytes);
         sys_free(alloc, kids, qbytes);
     } else {
-        build_subtree(&c, (task){0, 0, n, 0});
+        build_subtree(&c, (task){0, 0, n, 0, croot}, &st);
     }
     sys_free(alloc, pboxes, pbytes);
     out->node_count = atomic_load(&c.node_count);
-    out->depth = atomic_load(&c.depth);
-    measure(out);
+    out->depth = st.depth;
+    out->leaf_count = st.leaves;
+    out->sah_cost = (double)st.cost * 0x1p-32;
     return true;
 }
 

@@ -9,12 +9,10 @@
 typedef struct conv_ctx {
     const bvh2 *src;
     int width;
-    uint8_t *nodes;
-    uint32_t node_count, node_capacity;
+    uint8_t *nodes; /* NULL while counting */
     uint32_t stride;
     bvhw_leaf_fn leaf;
     void *leaf_user;
-    bool failed;
 } conv_ctx;
 
 static double node_area(const bvh_node *n) {
@@ -24,9 +22,11 @@ static double node_area(const bvh_node *n) {
 
 static bool is_leaf(const bvh_node *n) { return n->count != 0 || n->index == 0; }
 
-/* Fills wide node `dst` from binary inner node `src_index`; returns the binary children that
- * became wide inner nodes in `pending` (pairs of wide node, slot). */
-static void fill_node(conv_ctx *c, uint32_t dst, uint32_t src_index, uint32_t *pending, uint32_t *pending_count) {
+/* Fills wide node `dst` from binary inner node `src_index` (only numbers its children while
+ * counting); inner children take the ids *next, *next + 1, ... and are returned in `pending`
+ * (pairs of wide node, binary node). False when a leaf does not fit. */
+static bool fill_node(const conv_ctx *c, uint32_t dst, uint32_t src_index, uint32_t *next, uint32_t *pending,
+                      uint32_t *pending_count) {
     const bvh_node *nodes = c->src->nodes;
     uint32_t kids[16];
     int count = 0;
@@ -53,8 +53,17 @@ static void fill_node(conv_ctx *c, uint32_t dst, uint32_t src_index, uint32_t *p
         }
     }
     int w = c->width;
+    if (!c->nodes) {
+        for (int i = 0; i < count; i++) {
+            if (is_leaf(&nodes[kids[i]])) continue;
+            pending[(*pending_count)++] = (*next)++;
+            pending[(*pending_count)++] = kids[i];
+        }
+        return true;
+    }
     float *b = (float *)(c->nodes + (size_t)dst * c->stride);
     uint32_t *child = (uint32_t *)(b + 6 * w);
+    bool ok = true;
     for (int i = 0; i < w; i++) {
         if (i >= count) {
             b[0 * w + i] = INFINITY, b[1 * w + i] = -INFINITY;
@@ -76,46 +85,34 @@ static void fill_node(conv_ctx *c, uint32_t dst, uint32_t src_index, uint32_t *p
             }
             if (!c->leaf(c->leaf_user, k, &first, &items) || items == 0 || items > BVHW_MAX_ITEMS ||
                 first > BVHW_MAX_FIRST) {
-                c->failed = true;
+                ok = false;
                 child[i] = BVHW_EMPTY;
                 continue;
             }
             child[i] = BVHW_LEAF | first << 4 | items;
         } else {
-            uint32_t id = c->node_count++;
+            uint32_t id = (*next)++;
             child[i] = id;
             pending[(*pending_count)++] = id;
             pending[(*pending_count)++] = kids[i];
         }
     }
+    return ok;
 }
 
-bool bvhw_from_bvh2(const sys_allocator *alloc, const bvh2 *src, int width, bvhw_leaf_fn leaf,
-                    void *leaf_user, bvhw *out) {
-    memset(out, 0, sizeof *out);
-    conv_ctx c = {.src = src, .width = width, .leaf = leaf, .leaf_user = leaf_user};
-    c.stride = bvhw_node_bytes(width);
-    uint32_t inner = src->node_count > src->leaf_count ? src->node_count - src->leaf_count : 0;
-    c.node_capacity = inner + 1;
-    size_t bytes = (size_t)c.node_capacity * c.stride;
-    c.nodes = sys_alloc(alloc, bytes);
-    /* depth-first, so a subtree's nodes lie together in memory */
-    size_t pend_size = (size_t)2 * 16 * (BVHW_MAX_DEPTH + 2) * sizeof(uint32_t);
-    uint32_t *pending = sys_alloc(alloc, pend_size);
-    if (!c.nodes || !pending) {
-        sys_free(alloc, c.nodes, bytes);
-        sys_free(alloc, pending, pend_size);
-        return false;
-    }
+/* Converts the subtree of binary node `src` into wide node `dst` and its descendants, depth
+ * first (a subtree's nodes lie together in memory), numbering them from *next; counts only when
+ * c->nodes is NULL. */
+static bool convert_subtree(const conv_ctx *c, uint32_t dst, uint32_t src, uint32_t *next) {
+    uint32_t pending[2 * 16 * (BVHW_MAX_DEPTH + 2)];
     uint32_t pc = 0;
-    c.node_count = 1;
-    fill_node(&c, 0, 0, pending, &pc);
+    bool ok = fill_node(c, dst, src, next, pending, &pc);
     while (pc) {
         /* pop the last pushed pair; order children so the first child is converted first */
         uint32_t src_index = pending[--pc];
-        uint32_t dst = pending[--pc];
+        uint32_t d = pending[--pc];
         uint32_t before = pc;
-        fill_node(&c, dst, src_index, pending, &pc);
+        ok &= fill_node(c, d, src_index, next, pending, &pc);
         /* reverse the newly pushed pairs so the leftmost child is popped next */
         uint32_t pairs = (pc - before) / 2;
         for (uint32_t i = 0; i < pairs / 2; i++) {
@@ -125,22 +122,91 @@ bool bvhw_from_bvh2(const sys_allocator *alloc, const bvh2 *src, int width, bvhw
             pending[b] = t0, pending[b + 1] = t1;
         }
     }
-    sys_free(alloc, pending, pend_size);
-    if (c.failed) {
+    return ok;
+}
+
+/* The top of the tree is converted breadth first until there are enough open subtrees for the
+ * threads; each subtree is then counted, given its range of ids after the top's, and converted,
+ * all in parallel. The numbering depends only on the tree, not on the threads' timing. */
+#define WIDE_SUBTREES 64u
+
+typedef struct wide_job {
+    const conv_ctx *c;
+    const uint32_t *roots; /* pairs of wide node, binary node */
+    uint32_t *base;        /* per subtree: its first descendant id; counting: its descendant count */
+    bool *ok;
+} wide_job;
+
+static void count_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    const wide_job *j = user;
+    uint32_t next = 0;
+    convert_subtree(j->c, j->roots[2 * index], j->roots[2 * index + 1], &next);
+    j->base[index] = next;
+}
+
+static void convert_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    const wide_job *j = user;
+    uint32_t next = j->base[index];
+    j->ok[index] = convert_subtree(j->c, j->roots[2 * index], j->roots[2 * index + 1], &next);
+}
+
+/* The top: breadth first from the root until WIDE_SUBTREES inner children are open; returns the
+ * number of ids used (top nodes and open subtrees' roots) and the open subtrees in `roots`. */
+static uint32_t convert_top(const conv_ctx *c, uint32_t *roots, uint32_t *root_count, bool *ok) {
+    /* a FIFO that is never wrapped: it stops growing at its capacity (the rest are subtrees) */
+    uint32_t queue[8 * (WIDE_SUBTREES + 16)];
+    uint32_t head = 0, tail = 0, next = 1;
+    uint32_t pc = 0;
+    *ok = fill_node(c, 0, 0, &next, queue, &pc);
+    tail = pc;
+    while (head < tail && (tail - head) / 2 < WIDE_SUBTREES && tail + 2 * 16 <= 8 * (WIDE_SUBTREES + 16)) {
+        uint32_t d = queue[head++], src = queue[head++];
+        uint32_t add = 0;
+        *ok &= fill_node(c, d, src, &next, queue + tail, &add);
+        tail += add;
+    }
+    *root_count = (tail - head) / 2;
+    memcpy(roots, queue + head, (size_t)(tail - head) * sizeof(uint32_t));
+    return next;
+}
+
+bool bvhw_from_bvh2(const sys_allocator *alloc, sys_pool *pool, const bvh2 *src, int width, bvhw_leaf_fn leaf,
+                    void *leaf_user, bvhw *out) {
+    memset(out, 0, sizeof *out);
+    conv_ctx c = {.src = src, .width = width, .leaf = leaf, .leaf_user = leaf_user};
+    c.stride = bvhw_node_bytes(width);
+    uint32_t roots[2 * (WIDE_SUBTREES + 16)], base[WIDE_SUBTREES + 16], count = 0;
+    bool ok[WIDE_SUBTREES + 16], top_ok;
+    wide_job j = {.c = &c, .roots = roots, .base = base, .ok = ok};
+    /* count: the top, then each subtree's descendants */
+    uint32_t total = convert_top(&c, roots, &count, &top_ok);
+    if (pool) sys_pool_parallel_for(pool, count, count_task, &j);
+    else
+        for (uint32_t i = 0; i < count; i++) count_task(&j, i, 0);
+    for (uint32_t i = 0; i < count; i++) {
+        uint32_t n = base[i];
+        base[i] = total;
+        total += n;
+    }
+    size_t bytes = (size_t)total * c.stride;
+    c.nodes = sys_alloc(alloc, bytes);
+    if (!c.nodes) return false;
+    /* convert: the top again (the same ids), then the subtrees */
+    convert_top(&c, roots, &count, &top_ok);
+    if (pool) sys_pool_parallel_for(pool, count, convert_task, &j);
+    else
+        for (uint32_t i = 0; i < count; i++) convert_task(&j, i, 0);
+    bool all = top_ok;
+    for (uint32_t i = 0; i < count; i++) all &= ok[i];
+    if (!all) {
         sys_free(alloc, c.nodes, bytes);
         return false;
     }
-    /* the array was sized for the binary tree's inner nodes; keep only the nodes made */
-    size_t used = (size_t)c.node_count * c.stride;
-    void *exact = sys_alloc(alloc, used);
-    if (exact) {
-        memcpy(exact, c.nodes, used);
-        sys_free(alloc, c.nodes, bytes);
-        c.nodes = exact, bytes = used;
-    }
     out->width = width;
     out->nodes = c.nodes;
-    out->node_count = c.node_count;
+    out->node_count = total;
     out->bytes = bytes;
     return true;
 }

@@ -537,7 +537,7 @@ rp_error scene_build(rp_scene *s) {
                 s->tris = pc.blocks;
                 s->tri_block_count = alloc_blocks;
                 st.triangles = tris.count;
-                st.binary_nodes = b2.node_count;
+                st.binary_nodes = 2ull * b2.leaf_count - 1; /* node_count also counts unused nodes */
                 st.wide_nodes = s->tri_bvh.node_count;
                 st.leaves = b2.leaf_count;
                 st.depth = b2.depth;
@@ -564,7 +564,7 @@ rp_error scene_build(rp_scene *s) {
             if (!s->prims || !bvhw_from_bvh2(a, pool, &b2, 4, prim_leaf, NULL, &s->prim_bvh)) {
                 err = RP_ERROR_OUT_OF_MEMORY;
             } else {
-                st.binary_nodes += b2.node_count;
+                st.binary_nodes += 2ull * b2.leaf_count - 1;
                 st.wide_nodes += s->prim_bvh.node_count;
                 st.leaves += b2.leaf_count;
                 if (b2.depth > st.depth) st.depth = b2.depth;

@@ -20,7 +20,7 @@ typedef struct bvh_node {
 
 typedef struct bvh2 {
     bvh_node *nodes;     /* nodes[0] is the root */
-    uint32_t node_count;
+    uint32_t node_count; /* including unused nodes (count 0, index 0, never a child): 2 leaf_count - 1 are used */
     uint32_t node_capacity;
     uint32_t *prims;     /* primitive ids in leaf order */
     uint32_t prim_count;

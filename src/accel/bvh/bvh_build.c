@@ -22,7 +22,9 @@ typedef struct build_ctx {
     pbox *boxes; /* permuted with prims, so every pass over a node's range reads memory in order */
     uint32_t *prims;
     bvh_node *nodes;
-    _Atomic uint32_t node_count;
+    _Atomic uint32_t node_count; /* nodes handed out, in chunks */
+    struct node_chunk *chunks;     /* per thread: the rest of its chunk */
+    uint32_t chunk_count;
     int bins;
     int max_leaf;
     uint32_t block;    /* primitives per intersection block */
@@ -37,6 +39,16 @@ typedef struct build_ctx {
     struct tree_stats *task_stats; /* one per task */
     uint32_t task_count, task_capacity;
 } build_ctx;
+
+/* Nodes are handed to the threads in chunks of NODE_CHUNK (one atomic per chunk, and no two threads
+ * writing the same cache line: sibling pairs start at even indices, 64 bytes apart). The unused
+ * rest of each chunk is zeroed at the end: a node with count 0 and index 0 that no node points at. */
+#define NODE_CHUNK 64u
+
+typedef struct node_chunk {
+    uint32_t next, end;
+    uint8_t pad[RP_CACHE_LINE - 8];
+} node_chunk;
 
 /* An open node: its range of primitives and the box of their centroids (its own box is in the
  * node), which the partition that made it computed. */
@@ -343,7 +355,18 @@ static uint32_t split_partition(build_ctx *c, uint32_t begin, uint32_t end, cons
 }
 
 /* Processes one node: makes it a leaf or splits it and returns its two children as tasks. */
-static int build_node(build_ctx *c, const task *t, task out[2], tree_stats *st) {
+static uint32_t node_pair(build_ctx *c, uint32_t thread) {
+    node_chunk *k = &c->chunks[thread];
+    if (k->next == k->end) {
+        k->next = atomic_fetch_add_explicit(&c->node_count, NODE_CHUNK, memory_order_relaxed);
+        k->end = k->next + NODE_CHUNK;
+    }
+    uint32_t first = k->next;
+    k->next += 2;
+    return first;
+}
+
+static int build_node(build_ctx *c, uint32_t thread, const task *t, task out[2], tree_stats *st) {
     uint32_t n = t->end - t->begin;
     bvh_node *node = &c->nodes[t->node];
     /* the node's box is the union of its primitives' (the parent's bins gave it) */
@@ -385,7 +408,7 @@ static int build_node(build_ctx *c, const task *t, task out[2], tree_stats *st) 
         rbox = prim_range_box(c, mid, t->end, &rcbox);
     }
     st->cost += cost_fixed(box3_half_area(b), 1.0, c->inv_root_area);
-    uint32_t first = atomic_fetch_add_explicit(&c->node_count, 2, memory_order_relaxed);
+    uint32_t first = node_pair(c, thread);
     node->index = first;
     node->count = 0;
     set_node_box(&c->nodes[first], lbox);
@@ -395,14 +418,14 @@ static int build_node(build_ctx *c, const task *t, task out[2], tree_stats *st) 
     return 2;
 }
 
-static void build_subtree(build_ctx *c, task root, tree_stats *st) {
+static void build_subtree(build_ctx *c, uint32_t thread, task root, tree_stats *st) {
     task stack[2 * BVHW_MAX_DEPTH + 8];
     uint32_t sp = 0;
     stack[sp++] = root;
     while (sp) {
         task t = stack[--sp];
         task kids[2];
-        if (build_node(c, &t, kids, st) == 2) {
+        if (build_node(c, thread, &t, kids, st) == 2) {
             stack[sp++] = kids[1];
             stack[sp++] = kids[0];
         }
@@ -410,9 +433,8 @@ static void build_subtree(build_ctx *c, task root, tree_stats *st) {
 }
 
 static void build_task(void *user, uint32_t index, uint32_t thread) {
-    (void)thread;
     build_ctx *c = user;
-    build_subtree(c, c->tasks[index], &c->task_stats[index]);
+    build_subtree(c, thread, c->tasks[index], &c->task_stats[index]);
 }
 
 /* One level of the top of the tree: node `index` of `in` split into out[2 index], out[2 index + 1]. */
@@ -426,9 +448,8 @@ typedef struct level_job {
 } level_job;
 
 static void level_task(void *user, uint32_t index, uint32_t thread) {
-    (void)thread;
     level_job *j = user;
-    j->split[index] = build_node(j->c, &j->in[index], &j->out[2 * index], &j->stats[index]) == 2;
+    j->split[index] = build_node(j->c, thread, &j->in[index], &j->out[2 * index], &j->stats[index]) == 2;
 }
 
 /* Primitive boxes in SIMD form, the identity permutation and the root box, by chunks. */
@@ -462,12 +483,18 @@ static void init_task(void *user, uint32_t index, uint32_t thread) {
 bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, uint32_t n,
                const bvh_build_desc *desc, bvh2 *out) {
     memset(out, 0, sizeof *out);
-    uint32_t cap = n ? 2 * n - 1 : 1;
+    int threads = pool ? sys_pool_threads(pool) : 1;
+    /* the root, an unused node 1 (so pairs start at even indices), the pairs, and the unused rest
+     * of every thread's last chunk */
+    uint32_t cap = (n ? 2 * n : 2) + (uint32_t)threads * NODE_CHUNK;
+    size_t kbytes = (size_t)threads * sizeof(node_chunk);
+    node_chunk *chunks = sys_calloc(alloc, kbytes);
     out->nodes = sys_alloc(alloc, (size_t)cap * sizeof(bvh_node));
     out->prims = sys_alloc(alloc, (size_t)(n ? n : 1) * sizeof(uint32_t));
     size_t pbytes = (size_t)(n ? n : 1) * sizeof(pbox);
     pbox *pboxes = sys_alloc(alloc, pbytes);
-    if (!out->nodes || !out->prims || !pboxes) {
+    if (!out->nodes || !out->prims || !pboxes || !chunks) {
+        sys_free(alloc, chunks, kbytes);
         sys_free(alloc, pboxes, pbytes);
         bvh2_free(alloc, out);
         return false;
@@ -496,13 +523,14 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
     double root_area = box3_half_area(root);
     c.inv_root_area = root_area > 0.0 && isfinite(1.0 / root_area) ? 1.0 / root_area : 0.0;
     if ((c.block & (c.block - 1)) == 0) c.block_shift = __builtin_ctz(c.block);
-    atomic_store(&c.node_count, 1);
+    c.chunks = chunks, c.chunk_count = (uint32_t)threads;
+    atomic_store(&c.node_count, 2);
+    memset(&out->nodes[1], 0, sizeof(bvh_node));
     set_node_box(&out->nodes[0], root);
     out->nodes[0].index = 0;
     out->nodes[0].count = n;
 
     tree_stats st = {0};
-    int threads = pool ? sys_pool_threads(pool) : 1;
     if (threads > 1 && n > 4096) {
         /* Split level by level until the open subtrees are small enough to balance the threads.
          * A level with fewer nodes than threads is split node by node, each binned by all
@@ -521,6 +549,7 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
             sys_free(alloc, level, qbytes);
             sys_free(alloc, kids, qbytes);
             sys_free(alloc, pboxes, pbytes);
+            sys_free(alloc, chunks, kbytes);
             bvh2_free(alloc, out);
             return false;
         }
@@ -560,9 +589,13 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
         sys_free(alloc, level, qbytes);
         sys_free(alloc, kids, qbytes);
     } else {
-        build_subtree(&c, (task){0, 0, n, 0, croot}, &st);
+        build_subtree(&c, 0, (task){0, 0, n, 0, croot}, &st);
     }
     sys_free(alloc, pboxes, pbytes);
+    for (int i = 0; i < threads; i++)
+        if (chunks[i].next < chunks[i].end)
+            memset(&out->nodes[chunks[i].next], 0, (size_t)(chunks[i].end - chunks[i].next) * sizeof(bvh_node));
+    sys_free(alloc, chunks, kbytes);
     out->node_count = atomic_load(&c.node_count);
     out->depth = st.depth;
     out->leaf_count = st.leaves;

@@ -330,6 +330,25 @@ static void check_vs_json(const jvalue *root, const char *what) {
                    json_num(all, k == 1 ? "rtcOccluded16" : "rtcIntersect16") >= 0,
                "%s: rays.%s.embree_all", what, kinds[k]);
         CHECKF(json_num(r, "ratio") >= 0, "%s: rays.%s.ratio", what, kinds[k]);
+        /* each engine's best is the faster of its two finalists, timed `repeats` times */
+        const char *fin[2] = {"raypack_finalists", "embree_finalists"}, *name[2] = {"mode", "api"};
+        const jvalue *best[2] = {rp, emb};
+        for (int e = 0; e < 2; e++) {
+            const jvalue *fv = json_get(r, fin[e]), *bn = json_get(best[e], name[e]);
+            CHECKF(fv && fv->type == J_OBJECT && fv->count == 2, "%s: rays.%s.%s has 2 entries", what, kinds[k],
+                   fin[e]);
+            if (!fv || fv->type != J_OBJECT || !bn || bn->type != J_STRING) continue;
+            bool found = false;
+            for (size_t i = 0; i < fv->count; i++) {
+                CHECKF(fv->items[i].number <= json_num(best[e], "mrays_median"), "%s: rays.%s.%s.%s above the best",
+                       what, kinds[k], fin[e], fv->keys[i]);
+                if (strcmp(fv->keys[i], bn->string) != 0) continue;
+                found = true;
+                CHECKF(fabs(fv->items[i].number - json_num(best[e], "mrays_median")) < 1e-3,
+                       "%s: rays.%s.%s: the best's median", what, kinds[k], fin[e]);
+            }
+            CHECKF(found, "%s: rays.%s: the best (%s) is one of the %s", what, kinds[k], bn->string, fin[e]);
+        }
     }
 }
 

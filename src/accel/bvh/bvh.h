@@ -30,7 +30,7 @@ typedef struct bvh2 {
 } bvh2;
 
 typedef struct bvh_build_desc {
-    int bins;          /* per axis, 4..64 */
+    int bins;          /* per axis, 4..64 (twice as many, up to 64, in nodes of over 256 primitives) */
     int max_leaf_size; /* most primitives per leaf, 1..60; the SAH decides below it */
     int block_size;    /* primitives intersected together (4 for tri4 leaves); 0: 1 */
     float trav_cost;   /* cost of a node relative to one block intersection; 0: 1 */

@@ -9,6 +9,7 @@
 #include "simd/simd.h"
 
 #define MAX_BINS 64
+#define LARGE_NODE 256u /* nodes larger than this are binned with twice the bins */
 #define PAR_MIN 65536u     /* nodes this large (at the top of the tree) are binned by all threads */
 #define PAR_CHUNKS 32u
 #define MEDIAN_DEPTH 64 /* past this depth, split at the median to bound the depth */
@@ -241,9 +242,12 @@ typedef struct split_plan {
 /* Finds the best split of [begin, end) whose centroids lie in cbox; false when there is none (all
  * centroids in one bin on every axis). One pass bins all three axes at once. */
 static bool split_find(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox, box3 nbox, split_plan *out) {
-    /* small nodes: about one bin per primitive is as good, and the sweeps over empty bins
-     * dominated the build's time near the leaves */
-    int nb = c->bins;
+    /* Nodes of more than LARGE_NODE primitives get twice the bins: their splits shape the tree
+     * (kitchen, conference: single rays 5-15% faster than with 16 bins everywhere, as fast as 32
+     * everywhere, at no measurable build cost; 64 was no better). Small nodes: about one bin per
+     * primitive is as good, and the sweeps over empty bins dominated the build near the leaves. */
+    int nb = end - begin > LARGE_NODE ? 2 * c->bins : c->bins;
+    if (nb > MAX_BINS) nb = MAX_BINS;
     if ((uint32_t)nb > end - begin) nb = end - begin < 4 ? 4 : (int)(end - begin);
     vf4 lo = {cbox.lo.x, cbox.lo.y, cbox.lo.z, 0.0f}, scale = vf4_splat(0.0f);
     bool usable[3];

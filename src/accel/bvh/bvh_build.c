@@ -14,7 +14,7 @@
 #define PAR_CHUNKS 32u
 #define MEDIAN_DEPTH 64 /* past this depth, split at the median to bound the depth */
 
-/* A primitive box in SIMD form (w lanes unused), so unions are two min/max instructions. */
+/* A primitive box in SIMD form, so unions are two min/max instructions; w: lo 0, hi -inf (see bins). */
 typedef struct pbox {
     vf4 lo, hi;
 } pbox;
@@ -158,28 +158,34 @@ static inline vi4 bins_of(vf4 centroid, vf4 lo, vf4 scale, vf4 last) {
     return __builtin_convertvector(f, vi4);
 }
 
-/* Bins of the three axes: per bin, for each axis, the union of the boxes and the count of the
- * primitives whose centroid falls in it (a lane per axis, so the sweeps run the axes together). */
+/* Bins of the three axes: per bin, for each axis, the union of the boxes, and in the w lane of
+ * its upper corner the count of the primitives whose centroid falls in it (a float: exact up to
+ * 2^24, and only the SAH reads it). A primitive's upper corner has w = -inf, so max keeps the count
+ * and one add counts the primitive: a bin update is two loads and two stores (a separate count
+ * array made it three of each). */
 typedef struct bins {
     vf4 lo[MAX_BINS][3], hi[MAX_BINS][3];
-    vi4 count[MAX_BINS];
 } bins;
 
 static void bins_clear(bins *b, int nb) {
-    for (int k = 0; k < nb; k++) {
-        for (int a = 0; a < 3; a++) b->lo[k][a] = vf4_splat(INFINITY), b->hi[k][a] = vf4_splat(-INFINITY);
-        b->count[k] = vi4_splat(0);
-    }
+    for (int k = 0; k < nb; k++)
+        for (int a = 0; a < 3; a++) b->lo[k][a] = vf4_splat(INFINITY), b->hi[k][a] = (vf4){-INFINITY, -INFINITY, -INFINITY, 0.0f};
 }
 
 RP_INLINE void bin_one(bins *restrict out, const pbox *p, vf4 lo, vf4 scale, vf4 last) {
     vi4 b = bins_of(centroid_of(p), lo, scale, last);
+    const vf4 one_w = {0.0f, 0.0f, 0.0f, 1.0f};
     for (int a = 0; a < 3; a++) {
         int k = b[a];
         out->lo[k][a] = vf4_min(out->lo[k][a], p->lo);
-        out->hi[k][a] = vf4_max(out->hi[k][a], p->hi);
-        out->count[k][a]++;
+        out->hi[k][a] = vf4_max(out->hi[k][a], p->hi) + one_w;
     }
+}
+
+/* The counts of bin k on the three axes (lanes x, y, z; w 0). */
+static inline vf4 bin_counts(const bins *b, int k) {
+    vf4 t = __builtin_shufflevector(b->hi[k][0], b->hi[k][1], 3, 7, 3, 7);
+    return __builtin_shufflevector(t, b->hi[k][2], 0, 1, 7, 0) * (vf4){1.0f, 1.0f, 1.0f, 0.0f};
 }
 
 static void bin_range(const build_ctx *c, uint32_t begin, uint32_t end, vf4 lo, vf4 scale, vf4 last, int nb,
@@ -192,9 +198,10 @@ static void bins_merge(bins *dst, const bins *src, int nb) {
     for (int k = 0; k < nb; k++) {
         for (int a = 0; a < 3; a++) {
             dst->lo[k][a] = vf4_min(dst->lo[k][a], src->lo[k][a]);
-            dst->hi[k][a] = vf4_max(dst->hi[k][a], src->hi[k][a]);
+            vf4 h = vf4_max(dst->hi[k][a], src->hi[k][a]);
+            h[3] = dst->hi[k][a][3] + src->hi[k][a][3];
+            dst->hi[k][a] = h;
         }
-        dst->count[k] += src->count[k];
     }
 }
 
@@ -276,32 +283,33 @@ static bool split_find(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox, bo
     float inv = ext > 0.0 && isfinite(1.0 / ext) ? (float)(1.0 / ext) : 1.0f;
     vf4 sinv = vf4_splat(inv), inf = vf4_splat(INFINITY), ninf = vf4_splat(-INFINITY);
     vi4 zero = vi4_splat(0);
+    vf4 fzero = vf4_splat(0.0f);
     /* right-to-left sweep of areas and counts */
     vf4 rcost[MAX_BINS];
     vf4 blo[3] = {inf, inf, inf}, bhi[3] = {ninf, ninf, ninf}, d[3];
-    vi4 cnt = zero;
+    vf4 cnt = fzero;
     for (int b = nb - 1; b > 0; b--) {
         for (int a = 0; a < 3; a++) {
             blo[a] = vf4_min(blo[a], acc.lo[b][a]), bhi[a] = vf4_max(bhi[a], acc.hi[b][a]);
             d[a] = bhi[a] - blo[a];
         }
-        cnt += acc.count[b];
-        rcost[b] = vf4_select(cnt > zero, half_areas3(d, sinv) * blocks_v(c, cnt), inf);
+        cnt += bin_counts(&acc, b);
+        rcost[b] = vf4_select(cnt > fzero, half_areas3(d, sinv) * blocks_v(c, __builtin_convertvector(cnt, vi4)), inf);
     }
     /* left-to-right with the cost of each border: per axis, the first least cost */
     vi4 usable_m = {-(int)usable[0], -(int)usable[1], -(int)usable[2], 0};
     vf4 best = inf;
     vi4 best_b = zero;
     for (int a = 0; a < 3; a++) blo[a] = inf, bhi[a] = ninf;
-    cnt = zero;
+    cnt = fzero;
     for (int b = 1; b < nb; b++) {
         for (int a = 0; a < 3; a++) {
             blo[a] = vf4_min(blo[a], acc.lo[b - 1][a]), bhi[a] = vf4_max(bhi[a], acc.hi[b - 1][a]);
             d[a] = bhi[a] - blo[a];
         }
-        cnt += acc.count[b - 1];
-        vf4 cost = half_areas3(d, sinv) * blocks_v(c, cnt) + rcost[b];
-        vi4 better = (cost < best) & (cnt > zero) & usable_m;
+        cnt += bin_counts(&acc, b - 1);
+        vf4 cost = half_areas3(d, sinv) * blocks_v(c, __builtin_convertvector(cnt, vi4)) + rcost[b];
+        vi4 better = (cost < best) & (cnt > fzero) & usable_m;
         best = vf4_select(better, cost, best);
         best_b = vi4_select(better, vi4_splat(b), best_b);
     }
@@ -476,7 +484,7 @@ static void init_task(void *user, uint32_t index, uint32_t thread) {
         pbox *p = &j->pboxes[i];
         j->prims[i] = i;
         p->lo = (vf4){x->lo.x, x->lo.y, x->lo.z, 0.0f};
-        p->hi = (vf4){x->hi.x, x->hi.y, x->hi.z, 0.0f};
+        p->hi = (vf4){x->hi.x, x->hi.y, x->hi.z, -INFINITY}; /* w: see bins */
         vf4 ce = centroid_of(p);
         lo = vf4_min(lo, p->lo), hi = vf4_max(hi, p->hi);
         clo = vf4_min(clo, ce), chi = vf4_max(chi, ce);

@@ -342,9 +342,10 @@ int main(void) {
                "big: %llu triangles, %llu degenerate, %llu rejected", (unsigned long long)st.triangles,
                (unsigned long long)st.degenerate_prims, (unsigned long long)st.rejected_prims);
         CHECKF(st1.triangles == st.triangles && st1.binary_nodes == st.binary_nodes && st1.leaves == st.leaves &&
-                   st1.depth == st.depth && st1.sah_cost == st.sah_cost,
-               "1 thread: %llu nodes, SAH %.6f; 3 threads: %llu nodes, SAH %.6f", (unsigned long long)st1.binary_nodes,
-               st1.sah_cost, (unsigned long long)st.binary_nodes, st.sah_cost);
+                   st1.depth == st.depth && st1.sah_cost == st.sah_cost && st1.wide_nodes == st.wide_nodes,
+               "1 thread: %llu nodes (%llu wide), SAH %.6f; 3 threads: %llu nodes (%llu wide), SAH %.6f",
+               (unsigned long long)st1.binary_nodes, (unsigned long long)st1.wide_nodes, st1.sah_cost,
+               (unsigned long long)st.binary_nodes, (unsigned long long)st.wide_nodes, st.sah_cost);
         rp_device_release(dev1);
         for (int gk = 0; gk < 2; gk++) free(gv[gk]), free(gi[gk]);
     }

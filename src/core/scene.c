@@ -202,6 +202,9 @@ typedef struct tri_pack_ctx {
     uint32_t *first_block; /* per primitive position: the first block of the leaf starting there */
     uint32_t block_count;
     uint32_t chunks;       /* of the node array, one task each */
+    double inv_diag;       /* 1 / the scene's diagonal, for the leaf sides below */
+    uint64_t *side_sum;    /* per chunk: the leaves' longest sides, in 2^-24 of the diagonal */
+    uint32_t *leaf_count;  /* per chunk */
 } tri_pack_ctx;
 
 static inline bool tri_is_leaf(const bvh_node *n) { return n->count != 0; }
@@ -235,13 +238,25 @@ static void tri_fill_leaf(const tri_pack_ctx *c, const bvh_node *leaf) {
     }
 }
 
+/* Fills the blocks of a range of the nodes' leaves and points each leaf at its blocks (count:
+ * blocks, index: the first block), summing the leaves' sides for coherent_extent on the way; the
+ * sums are fixed point, so they do not depend on the number of chunks. */
 static void tri_pack_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     const tri_pack_ctx *c = user;
-    uint64_t n = c->bvh->node_count;
-    uint32_t begin = (uint32_t)(n * index / c->chunks), end = (uint32_t)(n * (index + 1) / c->chunks);
-    for (uint32_t i = begin; i < end; i++)
-        if (tri_is_leaf(&c->bvh->nodes[i])) tri_fill_leaf(c, &c->bvh->nodes[i]);
+    uint64_t n = c->bvh->node_count, sum = 0;
+    uint32_t begin = (uint32_t)(n * index / c->chunks), end = (uint32_t)(n * (index + 1) / c->chunks), leaves = 0;
+    for (uint32_t i = begin; i < end; i++) {
+        bvh_node *leaf = &c->bvh->nodes[i];
+        if (!tri_is_leaf(leaf)) continue;
+        tri_fill_leaf(c, leaf);
+        double side = fmax((double)leaf->hi[0] - leaf->lo[0], fmax((double)leaf->hi[1] - leaf->lo[1], (double)leaf->hi[2] - leaf->lo[2]));
+        sum += (uint64_t)(fmin(side * c->inv_diag, 1.0) * 0x1p24 + 0.5);
+        leaves++;
+        leaf->index = c->first_block[leaf->index];
+        leaf->count = (leaf->count + 3) / 4;
+    }
+    c->side_sum[index] = sum, c->leaf_count[index] = leaves;
 }
 
 /* Numbers the blocks of every leaf; false when out of memory. */
@@ -262,11 +277,11 @@ static bool tri_pack_plan(const sys_allocator *a, tri_pack_ctx *c) {
     return true;
 }
 
-/* Leaf payload of the triangle BVH: its blocks, numbered by tri_pack_plan. */
+/* Leaf payload of the triangle BVH: its blocks (tri_pack_task has pointed the leaf at them). */
 static bool tri_leaf(void *user, const bvh_node *leaf, uint32_t *first, uint32_t *items) {
-    const tri_pack_ctx *c = user;
-    *first = c->first_block[leaf->index];
-    *items = (leaf->count + 3) / 4;
+    (void)user;
+    *first = leaf->index;
+    *items = leaf->count;
     return true;
 }
 
@@ -300,18 +315,15 @@ static int quality_bins(rp_build_quality q) {
  * leaves. A large ground plane made the diagonal 30x the size of spd_tree's branches, and the
  * intervals of packets spread over the tree then covered most of it (shadow packets 4x slower
  * than single rays). */
-static float coherent_extent(const rp_scene *s, box3 bounds) {
-    vec3 e = v3_sub(bounds.hi, bounds.lo);
-    double ext = 0.01 * sqrt((double)e.x * e.x + (double)e.y * e.y + (double)e.z * e.z);
-    double sum = 0.0;
-    uint32_t leaves = 0;
-    for (uint32_t i = 0; i < s->tri_bvh2.node_count; i++) {
-        const bvh_node *n = &s->tri_bvh2.nodes[i];
-        if (n->count == 0) continue;
-        double side = fmax((double)n->hi[0] - n->lo[0], fmax((double)n->hi[1] - n->lo[1], (double)n->hi[2] - n->lo[2]));
-        if (isfinite(side)) sum += side, leaves++;
-    }
-    if (leaves && 2.0 * sum / leaves < ext) ext = 2.0 * sum / leaves;
+static double diagonal(box3 b) {
+    vec3 e = v3_sub(b.hi, b.lo);
+    return sqrt((double)e.x * e.x + (double)e.y * e.y + (double)e.z * e.z);
+}
+
+/* mean_side: the triangle leaves' mean longest side (0: no triangles). */
+static float coherent_extent(box3 bounds, double mean_side) {
+    double ext = 0.01 * diagonal(bounds);
+    if (mean_side > 0.0 && 2.0 * mean_side < ext) ext = 2.0 * mean_side;
     return (float)ext;
 }
 
@@ -431,6 +443,7 @@ rp_error scene_build(rp_scene *s) {
     gather tris = {0}, prims = {0};
     rp_error err = RP_ERROR_NONE;
     box3 bounds = box3_empty();
+    double mean_side = 0.0; /* of the triangle leaves, for coherent_extent */
     /* share the device's threads unless a parallel_for is running (commit called from a task) */
     bool locked = pthread_mutex_trylock(&s->device->pool_lock) == 0;
     sys_pool *pool = locked ? s->device->pool : NULL;
@@ -505,8 +518,14 @@ rp_error scene_build(rp_scene *s) {
         if (!bvh_build(a, pool, tris.boxes, tris.count, &bd, &b2)) {
             err = RP_ERROR_OUT_OF_MEMORY;
         } else {
-            tri_pack_ctx pc = {.scene = s, .bvh = &b2, .refs = tris.refs};
-            bool ok = tri_pack_plan(a, &pc);
+            double diag = diagonal(bounds);
+            tri_pack_ctx pc = {.scene = s, .bvh = &b2, .refs = tris.refs,
+                               .inv_diag = diag > 0.0 && isfinite(1.0 / diag) ? 1.0 / diag : 0.0};
+            pc.chunks = pool ? (uint32_t)sys_pool_threads(pool) * 8 : 1;
+            size_t sbytes = (size_t)pc.chunks * (sizeof(uint64_t) + sizeof(uint32_t));
+            uint64_t *sums = sys_alloc(a, sbytes);
+            pc.side_sum = sums, pc.leaf_count = sums ? (uint32_t *)(sums + pc.chunks) : NULL;
+            bool ok = sums && tri_pack_plan(a, &pc);
             /* one padding block past the end: the 8-lane leaf tests read a pair of blocks, and a
              * leaf's odd last block is paired with whatever follows it (those lanes masked off);
              * NaN vertices, so no edge function is exactly 0 there (no refinement), mask 0 */
@@ -518,20 +537,19 @@ rp_error scene_build(rp_scene *s) {
                 memset(pad, 0, sizeof *pad);
                 for (int q = 0; q < 9; q++)
                     for (int j = 0; j < 4; j++) pad->v[q][j] = NAN;
-                pc.chunks = pool ? (uint32_t)sys_pool_threads(pool) * 8 : 1;
                 if (pool) sys_pool_parallel_for(pool, pc.chunks, tri_pack_task, &pc);
                 else tri_pack_task(&pc, 0, 0);
+                uint64_t sum = 0;
+                uint64_t leaves = 0;
+                for (uint32_t i = 0; i < pc.chunks; i++) sum += pc.side_sum[i], leaves += pc.leaf_count[i];
+                mean_side = leaves ? (double)sum / (double)leaves * 0x1p-24 * diag : 0.0;
             }
+            sys_free(a, sums, sbytes);
             if (!ok || !bvhw_from_bvh2(a, pool, &b2, width, tri_leaf, &pc, &s->tri_bvh)) {
                 sys_free(a, pc.blocks, alloc_blocks * sizeof(tri4));
                 err = RP_ERROR_OUT_OF_MEMORY;
             } else {
                 /* keep the binary BVH for large packets, its leaves pointing at the tri4 blocks */
-                for (uint32_t i = 0; i < b2.node_count; i++) {
-                    if (!tri_is_leaf(&b2.nodes[i])) continue;
-                    b2.nodes[i].count = (b2.nodes[i].count + 3) / 4;
-                    b2.nodes[i].index = pc.first_block[b2.nodes[i].index];
-                }
                 sys_free(a, b2.prims, (size_t)(b2.prim_count ? b2.prim_count : 1) * sizeof(uint32_t));
                 b2.prims = NULL; /* the leaves no longer index it */
                 s->tris = pc.blocks;
@@ -590,7 +608,7 @@ rp_error scene_build(rp_scene *s) {
         .prim_intersect = sphere_intersect_cb,
         .prim_occluded = sphere_occluded_cb,
         .scene = s,
-        .coherent_extent = coherent_extent(s, bounds),
+        .coherent_extent = coherent_extent(bounds, mean_side),
     };
     return RP_ERROR_NONE;
 }

@@ -25,7 +25,6 @@ typedef struct build_ctx {
     bvh_node *nodes;
     _Atomic uint32_t node_count; /* nodes handed out, in chunks */
     struct node_chunk *chunks;     /* per thread: the rest of its chunk */
-    uint32_t chunk_count;
     int bins;
     int max_leaf;
     uint32_t block;    /* primitives per intersection block */
@@ -81,7 +80,6 @@ static void stats_leaf(tree_stats *st, const task *t, box3 b, double inv_root) {
     st->leaves++;
     if (t->depth + 1 > st->depth) st->depth = t->depth + 1;
 }
-
 
 static inline vf4 centroid_of(const pbox *b) { return b->lo * 0.5f + b->hi * 0.5f; }
 
@@ -535,7 +533,7 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
     double root_area = box3_half_area(root);
     c.inv_root_area = root_area > 0.0 && isfinite(1.0 / root_area) ? 1.0 / root_area : 0.0;
     if ((c.block & (c.block - 1)) == 0) c.block_shift = __builtin_ctz(c.block);
-    c.chunks = chunks, c.chunk_count = (uint32_t)threads;
+    c.chunks = chunks;
     atomic_store(&c.node_count, 2);
     memset(&out->nodes[1], 0, sizeof(bvh_node));
     set_node_box(&out->nodes[0], root);

@@ -210,8 +210,8 @@ RP_API void rp_geometry_commit(rp_geometry *geometry);
 /* ---- scene ----------------------------------------------------------------------------------- */
 
 typedef enum rp_build_quality {
-    RP_BUILD_QUALITY_MEDIUM = 0, /* binned SAH, 16 bins */
-    RP_BUILD_QUALITY_LOW = 1,    /* binned SAH, 8 bins, larger leaves */
+    RP_BUILD_QUALITY_MEDIUM = 0, /* binned SAH, 16 bins (32 in nodes of over 256 primitives) */
+    RP_BUILD_QUALITY_LOW = 1,    /* binned SAH, 8 bins (16 in large nodes), larger leaves */
     RP_BUILD_QUALITY_HIGH = 2    /* binned SAH, 64 bins */
 } rp_build_quality;
 

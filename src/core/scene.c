@@ -277,16 +277,9 @@ static bool tri_pack_plan(const sys_allocator *a, tri_pack_ctx *c) {
     return true;
 }
 
-/* Leaf payload of the triangle BVH: its blocks (tri_pack_task has pointed the leaf at them). */
-static bool tri_leaf(void *user, const bvh_node *leaf, uint32_t *first, uint32_t *items) {
-    (void)user;
-    *first = leaf->index;
-    *items = leaf->count;
-    return true;
-}
-
-/* Leaf payload of the primitive BVH: a range of the reordered prim_refs. */
-static bool prim_leaf(void *user, const bvh_node *leaf, uint32_t *first, uint32_t *items) {
+/* Leaf payload for the wide collapse: the leaf's own range. Triangle leaves point at their tri4
+ * blocks by then (tri_pack_task), primitive leaves at their range of the reordered prim_refs. */
+static bool leaf_range(void *user, const bvh_node *leaf, uint32_t *first, uint32_t *items) {
     (void)user;
     *first = leaf->index;
     *items = leaf->count;
@@ -545,7 +538,7 @@ rp_error scene_build(rp_scene *s) {
                 mean_side = leaves ? (double)sum / (double)leaves * 0x1p-24 * diag : 0.0;
             }
             sys_free(a, sums, sbytes);
-            if (!ok || !bvhw_from_bvh2(a, pool, &b2, width, tri_leaf, &pc, &s->tri_bvh)) {
+            if (!ok || !bvhw_from_bvh2(a, pool, &b2, width, leaf_range, NULL, &s->tri_bvh)) {
                 sys_free(a, pc.blocks, alloc_blocks * sizeof(tri4));
                 err = RP_ERROR_OUT_OF_MEMORY;
             } else {
@@ -579,7 +572,7 @@ rp_error scene_build(rp_scene *s) {
                 s->prim_count = prims.count;
                 for (uint32_t i = 0; i < prims.count; i++) s->prims[i] = prims.refs[b2.prims[i]];
             }
-            if (!s->prims || !bvhw_from_bvh2(a, pool, &b2, 4, prim_leaf, NULL, &s->prim_bvh)) {
+            if (!s->prims || !bvhw_from_bvh2(a, pool, &b2, 4, leaf_range, NULL, &s->prim_bvh)) {
                 err = RP_ERROR_OUT_OF_MEMORY;
             } else {
                 st.binary_nodes += 2ull * b2.leaf_count - 1;

@@ -75,10 +75,14 @@ static void stats_merge(tree_stats *dst, const tree_stats *src) {
     if (src->depth > dst->depth) dst->depth = src->depth;
 }
 
-static void stats_leaf(tree_stats *st, const task *t, box3 b, double inv_root) {
-    st->cost += cost_fixed(box3_half_area(b), (double)(t->end - t->begin), inv_root);
+/* Makes the task's node (box b) a leaf and counts it. */
+static int make_leaf(bvh_node *node, const task *t, box3 b, double inv_root, tree_stats *st) {
+    node->index = t->begin;
+    node->count = t->end - t->begin;
+    st->cost += cost_fixed(box3_half_area(b), (double)node->count, inv_root);
     st->leaves++;
     if (t->depth + 1 > st->depth) st->depth = t->depth + 1;
+    return 0;
 }
 
 static inline vf4 centroid_of(const pbox *b) { return b->lo * 0.5f + b->hi * 0.5f; }
@@ -381,12 +385,7 @@ static int build_node(build_ctx *c, uint32_t thread, const task *t, task out[2],
     bvh_node *node = &c->nodes[t->node];
     /* the node's box is the union of its primitives' (the parent's bins gave it) */
     box3 b = node_box(node);
-    if (n <= 1) {
-        node->index = t->begin;
-        node->count = n;
-        stats_leaf(st, t, b, c->inv_root_area);
-        return 0;
-    }
+    if (n <= 1) return make_leaf(node, t, b, c->inv_root_area, st);
     box3 lbox, rbox, lcbox, rcbox;
     uint32_t mid = 0;
     if (t->depth < MEDIAN_DEPTH) {
@@ -395,21 +394,14 @@ static int build_node(build_ctx *c, uint32_t thread, const task *t, task out[2],
         /* SAH termination (in block intersections, as Embree's builders): a leaf when it is
          * no costlier than the best split and small enough */
         double area = box3_half_area(b);
-        if (n <= (uint32_t)c->max_leaf && (!found || area * blocks_of(c, n) <= area * c->trav_cost + sp.cost)) {
-            node->index = t->begin;
-            node->count = n;
-            stats_leaf(st, t, b, c->inv_root_area);
-            return 0;
-        }
+        if (n <= (uint32_t)c->max_leaf && (!found || area * blocks_of(c, n) <= area * c->trav_cost + sp.cost))
+            return make_leaf(node, t, b, c->inv_root_area, st);
         if (found) {
             mid = split_partition(c, t->begin, t->end, &sp, &lcbox, &rcbox);
             lbox = sp.lbox, rbox = sp.rbox;
         }
     } else if (n <= (uint32_t)c->max_leaf) {
-        node->index = t->begin;
-        node->count = n;
-        stats_leaf(st, t, b, c->inv_root_area);
-        return 0;
+        return make_leaf(node, t, b, c->inv_root_area, st);
     }
     if (mid == 0) {
         /* identical centroids, or too deep: halve the range (order within it is arbitrary) */

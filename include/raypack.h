@@ -341,7 +341,8 @@ typedef struct rp_counters_n {
     uint64_t tri_tests;                   /* SIMD ray - triangle tests */
     uint64_t frustum_box_tests, frustum_box_culls;
     uint64_t frustum_tri_tests, frustum_tri_culls;
-    uint64_t traversal[5];                /* packets traced by auto, masked, ranged, partition, span */
+    uint64_t traversal[6];                /* packets traced by auto, masked, ranged, partition, span,
+                                             SIMD rays (auto, incoherent packets) */
     uint64_t box_tests_depth[RP_COUNTERS_N_DEPTH]; /* box_tests by depth of the box (root: 0) */
     uint64_t tri_tests_depth[RP_COUNTERS_N_DEPTH]; /* tri_tests by depth of the leaf */
 } rp_counters_n;

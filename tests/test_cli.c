@@ -130,6 +130,7 @@ int main(void) {
     EXPECT(args, 0, "frustum box culls/tests");
     EXPECT(args, 0, "box tests by BVH depth");
     EXPECT(args, 0, "16x16 packets, auto traversal, frusta on");
+    EXPECT(args, 0, "packets: span ");
     snprintf(path, sizeof path, "%s/stats.json", tmp);
     f = fopen(path, "r");
     CHECK(f != NULL);
@@ -140,7 +141,8 @@ int main(void) {
         CHECKF(strstr(json, "\"mrays_per_s\"") && strstr(json, "\"shadow\"") && strstr(json, "\"height\": 30"),
                "%s", json);
         CHECKF(strstr(json, "\"work\"") && strstr(json, "\"box_tests_depth\": [") &&
-                   strstr(json, "\"frustum_tri_culls\"") && strstr(json, "\"traversal\": \"auto\""),
+                   strstr(json, "\"frustum_tri_culls\"") && strstr(json, "\"traversal\": \"auto\"") &&
+                   strstr(json, "\"simd\": "),
                "%s", json);
         fclose(f);
     }

@@ -93,7 +93,7 @@ static void check_world(const world *w, int res, bool all_isas) {
             for (int i = 0; i < res * res; i++) hits[t] += rays[t][i].live && rays[t][i].ref.hit.geom_id != RP_INVALID_ID;
         CHECKF(hits[0] > (uint32_t)(res * res / 4), "%s: only %u primary hits", w->name, hits[0]);
         for (int t = 0; t < RAY_TYPES; t++) {
-            uint64_t culls = 0, auto_span = 0;
+            uint64_t culls = 0, auto_span = 0, auto_simd = 0;
             for (uint32_t n = 4; n <= 32; n *= 2) {
                 for (size_t m = 0; m < sizeof modes / sizeof modes[0]; m++) {
                     for (int fr = 0; fr < 2; fr++) {
@@ -115,15 +115,19 @@ static void check_world(const world *w, int res, bool all_isas) {
                             modes[m] != RP_TRAVERSAL_SIMD)
                             CHECK(c.packets > 0 && c.box_tests > 0);
                         if (modes[m] == RP_TRAVERSAL_AUTO) {
-                            /* every packet of auto went to Span or Partition */
-                            CHECK(c.traversal[0] == c.packets && c.traversal[3] + c.traversal[4] == c.packets);
-                            auto_span += c.traversal[4];
+                            /* every packet of auto went to Span, Partition or SIMD rays */
+                            CHECK(c.traversal[0] == c.packets &&
+                                  c.traversal[3] + c.traversal[4] + c.traversal[5] == c.packets);
+                            auto_span += c.traversal[4], auto_simd += c.traversal[5];
                         }
                     }
                 }
             }
             /* auto takes Span for coherent packets */
             if (t == RAY_PRIMARY) CHECKF(auto_span > 0, "%s: auto never chose span for primary packets", w->name);
+            /* ... and SIMD rays for the packets that leave the rings' spheres facing apart */
+            if (t == RAY_REFLECT && strcmp(w->name, "rings") == 0)
+                CHECKF(auto_simd > 0, "%s: auto never traced a reflection packet as SIMD rays", w->name);
             /* frusta must do something on primary and shadow packets */
             if (t <= RAY_SHADOW) CHECKF(culls > 0, "%s %s: frusta culled nothing", w->name, ray_names[t]);
             printf("%s isa %d %s: %u hits, %llu frustum culls\n", w->name, isas[ii], ray_names[t], hits[t],
@@ -239,6 +243,41 @@ static void check_conservative(const world *w, int packets) {
     printf("%s: conservativeness, %d packets, %u rays checked, culls %llu %llu %llu\n", w->name, packets, total,
            (unsigned long long)culls[0], (unsigned long long)culls[1], (unsigned long long)culls[2]);
     free(rays);
+    rp_scene_release(scene);
+    rp_device_release(dev);
+}
+
+/* Rays in every direction from the middle of the scene face apart: auto traces them one SIMD ray at a
+ * time (counted as such), with the single-ray answers. */
+static void check_auto_apart(const world *w) {
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 1});
+    rp_scene *scene = make_scene(dev, &w->sd);
+    enum { N = 8 };
+    test_ray rays[N * N];
+    for (uint32_t q = 0; q < N * N; q++) {
+        /* a Fibonacci sphere */
+        float z = 1.0f - 2.0f * ((float)q + 0.5f) / (float)(N * N), r = sqrtf(1.0f - z * z), phi = 2.39996323f * (float)q;
+        float c[3];
+        for (int a = 0; a < 3; a++) c[a] = 0.5f * (w->lo[a] + w->hi[a]);
+        rays[q] = (test_ray){.ray = {.org_x = c[0], .org_y = c[1], .org_z = c[2], .tnear = 0.0f, .dir_x = r * cosf(phi),
+                                     .dir_y = r * sinf(phi), .dir_z = z, .tfar = INFINITY, .mask = 0xFFFFFFFFu},
+                             .live = true};
+        reference(scene, &rays[q]);
+    }
+    rp_rayhit_n p;
+    CHECK(rp_rayhit_n_alloc(dev, N, &p));
+    for (int fr = 0; fr < 2; fr++)
+        for (int occ = 0; occ < 2; occ++) {
+            rp_counters_n c;
+            memset(&c, 0, sizeof c);
+            rp_query_n_desc d = {.traversal = RP_TRAVERSAL_AUTO, .frustum = fr ? RP_FRUSTUM_SECONDARY : RP_FRUSTUM_NONE,
+                                 .counters = &c};
+            uint32_t bad = trace_compare(scene, &d, &p, rays, occ != 0);
+            CHECKF(bad == 0, "%s: rays facing apart, %u of %d answers differ", w->name, bad, N * N);
+            CHECKF(c.packets == 1 && c.traversal[0] == 1 && c.traversal[5] == 1,
+                   "%s: auto traced rays facing apart as a packet", w->name);
+        }
+    rp_rayhit_n_free(dev, &p);
     rp_scene_release(scene);
     rp_device_release(dev);
 }
@@ -382,6 +421,7 @@ int main(void) {
     if (load_world("stanford_bunny_bun_zipper.ply.gz", "bunny", &w)) {
         check_world(&w, small ? 32 : 64, !small);
         check_conservative(&w, small ? 30 : 300);
+        check_auto_apart(&w);
         rp_scene_data_free(&w.sd);
     } else {
         CHECK(!"bunny loads");

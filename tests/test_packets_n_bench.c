@@ -144,12 +144,13 @@ static void bench_world(const world *w, int res, int reps) {
                         trace(dev, scene, rays[t], res, n, &d, occ, NULL);
                         d.counters = NULL;
                         printf("\n      [%s %u f%c: per ray: box %.2f tri %.2f; frustum box %.3f/%.3f tri %.3f/%.3f "
-                               "(tests/culls); packets masked/ranged/partition/span %llu/%llu/%llu/%llu]",
+                               "(tests/culls); packets masked/ranged/partition/span/simd %llu/%llu/%llu/%llu/%llu]",
                                mode_names[m], n, fr ? '+' : '-', (double)c.box_tests / live, (double)c.tri_tests / live,
                                (double)c.frustum_box_tests / live, (double)c.frustum_box_culls / live,
                                (double)c.frustum_tri_tests / live, (double)c.frustum_tri_culls / live,
                                (unsigned long long)c.traversal[1], (unsigned long long)c.traversal[2],
-                               (unsigned long long)c.traversal[3], (unsigned long long)c.traversal[4]);
+                               (unsigned long long)c.traversal[3], (unsigned long long)c.traversal[4],
+                               (unsigned long long)c.traversal[5]);
                     }
                     double mr = live / best * 1e-6;
                     if (modes[m] == RP_TRAVERSAL_SIMD) base = mr;

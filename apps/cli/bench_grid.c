@@ -365,10 +365,15 @@ static void grid_print(const grid_run *g) {
 static void grid_json_counters(FILE *f, const rp_counters_n *c) {
     fprintf(f,
             "{\"packets\": %llu, \"box_tests\": %llu, \"tri_tests\": %llu, \"frustum_box_tests\": %llu, "
-            "\"frustum_box_culls\": %llu, \"frustum_tri_tests\": %llu, \"frustum_tri_culls\": %llu}",
+            "\"frustum_box_culls\": %llu, \"frustum_tri_tests\": %llu, \"frustum_tri_culls\": %llu, "
+            "\"traversal\": {\"auto\": %llu, \"masked\": %llu, \"ranged\": %llu, \"partition\": %llu, \"span\": %llu, "
+            "\"simd\": %llu}}",
             (unsigned long long)c->packets, (unsigned long long)c->box_tests, (unsigned long long)c->tri_tests,
             (unsigned long long)c->frustum_box_tests, (unsigned long long)c->frustum_box_culls,
-            (unsigned long long)c->frustum_tri_tests, (unsigned long long)c->frustum_tri_culls);
+            (unsigned long long)c->frustum_tri_tests, (unsigned long long)c->frustum_tri_culls,
+            (unsigned long long)c->traversal[0], (unsigned long long)c->traversal[1],
+            (unsigned long long)c->traversal[2], (unsigned long long)c->traversal[3],
+            (unsigned long long)c->traversal[4], (unsigned long long)c->traversal[5]);
 }
 
 /* --json: levels (per ray type: seconds, Mrays/s, counters), recursion types, table 2. */

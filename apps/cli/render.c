@@ -33,10 +33,11 @@ static void render_usage(FILE *out) {
             "  --aov NAME             debug output instead of shading: depth (PFM: distance along\n"
             "                         the primary ray, +inf on a miss), normal, primid or albedo\n"
             "  --threads N            worker threads, 1..%d; 0 for all hardware threads [0]\n"
-            "  --traversal NAME       how Whitted's ray packets walk the BVH: auto, masked, ranged,\n"
-            "                         partition, span (ranged narrowed from both ends), single\n"
-            "                         (each ray alone) or simd (each SIMD ray alone) [auto];\n"
-            "                         every choice gives the same image\n"
+            "  --traversal NAME       how Whitted's ray packets walk the BVH: auto (per packet, from\n"
+            "                         its coherence: span, partition or its SIMD rays alone),\n"
+            "                         masked, ranged, partition, span (ranged narrowed from both\n"
+            "                         ends), single (each ray alone) or simd (each SIMD ray alone)\n"
+            "                         [auto]; every choice gives the same image\n"
             "  --packet N             Whitted traces packets of N x N rays, N = 4, 8, 16 or 32 [16]\n"
             "  --frustum on|off       cull with the packets' frusta [on]\n"
             "  --eye X,Y,Z  --look X,Y,Z  --up X,Y,Z  --fov DEG\n"
@@ -329,6 +330,13 @@ static void print_work(const rp_render_stats *rs) {
                (unsigned long long)c->frustum_box_culls, (unsigned long long)c->frustum_box_tests,
                (unsigned long long)c->frustum_tri_culls, (unsigned long long)c->frustum_tri_tests);
     }
+    for (int k = 0; k < RP_RAY_KIND_COUNT; k++) {
+        const rp_counters_n *c = &rs->work[k];
+        if (!c->traversal[0]) continue;
+        printf("auto     %-10s %9llu packets: span %llu, partition %llu, SIMD rays alone %llu\n", KIND_NAMES[k],
+               (unsigned long long)c->traversal[0], (unsigned long long)c->traversal[4],
+               (unsigned long long)c->traversal[3], (unsigned long long)c->traversal[5]);
+    }
     for (int which = 0; which < 2; which++) {
         printf("%s\n", which ? "tri tests by leaf depth (root 0):" : "box tests by BVH depth (root 0):");
         for (int k = 0; k < RP_RAY_KIND_COUNT; k++) {
@@ -360,14 +368,14 @@ static void json_work(FILE *f, const rp_render_stats *rs) {
         fprintf(f, "%s\n    \"%s\": {\"packets\": %llu, \"rays\": %llu, \"box_tests\": %llu, \"tri_tests\": %llu, "
                    "\"frustum_box_tests\": %llu, \"frustum_box_culls\": %llu, \"frustum_tri_tests\": %llu, "
                    "\"frustum_tri_culls\": %llu,\n      \"traversal\": {\"auto\": %llu, \"masked\": %llu, "
-                   "\"ranged\": %llu, \"partition\": %llu, \"span\": %llu},\n      \"box_tests_depth\": ",
+                   "\"ranged\": %llu, \"partition\": %llu, \"span\": %llu, \"simd\": %llu},\n      \"box_tests_depth\": ",
                 k ? "," : "", KIND_NAMES[k], (unsigned long long)c->packets, (unsigned long long)c->rays,
                 (unsigned long long)c->box_tests, (unsigned long long)c->tri_tests,
                 (unsigned long long)c->frustum_box_tests, (unsigned long long)c->frustum_box_culls,
                 (unsigned long long)c->frustum_tri_tests, (unsigned long long)c->frustum_tri_culls,
                 (unsigned long long)c->traversal[0], (unsigned long long)c->traversal[1],
                 (unsigned long long)c->traversal[2], (unsigned long long)c->traversal[3],
-                (unsigned long long)c->traversal[4]);
+                (unsigned long long)c->traversal[4], (unsigned long long)c->traversal[5]);
         json_histogram(f, c->box_tests_depth);
         fprintf(f, ",\n      \"tri_tests_depth\": ");
         json_histogram(f, c->tri_tests_depth);

@@ -205,6 +205,7 @@ static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p
     /* cells of 4 triangles (a measure of the scene's density; the SAH sizes the real leaves) */
     float cells = (float)scene->stats.triangles / 4.0f;
     q.auto_span = AUTO_SPAN_CELLS / sqrtf(cells > 1.0f ? cells : 1.0f);
+    q.auto_simd = AUTO_SIMD_CELLS / sqrtf(cells > 1.0f ? cells : 1.0f);
     pkt_alg alg = PKT_AUTO;
     switch (d.traversal) {
     case RP_TRAVERSAL_MASKED: alg = PKT_MASKED; break;
@@ -221,11 +222,8 @@ static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p
         c->rays += p->n * p->n;
     }
     const rp_kernels_n *k = kernels_n(scene->device);
-    if (any) {
-        k->occluded_n(&scene->accel, &q, alg, p, c);
-    } else {
-        k->intersect_n(&scene->accel, &q, alg, p, c);
-    }
+    bool traced = any ? k->occluded_n(&scene->accel, &q, alg, p, c) : k->intersect_n(&scene->accel, &q, alg, p, c);
+    if (!traced) trace_small(scene, RP_TRAVERSAL_SIMD, p, any);
 }
 
 void rp_intersect_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *packet) {

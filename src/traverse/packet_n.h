@@ -6,18 +6,20 @@
 #include "traverse/frustum.h"
 #include "traverse/traverse.h"
 
-/* The three algorithms of sec. 3, Span (Ranged narrowed from both ends, packet_n.inc) and the
- * per-packet choice, as indices of rp_counters_n.traversal. */
-typedef enum pkt_alg { PKT_AUTO = 0, PKT_MASKED = 1, PKT_RANGED = 2, PKT_PARTITION = 3, PKT_SPAN = 4 } pkt_alg;
+/* The three algorithms of sec. 3, Span (Ranged narrowed from both ends, packet_n.inc), the
+ * per-packet choice and auto's way out for incoherent packets (one SIMD ray at a time through the
+ * wide BVH, done by the caller), as indices of rp_counters_n.traversal. */
+typedef enum pkt_alg { PKT_AUTO = 0, PKT_MASKED = 1, PKT_RANGED = 2, PKT_PARTITION = 3, PKT_SPAN = 4, PKT_SIMD = 5 } pkt_alg;
 
 typedef struct rp_kernels_n {
     const char *name;
     int width; /* rays per SIMD ray */
     /* n x n rays through the binary BVH (acc->nodes2) with algorithm alg (PKT_AUTO: chosen from the
      * packet's coherence), culling with the frustum q->kind asks for; then the non-triangle
-     * primitives ray by ray. Counts into c when c != NULL. */
-    void (*intersect_n)(const rp_accel *acc, const frustum_req *q, pkt_alg alg, rp_rayhit_n *p, rp_counters_n *c);
-    void (*occluded_n)(const rp_accel *acc, const frustum_req *q, pkt_alg alg, rp_rayhit_n *p, rp_counters_n *c);
+     * primitives ray by ray. Counts into c when c != NULL. False, with the packet untouched, when
+     * PKT_AUTO found it too incoherent for a packet: the caller traces its SIMD rays. */
+    bool (*intersect_n)(const rp_accel *acc, const frustum_req *q, pkt_alg alg, rp_rayhit_n *p, rp_counters_n *c);
+    bool (*occluded_n)(const rp_accel *acc, const frustum_req *q, pkt_alg alg, rp_rayhit_n *p, rp_counters_n *c);
 } rp_kernels_n;
 
 /* Frusta are tested only where they can spare this many ray tests (see packet_n.inc). */
@@ -29,6 +31,15 @@ typedef struct rp_kernels_n {
  * gracefully as the rays part (sec. 5.2 and Table 1). Span beat Partition at 16x16 and 32x32 on
  * the coherent rays of every scene `raypack bench --grid` was run on. */
 #define AUTO_SPAN_CELLS 120.0f
+/* A packet whose spread crosses more than this many cells, or whose rays face apart, and most of
+ * whose SIMD rays are incoherent on their own too (some lane more than acos(AUTO_SIMD_COS), 26
+ * degrees, from the first) is traced one SIMD ray at a time through the wide BVH instead: its rays
+ * share too few nodes for a packet to pay. Rings' 2-bounce reflections off curved mirrors (`raypack
+ * bench --grid`, 16x16 auto with frusta against SIMD rays): 0.82 -> 1.18 timed in pairs. Without
+ * the per-SIMD-ray test, conference's reflection packets that straddle two flat mirrors went that
+ * way too and lost 10-15% against Span; with it, a fifth as many do. */
+#define AUTO_SIMD_CELLS 1000.0f
+#define AUTO_SIMD_COS 0.9f
 
 extern const rp_kernels_n rp_kernels_n_scalar, rp_kernels_n_sse, rp_kernels_n_avx2, rp_kernels_n_avx512;
 

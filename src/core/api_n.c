@@ -205,7 +205,7 @@ static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p
     /* cells of 4 triangles (a measure of the scene's density; the SAH sizes the real leaves) */
     float cells = (float)scene->stats.triangles / 4.0f;
     q.auto_span = AUTO_SPAN_CELLS / sqrtf(cells > 1.0f ? cells : 1.0f);
-    q.auto_simd = AUTO_SIMD_CELLS / sqrtf(cells > 1.0f ? cells : 1.0f);
+    q.auto_simd = cells >= AUTO_SIMD_MIN_CELLS ? AUTO_SIMD_CELLS / sqrtf(cells) : INFINITY;
     pkt_alg alg = PKT_AUTO;
     switch (d.traversal) {
     case RP_TRAVERSAL_MASKED: alg = PKT_MASKED; break;

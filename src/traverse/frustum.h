@@ -30,7 +30,7 @@ typedef struct frustum_req {
     float scale;      /* largest coordinate magnitude of the scene (and the point): the rounding scale */
     float lo[3], hi[3]; /* the scene's bounds (sec. 4.3's far plane) */
     float auto_span;    /* auto traversal: the largest direction spread traced with Span */
-    float auto_simd;    /* ... and the largest traced as a packet at all */
+    float auto_simd;    /* ... and the largest always traced as a packet (infinite: all) */
 } frustum_req;
 
 /* The u and v axes across dominant axis k. */

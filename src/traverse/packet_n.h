@@ -40,6 +40,11 @@ typedef struct rp_kernels_n {
  * way too and lost 10-15% against Span; with it, a fifth as many do. */
 #define AUTO_SIMD_CELLS 1000.0f
 #define AUTO_SIMD_COS 0.9f
+/* ... in scenes of at least this many cells only: in a tree of a few hundred nodes every ray
+ * visits much the same nodes, however it points (`raypack bench --vs embree`, diffuse rays, 16x16
+ * auto: cornell's 36 triangles 0.91x and spd_teapot's 2328 0.80x with SIMD rays, bart_museum5's
+ * 11308 1.23x, the larger scenes 1.2-3.1x). */
+#define AUTO_SIMD_MIN_CELLS 1024.0f
 
 extern const rp_kernels_n rp_kernels_n_scalar, rp_kernels_n_sse, rp_kernels_n_avx2, rp_kernels_n_avx512;
 

@@ -6,6 +6,7 @@
  * level by level from single-ray hits (no renderer), checks every configuration's hits against
  * them, then times each level; a recursion type's time is the sum of its levels' median times. */
 #include "bench.h"
+#include "cli.h"
 
 #include <errno.h>
 #include <math.h>
@@ -365,15 +366,12 @@ static void grid_print(const grid_run *g) {
 static void grid_json_counters(FILE *f, const rp_counters_n *c) {
     fprintf(f,
             "{\"packets\": %llu, \"box_tests\": %llu, \"tri_tests\": %llu, \"frustum_box_tests\": %llu, "
-            "\"frustum_box_culls\": %llu, \"frustum_tri_tests\": %llu, \"frustum_tri_culls\": %llu, "
-            "\"traversal\": {\"auto\": %llu, \"masked\": %llu, \"ranged\": %llu, \"partition\": %llu, \"span\": %llu, "
-            "\"simd\": %llu}}",
+            "\"frustum_box_culls\": %llu, \"frustum_tri_tests\": %llu, \"frustum_tri_culls\": %llu, ",
             (unsigned long long)c->packets, (unsigned long long)c->box_tests, (unsigned long long)c->tri_tests,
             (unsigned long long)c->frustum_box_tests, (unsigned long long)c->frustum_box_culls,
-            (unsigned long long)c->frustum_tri_tests, (unsigned long long)c->frustum_tri_culls,
-            (unsigned long long)c->traversal[0], (unsigned long long)c->traversal[1],
-            (unsigned long long)c->traversal[2], (unsigned long long)c->traversal[3],
-            (unsigned long long)c->traversal[4], (unsigned long long)c->traversal[5]);
+            (unsigned long long)c->frustum_tri_tests, (unsigned long long)c->frustum_tri_culls);
+    cli_json_traversal(f, c);
+    fputc('}', f);
 }
 
 /* --json: levels (per ray type: seconds, Mrays/s, counters), recursion types, table 2. */

@@ -4,6 +4,9 @@
 
 #include <stdbool.h>
 #include <stdint.h>
+#include <stdio.h>
+
+#include <raypack.h>
 
 /* Exit statuses: success, a load/render/write failure, a usage error. */
 enum { CLI_EXIT_OK = 0, CLI_EXIT_FAILURE = 1, CLI_EXIT_USAGE = 2 };
@@ -27,6 +30,8 @@ bool cli_parse_float(const char *cmd, const char *flag, const char *text, double
 bool cli_parse_vec3(const char *cmd, const char *flag, const char *text, float out[3]);
 /* Returns the value following flag argv[*i], advancing *i, or NULL after printing an error. */
 const char *cli_flag_value(const char *cmd, int argc, char **argv, int *i);
+/* Writes `"traversal": {"auto": n, ..., "simd": n}`, the packets of c per traversal algorithm. */
+void cli_json_traversal(FILE *f, const rp_counters_n *c);
 /* Largest thread count accepted by --threads. */
 #define CLI_MAX_THREADS 1024
 

@@ -367,15 +367,13 @@ static void json_work(FILE *f, const rp_render_stats *rs) {
         const rp_counters_n *c = &rs->work[k];
         fprintf(f, "%s\n    \"%s\": {\"packets\": %llu, \"rays\": %llu, \"box_tests\": %llu, \"tri_tests\": %llu, "
                    "\"frustum_box_tests\": %llu, \"frustum_box_culls\": %llu, \"frustum_tri_tests\": %llu, "
-                   "\"frustum_tri_culls\": %llu,\n      \"traversal\": {\"auto\": %llu, \"masked\": %llu, "
-                   "\"ranged\": %llu, \"partition\": %llu, \"span\": %llu, \"simd\": %llu},\n      \"box_tests_depth\": ",
+                   "\"frustum_tri_culls\": %llu,\n      ",
                 k ? "," : "", KIND_NAMES[k], (unsigned long long)c->packets, (unsigned long long)c->rays,
                 (unsigned long long)c->box_tests, (unsigned long long)c->tri_tests,
                 (unsigned long long)c->frustum_box_tests, (unsigned long long)c->frustum_box_culls,
-                (unsigned long long)c->frustum_tri_tests, (unsigned long long)c->frustum_tri_culls,
-                (unsigned long long)c->traversal[0], (unsigned long long)c->traversal[1],
-                (unsigned long long)c->traversal[2], (unsigned long long)c->traversal[3],
-                (unsigned long long)c->traversal[4], (unsigned long long)c->traversal[5]);
+                (unsigned long long)c->frustum_tri_tests, (unsigned long long)c->frustum_tri_culls);
+        cli_json_traversal(f, c);
+        fputs(",\n      \"box_tests_depth\": ", f);
         json_histogram(f, c->box_tests_depth);
         fprintf(f, ",\n      \"tri_tests_depth\": ");
         json_histogram(f, c->tri_tests_depth);

@@ -64,3 +64,11 @@ bool cli_parse_vec3(const char *cmd, const char *flag, const char *text, float o
     }
     return true;
 }
+
+void cli_json_traversal(FILE *f, const rp_counters_n *c) {
+    static const char *const names[] = {"auto", "masked", "ranged", "partition", "span", "simd"};
+    fputs("\"traversal\": {", f);
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
+        fprintf(f, "%s\"%s\": %llu", i ? ", " : "", names[i], (unsigned long long)c->traversal[i]);
+    fputc('}', f);
+}

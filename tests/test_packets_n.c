@@ -413,10 +413,62 @@ static void check_cone_edges(void) {
     free(pos);
 }
 
+/* A packet whose rays all hit every box on their way (parallel rays into one large quad, in a grid
+ * of quads) stays whole: Span then tests a leaf's triangles on all its rays, as Ranged does,
+ * without box tests for the rays between the span's ends, so the two count the same box tests. */
+static void check_span_whole(void) {
+    enum { G = 9, N = 16 };
+    float pos[3 * G * G];
+    uint32_t idx[6 * (G - 1) * (G - 1)];
+    for (int j = 0; j < G; j++)
+        for (int i = 0; i < G; i++) {
+            float *v = pos + 3 * (j * G + i);
+            v[0] = (float)i, v[1] = (float)j, v[2] = 0.1f * (float)((i * 7 + j * 3) % 5);
+        }
+    size_t tc = 0;
+    for (int j = 0; j + 1 < G; j++)
+        for (int i = 0; i + 1 < G; i++) {
+            uint32_t v00 = (uint32_t)(j * G + i), v10 = v00 + 1, v01 = v00 + G, v11 = v01 + 1;
+            uint32_t t[6] = {v00, v10, v11, v00, v11, v01};
+            memcpy(idx + 3 * tc, t, sizeof t);
+            tc += 2;
+        }
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 1});
+    rp_scene *scene = make_scene(dev, &(rp_scene_data){.positions = pos, .vertex_count = G * G, .indices = idx,
+                                                      .triangle_count = tc});
+    test_ray rays[N * N];
+    for (uint32_t q = 0; q < N * N; q++) {
+        /* inside the quad (4.1 .. 4.9)^2, so every ray hits the same leaves */
+        float x = 4.1f + 0.8f * (float)(q % N) / N, y = 4.1f + 0.8f * (float)(q / N) / N;
+        rays[q] = (test_ray){.ray = {.org_x = x, .org_y = y, .org_z = 5.0f, .tnear = 0.0f, .dir_x = 0.0f, .dir_y = 0.0f,
+                                     .dir_z = -1.0f, .tfar = INFINITY, .mask = 0xFFFFFFFFu},
+                             .live = true};
+        reference(scene, &rays[q]);
+    }
+    rp_rayhit_n p;
+    CHECK(rp_rayhit_n_alloc(dev, N, &p));
+    uint64_t box[2];
+    const rp_traversal algs[2] = {RP_TRAVERSAL_RANGED, RP_TRAVERSAL_SPAN};
+    for (int a = 0; a < 2; a++) {
+        rp_counters_n c;
+        memset(&c, 0, sizeof c);
+        rp_query_n_desc d = {.traversal = algs[a], .frustum = RP_FRUSTUM_NONE, .counters = &c};
+        CHECKF(trace_compare(scene, &d, &p, rays, false) == 0, "span whole: %s differs from single rays",
+               a ? "span" : "ranged");
+        box[a] = c.box_tests;
+    }
+    CHECKF(box[0] > 0 && box[1] == box[0], "a whole packet: span %llu box tests, ranged %llu",
+           (unsigned long long)box[1], (unsigned long long)box[0]);
+    rp_rayhit_n_free(dev, &p);
+    rp_scene_release(scene);
+    rp_device_release(dev);
+}
+
 int main(void) {
     bool small = rp_test_sanitized();
     check_api();
     check_cone_edges();
+    check_span_whole();
     world w;
     if (load_world("stanford_bunny_bun_zipper.ply.gz", "bunny", &w)) {
         check_world(&w, small ? 32 : 64, !small);

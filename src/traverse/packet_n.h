@@ -29,8 +29,12 @@ typedef struct rp_kernels_n {
  * this, i.e. when its footprint crosses at most about this many 4-triangle cells over the scene's
  * extent; any other packet (and one whose rays face apart) goes to Partition, which degrades
  * gracefully as the rays part (sec. 5.2 and Table 1). Span beat Partition at 16x16 and 32x32 on
- * the coherent rays of every scene `raypack bench --grid` was run on. */
-#define AUTO_SPAN_CELLS 120.0f
+ * the coherent rays of every scene `raypack bench --grid` was run on. 480 rather than 120: the
+ * grid's levels at 1024x1024, 16x16 auto with frusta, counted by callgrind, took 2-5% fewer
+ * instructions on kitchen's, conference's and sponza's refraction and reflection packets and
+ * within 1% of the same elsewhere; with Span for every packet that faces one way (no threshold),
+ * tree's refraction packets took 8% more. */
+#define AUTO_SPAN_CELLS 480.0f
 /* A packet whose spread crosses more than this many cells, or whose rays face apart, and most of
  * whose SIMD rays are incoherent on their own too (some lane more than acos(AUTO_SIMD_COS), 26
  * degrees, from the first) is traced one SIMD ray at a time through the wide BVH instead: its rays

@@ -317,6 +317,19 @@ static void check_api(void) {
  * packets from it and shadow packets towards it (origins beyond the mesh). The single-ray kernel is
  * watertight, so every such ray hits; the packets' frusta and the leaves' edge-plane (cone) test
  * must not lose one to rounding, whatever the algorithm. */
+/* The triangles of a g x g grid of vertices (row major), two per cell; returns their count. */
+static size_t grid_triangles(int g, uint32_t *idx) {
+    size_t tc = 0;
+    for (int j = 0; j + 1 < g; j++)
+        for (int i = 0; i + 1 < g; i++) {
+            uint32_t v00 = (uint32_t)(j * g + i), v10 = v00 + 1, v01 = v00 + (uint32_t)g, v11 = v01 + 1;
+            uint32_t t[6] = {v00, v10, v11, v00, v11, v01};
+            memcpy(idx + 3 * tc, t, sizeof t);
+            tc += 2;
+        }
+    return tc;
+}
+
 static void check_cone_edges(void) {
     enum { G = 33, N = 16 };
     float *pos = malloc(sizeof(float) * 3 * G * G);
@@ -333,14 +346,7 @@ static void check_cone_edges(void) {
             for (int a = 0; a < 3; a++)
                 pos[3 * (j * G + i) + a] = base[a] + ((float)i + jit[0]) * ex[a] + ((float)j + jit[1]) * ey[a] + jit[2];
         }
-    size_t tc = 0;
-    for (int j = 0; j + 1 < G; j++)
-        for (int i = 0; i + 1 < G; i++) {
-            uint32_t v00 = (uint32_t)(j * G + i), v10 = v00 + 1, v01 = v00 + G, v11 = v01 + 1;
-            uint32_t t[6] = {v00, v10, v11, v00, v11, v01};
-            memcpy(idx + 3 * tc, t, sizeof t);
-            tc += 2;
-        }
+    size_t tc = grid_triangles(G, idx);
     /* the targets: interior vertices, then midpoints of interior edges */
     size_t max_targets = 4 * G * G, nt = 0;
     float *target = malloc(sizeof(float) * 3 * max_targets);
@@ -425,14 +431,7 @@ static void check_span_whole(void) {
             float *v = pos + 3 * (j * G + i);
             v[0] = (float)i, v[1] = (float)j, v[2] = 0.1f * (float)((i * 7 + j * 3) % 5);
         }
-    size_t tc = 0;
-    for (int j = 0; j + 1 < G; j++)
-        for (int i = 0; i + 1 < G; i++) {
-            uint32_t v00 = (uint32_t)(j * G + i), v10 = v00 + 1, v01 = v00 + G, v11 = v01 + 1;
-            uint32_t t[6] = {v00, v10, v11, v00, v11, v01};
-            memcpy(idx + 3 * tc, t, sizeof t);
-            tc += 2;
-        }
+    size_t tc = grid_triangles(G, idx);
     rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 1});
     rp_scene *scene = make_scene(dev, &(rp_scene_data){.positions = pos, .vertex_count = G * G, .indices = idx,
                                                       .triangle_count = tc});

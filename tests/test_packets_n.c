@@ -463,11 +463,75 @@ static void check_span_whole(void) {
     rp_device_release(dev);
 }
 
+/* Ray masks in large packets: two stacked grid meshes with geometry masks 1 and 2, rays from one
+ * apex with masks 1, 2, 3 and 4 (the last sees neither) and directions that differ in their
+ * dominant axis within a SIMD ray; every algorithm, with and without frusta, must return the
+ * single-ray hits, closest and any. */
+static void check_ray_masks(void) {
+    enum { G = 9, N = 16 };
+    float pos[2][3 * G * G];
+    uint32_t idx[6 * (G - 1) * (G - 1)];
+    for (int m = 0; m < 2; m++)
+        for (int j = 0; j < G; j++)
+            for (int i = 0; i < G; i++) {
+                float *v = pos[m] + 3 * (j * G + i);
+                v[0] = (float)i - 4.0f, v[1] = (float)j - 4.0f, v[2] = -(float)m - 0.05f * (float)((i + 2 * j) % 3);
+            }
+    size_t tc = grid_triangles(G, idx);
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 1});
+    rp_scene *scene = rp_scene_new(dev, NULL);
+    for (int m = 0; m < 2; m++) {
+        rp_geometry *g = rp_geometry_new(dev, RP_GEOMETRY_TRIANGLE);
+        rp_geometry_set_buffer(g, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, pos[m], 0, 0, G * G);
+        rp_geometry_set_buffer(g, RP_BUFFER_INDEX, RP_FORMAT_UINT3, idx, 0, 0, tc);
+        rp_geometry_set_mask(g, 1u << m);
+        rp_geometry_commit(g);
+        rp_scene_attach(scene, g);
+        rp_geometry_release(g);
+    }
+    CHECK(rp_scene_commit(scene) == RP_ERROR_NONE);
+    rp_rayhit_n p;
+    CHECK(rp_rayhit_n_alloc(dev, N, &p));
+    uint32_t *mask = malloc(sizeof(uint32_t) * N * N);
+    test_ray rays[N * N];
+    uint32_t hits[2] = {0, 0};
+    for (uint32_t y = 0; y < N; y++)
+        for (uint32_t x = 0; x < N; x++) {
+            uint32_t q = rp_packet_n_index(N, x, y);
+            /* from (0, 0, 3) over the grids: the outer columns' rays are x-dominant */
+            float dx = 3.2f * ((float)x + 0.5f) / N - 1.6f, dy = 1.4f * ((float)y + 0.5f) / N - 0.7f;
+            mask[q] = 1u << ((x + 3 * y) % 4);
+            rays[q] = (test_ray){.ray = {.org_x = 0.0f, .org_y = 0.0f, .org_z = 3.0f, .tnear = 0.0f, .dir_x = dx,
+                                         .dir_y = dy, .dir_z = -1.0f, .tfar = INFINITY, .mask = mask[q]},
+                                 .live = true};
+            reference(scene, &rays[q]);
+            if (rays[q].ref.hit.geom_id < 2) hits[rays[q].ref.hit.geom_id]++;
+        }
+    CHECKF(hits[0] > 0 && hits[1] > 0, "ray masks: each grid is hit (%u, %u)", hits[0], hits[1]);
+    p.mask = mask;
+    const rp_traversal algs[] = {RP_TRAVERSAL_MASKED, RP_TRAVERSAL_RANGED, RP_TRAVERSAL_PARTITION,
+                                 RP_TRAVERSAL_SPAN, RP_TRAVERSAL_AUTO};
+    for (size_t a = 0; a < sizeof algs / sizeof algs[0]; a++)
+        for (int fr = 0; fr < 2; fr++)
+            for (int occ = 0; occ < 2; occ++) {
+                rp_query_n_desc d = {.traversal = algs[a], .frustum = fr ? RP_FRUSTUM_PRIMARY : RP_FRUSTUM_NONE};
+                uint32_t bad = trace_compare(scene, &d, &p, rays, occ);
+                CHECKF(bad == 0, "ray masks: traversal %d, frustum %d, %s: %u rays differ", (int)algs[a], fr,
+                       occ ? "occluded" : "intersect", bad);
+            }
+    p.mask = NULL;
+    free(mask);
+    rp_rayhit_n_free(dev, &p);
+    rp_scene_release(scene);
+    rp_device_release(dev);
+}
+
 int main(void) {
     bool small = rp_test_sanitized();
     check_api();
     check_cone_edges();
     check_span_whole();
+    check_ray_masks();
     world w;
     if (load_world("stanford_bunny_bun_zipper.ply.gz", "bunny", &w)) {
         check_world(&w, small ? 32 : 64, !small);

@@ -495,11 +495,12 @@ static void trace_n(const bench_n_engine *e, const bench_rays *set, size_t first
     for (size_t base = 0; base + per <= count; base += per) {
         const uint16_t *slot_of = e->slot_of + base;
         int32_t any = 0;
+        for (size_t q = 0; q < per; q++) any |= valid[q] = set->valid[first + slot_of[q]];
+        /* a packet without a live ray is not gathered (Embree's stream mode gets only the live
+         * rays); occlusion reads no hit fields */
+        if (!any) continue;
         for (size_t q = 0; q < per; q++) {
-            size_t s = first + slot_of[q];
-            const bench_ray *b = &set->rays[s];
-            valid[q] = set->valid[s];
-            any |= valid[q];
+            const bench_ray *b = &set->rays[first + slot_of[q]];
             p.org_x[q] = b->org[0];
             p.org_y[q] = b->org[1];
             p.org_z[q] = b->org[2];
@@ -508,10 +509,10 @@ static void trace_n(const bench_n_engine *e, const bench_rays *set, size_t first
             p.dir_y[q] = b->dir[1];
             p.dir_z[q] = b->dir[2];
             p.tfar[q] = b->tfar;
+            if (occlusion) continue;
             p.geom_id[q] = RP_INVALID_ID;
             p.prim_id[q] = RP_INVALID_ID;
         }
-        if (!any) continue;
         if (occlusion)
             rp_occluded_n(e->scene, &desc, &p);
         else

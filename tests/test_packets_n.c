@@ -248,7 +248,8 @@ static void check_conservative(const world *w, int packets) {
 }
 
 /* Rays in every direction from the middle of the scene face apart: auto traces them one SIMD ray at a
- * time (counted as such), with the single-ray answers. */
+ * time (counted as such), with the single-ray answers; a packet of two coherent halves facing apart
+ * goes to Span. */
 static void check_auto_apart(const world *w) {
     rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 1});
     rp_scene *scene = make_scene(dev, &w->sd);
@@ -277,6 +278,24 @@ static void check_auto_apart(const world *w) {
             CHECKF(c.packets == 1 && c.traversal[0] == 1 && c.traversal[5] == 1,
                    "%s: auto traced rays facing apart as a packet", w->name);
         }
+    /* Two coherent halves facing apart (a packet across the corner of two mirrors): Span */
+    for (uint32_t y = 0; y < N; y++)
+        for (uint32_t x = 0; x < N; x++) {
+            uint32_t q = rp_packet_n_index(N, x, y);
+            float s = x < N / 2 ? -1.0f : 1.0f, jx = 0.02f * (float)(x % (N / 2)), jy = 0.02f * (float)y;
+            rp_ray *r = &rays[q].ray;
+            r->dir_x = s, r->dir_y = jx - 0.03f, r->dir_z = jy - 0.07f; /* no axis where all agree */
+            reference(scene, &rays[q]);
+        }
+    for (int occ = 0; occ < 2; occ++) {
+        rp_counters_n c;
+        memset(&c, 0, sizeof c);
+        rp_query_n_desc d = {.traversal = RP_TRAVERSAL_AUTO, .frustum = RP_FRUSTUM_SECONDARY, .counters = &c};
+        uint32_t bad = trace_compare(scene, &d, &p, rays, occ != 0);
+        CHECKF(bad == 0, "%s: two halves facing apart, %u of %d answers differ", w->name, bad, N * N);
+        CHECKF(c.packets == 1 && c.traversal[4] == 1, "%s: auto traced two coherent halves facing apart without Span",
+               w->name);
+    }
     rp_rayhit_n_free(dev, &p);
     rp_scene_release(scene);
     rp_device_release(dev);

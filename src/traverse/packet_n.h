@@ -27,12 +27,17 @@ typedef struct rp_kernels_n {
 /* Auto traversal (beyond the paper, whose authors chose per scene): a packet goes to Span when its
  * direction spread (slope extent across the dominant axis) times sqrt(triangles / 4) is at most
  * this, i.e. when its footprint crosses at most about this many 4-triangle cells over the scene's
- * extent; any other packet (and one whose rays face apart) goes to Partition, which degrades
- * gracefully as the rays part (sec. 5.2 and Table 1). Span beat Partition at 16x16 and 32x32 on
- * the coherent rays of every scene `raypack bench --grid` was run on. 480 rather than 120: the
- * grid's levels at 1024x1024, 16x16 auto with frusta, counted by callgrind, took 2-5% fewer
+ * extent; any other packet goes to Partition, which degrades gracefully as the rays part (sec. 5.2
+ * and Table 1). Span beat Partition at 16x16 and 32x32 on the coherent rays of every scene
+ * `raypack bench --grid` was run on. A packet whose rays face apart (most often one across the
+ * corner of two flat mirrors) goes to Span as well: summed over the grid's six levels (1024x1024,
+ * 16x16 auto with frusta, callgrind) that took 1.0% fewer instructions on kitchen, 0.3-0.6% fewer
+ * on museum, conference and sponza, 0.1-0.4% more on bunny, tree and rings (curved mirrors, whose
+ * packets part for good), and left auto within 1% of the best fixed algorithm on every shared
+ * scene (kitchen had been 1.9% behind Span). 480 rather than 120: the grid's levels took 2-5% fewer
  * instructions on kitchen's, conference's and sponza's refraction and reflection packets and
- * within 1% of the same elsewhere; with Span for every packet that faces one way (no threshold),
+ * within 1% of the same elsewhere; 960: 0.4% fewer on kitchen and conference, 1.5% more on tree
+ * (its refraction packets 6% more); with Span for every packet that faces one way (no threshold),
  * tree's refraction packets took 8% more. */
 #define AUTO_SPAN_CELLS 480.0f
 /* A packet whose spread crosses more than this many cells, or whose rays face apart, and most of

@@ -591,10 +591,14 @@ rp_error scene_build(rp_scene *s) {
     st.bvh_width = (uint32_t)width;
     s->stats = st;
     s->bounds = (rp_bounds){bounds.lo.x, bounds.lo.y, bounds.lo.z, 0.0f, bounds.hi.x, bounds.hi.y, bounds.hi.z, 0.0f};
+    uint32_t tri_mask_and = 0xFFFFFFFFu;
+    for (uint32_t gi = 0; gi < s->geom_count; gi++)
+        if (s->geoms[gi] && s->geoms[gi]->type == RP_GEOMETRY_TRIANGLE) tri_mask_and &= s->geoms[gi]->mask;
     s->accel = (rp_accel){
         .width = width,
         .nodes = s->tri_bvh.nodes,
         .tris = s->tris,
+        .tri_mask_and = tri_mask_and,
         .nodes2 = s->tri_bvh2.nodes,
         .pnodes = s->prim_bvh.nodes,
         .prims = s->prims,

@@ -8,7 +8,8 @@
 #include "raypack.h"
 
 /* Four triangles in SoA form, the leaf item of triangle BVHs. v[3*vertex + axis][lane].
- * Unused lanes have mask 0, so no ray ever hits them. */
+ * Unused lanes repeat lane 0 with mask 0: a mask test rejects them, and kernels that skip it
+ * (rp_accel.tri_mask_and) find at most a tie with lane 0, which lane 0 wins. */
 typedef struct tri4 {
     float v[9][4];
     uint32_t geom[4];
@@ -32,6 +33,8 @@ struct rp_accel {
     int width;                 /* 4, 8 or 16 */
     const void *nodes;         /* NULL when the scene has no triangles */
     const tri4 *tris;
+    uint32_t tri_mask_and;     /* AND of the triangle geometries' masks: a ray sharing a bit with it
+                                * passes every mask test, so its leaves skip them */
     const void *nodes2;        /* the binary BVH (bvh_node), leaves: tri4 blocks [index, index + count) */
     /* spheres and user primitives: BVH4 of prim_refs */
     const void *pnodes;        /* NULL when there are none */

@@ -88,6 +88,8 @@ int main(void) {
     EXPECT("render --packet 12", 2, "--packet expects 4, 8, 16 or 32");
     EXPECT("render --packet 64", 2, "--packet expects 4, 8, 16 or 32");
     EXPECT("render --frustum yes", 2, "--frustum expects on or off");
+    EXPECT("render --isa avx1024", 2, "--isa expects auto, scalar, sse, avx2 or avx512, got 'avx1024'");
+    EXPECT("bench --isa 16", 2, "--isa expects auto, scalar, sse, avx2 or avx512");
     EXPECT("render --frobnicate", 2, "unknown option '--frobnicate'");
     EXPECT("render a.obj b.obj", 2, "expected one SCENE");
     EXPECT("render -o out.jpg", 2, "-o expects a file ending in .png, .pfm or .ppm");
@@ -179,6 +181,26 @@ int main(void) {
         static const char *aovs[] = {"normal", "primid", "albedo"};
         snprintf(args, sizeof args, "render --width 24 --height 16 --aov %s -o '%s/aov.png' --quiet", aovs[i], tmp);
         EXPECT(args, 0, "");
+    }
+    /* Every kernel set gives the same image: the built-in room (mirror, glass, Whitted packets)
+     * with the scalar kernels and with the widest this CPU has. */
+    snprintf(args, sizeof args, "render --width 64 --height 48 --isa scalar -o '%s/isa_scalar.pfm'", tmp);
+    EXPECT(args, 0, "scalar kernels");
+    snprintf(args, sizeof args, "render --width 64 --height 48 -o '%s/isa_auto.pfm' --quiet", tmp);
+    EXPECT(args, 0, "");
+    {
+        char pa[1100], pb[1100];
+        snprintf(pa, sizeof pa, "%s/isa_scalar.pfm", tmp);
+        snprintf(pb, sizeof pb, "%s/isa_auto.pfm", tmp);
+        int wa = 0, ha = 0, ca = 0, wb = 0, hb = 0, cb = 0;
+        float *ia = rp_image_read_pfm(pa, &wa, &ha, &ca, err, sizeof err);
+        float *ib = rp_image_read_pfm(pb, &wb, &hb, &cb, err, sizeof err);
+        CHECKF(ia && ib && wa == 64 && ha == 48 && wb == wa && hb == ha && cb == ca, "%s", err);
+        if (ia && ib && wb == wa && hb == ha && cb == ca)
+            CHECKF(memcmp(ia, ib, (size_t)wa * (size_t)ha * (size_t)ca * sizeof(float)) == 0,
+                   "--isa scalar and --isa auto render different images");
+        free(ia);
+        free(ib);
     }
     if (cornell) {
         snprintf(args, sizeof args, "info '%s'", cornell);

@@ -312,7 +312,7 @@ static void rp_trace_occluded1(void *engine, const bench_rays *set, size_t first
     }
 }
 
-/* Packet modes: W consecutive slots (a row, half or all of a 4x4 tile) per call. */
+/* Packet modes: W consecutive slots (a 2x2 quad, a 4x2 half or all of a 4x4 tile) per call. */
 #define BENCH_RP_PACKET_MODES(W)                                                                 \
     static void rp_trace_intersect##W(void *engine, const bench_rays *set, size_t first,         \
                                       size_t n, bench_hits *out, void *scratch) {                \
@@ -320,7 +320,7 @@ static void rp_trace_occluded1(void *engine, const bench_rays *set, size_t first
         rp_scene *scene = engine;                                                                \
         for (size_t base = first; base < first + n; base += W) {                                 \
             const int32_t *valid = set->valid + base;                                            \
-            if (!bench_any_valid(valid, W)) continue;                                                  \
+            if (!bench_any_valid(valid, W)) continue;                                            \
             rp_rayhit##W p;                                                                      \
             for (int k = 0; k < W; k++) {                                                        \
                 const bench_ray *b = &set->rays[base + (size_t)k];                               \
@@ -354,7 +354,7 @@ static void rp_trace_occluded1(void *engine, const bench_rays *set, size_t first
         rp_scene *scene = engine;                                                                \
         for (size_t base = first; base < first + n; base += W) {                                 \
             const int32_t *valid = set->valid + base;                                            \
-            if (!bench_any_valid(valid, W)) continue;                                                  \
+            if (!bench_any_valid(valid, W)) continue;                                            \
             rp_ray##W p;                                                                         \
             for (int k = 0; k < W; k++) {                                                        \
                 const bench_ray *b = &set->rays[base + (size_t)k];                               \
@@ -452,17 +452,21 @@ void bench_n_engine_init(bench_n_engine *e, rp_scene *scene, uint32_t n, rp_trav
     e->desc.traversal = traversal;
     e->desc.frustum = frustum;
     if (point) memcpy(e->desc.point, point, sizeof e->desc.point);
-    /* Packet p covers the block's pixels [px*n, px*n+n) x [py*n, py*n+n); its ray (x, y) is in the
-     * 4x4 tile (lx/4, ly/4) of the block at (lx%4, ly%4), as slot_pixel reads a chunk. */
+    /* Packet p is the square of n x n pixels at the block's slots [p*n*n, (p+1)*n*n). */
     uint32_t per_side = BENCH_BLOCK / n, per = n * n;
     for (uint32_t p = 0; p < per_side * per_side; p++)
         for (uint32_t y = 0; y < n; y++)
             for (uint32_t x = 0; x < n; x++) {
-                uint32_t lx = (p % per_side) * n + x, ly = (p / per_side) * n + y;
-                uint32_t slot = ((ly / BENCH_TILE) * (BENCH_BLOCK / BENCH_TILE) + lx / BENCH_TILE) *
-                                    (BENCH_TILE * BENCH_TILE) +
-                                (ly % BENCH_TILE) * BENCH_TILE + lx % BENCH_TILE;
-                e->slot_of[p * per + rp_packet_n_index(n, x, y)] = (uint16_t)slot;
+                uint32_t x0, y0;
+                bench_block_pixel(p * per, &x0, &y0);
+                uint32_t slot = bench_block_slot(x0 + x, y0 + y), q = rp_packet_n_index(n, x, y);
+                /* the library's layout puts each 4x4 tile in a run of 16 in Morton order, as
+                 * bench_block_slot does; anything else is a bug here or there */
+                if (q % 16 != slot % 16 || slot / per != p) {
+                    fprintf(stderr, "raypack bench: entry %u of a %ux%u packet is not in tile order\n", q, n, n);
+                    abort();
+                }
+                e->tile_at[slot / 16] = (uint16_t)(q / 16);
             }
 }
 
@@ -483,46 +487,49 @@ static int32_t *packet_in_scratch(void *scratch, uint32_t n, rp_rayhit_n *p) {
     return valid;
 }
 
-/* One chunk in n x n packets built from the set's rays (the same numbers as every other mode);
- * packets without a live ray are skipped, as by the other packet modes. */
+/* One chunk in n x n packets built from the set's rays (the same numbers as every other mode),
+ * copied a 4x4 tile at a time, in the order of the slots: the hardware prefetchers follow ascending
+ * addresses only (the packet's tiles are in row order, the slots in Morton order; copying in the
+ * packet's order took twice as long). Packets without a live ray are skipped, as by the other
+ * packet modes. */
 static void trace_n(const bench_n_engine *e, const bench_rays *set, size_t first, size_t count,
                     bench_hits *out, void *scratch, bool occlusion) {
     rp_rayhit_n p;
     int32_t *valid = packet_in_scratch(scratch, e->n, &p);
     rp_query_n_desc desc = e->desc;
     desc.counters = e->count ? bench_scratch_counters(scratch) : NULL;
-    size_t per = (size_t)e->n * e->n;
+    size_t per = (size_t)e->n * e->n, tiles = per / 16;
     for (size_t base = 0; base + per <= count; base += per) {
-        const uint16_t *slot_of = e->slot_of + base;
+        const uint16_t *tile_at = e->tile_at + base / 16;
+        size_t s0 = first + base;
         int32_t any = 0;
-        for (size_t q = 0; q < per; q++) any |= valid[q] = set->valid[first + slot_of[q]];
+        for (size_t k = 0; k < tiles; k++) {
+            const int32_t *sv = set->valid + s0 + k * 16;
+            int32_t *v = valid + tile_at[k] * 16u;
+            for (int j = 0; j < 16; j++) any |= v[j] = sv[j];
+        }
         /* a packet without a live ray is not gathered (Embree's stream mode gets only the live
          * rays); occlusion reads no hit fields */
         if (!any) continue;
-        for (size_t q = 0; q < per; q++) {
-            const bench_ray *b = &set->rays[first + slot_of[q]];
-            p.org_x[q] = b->org[0];
-            p.org_y[q] = b->org[1];
-            p.org_z[q] = b->org[2];
-            p.tnear[q] = b->tnear;
-            p.dir_x[q] = b->dir[0];
-            p.dir_y[q] = b->dir[1];
-            p.dir_z[q] = b->dir[2];
-            p.tfar[q] = b->tfar;
-            if (occlusion) continue;
-            p.geom_id[q] = RP_INVALID_ID;
-            p.prim_id[q] = RP_INVALID_ID;
+        for (size_t k = 0; k < tiles; k++) {
+            size_t q = tile_at[k] * 16u;
+            bench_rays_to_soa(set->rays + s0 + k * 16, 16, p.org_x + q, p.org_y + q, p.org_z + q,
+                              p.tnear + q, p.dir_x + q, p.dir_y + q, p.dir_z + q, p.tfar + q);
         }
-        if (occlusion)
+        if (occlusion) {
             rp_occluded_n(e->scene, &desc, &p);
-        else
+        } else {
+            for (size_t q = 0; q < per; q++) p.geom_id[q] = p.prim_id[q] = RP_INVALID_ID;
             rp_intersect_n(e->scene, &desc, &p);
-        for (size_t q = 0; q < per; q++) {
-            if (!valid[q]) continue;
-            size_t s = first + slot_of[q];
-            bool hit = !occlusion && p.geom_id[q] != RP_INVALID_ID;
-            out->t[s] = occlusion ? p.tfar[q] : hit ? p.tfar[q] : INFINITY;
-            out->prim[s] = hit ? p.prim_id[q] : RP_INVALID_ID;
+        }
+        for (size_t k = 0; k < tiles; k++) {
+            size_t q = tile_at[k] * 16u, s = s0 + k * 16;
+            for (int j = 0; j < 16; j++) {
+                if (!valid[q + j]) continue;
+                bool hit = !occlusion && p.geom_id[q + j] != RP_INVALID_ID;
+                out->t[s + j] = occlusion || hit ? p.tfar[q + j] : INFINITY;
+                out->prim[s + j] = hit ? p.prim_id[q + j] : RP_INVALID_ID;
+            }
         }
     }
 }
@@ -711,16 +718,14 @@ static void cross3(float *out, const float *a, const float *b) {
 /* a . b */
 static float dot3(const float *a, const float *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
-/* Pixel of a slot (inverse of the block / tile / pixel layout of bench.h). */
+/* Pixel of a slot (inverse of the block layout of bench.h). */
 static void slot_pixel(int width, size_t slot, int *x, int *y) {
     int blocks_x = (width + BENCH_BLOCK - 1) / BENCH_BLOCK;
     size_t block = slot / BENCH_CHUNK, within = slot % BENCH_CHUNK;
-    size_t tile = within / (BENCH_TILE * BENCH_TILE), pix = within % (BENCH_TILE * BENCH_TILE);
-    const size_t tiles_x = BENCH_BLOCK / BENCH_TILE;
-    *x = (int)(block % (size_t)blocks_x) * BENCH_BLOCK + (int)(tile % tiles_x) * BENCH_TILE +
-         (int)(pix % BENCH_TILE);
-    *y = (int)(block / (size_t)blocks_x) * BENCH_BLOCK + (int)(tile / tiles_x) * BENCH_TILE +
-         (int)(pix / BENCH_TILE);
+    uint32_t lx, ly;
+    bench_block_pixel((uint32_t)within, &lx, &ly);
+    *x = (int)(block % (size_t)blocks_x) * BENCH_BLOCK + (int)lx;
+    *y = (int)(block / (size_t)blocks_x) * BENCH_BLOCK + (int)ly;
 }
 
 bool bench_rays_alloc(bench_rays *set, bench_kind kind, int width, int height) {
@@ -986,6 +991,8 @@ static void usage(FILE *f) {
             "                     primary / +shadows / 2-deep refraction / 2-bounce reflection,\n"
             "                     frusta off and on, against single and SIMD rays (repeats 3)\n"
             "  --threads N        tracing threads (default 2); plain bench also times 1 thread\n"
+            "  --isa NAME         raypack's kernels: auto (the widest the CPU has), scalar, sse,\n"
+            "                     avx2 or avx512 (default auto)\n"
             "  --repeats N        timed repeats per mode (default 5, --grid 3; median, min, max)\n"
             "  --warmup N         untimed passes per mode first (default 1)\n"
             "  --width W --height H   primary rays (default 1024x1024)\n"
@@ -1025,6 +1032,8 @@ static int parse_args(int argc, char **argv, bench_opts *o) {
             o->vs_embree = ok;
         } else if (strcmp(a, "--threads") == 0) {
             ok = cli_parse_int(cmd, a, val, 1, CLI_MAX_THREADS, &o->threads);
+        } else if (strcmp(a, "--isa") == 0) {
+            ok = cli_parse_isa(cmd, a, val, &o->isa);
         } else if (strcmp(a, "--repeats") == 0) {
             ok = cli_parse_int(cmd, a, val, 1, 1000, &o->repeats);
             o->repeats_set = true;
@@ -1108,11 +1117,8 @@ static bool load_scene(bench_ctx *ctx) {
 
 /* Device, raypack's scene and per-thread scratch. */
 static bool setup_raypack(bench_ctx *ctx) {
-    ctx->device = rp_device_new(&(rp_device_desc){.threads = ctx->opts.threads});
-    if (!ctx->device) {
-        fprintf(stderr, "raypack bench: cannot create the device\n");
-        return false;
-    }
+    ctx->device = cli_device_new("bench", ctx->opts.threads, ctx->opts.isa);
+    if (!ctx->device) return false;
     int threads = rp_device_thread_count(ctx->device);
     if (threads < 1) threads = 1;
     ctx->scratch.threads = threads;
@@ -1198,8 +1204,9 @@ void bench_print_header(const bench_ctx *ctx) {
            (double)ctx->mesh.lower[2], (double)ctx->mesh.upper[0], (double)ctx->mesh.upper[1],
            (double)ctx->mesh.upper[2]);
     printf("light     %g,%g,%g\n", (double)ctx->light[0], (double)ctx->light[1], (double)ctx->light[2]);
-    printf("device    %d threads, SIMD width %d; %d timed repeats after %d warm-up\n",
-           rp_device_thread_count(ctx->device), rp_device_isa(ctx->device), ctx->opts.repeats,
+    printf("device    %d threads, %s kernels (SIMD width %d); %d timed repeats after %d warm-up\n",
+           rp_device_thread_count(ctx->device), cli_isa_name(rp_device_isa(ctx->device)),
+           rp_device_isa(ctx->device), ctx->opts.repeats,
            ctx->opts.warmup);
 }
 
@@ -1322,9 +1329,9 @@ static int bench_core(bench_ctx *ctx) {
         fprintf(f, "{\"scene\": ");
         bench_json_string(f, ctx->scene_name);
         fprintf(f, ", \"triangles\": %zu, \"threads\": %d, \"width\": %d, \"height\": %d, "
-                   "\"repeats\": %d,\n",
+                   "\"repeats\": %d, \"isa\": \"%s\",\n",
                 ctx->mesh.triangle_count, ctx->opts.threads, ctx->opts.width, ctx->opts.height,
-                ctx->opts.repeats);
+                ctx->opts.repeats, cli_isa_name(rp_device_isa(ctx->device)));
         fprintf(f, " \"build\": {\"raypack_ms\": %.3f, \"raypack_commit_ms\": %.3f, "
                    "\"raypack_bytes\": %zu, \"sah_cost\": %.4f},\n \"rays\": {",
                 build_ms, st.build_ms, st.bytes, st.sah_cost);

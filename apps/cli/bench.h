@@ -10,13 +10,20 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
 
 #include <raypack.h>
 
-/* Rays of a set are stored by 32x32 pixel blocks (one chunk of work), 4x4 tiles inside a block and
- * pixels in raster order inside a tile, so 16 consecutive slots are a 4x4 tile, 8 a 4x2 and 4 a row
- * of a tile. Slots outside the image or without a ray (a primary miss) are not valid. */
-#define BENCH_TILE 4
+/* Rays of a set are stored by 32x32 pixel blocks (one chunk of work), in Morton (Z) order inside a
+ * block (bench_block_slot), so every aligned square is a run of slots: 4 consecutive slots are a
+ * 2x2 quad, 8 a 4x2, 16 a 4x4 tile (Embree's 16-ray packets), 64 to 1024 the 8x8 to 32x32 packets
+ * of raypack's large-packet modes, which read their rays in order. (Tiles in raster order made the
+ * 16x16 packets read 2 KB runs 2 KB apart, and with a scalar copy their copy into the packet took
+ * 3x as long as Embree's into rtcIntersect16's packets; kitchen's primary rays, 1 thread, the copies
+ * alone: 125 against 370-400 Mrays/s, now 410-440.) Slots outside the image or without a ray (a
+ * primary miss) are not valid. */
 #define BENCH_BLOCK 32
 #define BENCH_CHUNK (BENCH_BLOCK * BENCH_BLOCK)
 
@@ -27,6 +34,7 @@ typedef struct bench_opts {
     bool grid;               /* --grid: the experiment grid of Overbeck et al. 2008, sec. 5 */
     bool repeats_set;        /* --repeats was given (the grid's default differs) */
     int threads;             /* >= 1 */
+    int isa;                 /* --isa: rp_device_desc.isa, 0 the best the CPU has */
     int repeats;             /* timed repeats per mode */
     int warmup;              /* untimed passes per mode before timing */
     int width, height;
@@ -118,15 +126,34 @@ typedef struct bench_scratch {
 } bench_scratch;
 
 /* How a large-packet mode traces a set: n x n packets of screen tiles (n = 4, 8, 16 or 32 divides
- * BENCH_BLOCK, so a chunk is a whole number of packets), with one rp_query_n_desc. slot_of maps
- * packet-major, then rp_packet_n_index order to a slot of the chunk. */
+ * BENCH_BLOCK, so a chunk is a whole number of packets), with one rp_query_n_desc. Packet p of a
+ * chunk is its slots [p*n*n, (p+1)*n*n); every run of 16 entries of a packet (rp_packet_n_index
+ * order) is one 4x4 tile, 16 consecutive slots in the same order, and the k-th 16 slots of the
+ * chunk are entries tile_at[k] * 16 .. + 15 of their packet. */
 typedef struct bench_n_engine {
     rp_scene *scene;
     uint32_t n;
     rp_query_n_desc desc;    /* counters: ignored (see count) */
     bool count;              /* add the work to the tracing thread's bench_scratch_counters */
-    uint16_t slot_of[BENCH_CHUNK];
+    uint16_t tile_at[BENCH_CHUNK / 16];
 } bench_n_engine;
+
+/* Slot within its block of the block's pixel (lx, ly), 0 <= lx, ly < BENCH_BLOCK: the bits of lx
+ * and ly interleaved, lx's lowest. */
+static inline uint32_t bench_block_slot(uint32_t lx, uint32_t ly) {
+    uint32_t s = 0;
+    for (uint32_t b = 0; (1u << b) < BENCH_BLOCK; b++) s |= ((lx >> b) & 1u) << (2 * b) | ((ly >> b) & 1u) << (2 * b + 1);
+    return s;
+}
+
+/* Inverse of bench_block_slot. */
+static inline void bench_block_pixel(uint32_t slot, uint32_t *lx, uint32_t *ly) {
+    *lx = *ly = 0;
+    for (uint32_t b = 0; (1u << b) < BENCH_BLOCK; b++) {
+        *lx |= ((slot >> (2 * b)) & 1u) << b;
+        *ly |= ((slot >> (2 * b + 1)) & 1u) << b;
+    }
+}
 
 /* Large-packet modes each set gets in bench_raypack_modes: 16x16 and 8x8, auto, frustum on. */
 #define BENCH_N_MODES 2
@@ -219,6 +246,33 @@ int bench_vs_embree(bench_ctx *ctx);
 #endif
 
 /* True when any lane of a packet is live: packets of misses are skipped, by both engines alike. */
+/* Copies count rays (a multiple of 4) into eight arrays, four at a time with SSE transposes where
+ * the compiler has SSE: the compiler transposes the Embree modes' fixed-size copies on its own, but
+ * kept this one scalar, and 8 scalar loads and stores a ray made the copy into a 16x16 packet take as
+ * long as raypack's traversal of it (kitchen's primary rays, 1 thread). */
+static inline void bench_rays_to_soa(const bench_ray *src, size_t count, float *ox, float *oy, float *oz,
+                                     float *tn, float *dx, float *dy, float *dz, float *tf) {
+#if defined(__SSE2__)
+    for (size_t i = 0; i < count; i += 4) {
+        const float *r = src[i].org;
+        __m128 a0 = _mm_loadu_ps(r), a1 = _mm_loadu_ps(r + 8), a2 = _mm_loadu_ps(r + 16),
+               a3 = _mm_loadu_ps(r + 24);
+        __m128 b0 = _mm_loadu_ps(r + 4), b1 = _mm_loadu_ps(r + 12), b2 = _mm_loadu_ps(r + 20),
+               b3 = _mm_loadu_ps(r + 28);
+        _MM_TRANSPOSE4_PS(a0, a1, a2, a3);
+        _MM_TRANSPOSE4_PS(b0, b1, b2, b3);
+        _mm_storeu_ps(ox + i, a0), _mm_storeu_ps(oy + i, a1), _mm_storeu_ps(oz + i, a2), _mm_storeu_ps(tn + i, a3);
+        _mm_storeu_ps(dx + i, b0), _mm_storeu_ps(dy + i, b1), _mm_storeu_ps(dz + i, b2), _mm_storeu_ps(tf + i, b3);
+    }
+#else
+    for (size_t i = 0; i < count; i++) {
+        const bench_ray *b = &src[i];
+        ox[i] = b->org[0], oy[i] = b->org[1], oz[i] = b->org[2], tn[i] = b->tnear;
+        dx[i] = b->dir[0], dy[i] = b->dir[1], dz[i] = b->dir[2], tf[i] = b->tfar;
+    }
+#endif
+}
+
 static inline bool bench_any_valid(const int32_t *valid, int width) {
     int32_t any = 0;
     for (int k = 0; k < width; k++) any |= valid[k];

@@ -2,6 +2,7 @@
  * the same rays, taking turns; each engine at its best per ray set (DESIGN.md, "Benchmarks against
  * Embree"). Compiled to nothing when CMake did not find Embree. */
 #include "bench.h"
+#include "cli.h"
 
 #if defined(RP_HAVE_EMBREE)
 
@@ -136,7 +137,7 @@ static void emb_trace_occluded1(void *engine, const bench_rays *set, size_t firs
         ctx.flags = e->flags;                                                                    \
         for (size_t base = first; base < first + n; base += W) {                                 \
             const int32_t *valid = set->valid + base;                                            \
-            if (!bench_any_valid(valid, W)) continue;                                              \
+            if (!bench_any_valid(valid, W)) continue;                                            \
             struct RTCRayHit##W p;                                                               \
             for (int k = 0; k < W; k++) {                                                        \
                 const bench_ray *b = &set->rays[base + (size_t)k];                               \
@@ -173,7 +174,7 @@ static void emb_trace_occluded1(void *engine, const bench_rays *set, size_t firs
         ctx.flags = e->flags;                                                                    \
         for (size_t base = first; base < first + n; base += W) {                                 \
             const int32_t *valid = set->valid + base;                                            \
-            if (!bench_any_valid(valid, W)) continue;                                              \
+            if (!bench_any_valid(valid, W)) continue;                                            \
             struct RTCRay##W p;                                                                  \
             for (int k = 0; k < W; k++) {                                                        \
                 const bench_ray *b = &set->rays[base + (size_t)k];                               \
@@ -350,9 +351,9 @@ static bool emb_write_json(const bench_ctx *ctx, const emb_build_result *b,
     fprintf(f, "{\"scene\": ");
     bench_json_string(f, ctx->scene_name);
     fprintf(f, ", \"triangles\": %zu, \"threads\": %d, \"width\": %d, \"height\": %d, "
-               "\"repeats\": %d, \"embree_version\": \"%s\",\n",
+               "\"repeats\": %d, \"isa\": \"%s\", \"embree_version\": \"%s\",\n",
             ctx->mesh.triangle_count, ctx->opts.threads, ctx->opts.width, ctx->opts.height,
-            ctx->opts.repeats, RTC_VERSION_STRING);
+            ctx->opts.repeats, cli_isa_name(rp_device_isa(ctx->device)), RTC_VERSION_STRING);
     fprintf(f, " \"build\": {\"raypack_ms\": %.3f, \"raypack_commit_ms\": %.3f, \"embree_ms\": %.3f, "
                "\"embree_hq_ms\": %.3f, \"raypack_bytes\": %zu, \"embree_bytes\": %lld, "
                "\"embree_hq_bytes\": %lld},\n \"rays\": {",

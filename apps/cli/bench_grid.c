@@ -385,9 +385,9 @@ static bool grid_write_json(const grid_run *g) {
     fprintf(f, "{\"scene\": ");
     bench_json_string(f, ctx->scene_name);
     fprintf(f, ", \"triangles\": %zu, \"threads\": %d, \"width\": %d, \"height\": %d, \"repeats\": %d, "
-               "\"simd_width\": %d, \"mismatches\": 0,\n \"levels\": {",
+               "\"simd_width\": %d, \"isa\": \"%s\", \"mismatches\": 0,\n \"levels\": {",
             ctx->mesh.triangle_count, ctx->opts.threads, ctx->opts.width, ctx->opts.height, ctx->opts.repeats,
-            rp_device_isa(ctx->device));
+            rp_device_isa(ctx->device), cli_isa_name(rp_device_isa(ctx->device)));
     for (int l = 0; l < GRID_LEVELS; l++) {
         const grid_level *lv = &g->levels[l];
         fprintf(f, "%s\n  \"%s\": {\"rays\": %zu, \"configs\": {", l ? "," : "", grid_level_names[l],

@@ -28,6 +28,13 @@ bool cli_parse_float(const char *cmd, const char *flag, const char *text, double
                      float *out);
 /* Parses "x,y,z" into three finite floats. */
 bool cli_parse_vec3(const char *cmd, const char *flag, const char *text, float out[3]);
+/* Parses an --isa value: auto (0), scalar (1), sse (4), avx2 (8) or avx512 (16), the
+ * rp_device_desc.isa codes; prints an error and returns false on anything else. */
+bool cli_parse_isa(const char *cmd, const char *flag, const char *text, int *out);
+/* Creates the device for --threads and --isa; prints why on failure (an ISA the CPU lacks). */
+rp_device *cli_device_new(const char *cmd, int threads, int isa);
+/* The name of an rp_device_desc.isa code ("avx512", ...). */
+const char *cli_isa_name(int isa);
 /* Returns the value following flag argv[*i], advancing *i, or NULL after printing an error. */
 const char *cli_flag_value(const char *cmd, int argc, char **argv, int *i);
 /* Writes `"traversal": {"auto": n, ..., "simd": n}`, the packets of c per traversal algorithm. */

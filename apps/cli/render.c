@@ -33,6 +33,8 @@ static void render_usage(FILE *out) {
             "  --aov NAME             debug output instead of shading: depth (PFM: distance along\n"
             "                         the primary ray, +inf on a miss), normal, primid or albedo\n"
             "  --threads N            worker threads, 1..%d; 0 for all hardware threads [0]\n"
+            "  --isa NAME             kernels: auto (the widest the CPU has), scalar, sse, avx2\n"
+            "                         or avx512 [auto]; every choice gives the same image\n"
             "  --traversal NAME       how Whitted's ray packets walk the BVH: auto (per packet, from\n"
             "                         its coherence: span, partition or its SIMD rays alone),\n"
             "                         masked, ranged, partition, span (ranged narrowed from both\n"
@@ -58,7 +60,7 @@ typedef struct render_options {
     const char *scene;
     const char *output;
     const char *stats_json;
-    int width, height, spp, max_depth, threads;
+    int width, height, spp, max_depth, threads, isa;
     rp_integrator_type integrator;
     const char *integrator_name;
     bool use_aov;
@@ -111,6 +113,9 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
         } else if (strcmp(a, "--threads") == 0) {
             VALUE();
             if (!cli_parse_int(CMD, a, v, 0, CLI_MAX_THREADS, &o->threads)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--isa") == 0) {
+            VALUE();
+            if (!cli_parse_isa(CMD, a, v, &o->isa)) return CLI_EXIT_USAGE;
         } else if (strcmp(a, "--integrator") == 0) {
             VALUE();
             if (strcmp(v, "eyelight") == 0) {
@@ -421,13 +426,10 @@ int cli_render(int argc, char **argv) {
     double load_ms = cli_now_ms() - t0;
 
     int status = CLI_EXIT_FAILURE;
-    rp_device *device = rp_device_new(&(rp_device_desc){.threads = o.threads});
+    rp_device *device = cli_device_new(CMD, o.threads, o.isa);
     rp_render_scene *scene = NULL;
     float *pixels = NULL;
-    if (!device) {
-        fprintf(stderr, "raypack render: cannot create a device\n");
-        goto done;
-    }
+    if (!device) goto done;
     double t1 = cli_now_ms();
     char err[512] = "";
     scene = rp_render_scene_new(device, &data, NULL, err, sizeof err);
@@ -507,7 +509,7 @@ int cli_render(int argc, char **argv) {
         if (packets)
             printf(" (max depth %d, %dx%d packets, %s traversal, frusta %s)", o.max_depth < 0 ? 5 : o.max_depth,
                    o.packet, o.packet, o.traversal_name, o.no_frustum ? "off" : "on");
-        printf(", %d threads\n", threads);
+        printf(", %d threads, %s kernels\n", threads, cli_isa_name(rp_device_isa(device)));
         printf("time     load %.1f ms, build %.1f ms, render %.1f ms\n", load_ms, build_ms, rs.render_ms);
         printf("rays     primary %llu, shadow %llu, reflection %llu, refraction %llu, total %llu\n",
                (unsigned long long)rs.rays[RP_RAY_PRIMARY], (unsigned long long)rs.rays[RP_RAY_SHADOW],
@@ -535,7 +537,8 @@ int cli_render(int argc, char **argv) {
         json_string(f, o.output);
         fprintf(f, ",\n  \"width\": %d,\n  \"height\": %d,\n  \"spp\": %d,\n  \"integrator\": \"%s\",\n", w, h,
                 o.use_aov ? 1 : (o.spp ? o.spp : 1), mode);
-        fprintf(f, "  \"threads\": %d,\n  \"triangles\": %zu,\n", threads, data.triangle_count);
+        fprintf(f, "  \"threads\": %d,\n  \"isa\": \"%s\",\n  \"triangles\": %zu,\n", threads,
+                cli_isa_name(rp_device_isa(device)), data.triangle_count);
         fprintf(f, "  \"load_ms\": %.3f,\n  \"build_ms\": %.3f,\n  \"render_ms\": %.3f,\n", load_ms, build_ms,
                 rs.render_ms);
         fprintf(f, "  \"rays\": {\"primary\": %llu, \"shadow\": %llu, \"reflection\": %llu, \"refraction\": %llu, "

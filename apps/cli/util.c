@@ -5,6 +5,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 #include <time.h>
 
 double cli_now_ms(void) {
@@ -63,6 +64,40 @@ bool cli_parse_vec3(const char *cmd, const char *flag, const char *text, float o
         p = end + 1;
     }
     return true;
+}
+
+static const struct {
+    const char *name;
+    int code;
+} isa_names[] = {{"auto", 0}, {"scalar", 1}, {"sse", 4}, {"avx2", 8}, {"avx512", 16}};
+
+bool cli_parse_isa(const char *cmd, const char *flag, const char *text, int *out) {
+    for (size_t i = 0; i < sizeof isa_names / sizeof isa_names[0]; i++)
+        if (strcmp(text, isa_names[i].name) == 0) {
+            *out = isa_names[i].code;
+            return true;
+        }
+    fprintf(stderr, "raypack %s: %s expects auto, scalar, sse, avx2 or avx512, got '%s'\n", cmd, flag, text);
+    return false;
+}
+
+const char *cli_isa_name(int isa) {
+    for (size_t i = 0; i < sizeof isa_names / sizeof isa_names[0]; i++)
+        if (isa_names[i].code == isa) return isa_names[i].name;
+    return "?";
+}
+
+rp_device *cli_device_new(const char *cmd, int threads, int isa) {
+    rp_device *d = rp_device_new(&(rp_device_desc){.threads = threads, .isa = isa});
+    if (d) return d;
+    rp_device *best = isa ? rp_device_new(&(rp_device_desc){.threads = 1}) : NULL;
+    if (best && rp_device_isa(best) < isa)
+        fprintf(stderr, "raypack %s: --isa %s: this CPU has up to %s\n", cmd, cli_isa_name(isa),
+                cli_isa_name(rp_device_isa(best)));
+    else
+        fprintf(stderr, "raypack %s: cannot create the device\n", cmd);
+    rp_device_release(best);
+    return NULL;
 }
 
 void cli_json_traversal(FILE *f, const rp_counters_n *c) {

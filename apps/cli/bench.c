@@ -511,7 +511,9 @@ static void trace_n(const bench_n_engine *e, const bench_rays *set, size_t first
         /* a packet without a live ray is not gathered (Embree's stream mode gets only the live
          * rays); occlusion reads no hit fields */
         if (!any) continue;
+        bool next = base + 2 * per <= count;
         for (size_t k = 0; k < tiles; k++) {
+            if (next) bench_prefetch_rays(set, s0 + per + k * 16, 16);
             size_t q = tile_at[k] * 16u;
             bench_rays_to_soa(set->rays + s0 + k * 16, 16, p.org_x + q, p.org_y + q, p.org_z + q,
                               p.tnear + q, p.dir_x + q, p.dir_y + q, p.dir_z + q, p.tfar + q);

@@ -513,7 +513,10 @@ static void trace_n(const bench_n_engine *e, const bench_rays *set, size_t first
         if (!any) continue;
         bool next = base + 2 * per <= count;
         for (size_t k = 0; k < tiles; k++) {
-            if (next) bench_prefetch_rays(set, s0 + per + k * 16, 16);
+            if (next) {
+                bench_prefetch_rays(set, s0 + per + k * 16, 16);
+                __builtin_prefetch(set->valid + s0 + per + k * 16);
+            }
             size_t q = tile_at[k] * 16u;
             bench_rays_to_soa(set->rays + s0 + k * 16, 16, p.org_x + q, p.org_y + q, p.org_z + q,
                               p.tnear + q, p.dir_x + q, p.dir_y + q, p.dir_z + q, p.tfar + q);

@@ -250,7 +250,8 @@ int bench_vs_embree(bench_ctx *ctx);
  * The large-packet modes ask for the next packet's rays while they copy the current one in: a
  * large packet's traversal runs long enough between two copies for the hardware prefetchers to
  * lose the stream (kitchen's primary rays, 16x16 packets, 1 thread: 86.7 -> 98.4 Mrays/s, the next
- * packet's tile fetched with each tile copied). The 4- to 16-ray packet modes of both engines,
+ * packet's tile fetched with each tile copied; its valid flags too, timed against the rays alone:
+ * primary 85.8 -> 101.5, shadow 109.5 -> 128.9). The 4- to 16-ray packet modes of both engines,
  * which copy 16 rays between two traversals, do not: it changed neither (rtcIntersect16 85.8 ->
  * 84.5, raypack's packet16 51.7 -> 51.3). */
 static inline void bench_prefetch_rays(const bench_rays *set, size_t first, size_t count) {

@@ -40,15 +40,23 @@ typedef struct rp_kernels_n {
  * (its refraction packets 6% more); with Span for every packet that faces one way (no threshold),
  * tree's refraction packets took 8% more. */
 #define AUTO_SPAN_CELLS 480.0f
-/* A packet whose spread crosses more than this many cells, or whose rays face apart, and most of
- * whose SIMD rays are incoherent on their own too (some lane more than acos(AUTO_SIMD_COS), 26
- * degrees, from the first) is traced one SIMD ray at a time through the wide BVH instead: its rays
- * share too few nodes for a packet to pay. Rings' 2-bounce reflections off curved mirrors (`raypack
- * bench --grid`, 16x16 auto with frusta against SIMD rays): 0.82 -> 1.18 timed in pairs. Without
- * the per-SIMD-ray test, conference's reflection packets that straddle two flat mirrors went that
- * way too and lost 10-15% against Span; with it, a fifth as many do. */
+/* A packet whose spread crosses more than this many cells, or whose rays face apart, and more than
+ * AUTO_SIMD_SHARE of whose SIMD rays are incoherent on their own too (some lane more than
+ * acos(AUTO_SIMD_COS), 26 degrees, from the first) is traced one SIMD ray at a time through the
+ * wide BVH instead: its rays share too few nodes for a packet to pay. Rings' 2-bounce reflections
+ * off curved mirrors (`raypack bench --grid`, 16x16 auto with frusta against SIMD rays): 0.82 ->
+ * 1.18 timed in pairs. Without the per-SIMD-ray test, conference's reflection packets that
+ * straddle two flat mirrors went that way too and lost 10-15% against Span; with it, a fifth as
+ * many do. */
 #define AUTO_SIMD_CELLS 1000.0f
 #define AUTO_SIMD_COS 0.9f
+/* ... as a fraction, 3/4: with 16-wide SIMD rays (4x4 tiles, AVX-512) half took too many of the
+ * reflection packets that Span traces faster; `raypack bench --grid`, auto over the best fixed
+ * algorithm on the 2-bounce reflections, 16x16 with frusta, half -> 3/4: conference 0.90 -> 0.96,
+ * kitchen 0.96 -> 0.98, museum 0.95 -> 0.99, bunny 0.95 -> 0.97; rings 1.33 -> 1.27 and tree
+ * 1.19 -> 1.14 (their curved mirrors' packets still go ray by ray). 7/8: conference 0.98, rings
+ * 1.16. */
+#define AUTO_SIMD_SHARE 0.75f
 /* ... in scenes of at least this many cells only: in a tree of a few hundred nodes every ray
  * visits much the same nodes, however it points (`raypack bench --vs embree`, diffuse rays, 16x16
  * auto: cornell's 36 triangles 0.91x and spd_teapot's 2328 0.80x with SIMD rays, bart_museum5's

@@ -50,13 +50,14 @@ typedef struct rp_kernels_n {
  * many do. */
 #define AUTO_SIMD_CELLS 1000.0f
 #define AUTO_SIMD_COS 0.9f
-/* ... as a fraction, 3/4: with 16-wide SIMD rays (4x4 tiles, AVX-512) half took too many of the
- * reflection packets that Span traces faster; `raypack bench --grid`, auto over the best fixed
- * algorithm on the 2-bounce reflections, 16x16 with frusta, half -> 3/4: conference 0.90 -> 0.96,
- * kitchen 0.96 -> 0.98, museum 0.95 -> 0.99, bunny 0.95 -> 0.97; rings 1.33 -> 1.27 and tree
- * 1.19 -> 1.14 (their curved mirrors' packets still go ray by ray). 7/8: conference 0.98, rings
- * 1.16. */
-#define AUTO_SIMD_SHARE 0.75f
+/* ... as a fraction of SIMD rays W wide: half up to 8 wide, 3/4 at 16 (4x4 tiles, AVX-512),
+ * where half took too many of the reflection packets that Span traces faster. `raypack bench
+ * --grid`, auto over the best fixed algorithm on the 2-bounce reflections, 16x16 with frusta,
+ * half -> 3/4, AVX-512: conference 0.90 -> 0.96, kitchen 0.96 -> 0.98, museum 0.95 -> 0.99, bunny
+ * 0.95 -> 0.97; rings 1.33 -> 1.27 and tree 1.19 -> 1.14 (their curved mirrors' packets still go
+ * ray by ray); 7/8: conference 0.98, rings 1.16. AVX2 (`--isa avx2`), half -> 3/4: conference
+ * 0.97 -> 1.00, but rings 1.39 -> 1.19 (32x32: 1.40 -> 1.04), so 8-wide SIMD rays keep half. */
+#define AUTO_SIMD_SHARE(W) ((W) >= 16 ? 0.75f : 0.5f)
 /* ... in scenes of at least this many cells only: in a tree of a few hundred nodes every ray
  * visits much the same nodes, however it points (`raypack bench --vs embree`, diffuse rays, 16x16
  * auto: cornell's 36 triangles 0.91x and spd_teapot's 2328 0.80x with SIMD rays, bart_museum5's

@@ -125,6 +125,19 @@ static inline uint32_t vi16_movemask(vi16 m) {
     return r;
 #endif
 }
+/* movemask(a <= b) (false where either is NaN), straight from the compare's mask register where
+ * the ISA has one: with AVX-512, GCC turned movemask(a <= b) into compare -> k, k -> -1/0 vector
+ * (vmovdqa32), vector -> k (vpmovd2m), k -> bits, on the critical path of every box test. */
+static inline uint32_t vf4_le_bits(vf4 a, vf4 b) { return vi4_movemask(a <= b); }
+static inline uint32_t vf8_le_bits(vf8 a, vf8 b) { return vi8_movemask(a <= b); }
+static inline uint32_t vf16_le_bits(vf16 a, vf16 b) {
+#if defined(__AVX512F__)
+    return (uint32_t)_mm512_cmp_ps_mask((__m512)a, (__m512)b, _CMP_LE_OS);
+#else
+    return vi16_movemask(a <= b);
+#endif
+}
+
 /* Lane mask from a bit mask. */
 static inline vi4 vi4_from_bits(uint32_t bits) {
     return ((vi4){1, 2, 4, 8} & vi4_splat((int32_t)bits)) != 0;

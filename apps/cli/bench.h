@@ -245,7 +245,6 @@ int bench_grid(bench_ctx *ctx);
 int bench_vs_embree(bench_ctx *ctx);
 #endif
 
-/* True when any lane of a packet is live: packets of misses are skipped, by both engines alike. */
 /* Asks for the rays of slots [first, first + count) ahead of their use (nothing past the set).
  * The large-packet modes ask for the next packet's rays while they copy the current one in: a
  * large packet's traversal runs long enough between two copies for the hardware prefetchers to
@@ -287,6 +286,7 @@ static inline void bench_rays_to_soa(const bench_ray *src, size_t count, float *
 #endif
 }
 
+/* True when any lane of a packet is live: packets of misses are skipped, by both engines alike. */
 static inline bool bench_any_valid(const int32_t *valid, int width) {
     int32_t any = 0;
     for (int k = 0; k < width; k++) any |= valid[k];

@@ -17,6 +17,18 @@ typedef struct tri4 {
     uint32_t mask[4];
 } tri4;
 
+/* Geometric normal of a hit triangle: (v1 - v0) x (v2 - v0), as Embree's Ng. */
+static inline void tri_normal(const tri4 *tr, uint32_t lane, float n[3]) {
+    float e1[3], e2[3];
+    for (int a = 0; a < 3; a++) {
+        e1[a] = tr->v[3 + a][lane] - tr->v[a][lane];
+        e2[a] = tr->v[6 + a][lane] - tr->v[a][lane];
+    }
+    n[0] = e1[1] * e2[2] - e1[2] * e2[1];
+    n[1] = e1[2] * e2[0] - e1[0] * e2[2];
+    n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+}
+
 /* A primitive of a sphere or user geometry, the leaf item of the second BVH. */
 typedef struct prim_ref {
     uint32_t geom;

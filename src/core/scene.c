@@ -138,7 +138,7 @@ void rp_scene_get_stats(const rp_scene *scene, rp_scene_stats *out) {
 /* ---- commit ------------------------------------------------------------------------------- */
 
 typedef struct gather {
-    box3 *boxes;
+    bvh_prim *boxes;
     prim_ref *refs;
     uint32_t count, capacity;
 } gather;
@@ -146,7 +146,7 @@ typedef struct gather {
 static bool gather_push(const sys_allocator *a, gather *g, box3 b, uint32_t geom, uint32_t prim) {
     if (g->count == g->capacity) {
         uint32_t cap = g->capacity ? g->capacity * 2 : 1024;
-        box3 *nb = sys_alloc(a, (size_t)cap * sizeof *nb);
+        bvh_prim *nb = sys_alloc(a, (size_t)cap * sizeof *nb);
         prim_ref *nr = sys_alloc(a, (size_t)cap * sizeof *nr);
         if (!nb || !nr) {
             sys_free(a, nb, (size_t)cap * sizeof *nb);
@@ -161,7 +161,7 @@ static bool gather_push(const sys_allocator *a, gather *g, box3 b, uint32_t geom
         sys_free(a, g->refs, (size_t)g->capacity * sizeof *nr);
         g->boxes = nb, g->refs = nr, g->capacity = cap;
     }
-    g->boxes[g->count] = b;
+    g->boxes[g->count] = bvh_prim_of(b);
     g->refs[g->count] = (prim_ref){geom, prim};
     g->count++;
     return true;
@@ -192,16 +192,18 @@ static bool load_triangle(const rp_geometry *g, uint32_t prim, vec3 v[3]) {
 
 /* Packing of the triangle BVH's leaves into tri4 blocks. A leaf's first block comes from a prefix
  * sum over the leaves in primitive order, so the blocks are allocated exactly and filled by all
- * threads at once (filling was a third of a serial commit: every triangle's vertices are read
- * through its index buffer). */
+ * threads at once. The fill goes in primitive order (the blocks are then written in order) and
+ * prefetches each triangle's reference, indices and vertices a few triangles ahead: the builder's
+ * order sends every triangle to a random place in the index buffer, and the fill, reading them one
+ * after another, had waited on memory (spd_tree: 24 of a commit's 157 ms on two threads). */
 typedef struct tri_pack_ctx {
     const rp_scene *scene;
     const bvh2 *bvh;
     const prim_ref *refs;
     tri4 *blocks;
-    uint32_t *first_block; /* per primitive position: the first block of the leaf starting there */
+    uint32_t *block_of;    /* per primitive position: its block */
     uint32_t block_count;
-    uint32_t chunks;       /* of the node array, one task each */
+    uint32_t chunks;       /* of the primitives and of the nodes, one task each */
     double inv_diag;       /* 1 / the scene's diagonal, for the leaf sides below */
     uint64_t *side_sum;    /* per chunk: the leaves' longest sides, in 2^-24 of the diagonal */
     uint32_t *leaf_count;  /* per chunk */
@@ -209,39 +211,67 @@ typedef struct tri_pack_ctx {
 
 static inline bool tri_is_leaf(const bvh_node *n) { return n->count != 0; }
 
-static void tri_fill_leaf(const tri_pack_ctx *c, const bvh_node *leaf) {
-    uint32_t n = leaf->count, blocks = (n + 3) / 4, first = c->first_block[leaf->index];
-    for (uint32_t b = 0; b < blocks; b++) {
-        tri4 *t = &c->blocks[first + b];
-        memset(t, 0, sizeof *t);
-        for (uint32_t j = 0; j < 4; j++) {
-            uint32_t k = b * 4 + j;
-            if (k >= n) break;
-            prim_ref r = c->refs[c->bvh->prims[leaf->index + k]];
-            const rp_geometry *g = c->scene->geoms[r.geom];
-            vec3 v[3] = {{0}};
-            load_triangle(g, r.prim, v); /* validated when gathered */
-            for (int q = 0; q < 3; q++) {
-                t->v[3 * q + 0][j] = v[q].x;
-                t->v[3 * q + 1][j] = v[q].y;
-                t->v[3 * q + 2][j] = v[q].z;
-            }
-            t->geom[j] = r.geom, t->prim[j] = r.prim, t->mask[j] = g->mask;
+/* Prefetch distances, in triangles, of a triangle's reference, its indices and its vertices. */
+#define PACK_AHEAD_REF 24u
+#define PACK_AHEAD_INDEX 16u
+#define PACK_AHEAD_VERTEX 8u
+
+static inline const uint32_t *tri_indices(const rp_scene *s, prim_ref r) {
+    return geom_item(&s->geoms[r.geom]->buffers[RP_BUFFER_INDEX], r.prim);
+}
+
+/* First position of chunk `index`: the nominal start moved on to the start of a block, so no block
+ * is shared by two chunks. */
+static uint32_t pack_chunk_start(const tri_pack_ctx *c, uint32_t index) {
+    uint64_t n = c->bvh->prim_count;
+    uint32_t p = (uint32_t)(n * index / c->chunks);
+    while (p > 0 && p < n && c->block_of[p] == c->block_of[p - 1]) p++;
+    return p;
+}
+
+/* Fills the blocks of a chunk of primitive positions. Unused lanes repeat lane 0 with mask 0
+ * (never hit): zeroed lanes made every edge function exactly 0, so each test of a partly filled
+ * block took the watertight test's double-precision refinement. */
+static void tri_pack_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    const tri_pack_ctx *c = user;
+    const uint32_t *prims = c->bvh->prims, *block_of = c->block_of;
+    const prim_ref *refs = c->refs;
+    uint32_t b = pack_chunk_start(c, index), e = pack_chunk_start(c, index + 1), lane = 0;
+    for (uint32_t p = b; p < e; p++) {
+        if (p + PACK_AHEAD_REF < e) __builtin_prefetch(&refs[prims[p + PACK_AHEAD_REF]]);
+        if (p + PACK_AHEAD_INDEX < e) __builtin_prefetch(tri_indices(c->scene, refs[prims[p + PACK_AHEAD_INDEX]]));
+        if (p + PACK_AHEAD_VERTEX < e) {
+            prim_ref r = refs[prims[p + PACK_AHEAD_VERTEX]];
+            const uint32_t *idx = tri_indices(c->scene, r);
+            const geom_buffer *vb = &c->scene->geoms[r.geom]->buffers[RP_BUFFER_VERTEX];
+            for (int k = 0; k < 3; k++) __builtin_prefetch(vb->data + (size_t)idx[k] * vb->stride);
         }
-        /* unused lanes repeat lane 0 with mask 0 (never hit): zeroed lanes made every edge
-         * function exactly 0, so each test of a partly filled block took the watertight test's
-         * double-precision refinement */
-        for (uint32_t j = n - b * 4; j < 4; j++) {
+        uint32_t blk = block_of[p];
+        lane = p > b && blk == block_of[p - 1] ? lane + 1 : 0;
+        tri4 *t = &c->blocks[blk];
+        prim_ref r = refs[prims[p]];
+        const rp_geometry *g = c->scene->geoms[r.geom];
+        vec3 v[3] = {{0}};
+        load_triangle(g, r.prim, v); /* validated when gathered */
+        for (int q = 0; q < 3; q++) {
+            t->v[3 * q + 0][lane] = v[q].x;
+            t->v[3 * q + 1][lane] = v[q].y;
+            t->v[3 * q + 2][lane] = v[q].z;
+        }
+        t->geom[lane] = r.geom, t->prim[lane] = r.prim, t->mask[lane] = g->mask;
+        if (p + 1 < e && block_of[p + 1] == blk) continue;
+        for (uint32_t j = lane + 1; j < 4; j++) {
             for (int q = 0; q < 9; q++) t->v[q][j] = t->v[q][0];
             t->geom[j] = t->geom[0], t->prim[j] = t->prim[0], t->mask[j] = 0;
         }
     }
 }
 
-/* Fills the blocks of a range of the nodes' leaves and points each leaf at its blocks (count:
- * blocks, index: the first block), summing the leaves' sides for coherent_extent on the way; the
- * sums are fixed point, so they do not depend on the number of chunks. */
-static void tri_pack_task(void *user, uint32_t index, uint32_t thread) {
+/* Points each leaf of a chunk of the nodes at its blocks (count: blocks, index: the first block),
+ * summing the leaves' sides for coherent_extent on the way; the sums are fixed point, so they do
+ * not depend on the number of chunks. */
+static void tri_leaf_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     const tri_pack_ctx *c = user;
     uint64_t n = c->bvh->node_count, sum = 0;
@@ -249,31 +279,30 @@ static void tri_pack_task(void *user, uint32_t index, uint32_t thread) {
     for (uint32_t i = begin; i < end; i++) {
         bvh_node *leaf = &c->bvh->nodes[i];
         if (!tri_is_leaf(leaf)) continue;
-        tri_fill_leaf(c, leaf);
         double side = fmax((double)leaf->hi[0] - leaf->lo[0], fmax((double)leaf->hi[1] - leaf->lo[1], (double)leaf->hi[2] - leaf->lo[2]));
         sum += (uint64_t)(fmin(side * c->inv_diag, 1.0) * 0x1p24 + 0.5);
         leaves++;
-        leaf->index = c->first_block[leaf->index];
+        leaf->index = c->block_of[leaf->index];
         leaf->count = (leaf->count + 3) / 4;
     }
     c->side_sum[index] = sum, c->leaf_count[index] = leaves;
 }
 
-/* Numbers the blocks of every leaf; false when out of memory. */
+/* Numbers the blocks: every primitive position gets its block; false when out of memory. */
 static bool tri_pack_plan(const sys_allocator *a, tri_pack_ctx *c) {
     const bvh2 *b = c->bvh;
-    c->first_block = sys_alloc(a, (size_t)b->prim_count * sizeof(uint32_t));
-    if (!c->first_block) return false;
-    memset(c->first_block, 0, (size_t)b->prim_count * sizeof(uint32_t));
+    c->block_of = sys_alloc(a, (size_t)b->prim_count * sizeof(uint32_t));
+    if (!c->block_of) return false;
+    memset(c->block_of, 0, (size_t)b->prim_count * sizeof(uint32_t));
     for (uint32_t i = 0; i < b->node_count; i++)
-        if (tri_is_leaf(&b->nodes[i])) c->first_block[b->nodes[i].index] = (b->nodes[i].count + 3) / 4;
-    uint32_t sum = 0;
+        if (tri_is_leaf(&b->nodes[i])) c->block_of[b->nodes[i].index] = b->nodes[i].count;
+    uint32_t next = 0, block = 0, k = 0; /* k: position in the current leaf */
     for (uint32_t p = 0; p < b->prim_count; p++) {
-        uint32_t k = c->first_block[p];
-        c->first_block[p] = sum;
-        sum += k;
+        uint32_t count = c->block_of[p];
+        if (count) block = next, next += (count + 3) / 4, k = 0;
+        c->block_of[p] = block + k++ / 4;
     }
-    c->block_count = sum;
+    c->block_count = next;
     return true;
 }
 
@@ -288,6 +317,8 @@ static bool leaf_range(void *user, const bvh_node *leaf, uint32_t *first, uint32
 
 static bool sphere_intersect_cb(const rp_accel *acc, prim_ref ref, rp_ray *ray, rp_hit *hit);
 static bool sphere_occluded_cb(const rp_accel *acc, prim_ref ref, const rp_ray *ray);
+
+#define SMALL_BUILD 4096u /* primitives */
 
 static int pick_width(const rp_scene *s) {
     if (s->desc.bvh_width) return s->desc.bvh_width;
@@ -359,7 +390,7 @@ static void tri_gather_task(void *user, uint32_t index, uint32_t thread) {
         }
         box3 box = {v3_min(v[0], v3_min(v[1], v[2])), v3_max(v[0], v3_max(v[1], v[2]))};
         bounds = box3_union(bounds, box);
-        j->out->boxes[w] = box;
+        j->out->boxes[w] = bvh_prim_of(box);
         j->out->refs[w] = (prim_ref){j->geom_ids[k], p};
         w++;
     }
@@ -507,14 +538,16 @@ rp_error scene_build(rp_scene *s) {
     bd.trav_cost = s->desc.quality == RP_BUILD_QUALITY_LOW ? 1.0f : 0.5f;
     int width = pick_width(s);
     if (err == RP_ERROR_NONE && tris.count) {
+        /* small meshes on the calling thread: waking the others took longer than the work */
+        sys_pool *tpool = tris.count >= SMALL_BUILD ? pool : NULL;
         bvh2 b2;
-        if (!bvh_build(a, pool, tris.boxes, tris.count, &bd, &b2)) {
+        if (!bvh_build(a, tpool, tris.boxes, tris.count, &bd, &b2)) {
             err = RP_ERROR_OUT_OF_MEMORY;
         } else {
             double diag = diagonal(bounds);
             tri_pack_ctx pc = {.scene = s, .bvh = &b2, .refs = tris.refs,
                                .inv_diag = diag > 0.0 && isfinite(1.0 / diag) ? 1.0 / diag : 0.0};
-            pc.chunks = pool ? (uint32_t)sys_pool_threads(pool) * 8 : 1;
+            pc.chunks = tpool ? (uint32_t)sys_pool_threads(tpool) * 8 : 1;
             size_t sbytes = (size_t)pc.chunks * (sizeof(uint64_t) + sizeof(uint32_t));
             uint64_t *sums = sys_alloc(a, sbytes);
             pc.side_sum = sums, pc.leaf_count = sums ? (uint32_t *)(sums + pc.chunks) : NULL;
@@ -530,15 +563,20 @@ rp_error scene_build(rp_scene *s) {
                 memset(pad, 0, sizeof *pad);
                 for (int q = 0; q < 9; q++)
                     for (int j = 0; j < 4; j++) pad->v[q][j] = NAN;
-                if (pool) sys_pool_parallel_for(pool, pc.chunks, tri_pack_task, &pc);
-                else tri_pack_task(&pc, 0, 0);
+                if (tpool) {
+                    sys_pool_parallel_for(tpool, pc.chunks, tri_pack_task, &pc);
+                    sys_pool_parallel_for(tpool, pc.chunks, tri_leaf_task, &pc);
+                } else {
+                    tri_pack_task(&pc, 0, 0);
+                    tri_leaf_task(&pc, 0, 0);
+                }
                 uint64_t sum = 0;
                 uint64_t leaves = 0;
                 for (uint32_t i = 0; i < pc.chunks; i++) sum += pc.side_sum[i], leaves += pc.leaf_count[i];
                 mean_side = leaves ? (double)sum / (double)leaves * 0x1p-24 * diag : 0.0;
             }
             sys_free(a, sums, sbytes);
-            if (!ok || !bvhw_from_bvh2(a, pool, &b2, width, leaf_range, NULL, &s->tri_bvh)) {
+            if (!ok || !bvhw_from_bvh2(a, tpool, &b2, width, leaf_range, NULL, &s->tri_bvh)) {
                 sys_free(a, pc.blocks, alloc_blocks * sizeof(tri4));
                 err = RP_ERROR_OUT_OF_MEMORY;
             } else {
@@ -557,7 +595,7 @@ rp_error scene_build(rp_scene *s) {
                 s->tri_bvh2 = b2;
                 b2.nodes = NULL;
             }
-            sys_free(a, pc.first_block, (size_t)b2.prim_count * sizeof(uint32_t));
+            sys_free(a, pc.block_of, (size_t)b2.prim_count * sizeof(uint32_t));
             if (b2.nodes) bvh2_free(a, &b2);
         }
     }

@@ -4,6 +4,7 @@
 #ifndef RP_BVH_H
 #define RP_BVH_H
 
+#include <math.h>
 #include <stdint.h>
 
 #include "math/vec.h"
@@ -36,10 +37,23 @@ typedef struct bvh_build_desc {
     float trav_cost;   /* cost of a node relative to one block intersection; 0: 1 */
 } bvh_build_desc;
 
-/* Builds over n boxes (none empty or non-finite); uses the pool's threads when pool != NULL.
- * Returns false when out of memory. n == 0 gives a single empty leaf. */
-bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, uint32_t n,
-               const bvh_build_desc *desc, bvh2 *out);
+/* A primitive's box in the form the builder bins and partitions: lo x, y, z, 0 and hi x, y, z,
+ * -inf (the w lanes are the builder's). Made where the boxes are computed, so a build reads no
+ * second copy of them. */
+typedef struct bvh_prim {
+    _Alignas(16) float lo[4];
+    _Alignas(16) float hi[4];
+} bvh_prim;
+
+static inline bvh_prim bvh_prim_of(box3 b) {
+    return (bvh_prim){{b.lo.x, b.lo.y, b.lo.z, 0.0f}, {b.hi.x, b.hi.y, b.hi.z, -INFINITY}};
+}
+
+/* Builds over n primitive boxes (none empty or non-finite), which it reorders (out->prims says
+ * where each went); uses the pool's threads when pool != NULL. Returns false when out of memory.
+ * n == 0 gives a single empty leaf. */
+bool bvh_build(const sys_allocator *alloc, sys_pool *pool, bvh_prim *boxes, uint32_t n, const bvh_build_desc *desc,
+               bvh2 *out);
 void bvh2_free(const sys_allocator *alloc, bvh2 *bvh);
 
 /* Wide node of width W (4, 8 or 16) is stored as floats bounds[6][W] (lo_x, hi_x, lo_y, hi_y,

@@ -13,6 +13,7 @@
 #define PAR_MIN 65536u     /* nodes this large (at the top of the tree) are binned by all threads */
 #define PAR_CHUNKS 32u
 #define MEDIAN_DEPTH 64 /* past this depth, split at the median to bound the depth */
+#define BIN_PAIR_MIN 64u   /* nodes this large are binned into two sets of bins, merged after */
 
 /* A primitive box in SIMD form, so unions are two min/max instructions; w: lo 0, hi -inf (see bins). */
 typedef struct pbox {
@@ -56,6 +57,8 @@ typedef struct task {
     uint32_t node, begin, end, depth;
     box3 cbox;
 } task;
+
+static inline uint32_t task_size(const task *t) { return t->end - t->begin; }
 
 /* The tree's SAH cost (inner nodes' half areas and leaves' half area x primitives, relative to
  * the root's), leaves and depth, gathered while building. The cost is summed in fixed point
@@ -190,12 +193,6 @@ static inline vf4 bin_counts(const bins *b, int k) {
     return __builtin_shufflevector(t, b->hi[k][2], 0, 1, 7, 0) * (vf4){1.0f, 1.0f, 1.0f, 0.0f};
 }
 
-static void bin_range(const build_ctx *c, uint32_t begin, uint32_t end, vf4 lo, vf4 scale, vf4 last, int nb,
-                      bins *out) {
-    bins_clear(out, nb);
-    for (uint32_t i = begin; i < end; i++) bin_one(out, &c->boxes[i], lo, scale, last);
-}
-
 static void bins_merge(bins *dst, const bins *src, int nb) {
     for (int k = 0; k < nb; k++) {
         for (int a = 0; a < 3; a++) {
@@ -205,6 +202,26 @@ static void bins_merge(bins *dst, const bins *src, int nb) {
             dst->hi[k][a] = h;
         }
     }
+}
+
+/* Neighbouring primitives often fall in the same bin, and each update of a bin waited for the
+ * last one's store; two sets of bins, taking turns, halve those chains. */
+static void bin_range(const build_ctx *c, uint32_t begin, uint32_t end, vf4 lo, vf4 scale, vf4 last, int nb,
+                      bins *out) {
+    bins_clear(out, nb);
+    uint32_t i = begin;
+    if (end - begin >= BIN_PAIR_MIN) {
+        bins two;
+        bins_clear(&two, nb);
+        for (; i + 1 < end; i += 2) {
+            bin_one(out, &c->boxes[i], lo, scale, last);
+            bin_one(&two, &c->boxes[i + 1], lo, scale, last);
+        }
+        if (i < end) bin_one(out, &c->boxes[i], lo, scale, last);
+        bins_merge(out, &two, nb);
+        return;
+    }
+    for (; i < end; i++) bin_one(out, &c->boxes[i], lo, scale, last);
 }
 
 static void bins_task(void *user, uint32_t index, uint32_t thread) {
@@ -253,11 +270,14 @@ typedef struct split_plan {
 static bool split_find(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox, box3 nbox, split_plan *out) {
     /* Nodes of more than LARGE_NODE primitives get twice the bins: their splits shape the tree
      * (kitchen, conference: single rays 5-15% faster than with 16 bins everywhere, as fast as 32
-     * everywhere, at no measurable build cost; 64 was no better). Small nodes: about one bin per
-     * primitive is as good, and the sweeps over empty bins dominated the build near the leaves. */
+     * everywhere, at no measurable build cost; 64 was no better). A node of n primitives gets at
+     * most 4 + n bins / 128 (4 + n / 8 at the default 16; Embree's builders give 4 + n / 20):
+     * sweeping and clearing mostly empty bins near the leaves had been a sixth of a build, and
+     * the shared scenes' SAH costs moved by -16% (museum) to +0.2% (teapot). */
     int nb = end - begin > LARGE_NODE ? 2 * c->bins : c->bins;
     if (nb > MAX_BINS) nb = MAX_BINS;
-    if ((uint32_t)nb > end - begin) nb = end - begin < 4 ? 4 : (int)(end - begin);
+    uint64_t small_nb = 4u + (uint64_t)(end - begin) * (uint32_t)c->bins / 128u;
+    if ((uint64_t)nb > small_nb) nb = (int)small_nb;
     vf4 lo = {cbox.lo.x, cbox.lo.y, cbox.lo.z, 0.0f}, scale = vf4_splat(0.0f);
     bool usable[3];
     for (int axis = 0; axis < 3; axis++) {
@@ -368,6 +388,97 @@ static uint32_t split_partition(build_ctx *c, uint32_t begin, uint32_t end, cons
     }
 }
 
+/* Partition of a large node in PAR_CHUNKS chunks (on the pool's threads when there is one): each
+ * chunk is partitioned in place, then the right-side primitives left of the node's middle are
+ * swapped with the left-side ones right of it. The chunks do not depend on the number of threads,
+ * so neither does the tree (a serial partition of the top nodes had kept one thread busy while the
+ * others waited: spd_tree's first two levels, 11 of a 157 ms commit on two threads). */
+typedef struct part_job {
+    build_ctx *c;
+    const split_plan *s;
+    uint32_t begin, end, mid;
+    uint32_t local_mid[PAR_CHUNKS];
+    box3 lc[PAR_CHUNKS], rc[PAR_CHUNKS];
+    /* the misplaced primitives: ranges of right-side ones before mid, left-side ones after it */
+    uint32_t rb[PAR_CHUNKS], re[PAR_CHUNKS], lb[PAR_CHUNKS], le[PAR_CHUNKS];
+    uint32_t rn, ln;
+    uint64_t misplaced;
+} part_job;
+
+static void part_chunk(const part_job *j, uint32_t index, uint32_t *b, uint32_t *e) {
+    uint64_t n = j->end - j->begin;
+    *b = j->begin + (uint32_t)(n * index / PAR_CHUNKS), *e = j->begin + (uint32_t)(n * (index + 1) / PAR_CHUNKS);
+}
+
+static void part_local_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    part_job *j = user;
+    uint32_t b, e;
+    part_chunk(j, index, &b, &e);
+    j->local_mid[index] = split_partition(j->c, b, e, j->s, &j->lc[index], &j->rc[index]);
+}
+
+/* Position of the k-th element of the ranges [b[i], e[i]) taken in order; *i: the range. */
+static uint32_t part_locate(const uint32_t *b, const uint32_t *e, uint32_t count, uint64_t k, uint32_t *i) {
+    for (*i = 0; *i < count; (*i)++) {
+        if (k < e[*i] - b[*i]) return b[*i] + (uint32_t)k;
+        k -= e[*i] - b[*i];
+    }
+    return 0; /* not reached: k < the ranges' total */
+}
+
+static void part_swap_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    part_job *j = user;
+    uint64_t k = j->misplaced * index / PAR_CHUNKS, kend = j->misplaced * (index + 1) / PAR_CHUNKS;
+    if (k == kend) return;
+    uint32_t ri, li;
+    uint32_t r = part_locate(j->rb, j->re, j->rn, k, &ri), l = part_locate(j->lb, j->le, j->ln, k, &li);
+    pbox *boxes = j->c->boxes;
+    uint32_t *prims = j->c->prims;
+    for (; k < kend; k++) {
+        pbox x = boxes[r];
+        uint32_t p = prims[r];
+        boxes[r] = boxes[l], prims[r] = prims[l];
+        boxes[l] = x, prims[l] = p;
+        if (++r == j->re[ri] && ri + 1 < j->rn) r = j->rb[++ri];
+        if (++l == j->le[li] && li + 1 < j->ln) l = j->lb[++li];
+    }
+}
+
+static uint32_t split_partition_par(build_ctx *c, uint32_t begin, uint32_t end, const split_plan *s, box3 *lcbox,
+                                    box3 *rcbox) {
+    part_job job, *j = &job;
+    j->c = c, j->s = s, j->begin = begin, j->end = end;
+    if (c->top_pool) sys_pool_parallel_for(c->top_pool, PAR_CHUNKS, part_local_task, j);
+    else
+        for (uint32_t i = 0; i < PAR_CHUNKS; i++) part_local_task(j, i, 0);
+    uint32_t mid = begin;
+    *lcbox = box3_empty(), *rcbox = box3_empty();
+    for (uint32_t i = 0; i < PAR_CHUNKS; i++) {
+        uint32_t b, e;
+        part_chunk(j, i, &b, &e);
+        mid += j->local_mid[i] - b;
+        *lcbox = box3_union(*lcbox, j->lc[i]), *rcbox = box3_union(*rcbox, j->rc[i]);
+    }
+    j->rn = j->ln = 0;
+    j->misplaced = 0;
+    for (uint32_t i = 0; i < PAR_CHUNKS; i++) {
+        uint32_t b, e, m = j->local_mid[i];
+        part_chunk(j, i, &b, &e);
+        uint32_t r0 = m, r1 = e < mid ? e : mid; /* right side before mid */
+        if (r0 < r1) j->rb[j->rn] = r0, j->re[j->rn++] = r1, j->misplaced += r1 - r0;
+        uint32_t l0 = b > mid ? b : mid, l1 = m; /* left side after mid */
+        if (l0 < l1) j->lb[j->ln] = l0, j->le[j->ln++] = l1;
+    }
+    if (j->misplaced) {
+        if (c->top_pool) sys_pool_parallel_for(c->top_pool, PAR_CHUNKS, part_swap_task, j);
+        else
+            for (uint32_t i = 0; i < PAR_CHUNKS; i++) part_swap_task(j, i, 0);
+    }
+    return mid;
+}
+
 /* Processes one node: makes it a leaf or splits it and returns its two children as tasks. */
 static uint32_t node_pair(build_ctx *c, uint32_t thread) {
     node_chunk *k = &c->chunks[thread];
@@ -397,7 +508,8 @@ static int build_node(build_ctx *c, uint32_t thread, const task *t, task out[2],
         if (n <= (uint32_t)c->max_leaf && (!found || area * blocks_of(c, n) <= area * c->trav_cost + sp.cost))
             return make_leaf(node, t, b, c->inv_root_area, st);
         if (found) {
-            mid = split_partition(c, t->begin, t->end, &sp, &lcbox, &rcbox);
+            mid = n >= PAR_MIN ? split_partition_par(c, t->begin, t->end, &sp, &lcbox, &rcbox)
+                               : split_partition(c, t->begin, t->end, &sp, &lcbox, &rcbox);
             lbox = sp.lbox, rbox = sp.rbox;
         }
     } else if (n <= (uint32_t)c->max_leaf) {
@@ -436,7 +548,11 @@ static void build_subtree(build_ctx *c, uint32_t thread, task root, tree_stats *
 
 static void build_task(void *user, uint32_t index, uint32_t thread) {
     build_ctx *c = user;
-    build_subtree(c, thread, c->tasks[index], &c->task_stats[index]);
+    /* gathered locally: the tasks' stats share cache lines, and the threads, writing them at
+     * every node, had slowed each other by a fifth */
+    tree_stats st = {0};
+    build_subtree(c, thread, c->tasks[index], &st);
+    c->task_stats[index] = st;
 }
 
 /* One level of the top of the tree: node `index` of `in` split into out[2 index], out[2 index + 1]. */
@@ -447,17 +563,18 @@ typedef struct level_job {
     task *out;
     uint8_t *split;
     tree_stats *stats; /* one per node of the level */
+    const uint32_t *index; /* the nodes of the level to split (NULL: index itself) */
 } level_job;
 
 static void level_task(void *user, uint32_t index, uint32_t thread) {
     level_job *j = user;
+    if (j->index) index = j->index[index];
     j->split[index] = build_node(j->c, thread, &j->in[index], &j->out[2 * index], &j->stats[index]) == 2;
 }
 
-/* Primitive boxes in SIMD form, the identity permutation and the root box, by chunks. */
+/* The identity permutation, the root box and the centroids' box, by chunks. */
 typedef struct init_job {
-    const box3 *boxes;
-    pbox *pboxes;
+    const pbox *pboxes;
     uint32_t *prims;
     uint32_t n, chunks; /* at most PAR_CHUNKS */
     box3 part[PAR_CHUNKS], cpart[PAR_CHUNKS]; /* boxes and centroid boxes */
@@ -470,11 +587,8 @@ static void init_task(void *user, uint32_t index, uint32_t thread) {
     uint32_t b = (uint32_t)(n * index / j->chunks), e = (uint32_t)(n * (index + 1) / j->chunks);
     vf4 lo = vf4_splat(INFINITY), hi = vf4_splat(-INFINITY), clo = lo, chi = hi;
     for (uint32_t i = b; i < e; i++) {
-        const box3 *x = &j->boxes[i];
-        pbox *p = &j->pboxes[i];
+        const pbox *p = &j->pboxes[i];
         j->prims[i] = i;
-        p->lo = (vf4){x->lo.x, x->lo.y, x->lo.z, 0.0f};
-        p->hi = (vf4){x->hi.x, x->hi.y, x->hi.z, -INFINITY}; /* w: see bins */
         vf4 ce = centroid_of(p);
         lo = vf4_min(lo, p->lo), hi = vf4_max(hi, p->hi);
         clo = vf4_min(clo, ce), chi = vf4_max(chi, ce);
@@ -482,8 +596,10 @@ static void init_task(void *user, uint32_t index, uint32_t thread) {
     j->part[index] = box_of(lo, hi), j->cpart[index] = box_of(clo, chi);
 }
 
-bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, uint32_t n,
-               const bvh_build_desc *desc, bvh2 *out) {
+_Static_assert(sizeof(pbox) == sizeof(bvh_prim), "bvh_prim is the builder's pbox");
+
+bool bvh_build(const sys_allocator *alloc, sys_pool *pool, bvh_prim *boxes, uint32_t n, const bvh_build_desc *desc,
+               bvh2 *out) {
     memset(out, 0, sizeof *out);
     int threads = pool ? sys_pool_threads(pool) : 1;
     /* the root, an unused node 1 (so pairs start at even indices), the pairs, and the unused rest
@@ -493,11 +609,9 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
     node_chunk *chunks = sys_calloc(alloc, kbytes);
     out->nodes = sys_alloc(alloc, (size_t)cap * sizeof(bvh_node));
     out->prims = sys_alloc(alloc, (size_t)(n ? n : 1) * sizeof(uint32_t));
-    size_t pbytes = (size_t)(n ? n : 1) * sizeof(pbox);
-    pbox *pboxes = sys_alloc(alloc, pbytes);
-    if (!out->nodes || !out->prims || !pboxes || !chunks) {
+    pbox *pboxes = (pbox *)boxes;
+    if (!out->nodes || !out->prims || !chunks) {
         sys_free(alloc, chunks, kbytes);
-        sys_free(alloc, pboxes, pbytes);
         bvh2_free(alloc, out);
         return false;
     }
@@ -507,7 +621,7 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
     /* large inputs on all threads: a serial pass (and its page faults) over millions of boxes
      * was a tenth of a large build on two threads */
     bool par_init = pool && sys_pool_threads(pool) > 1 && n >= PAR_MIN;
-    init_job ij = {.boxes = boxes, .pboxes = pboxes, .prims = out->prims, .n = n,
+    init_job ij = {.pboxes = pboxes, .prims = out->prims, .n = n,
                    .chunks = par_init ? PAR_CHUNKS : 1};
     if (par_init) sys_pool_parallel_for(pool, ij.chunks, init_task, &ij);
     else init_task(&ij, 0, 0);
@@ -534,10 +648,8 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
 
     tree_stats st = {0};
     if (threads > 1 && n > 4096) {
-        /* Split level by level until the open subtrees are small enough to balance the threads.
-         * A level with fewer nodes than threads is split node by node, each binned by all
-         * threads; a level with more is split a node per thread (the partitions of the top
-         * levels had run on one thread while the others waited). */
+        /* Split level by level until the open subtrees are small enough to balance the threads
+         * (below: which nodes of a level all threads split together). */
         uint32_t grain = n / (uint32_t)(threads * 16);
         if (grain < 1024) grain = 1024;
         c.task_capacity = 1024;
@@ -550,7 +662,6 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
             sys_free(alloc, c.task_stats, c.task_capacity * sizeof(tree_stats));
             sys_free(alloc, level, qbytes);
             sys_free(alloc, kids, qbytes);
-            sys_free(alloc, pboxes, pbytes);
             sys_free(alloc, chunks, kbytes);
             bvh2_free(alloc, out);
             return false;
@@ -569,13 +680,29 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
             }
             if (!wn) break;
             tree_stats lstats[LEVEL_MAX] = {{0}};
+            /* While the largest node left is large and over 5/4 of a thread's share of the nodes
+             * left, it is split by all threads (binned and partitioned in chunks); the rest are
+             * split a node per thread. Node per thread throughout, a level of kitchen's (100682
+             * and 9496 primitives) had run on one thread. */
+            uint64_t left = 0;
+            uint32_t rest[LEVEL_MAX], rn = wn;
+            for (uint32_t i = 0; i < wn; i++) left += task_size(&level[i]), rest[i] = i;
             level_job job = {.c = &c, .in = level, .out = kids, .split = split, .stats = lstats};
-            if (wn < (uint32_t)threads) {
-                c.top_pool = pool;
-                for (uint32_t i = 0; i < wn; i++) level_task(&job, i, 0);
-            } else {
-                c.top_pool = NULL;
-                sys_pool_parallel_for(pool, wn, level_task, &job);
+            c.top_pool = pool;
+            while (rn) {
+                uint32_t big = 0, size = task_size(&level[rest[0]]);
+                for (uint32_t i = 1; i < rn; i++)
+                    if (task_size(&level[rest[i]]) > size) big = i, size = task_size(&level[rest[i]]);
+                uint32_t node = rest[big];
+                if (size < PAR_MIN || (uint64_t)size * 4u * (uint32_t)threads <= left * 5u) break;
+                level_task(&job, node, 0);
+                left -= size;
+                rest[big] = rest[--rn];
+            }
+            c.top_pool = NULL;
+            if (rn) {
+                job.index = rest;
+                sys_pool_parallel_for(pool, rn, level_task, &job);
             }
             ln = 0;
             for (uint32_t i = 0; i < wn; i++) {
@@ -593,7 +720,6 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, const box3 *boxes, ui
     } else {
         build_subtree(&c, 0, (task){0, 0, n, 0, croot}, &st);
     }
-    sys_free(alloc, pboxes, pbytes);
     for (int i = 0; i < threads; i++)
         if (chunks[i].next < chunks[i].end)
             memset(&out->nodes[chunks[i].next], 0, (size_t)(chunks[i].end - chunks[i].next) * sizeof(bvh_node));

@@ -29,26 +29,31 @@ static bool fill_node(const conv_ctx *c, uint32_t dst, uint32_t src_index, uint3
                       uint32_t *pending_count) {
     const bvh_node *nodes = c->src->nodes;
     uint32_t kids[16];
+    double area[16]; /* of each inner child; -1 for leaves */
     int count = 0;
     const bvh_node *root = &nodes[src_index];
     if (is_leaf(root)) {
         kids[count++] = src_index; /* a tree that is a single leaf */
     } else {
-        kids[count++] = root->index;
-        kids[count++] = root->index + 1;
+        for (int i = 0; i < 2; i++) {
+            kids[count] = root->index + (uint32_t)i;
+            const bvh_node *k = &nodes[kids[count]];
+            area[count++] = is_leaf(k) ? -1.0 : node_area(k);
+        }
         while (count < c->width) {
             int best = -1;
             double best_area = -1.0;
-            for (int i = 0; i < count; i++) {
-                const bvh_node *k = &nodes[kids[i]];
-                if (!is_leaf(k) && node_area(k) > best_area) best = i, best_area = node_area(k);
-            }
+            for (int i = 0; i < count; i++)
+                if (area[i] > best_area) best = i, best_area = area[i];
             if (best < 0) break;
             uint32_t open = kids[best];
             /* keep the tree's left-to-right order: replace by left, insert right after it */
-            for (int i = count; i > best + 1; i--) kids[i] = kids[i - 1];
-            kids[best] = nodes[open].index;
-            kids[best + 1] = nodes[open].index + 1;
+            for (int i = count; i > best + 1; i--) kids[i] = kids[i - 1], area[i] = area[i - 1];
+            for (int i = 0; i < 2; i++) {
+                kids[best + i] = nodes[open].index + (uint32_t)i;
+                const bvh_node *k = &nodes[kids[best + i]];
+                area[best + i] = is_leaf(k) ? -1.0 : node_area(k);
+            }
             count++;
         }
     }

@@ -17,6 +17,46 @@ static inline void wt_refine(float Ax, float Ay, float Bx, float By, float Cx, f
     *W = (float)((double)Bx * (double)Ay - (double)By * (double)Ax);
 }
 
+/* The test's lane masks: -1/0 vectors, except 16 wide with AVX-512, where they stay in mask
+ * registers (__mmask16) from the compares to the returned lanes. GCC's vector compares had taken
+ * each one through a -1/0 vector and back (vpmovm2d, vpmovd2m) to combine and test it. Same
+ * predicates either way: == false on NaN, < and > false on NaN, != true on NaN. */
+#define WT_MASKS_VEC(N)                                                                           \
+    typedef vi##N wt_mask##N;                                                                     \
+    RP_INLINE wt_mask##N wt_zero_##N(vf##N U, vf##N V, vf##N W) {                                 \
+        vf##N z = vf##N##_splat(0.0f);                                                            \
+        return (U == z) | (V == z) | (W == z);                                                    \
+    }                                                                                             \
+    RP_INLINE wt_mask##N wt_inside_##N(vf##N mn, vf##N mx, vf##N det) {                           \
+        vf##N z = vf##N##_splat(0.0f);                                                            \
+        return ~((mn < z) & (mx > z)) & (det != z);                                               \
+    }                                                                                             \
+    RP_INLINE wt_mask##N wt_and_nonzero_##N(wt_mask##N m, vf##N x) { return m & (x != vf##N##_splat(0.0f)); } \
+    RP_INLINE uint32_t wt_bits_##N(wt_mask##N m) { return vi##N##_movemask(m); }                  \
+    RP_INLINE vi##N wt_lanes_##N(wt_mask##N m) { return m; }
+WT_MASKS_VEC(4)
+WT_MASKS_VEC(8)
+#if defined(__AVX512F__) && defined(__AVX512DQ__)
+typedef __mmask16 wt_mask16;
+RP_INLINE wt_mask16 wt_zero_16(vf16 U, vf16 V, vf16 W) {
+    __m512 z = _mm512_setzero_ps();
+    return (wt_mask16)(_mm512_cmp_ps_mask((__m512)U, z, _CMP_EQ_OQ) | _mm512_cmp_ps_mask((__m512)V, z, _CMP_EQ_OQ) |
+                       _mm512_cmp_ps_mask((__m512)W, z, _CMP_EQ_OQ));
+}
+RP_INLINE wt_mask16 wt_inside_16(vf16 mn, vf16 mx, vf16 det) {
+    __m512 z = _mm512_setzero_ps();
+    wt_mask16 out = (wt_mask16)(_mm512_cmp_ps_mask((__m512)mn, z, _CMP_LT_OS) & _mm512_cmp_ps_mask((__m512)mx, z, _CMP_GT_OS));
+    return (wt_mask16)(~out & _mm512_cmp_ps_mask((__m512)det, z, _CMP_NEQ_UQ));
+}
+RP_INLINE wt_mask16 wt_and_nonzero_16(wt_mask16 m, vf16 x) {
+    return (wt_mask16)(m & _mm512_cmp_ps_mask((__m512)x, _mm512_setzero_ps(), _CMP_NEQ_UQ));
+}
+RP_INLINE uint32_t wt_bits_16(wt_mask16 m) { return (uint32_t)m; }
+RP_INLINE vi16 wt_lanes_16(wt_mask16 m) { return (vi16)_mm512_movm_epi32(m); }
+#else
+WT_MASKS_VEC(16)
+#endif
+
 /* wt_N: a*, b*, c* are the vertices minus the ray origin, already permuted so that z is the ray's
  * dominant axis; s* the shear constants. Returns the lanes hit, with t, u, v; when no lane passes
  * the edge tests it returns at once (t, u, v are 0), so the distance and its divisions are paid
@@ -67,7 +107,7 @@ static inline void wt_refine(float Ax, float Ay, float Bx, float By, float Cx, f
         vf##N Cx = cx - sx * cz, Cy = cy - sy * cz;                                               \
         vf##N U = Cx * By - Cy * Bx, V = Ax * Cy - Ay * Cx, W = Bx * Ay - By * Ax;                \
         vf##N zero = vf##N##_splat(0.0f);                                                         \
-        uint32_t z = vi##N##_movemask((U == zero) | (V == zero) | (W == zero));                   \
+        uint32_t z = wt_bits_##N(wt_zero_##N(U, V, W));                                           \
         if (RP_UNLIKELY(z)) {                                                                     \
             wt_edges##N e = wt_fix_##N(Ax, Ay, Bx, By, Cx, Cy, (wt_edges##N){U, V, W}, z);        \
             U = e.U, V = e.V, W = e.W;                                                            \
@@ -76,10 +116,10 @@ static inline void wt_refine(float Ax, float Ay, float Bx, float By, float Cx, f
          * operand yields the other one), the same decision as tri_intersect_ref's. */           \
         vf##N mn = vf##N##_min(U, vf##N##_min(V, W)), mx = vf##N##_max(U, vf##N##_max(V, W));     \
         vf##N det = U + V + W;                                                                    \
-        vi##N ok = ~((mn < zero) & (mx > zero)) & (det != zero);                                  \
-        if (!vi##N##_movemask(ok)) {                                                              \
+        wt_mask##N ok = wt_inside_##N(mn, mx, det);                                               \
+        if (!wt_bits_##N(ok)) {                                                                   \
             *t = zero, *u = zero, *v = zero;                                                      \
-            return ok;                                                                            \
+            return vi##N##_splat(0);                                                              \
         }                                                                                         \
         /* distance from the plane, N.(v0 - o) / N.d with d = (sx, sy, 1) / sz: exact for      \
          * axis-aligned planes, unlike the sheared sum of the paper, which cancels badly for   \
@@ -89,12 +129,12 @@ static inline void wt_refine(float Ax, float Ay, float Bx, float By, float Cx, f
         vf##N nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x; \
         vf##N na = nx * ax + ny * ay + nz * az;                                                   \
         vf##N nd = nx * sx + ny * sy + nz;                                                        \
-        ok &= nd != zero;                                                                         \
+        ok = wt_and_nonzero_##N(ok, nd);                                                          \
         *t = (na * sz) / nd;                                                                      \
         vf##N rcp = vf##N##_splat(1.0f) / det;                                                    \
         *u = V * rcp;                                                                             \
         *v = W * rcp;                                                                             \
-        return ok;                                                                                \
+        return wt_lanes_##N(ok);                                                                  \
     }
 
 #endif

@@ -14,7 +14,7 @@
 #include <string.h>
 
 /* Builds of each kind whose median is reported. */
-#define EMB_BUILD_REPEATS 3
+#define EMB_BUILD_REPEATS 5
 #define EMB_MAX_MODES 8
 #define EMB_SCREEN 2    /* screening passes per mode */
 #define EMB_FINALISTS 2 /* modes per engine timed `repeats` times */

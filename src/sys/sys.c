@@ -44,12 +44,15 @@ struct sys_pool {
     _Atomic int busy;     /* workers still inside the current job */
     _Atomic int sleepers; /* workers waiting on `wake` (or about to) */
     _Atomic bool quit;
+    int spin;             /* pauses a waiting thread spins before it sleeps (0 when oversubscribed) */
     size_t bytes;         /* of this allocation */
 };
 
 /* Waiting spins this many pauses (some tens of microseconds) before it sleeps: a build runs dozens
  * of short parallel loops back to back, and a sleeping thread took longer to wake than many of
- * them ran (bart_museum5: 1.4 ms builds on two threads against 1.95 on one). */
+ * them ran (bart_museum5: 1.4 ms builds on two threads against 1.95 on one). Not when the pool has
+ * more threads than the machine: spinning threads then take the cores from working ones (spd_tree
+ * built in 783 ms on 64 threads on 2 cores, 343 ms sleeping at once). */
 #ifndef SYS_SPIN
 #define SYS_SPIN 4096
 #endif
@@ -79,7 +82,7 @@ static void run_job(sys_pool *pool, uint32_t thread) {
  * the generation are sequentially consistent: a publisher that bumps the generation and then sees
  * no sleeper knows every worker about to sleep will see the new generation first. */
 static uint64_t wait_generation(sys_pool *pool, uint64_t seen) {
-    for (int i = 0; i < SYS_SPIN; i++) {
+    for (int i = 0; i < pool->spin; i++) {
         uint64_t g = atomic_load_explicit(&pool->generation, memory_order_acquire);
         if (g != seen) return g;
         cpu_pause();
@@ -128,6 +131,7 @@ sys_pool *sys_pool_new(const sys_allocator *a, int threads) {
     pool->alloc = *a;
     pool->bytes = size;
     pool->threads = threads;
+    pool->spin = threads <= sys_hardware_threads() ? SYS_SPIN : 0;
     pool->workers = (pthread_t *)(pool + 1);
     worker_arg *args = (worker_arg *)(pool->workers + threads);
     pthread_mutex_init(&pool->mutex, NULL);
@@ -171,7 +175,7 @@ void sys_pool_parallel_for(sys_pool *pool, uint32_t count, rp_task_fn fn, void *
     atomic_store_explicit(&pool->busy, pool->threads - 1, memory_order_relaxed);
     publish(pool);
     run_job(pool, 0);
-    for (int i = 0; i < SYS_SPIN && atomic_load_explicit(&pool->busy, memory_order_acquire) > 0; i++) cpu_pause();
+    for (int i = 0; i < pool->spin && atomic_load_explicit(&pool->busy, memory_order_acquire) > 0; i++) cpu_pause();
     if (atomic_load_explicit(&pool->busy, memory_order_acquire) > 0) {
         pthread_mutex_lock(&pool->mutex);
         while (atomic_load(&pool->busy) > 0) pthread_cond_wait(&pool->done, &pool->mutex);

@@ -139,7 +139,8 @@ int cli_info(int argc, char **argv) {
            (unsigned long long)st.binary_nodes, (unsigned long long)st.leaves, st.depth, st.sah_cost);
     printf("layout      %llu inner nodes of width %u, %.2f MiB\n", (unsigned long long)st.wide_nodes, st.bvh_width,
            (double)st.bytes / 1048576.0);
-    printf("build       %.1f ms on %d threads\n", st.build_ms, rp_device_thread_count(device));
+    int nthreads = rp_device_thread_count(device);
+    printf("build       %.1f ms on %d thread%s\n", st.build_ms, nthreads, nthreads == 1 ? "" : "s");
     status = CLI_EXIT_OK;
 
 done:

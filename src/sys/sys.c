@@ -1,6 +1,7 @@
 /* Timers, CPU feature detection and the thread pool. */
 #define _GNU_SOURCE
 #include <pthread.h>
+#include <sched.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -12,7 +13,13 @@ double sys_seconds(void) {
     return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
+/* The CPUs this process may run on (a container's or taskset's cpuset, not the host's count), so
+ * the default pool and the pool's spinning (sys_pool_new) match the cores there are. */
 int sys_hardware_threads(void) {
+#if defined(__linux__)
+    cpu_set_t set;
+    if (sched_getaffinity(0, sizeof set, &set) == 0 && CPU_COUNT(&set) > 0) return CPU_COUNT(&set);
+#endif
     long n = sysconf(_SC_NPROCESSORS_ONLN);
     return n < 1 ? 1 : (int)n;
 }

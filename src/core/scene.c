@@ -245,7 +245,7 @@ static void tri_pack_task(void *user, uint32_t index, uint32_t thread) {
             prim_ref r = refs[prims[p + PACK_AHEAD_VERTEX]];
             const uint32_t *idx = tri_indices(c->scene, r);
             const geom_buffer *vb = &c->scene->geoms[r.geom]->buffers[RP_BUFFER_VERTEX];
-            for (int k = 0; k < 3; k++) __builtin_prefetch(vb->data + (size_t)idx[k] * vb->stride);
+            for (int k = 0; k < 3; k++) __builtin_prefetch(geom_item(vb, idx[k]));
         }
         uint32_t blk = block_of[p];
         lane = p > b && blk == block_of[p - 1] ? lane + 1 : 0;

@@ -8,6 +8,7 @@
 #include <stdint.h>
 
 #include "math/vec.h"
+#include "simd/simd.h"
 #include "sys/sys.h"
 
 /* Binary node, 32 bytes. Inner: children at index and index + 1 (count == 0).
@@ -37,12 +38,11 @@ typedef struct bvh_build_desc {
     float trav_cost;   /* cost of a node relative to one block intersection; 0: 1 */
 } bvh_build_desc;
 
-/* A primitive's box in the form the builder bins and partitions: lo x, y, z, 0 and hi x, y, z,
- * -inf (the w lanes are the builder's). Made where the boxes are computed, so a build reads no
- * second copy of them. */
+/* A primitive's box in the form the builder bins and partitions, SIMD vectors so a union is two
+ * min/max instructions: lo x, y, z, 0 and hi x, y, z, -inf (the w lanes are the builder's, see its
+ * bins). Made where the boxes are computed, so a build reads no second copy of them. */
 typedef struct bvh_prim {
-    _Alignas(16) float lo[4];
-    _Alignas(16) float hi[4];
+    vf4 lo, hi;
 } bvh_prim;
 
 static inline bvh_prim bvh_prim_of(box3 b) {

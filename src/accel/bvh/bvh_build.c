@@ -15,13 +15,8 @@
 #define MEDIAN_DEPTH 64 /* past this depth, split at the median to bound the depth */
 #define BIN_PAIR_MIN 64u   /* nodes this large are binned into two sets of bins, merged after */
 
-/* A primitive box in SIMD form, so unions are two min/max instructions; w: lo 0, hi -inf (see bins). */
-typedef struct pbox {
-    vf4 lo, hi;
-} pbox;
-
 typedef struct build_ctx {
-    pbox *boxes; /* permuted with prims, so every pass over a node's range reads memory in order */
+    bvh_prim *boxes; /* permuted with prims, so every pass over a node's range reads memory in order */
     uint32_t *prims;
     bvh_node *nodes;
     _Atomic uint32_t node_count; /* nodes handed out, in chunks */
@@ -88,7 +83,7 @@ static int make_leaf(bvh_node *node, const task *t, box3 b, double inv_root, tre
     return 0;
 }
 
-static inline vf4 centroid_of(const pbox *b) { return b->lo * 0.5f + b->hi * 0.5f; }
+static inline vf4 centroid_of(const bvh_prim *b) { return b->lo * 0.5f + b->hi * 0.5f; }
 
 static inline box3 box_of(vf4 lo, vf4 hi) { return (box3){v3(lo[0], lo[1], lo[2]), v3(hi[0], hi[1], hi[2])}; }
 
@@ -96,7 +91,7 @@ static inline box3 box_of(vf4 lo, vf4 hi) { return (box3){v3(lo[0], lo[1], lo[2]
 static void range_boxes(const build_ctx *c, uint32_t begin, uint32_t end, vf4 out[4]) {
     vf4 lo = vf4_splat(INFINITY), hi = vf4_splat(-INFINITY), clo = lo, chi = hi;
     for (uint32_t i = begin; i < end; i++) {
-        const pbox *b = &c->boxes[i];
+        const bvh_prim *b = &c->boxes[i];
         vf4 ce = centroid_of(b);
         lo = vf4_min(lo, b->lo), hi = vf4_max(hi, b->hi);
         clo = vf4_min(clo, ce), chi = vf4_max(chi, ce);
@@ -113,16 +108,17 @@ typedef struct par_job {
     void *out;           /* PAR_CHUNKS results */
 } par_job;
 
-static void par_range(const par_job *j, uint32_t index, uint32_t *b, uint32_t *e) {
-    uint64_t n = j->end - j->begin;
-    *b = j->begin + (uint32_t)(n * index / PAR_CHUNKS), *e = j->begin + (uint32_t)(n * (index + 1) / PAR_CHUNKS);
+/* Chunk `index` of PAR_CHUNKS of [begin, end). */
+static void par_chunk(uint32_t begin, uint32_t end, uint32_t index, uint32_t *b, uint32_t *e) {
+    uint64_t n = end - begin;
+    *b = begin + (uint32_t)(n * index / PAR_CHUNKS), *e = begin + (uint32_t)(n * (index + 1) / PAR_CHUNKS);
 }
 
 static void boxes_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     const par_job *j = user;
     uint32_t b, e;
-    par_range(j, index, &b, &e);
+    par_chunk(j->begin, j->end, index, &b, &e);
     range_boxes(j->c, b, e, (vf4 *)j->out + 4 * index);
 }
 
@@ -177,7 +173,7 @@ static void bins_clear(bins *b, int nb) {
         for (int a = 0; a < 3; a++) b->lo[k][a] = vf4_splat(INFINITY), b->hi[k][a] = (vf4){-INFINITY, -INFINITY, -INFINITY, 0.0f};
 }
 
-RP_INLINE void bin_one(bins *restrict out, const pbox *p, vf4 lo, vf4 scale, vf4 last) {
+RP_INLINE void bin_one(bins *restrict out, const bvh_prim *p, vf4 lo, vf4 scale, vf4 last) {
     vi4 b = bins_of(centroid_of(p), lo, scale, last);
     const vf4 one_w = {0.0f, 0.0f, 0.0f, 1.0f};
     for (int a = 0; a < 3; a++) {
@@ -228,7 +224,7 @@ static void bins_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     const par_job *j = user;
     uint32_t b, e;
-    par_range(j, index, &b, &e);
+    par_chunk(j->begin, j->end, index, &b, &e);
     bin_range(j->c, b, e, j->lo, j->scale, j->last, j->nb, (bins *)j->out + index);
 }
 
@@ -355,7 +351,7 @@ static bool split_find(build_ctx *c, uint32_t begin, uint32_t end, box3 cbox, bo
 /* Partitions [begin, end) by the split (branch-free: the side of a primitive is as good as random
  * to the branch predictor), gathering each side's centroid box on the way; returns the first
  * index of the right side. Inlined once per axis, so the lane is a constant. */
-RP_INLINE uint32_t partition_axis(pbox *restrict boxes, uint32_t *restrict prims, uint32_t begin, uint32_t end,
+RP_INLINE uint32_t partition_axis(bvh_prim *restrict boxes, uint32_t *restrict prims, uint32_t begin, uint32_t end,
                                   const split_plan *s, const int axis, box3 *lcbox, box3 *rcbox) {
     vf4 inf = vf4_splat(INFINITY), ninf = vf4_splat(-INFINITY);
     vf4 lclo = inf, lchi = ninf, rclo = inf, rchi = ninf;
@@ -363,7 +359,7 @@ RP_INLINE uint32_t partition_axis(pbox *restrict boxes, uint32_t *restrict prims
     int bin = s->bin;
     uint32_t i = begin;
     for (uint32_t k = begin; k < end; k++) {
-        pbox x = boxes[k];
+        bvh_prim x = boxes[k];
         uint32_t p = prims[k];
         vf4 ce = centroid_of(&x);
         int left = bins_of(ce, lo, scale, last)[axis] < bin;
@@ -405,16 +401,11 @@ typedef struct part_job {
     uint64_t misplaced;
 } part_job;
 
-static void part_chunk(const part_job *j, uint32_t index, uint32_t *b, uint32_t *e) {
-    uint64_t n = j->end - j->begin;
-    *b = j->begin + (uint32_t)(n * index / PAR_CHUNKS), *e = j->begin + (uint32_t)(n * (index + 1) / PAR_CHUNKS);
-}
-
 static void part_local_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     part_job *j = user;
     uint32_t b, e;
-    part_chunk(j, index, &b, &e);
+    par_chunk(j->begin, j->end, index, &b, &e);
     j->local_mid[index] = split_partition(j->c, b, e, j->s, &j->lc[index], &j->rc[index]);
 }
 
@@ -434,10 +425,10 @@ static void part_swap_task(void *user, uint32_t index, uint32_t thread) {
     if (k == kend) return;
     uint32_t ri, li;
     uint32_t r = part_locate(j->rb, j->re, j->rn, k, &ri), l = part_locate(j->lb, j->le, j->ln, k, &li);
-    pbox *boxes = j->c->boxes;
+    bvh_prim *boxes = j->c->boxes;
     uint32_t *prims = j->c->prims;
     for (; k < kend; k++) {
-        pbox x = boxes[r];
+        bvh_prim x = boxes[r];
         uint32_t p = prims[r];
         boxes[r] = boxes[l], prims[r] = prims[l];
         boxes[l] = x, prims[l] = p;
@@ -457,7 +448,7 @@ static uint32_t split_partition_par(build_ctx *c, uint32_t begin, uint32_t end, 
     *lcbox = box3_empty(), *rcbox = box3_empty();
     for (uint32_t i = 0; i < PAR_CHUNKS; i++) {
         uint32_t b, e;
-        part_chunk(j, i, &b, &e);
+        par_chunk(begin, end, i, &b, &e);
         mid += j->local_mid[i] - b;
         *lcbox = box3_union(*lcbox, j->lc[i]), *rcbox = box3_union(*rcbox, j->rc[i]);
     }
@@ -465,7 +456,7 @@ static uint32_t split_partition_par(build_ctx *c, uint32_t begin, uint32_t end, 
     j->misplaced = 0;
     for (uint32_t i = 0; i < PAR_CHUNKS; i++) {
         uint32_t b, e, m = j->local_mid[i];
-        part_chunk(j, i, &b, &e);
+        par_chunk(begin, end, i, &b, &e);
         uint32_t r0 = m, r1 = e < mid ? e : mid; /* right side before mid */
         if (r0 < r1) j->rb[j->rn] = r0, j->re[j->rn++] = r1, j->misplaced += r1 - r0;
         uint32_t l0 = b > mid ? b : mid, l1 = m; /* left side after mid */
@@ -577,7 +568,7 @@ static void level_task(void *user, uint32_t index, uint32_t thread) {
 
 /* The identity permutation, the root box and the centroids' box, by chunks. */
 typedef struct init_job {
-    const pbox *pboxes;
+    const bvh_prim *boxes;
     uint32_t *prims;
     uint32_t n, chunks; /* at most PAR_CHUNKS */
     box3 part[PAR_CHUNKS], cpart[PAR_CHUNKS]; /* boxes and centroid boxes */
@@ -590,7 +581,7 @@ static void init_task(void *user, uint32_t index, uint32_t thread) {
     uint32_t b = (uint32_t)(n * index / j->chunks), e = (uint32_t)(n * (index + 1) / j->chunks);
     vf4 lo = vf4_splat(INFINITY), hi = vf4_splat(-INFINITY), clo = lo, chi = hi;
     for (uint32_t i = b; i < e; i++) {
-        const pbox *p = &j->pboxes[i];
+        const bvh_prim *p = &j->boxes[i];
         j->prims[i] = i;
         vf4 ce = centroid_of(p);
         lo = vf4_min(lo, p->lo), hi = vf4_max(hi, p->hi);
@@ -598,8 +589,6 @@ static void init_task(void *user, uint32_t index, uint32_t thread) {
     }
     j->part[index] = box_of(lo, hi), j->cpart[index] = box_of(clo, chi);
 }
-
-_Static_assert(sizeof(pbox) == sizeof(bvh_prim), "bvh_prim is the builder's pbox");
 
 bool bvh_build(const sys_allocator *alloc, sys_pool *pool, bvh_prim *boxes, uint32_t n, const bvh_build_desc *desc,
                bvh2 *out) {
@@ -612,7 +601,6 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, bvh_prim *boxes, uint
     node_chunk *chunks = sys_calloc(alloc, kbytes);
     out->nodes = sys_alloc(alloc, (size_t)cap * sizeof(bvh_node));
     out->prims = sys_alloc(alloc, (size_t)(n ? n : 1) * sizeof(uint32_t));
-    pbox *pboxes = (pbox *)boxes;
     if (!out->nodes || !out->prims || !chunks) {
         sys_free(alloc, chunks, kbytes);
         bvh2_free(alloc, out);
@@ -624,14 +612,14 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, bvh_prim *boxes, uint
     /* large inputs on all threads: a serial pass (and its page faults) over millions of boxes
      * was a tenth of a large build on two threads */
     bool par_init = pool && sys_pool_threads(pool) > 1 && n >= PAR_MIN;
-    init_job ij = {.pboxes = pboxes, .prims = out->prims, .n = n,
+    init_job ij = {.boxes = boxes, .prims = out->prims, .n = n,
                    .chunks = par_init ? PAR_CHUNKS : 1};
     if (par_init) sys_pool_parallel_for(pool, ij.chunks, init_task, &ij);
     else init_task(&ij, 0, 0);
     box3 croot = box3_empty();
     for (uint32_t i = 0; i < ij.chunks; i++) root = box3_union(root, ij.part[i]), croot = box3_union(croot, ij.cpart[i]);
     build_ctx c = {
-        .boxes = pboxes, .prims = out->prims, .nodes = out->nodes,
+        .boxes = boxes, .prims = out->prims, .nodes = out->nodes,
         .bins = desc->bins < 4 ? 4 : desc->bins > MAX_BINS ? MAX_BINS : desc->bins,
         .max_leaf = desc->max_leaf_size < 1 ? 1 : desc->max_leaf_size,
         .alloc = alloc,

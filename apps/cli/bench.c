@@ -527,13 +527,18 @@ static void trace_n(const bench_n_engine *e, const bench_rays *set, size_t first
             for (size_t q = 0; q < per; q++) p.geom_id[q] = p.prim_id[q] = RP_INVALID_ID;
             rp_intersect_n(e->scene, &desc, &p);
         }
+        /* (the arrays in locals: GCC had reloaded each pointer for every ray) */
+        const float *tfar = p.tfar;
+        const uint32_t *geom = p.geom_id, *prim = p.prim_id;
+        float *ot = out->t;
+        uint32_t *op = out->prim;
         for (size_t k = 0; k < tiles; k++) {
             size_t q = tile_at[k] * 16u, s = s0 + k * 16;
             for (int j = 0; j < 16; j++) {
                 if (!valid[q + j]) continue;
-                bool hit = !occlusion && p.geom_id[q + j] != RP_INVALID_ID;
-                out->t[s + j] = occlusion || hit ? p.tfar[q + j] : INFINITY;
-                out->prim[s + j] = hit ? p.prim_id[q + j] : RP_INVALID_ID;
+                bool hit = !occlusion && geom[q + j] != RP_INVALID_ID;
+                ot[s + j] = occlusion || hit ? tfar[q + j] : INFINITY;
+                op[s + j] = hit ? prim[q + j] : RP_INVALID_ID;
             }
         }
     }

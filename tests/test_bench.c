@@ -330,6 +330,13 @@ static void check_vs_json(const jvalue *root, const char *what) {
                    json_num(all, k == 1 ? "rtcOccluded16" : "rtcIntersect16") >= 0,
                "%s: rays.%s.embree_all", what, kinds[k]);
         CHECKF(json_num(r, "ratio") >= 0, "%s: rays.%s.ratio", what, kinds[k]);
+        /* the best modes timed with the engines' calls skipped */
+        const jvalue *h = json_get(r, "harness");
+        bool traced = json_num(r, "count") > 0;
+        CHECKF(traced ? json_num(h, "raypack_mrays") > 0 && json_num(h, "embree_mrays") > 0
+                      : json_num(h, "raypack_mrays") >= 0 && json_num(h, "embree_mrays") >= 0,
+               "%s: rays.%s.harness", what, kinds[k]);
+        CHECKF(json_num(h, "tracing_ratio") >= 0, "%s: rays.%s.harness.tracing_ratio", what, kinds[k]);
         /* each engine's best is the faster of its two finalists, timed `repeats` times */
         const char *fin[2] = {"raypack_finalists", "embree_finalists"}, *name[2] = {"mode", "api"};
         const jvalue *best[2] = {rp, emb};

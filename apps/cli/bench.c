@@ -290,7 +290,7 @@ static void rp_trace_intersect1(void *engine, const bench_rays *set, size_t firs
         fill_rp_ray(&rh.ray, &set->rays[i], i);
         rh.hit.geom_id = RP_INVALID_ID;
         rh.hit.prim_id = RP_INVALID_ID;
-        rp_intersect1(scene, &rh);
+        BENCH_TRACE(rp_intersect1(scene, &rh));
         bool hit = rh.hit.geom_id != RP_INVALID_ID;
         out->t[i] = hit ? rh.ray.tfar : INFINITY;
         out->prim[i] = hit ? rh.hit.prim_id : RP_INVALID_ID;
@@ -306,7 +306,7 @@ static void rp_trace_occluded1(void *engine, const bench_rays *set, size_t first
         if (!set->valid[i]) continue;
         rp_ray r;
         fill_rp_ray(&r, &set->rays[i], i);
-        rp_occluded1(scene, &r);
+        BENCH_TRACE(rp_occluded1(scene, &r));
         out->t[i] = r.tfar;
         out->prim[i] = RP_INVALID_ID;
     }
@@ -339,7 +339,7 @@ static void rp_trace_occluded1(void *engine, const bench_rays *set, size_t first
                 p.hit.geom_id[k] = RP_INVALID_ID;                                                \
                 p.hit.prim_id[k] = RP_INVALID_ID;                                                \
             }                                                                                    \
-            rp_intersect##W(scene, valid, &p);                                                   \
+            BENCH_TRACE(rp_intersect##W(scene, valid, &p));                                      \
             for (int k = 0; k < W; k++) {                                                        \
                 if (!valid[k]) continue;                                                         \
                 bool hit = p.hit.geom_id[k] != RP_INVALID_ID;                                    \
@@ -371,7 +371,7 @@ static void rp_trace_occluded1(void *engine, const bench_rays *set, size_t first
                 p.id[k] = (uint32_t)(base + (size_t)k);                                          \
                 p.flags[k] = 0;                                                                  \
             }                                                                                    \
-            rp_occluded##W(scene, valid, &p);                                                    \
+            BENCH_TRACE(rp_occluded##W(scene, valid, &p));                                       \
             for (int k = 0; k < W; k++) {                                                        \
                 if (!valid[k]) continue;                                                         \
                 out->t[base + (size_t)k] = p.tfar[k];                                            \
@@ -393,7 +393,7 @@ static void rp_trace_array(rp_scene *scene, const bench_rays *set, size_t first,
         for (size_t i = first; i < first + n; i++)
             if (set->valid[i]) fill_rp_ray(&rays[m++], &set->rays[i], i);
         if (m == 0) return;
-        rp_occluded_array(scene, rays, m, flags);
+        BENCH_TRACE(rp_occluded_array(scene, rays, m, flags));
         for (size_t j = 0; j < m; j++) {
             out->t[rays[j].id] = rays[j].tfar;
             out->prim[rays[j].id] = RP_INVALID_ID;
@@ -408,7 +408,7 @@ static void rp_trace_array(rp_scene *scene, const bench_rays *set, size_t first,
             m++;
         }
         if (m == 0) return;
-        rp_intersect_array(scene, rh, m, flags);
+        BENCH_TRACE(rp_intersect_array(scene, rh, m, flags));
         for (size_t j = 0; j < m; j++) {
             bool hit = rh[j].hit.geom_id != RP_INVALID_ID;
             out->t[rh[j].ray.id] = hit ? rh[j].ray.tfar : INFINITY;
@@ -439,6 +439,8 @@ _Static_assert(BENCH_COUNTERS_OFFSET % 64 == 0 &&
                    BENCH_COUNTERS_OFFSET + sizeof(rp_counters_n) <=
                        (size_t)BENCH_CHUNK * BENCH_SCRATCH_RAY_BYTES,
                "a 32x32 packet and the counters fit in a thread's scratch");
+
+bool bench_harness_only;
 
 rp_counters_n *bench_scratch_counters(void *scratch) {
     return (rp_counters_n *)(void *)((char *)scratch + BENCH_COUNTERS_OFFSET);
@@ -522,10 +524,10 @@ static void trace_n(const bench_n_engine *e, const bench_rays *set, size_t first
                               p.tnear + q, p.dir_x + q, p.dir_y + q, p.dir_z + q, p.tfar + q);
         }
         if (occlusion) {
-            rp_occluded_n(e->scene, &desc, &p);
+            BENCH_TRACE(rp_occluded_n(e->scene, &desc, &p));
         } else {
             for (size_t q = 0; q < per; q++) p.geom_id[q] = p.prim_id[q] = RP_INVALID_ID;
-            rp_intersect_n(e->scene, &desc, &p);
+            BENCH_TRACE(rp_intersect_n(e->scene, &desc, &p));
         }
         /* (the arrays in locals: GCC had reloaded each pointer for every ray) */
         const float *tfar = p.tfar;
@@ -995,7 +997,8 @@ static void usage(FILE *f) {
             "usage: raypack bench [SCENE] [options]\n"
             "  Times raypack's query modes (single rays, 4/8/16-wide packets, ray arrays) on\n"
             "  primary, shadow, reflection and diffuse rays; no SCENE: a generated sphere field.\n"
-            "  --vs embree        raypack against Embree on the same rays, in one process\n"
+            "  --vs embree        raypack against Embree on the same rays, in one process, and\n"
+            "                     each best mode with the engines' calls skipped (the harness alone)\n"
             "  --grid             the experiment grid of Overbeck et al. 2008 (sec. 5): masked,\n"
             "                     ranged, partition, span and auto traversal x 4x4..32x32 packets x\n"
             "                     primary / +shadows / 2-deep refraction / 2-bounce reflection,\n"

@@ -93,6 +93,15 @@ typedef struct bench_hits {
     uint32_t *prim;
 } bench_hits;
 
+/* While set, every mode does all its work but the engine's call: it copies the rays into the
+ * engine's layout and writes the (missed) hits back. Timing that gives each mode's harness cost,
+ * paid by the engine's Mrays/s as well (bench --vs embree prints it for both engines' best). */
+extern bool bench_harness_only;
+#define BENCH_TRACE(call)                                                                          \
+    do {                                                                                           \
+        if (!bench_harness_only) call;                                                             \
+    } while (0)
+
 /* Traces slots [first, first + n) of a set into out; `scratch` is the calling thread's buffer. */
 typedef void (*bench_trace_fn)(void *engine, const bench_rays *set, size_t first, size_t n,
                                bench_hits *out, void *scratch);

@@ -101,7 +101,7 @@ static void emb_trace_intersect1(void *engine, const bench_rays *set, size_t fir
         emb_fill_ray(&rh.ray, &set->rays[i], i);
         rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
         rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
-        rtcIntersect1(e->scene, &ctx, &rh);
+        BENCH_TRACE(rtcIntersect1(e->scene, &ctx, &rh));
         bool hit = rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
         out->t[i] = hit ? rh.ray.tfar : INFINITY;
         out->prim[i] = hit ? rh.hit.primID : RP_INVALID_ID;
@@ -120,7 +120,7 @@ static void emb_trace_occluded1(void *engine, const bench_rays *set, size_t firs
         if (!set->valid[i]) continue;
         struct RTCRay r;
         emb_fill_ray(&r, &set->rays[i], i);
-        rtcOccluded1(e->scene, &ctx, &r);
+        BENCH_TRACE(rtcOccluded1(e->scene, &ctx, &r));
         out->t[i] = r.tfar;
         out->prim[i] = RP_INVALID_ID;
     }
@@ -156,7 +156,7 @@ static void emb_trace_occluded1(void *engine, const bench_rays *set, size_t firs
                 p.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;                                       \
                 p.hit.primID[k] = RTC_INVALID_GEOMETRY_ID;                                       \
             }                                                                                    \
-            rtcIntersect##W(valid, e->scene, &ctx, &p);                                          \
+            BENCH_TRACE(rtcIntersect##W(valid, e->scene, &ctx, &p));                             \
             for (int k = 0; k < W; k++) {                                                        \
                 if (!valid[k]) continue;                                                         \
                 bool hit = p.hit.geomID[k] != RTC_INVALID_GEOMETRY_ID;                           \
@@ -191,7 +191,7 @@ static void emb_trace_occluded1(void *engine, const bench_rays *set, size_t firs
                 p.id[k] = (uint32_t)(base + (size_t)k);                                          \
                 p.flags[k] = 0;                                                                  \
             }                                                                                    \
-            rtcOccluded##W(valid, e->scene, &ctx, &p);                                           \
+            BENCH_TRACE(rtcOccluded##W(valid, e->scene, &ctx, &p));                              \
             for (int k = 0; k < W; k++) {                                                        \
                 if (!valid[k]) continue;                                                         \
                 out->t[base + (size_t)k] = p.tfar[k];                                            \
@@ -218,7 +218,7 @@ static void emb_trace_stream(void *engine, const bench_rays *set, size_t first, 
         for (size_t i = first; i < first + n; i++)
             if (set->valid[i]) emb_fill_ray(&rays[m++], &set->rays[i], i);
         if (m == 0) return;
-        rtcOccluded1M(e->scene, &ctx, rays, m, sizeof(struct RTCRay));
+        BENCH_TRACE(rtcOccluded1M(e->scene, &ctx, rays, m, sizeof(struct RTCRay)));
         for (unsigned int j = 0; j < m; j++) {
             out->t[rays[j].id] = rays[j].tfar;
             out->prim[rays[j].id] = RP_INVALID_ID;
@@ -233,7 +233,7 @@ static void emb_trace_stream(void *engine, const bench_rays *set, size_t first, 
             m++;
         }
         if (m == 0) return;
-        rtcIntersect1M(e->scene, &ctx, rh, m, sizeof(struct RTCRayHit));
+        BENCH_TRACE(rtcIntersect1M(e->scene, &ctx, rh, m, sizeof(struct RTCRayHit)));
         for (unsigned int j = 0; j < m; j++) {
             bool hit = rh[j].hit.geomID != RTC_INVALID_GEOMETRY_ID;
             out->t[rh[j].ray.id] = hit ? rh[j].ray.tfar : INFINITY;
@@ -270,8 +270,18 @@ typedef struct emb_set_result {
     size_t mismatches;                  /* the worst of emb_diff */
     int rp_best, emb_best;
     bool rp_final[EMB_MAX_MODES], emb_final[EMB_MAX_MODES]; /* timed `repeats` times */
+    bench_stat rp_harness, emb_harness; /* the best modes with bench_harness_only */
     emb_engine engine;
 } emb_set_result;
+
+/* Embree's tracing time per ray over raypack's, each mode's harness time taken out of its
+ * median (0 when a harness is not faster than its mode, as timing noise can make it). */
+static double tracing_ratio(const emb_set_result *r) {
+    double p = r->rp_stat[r->rp_best].median, e = r->emb_stat[r->emb_best].median;
+    double ph = r->rp_harness.median, eh = r->emb_harness.median;
+    if (!(p > 0.0 && e > 0.0 && ph > p && eh > e)) return 0.0;
+    return (1.0 / e - 1.0 / eh) / (1.0 / p - 1.0 / ph);
+}
 
 typedef struct emb_build_result {
     double rp_ms, rp_commit_ms, emb_ms, emb_hq_ms;
@@ -387,7 +397,9 @@ static bool emb_write_json(const bench_ctx *ctx, const emb_build_result *b,
         double ratio = r->emb_stat[r->emb_best].median > 0.0
                            ? r->rp_stat[r->rp_best].median / r->emb_stat[r->emb_best].median
                            : 0.0;
-        fprintf(f, "},\n   \"ratio\": %.4f}", ratio);
+        fprintf(f, "},\n   \"harness\": {\"raypack_mrays\": %.4f, \"embree_mrays\": %.4f, "
+                   "\"tracing_ratio\": %.4f},\n   \"ratio\": %.4f}",
+                r->rp_harness.median, r->emb_harness.median, tracing_ratio(r), ratio);
     }
     fprintf(f, "\n }\n}\n");
     if (fclose(f) != 0) {
@@ -434,6 +446,22 @@ static void emb_print(const bench_ctx *ctx, const emb_build_result *b, const emb
                ctx->sets[k].count, r->mismatches, r->rp_modes[r->rp_best].name, p,
                r->emb_modes[r->emb_best].name, e, e > 0.0 ? p / e : 0.0);
     }
+
+    /* What the benchmark costs besides tracing: with the engines' calls skipped, each best mode
+     * still copies its rays into the engine's layout and writes the hits back. A lower bound (the
+     * rays stay in the caches that tracing would share) of what its Mrays/s pays for the copies,
+     * and so a ceiling on the ratio: raypack's harness alone over Embree's median. */
+    printf("\nharness alone (the same modes, the engines' calls skipped; median of %d passes):\n",
+           ctx->opts.repeats);
+    printf("%-11s %16s %15s %14s %15s\n", "rays", "raypack Mrays/s", "embree Mrays/s", "ratio ceiling",
+           "tracing ratio");
+    for (int k = 0; k < BENCH_KIND_COUNT; k++) {
+        const emb_set_result *r = &res[k];
+        double e = r->emb_stat[r->emb_best].median;
+        printf("%-11s %16.2f %15.2f %14.2f %15.3f\n", bench_kind_name((bench_kind)k), r->rp_harness.median,
+               r->emb_harness.median, e > 0.0 ? r->rp_harness.median / e : 0.0, tracing_ratio(r));
+    }
+    printf("(tracing ratio: Embree's time per ray over raypack's, each harness's time taken out)\n");
 }
 
 int bench_vs_embree(bench_ctx *ctx) {
@@ -550,6 +578,16 @@ int bench_vs_embree(bench_ctx *ctx) {
         for (int m = 0; m < EMB_MAX_MODES; m++) rp_out[m] = !r->rp_final[m], emb_out[m] = !r->emb_final[m];
         r->rp_best = best_of(r->rp_stat, r->rp_count, rp_out);
         r->emb_best = best_of(r->emb_stat, r->emb_count, emb_out);
+        /* the best modes' harness alone, taking turns (samples: the finalists' buffer, reused) */
+        bench_harness_only = true;
+        for (size_t rep = 0; rep < reps; rep++) {
+            samples[rep] = bench_mrays(set, bench_trace_set(ctx, ctx->opts.threads, &r->rp_modes[r->rp_best], set, &hits));
+            samples[reps + rep] =
+                bench_mrays(set, bench_trace_set(ctx, ctx->opts.threads, &r->emb_modes[r->emb_best], set, &hits));
+        }
+        bench_harness_only = false;
+        r->rp_harness = bench_stats(samples, ctx->opts.repeats);
+        r->emb_harness = bench_stats(samples + reps, ctx->opts.repeats);
     }
     emb_print(ctx, &build, res);
     rc = 0;

@@ -3,6 +3,7 @@
 #define RP_TRAVERSE_H
 
 #include <stdbool.h>
+#include <stddef.h>
 #include <stdint.h>
 
 #include "raypack.h"
@@ -80,6 +81,13 @@ bool tri_intersect_ref(const float org[3], const float dir[3], float tnear, floa
 
 /* Tie-break of equal distances: the lower (geom, prim) wins, so every traversal order gives the
  * same hit. */
+/* Fetches the cache lines of [p, p + bytes) ahead of use: the packet traversals' children (a
+ * node, or a leaf's first block of triangles) while the packet is busy with their siblings. */
+static inline void prefetch_bytes(const void *p, size_t bytes) {
+    const char *c = (const char *)p, *last = c + bytes - 1;
+    for (c -= (uintptr_t)c & 63u; c <= last; c += 64) __builtin_prefetch(c);
+}
+
 static inline bool hit_key_less(uint32_t g0, uint32_t p0, uint32_t g1, uint32_t p1) {
     return g0 < g1 || (g0 == g1 && p0 < p1);
 }

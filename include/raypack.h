@@ -347,11 +347,28 @@ typedef struct rp_counters_n {
     uint64_t tri_tests_depth[RP_COUNTERS_N_DEPTH]; /* tri_tests by depth of the leaf */
 } rp_counters_n;
 
+/* What auto traversal learns about the packets its coherence measure cannot settle, two classes
+ * with two ways each: [0] packets whose rays part (a direction spread too wide for Span), traced
+ * with Partition [0][0] or Span [0][1]; [1] packets it finds too incoherent for a packet, traced as
+ * a packet [1][0] or as SIMD rays one at a time [1][1]. Auto times them, sends each packet of a
+ * class the way that has taken less time per ray and, every 16th, the other way, to keep both
+ * figures current. Zero it before the first call; keep one per thread and per kind of packet
+ * (one size and ray type: which way pays differs between them). The choice changes how long a
+ * packet takes and the counters, never its hits. */
+typedef struct rp_auto_tally {
+    uint64_t seen[2];       /* packets of each class traced */
+    uint64_t packets[2][2]; /* ... each way (the recent ones: a way's figures are halved as it goes) */
+    uint64_t rays[2][2];    /* their live rays */
+    uint64_t ticks[2][2];   /* the time they took, in the CPU's time-stamp ticks */
+} rp_auto_tally;
+
 typedef struct rp_query_n_desc {
     rp_traversal traversal;     /* 0: RP_TRAVERSAL_AUTO */
     rp_frustum_kind frustum;    /* 0: RP_FRUSTUM_NONE */
     float point[3];             /* RP_FRUSTUM_SHADOW: the point every ray heads to (the light) */
     rp_counters_n *counters;    /* NULL: nothing is counted (and nothing is paid for it) */
+    rp_auto_tally *tally;       /* auto: what it learns as it goes; NULL: fixed ways (parting
+                                   packets to Partition, incoherent ones ray by ray) */
 } rp_query_n_desc;
 
 /* Returns the defaults for every zero field of desc (NULL gives all defaults). */

@@ -247,6 +247,51 @@ static void check_conservative(const world *w, int packets) {
     rp_device_release(dev);
 }
 
+/* Traces the packet of rays `count` times with auto and tally t (both occlusion and closest hits,
+ * in turns), counting into c; every answer must be the single ray's. */
+static void trace_tally(const world *w, rp_scene *scene, rp_rayhit_n *p, const test_ray *rays, rp_auto_tally *t,
+                        int count, rp_counters_n *c) {
+    memset(c, 0, sizeof *c);
+    rp_query_n_desc d = {.traversal = RP_TRAVERSAL_AUTO, .frustum = RP_FRUSTUM_SECONDARY, .counters = c, .tally = t};
+    uint32_t bad = 0;
+    for (int i = 0; i < count; i++) bad += trace_compare(scene, &d, p, rays, i % 2 != 0);
+    CHECKF(bad == 0, "%s: auto with a tally, %u answers differ", w->name, bad);
+    CHECKF(c->packets == (uint64_t)count && c->traversal[0] == (uint64_t)count &&
+               c->traversal[3] + c->traversal[4] + c->traversal[5] == (uint64_t)count,
+           "%s: auto with a tally counted %llu packets", w->name, (unsigned long long)c->packets);
+}
+
+/* Auto with a tally (rp_auto_tally) on packets of class cls, counted in traversal[alt] when they go
+ * way 1: the ways take turns until each has 4 packets, then the faster goes on and the slower
+ * takes every 16th; the answers stay the single ray's. A tally primed with one way far cheaper
+ * keeps to it but for those every 16th. */
+static void check_auto_tally(const world *w, rp_scene *scene, rp_rayhit_n *p, const test_ray *rays, int cls, int alt,
+                             const char *what) {
+    uint64_t live = (uint64_t)p->n * p->n;
+    rp_auto_tally t;
+    rp_counters_n c;
+    memset(&t, 0, sizeof t);
+    trace_tally(w, scene, p, rays, &t, 8, &c);
+    CHECKF(c.traversal[alt] == 4 && t.seen[cls] == 8 && t.seen[1 - cls] == 0 && t.packets[cls][0] == 4 &&
+               t.packets[cls][1] == 4 && t.rays[cls][0] == 4 * live && t.rays[cls][1] == 4 * live &&
+               t.ticks[cls][0] > 0 && t.ticks[cls][1] > 0,
+           "%s: %s, a fresh tally: %llu of 8 packets the second way, seen %llu, packets %llu/%llu", w->name, what,
+           (unsigned long long)c.traversal[alt], (unsigned long long)t.seen[cls],
+           (unsigned long long)t.packets[cls][0], (unsigned long long)t.packets[cls][1]);
+    for (int way = 0; way < 2; way++) {
+        /* seen 200: packets 207 and 223 of the next 32 go the other way */
+        memset(&t, 0, sizeof t);
+        t.seen[cls] = 200;
+        for (int k = 0; k < 2; k++) t.packets[cls][k] = 100, t.rays[cls][k] = 100 * live;
+        t.ticks[cls][way] = 1000000, t.ticks[cls][1 - way] = 1000000000000000ull;
+        trace_tally(w, scene, p, rays, &t, 32, &c);
+        CHECKF(c.traversal[alt] == (way ? 30u : 2u), "%s: %s, a tally that finds way %d cheaper sent %llu of 32 "
+               "packets the second way", w->name, what, way, (unsigned long long)c.traversal[alt]);
+        CHECKF(t.seen[cls] == 232 && t.packets[cls][0] + t.packets[cls][1] < 232,
+               "%s: %s, the tally's figures did not move on", w->name, what);
+    }
+}
+
 /* Rays in every direction from the middle of the scene face apart: auto traces them one SIMD ray at a
  * time (counted as such), with the single-ray answers; a packet of two coherent halves facing apart
  * goes to Span. */
@@ -278,6 +323,7 @@ static void check_auto_apart(const world *w) {
             CHECKF(c.packets == 1 && c.traversal[0] == 1 && c.traversal[5] == 1,
                    "%s: auto traced rays facing apart as a packet", w->name);
         }
+    check_auto_tally(w, scene, &p, rays, 1, 5, "incoherent packets (a packet or SIMD rays)");
     /* Two coherent halves facing apart (a packet across the corner of two mirrors): Span */
     for (uint32_t y = 0; y < N; y++)
         for (uint32_t x = 0; x < N; x++) {
@@ -296,6 +342,19 @@ static void check_auto_apart(const world *w) {
         CHECKF(c.packets == 1 && c.traversal[4] == 1, "%s: auto traced two coherent halves facing apart without Span",
                w->name);
     }
+    /* Rays that part, a slope of -2.5..2.5 across z (a spread between auto's bounds for Span and for
+     * SIMD rays in bunny's 69451 triangles): Partition, or with a tally Partition and Span in turns */
+    for (uint32_t y = 0; y < N; y++)
+        for (uint32_t x = 0; x < N; x++) {
+            uint32_t q = rp_packet_n_index(N, x, y);
+            rp_ray *r = &rays[q].ray;
+            r->dir_x = -2.5f + 5.0f * (float)x / (N - 1), r->dir_y = -2.5f + 5.0f * (float)y / (N - 1), r->dir_z = 1.0f;
+            reference(scene, &rays[q]);
+        }
+    rp_counters_n c;
+    trace_tally(w, scene, &p, rays, NULL, 2, &c);
+    CHECKF(c.traversal[3] == 2, "%s: auto traced rays that part without Partition", w->name);
+    check_auto_tally(w, scene, &p, rays, 0, 4, "packets whose rays part (Partition or Span)");
     rp_rayhit_n_free(dev, &p);
     rp_scene_release(scene);
     rp_device_release(dev);

@@ -246,10 +246,13 @@ static void trace_task(void *user, uint32_t index, uint32_t thread) {
                      job->scratch->per_thread[thread]);
 }
 
+static uint64_t bench_traces; /* bench_trace_set calls so far */
+
 double bench_trace_set(bench_ctx *ctx, int threads, const bench_mode *mode, const bench_rays *set,
                        bench_hits *out) {
     trace_job job = {mode, set, out, &ctx->scratch};
     uint32_t chunks = (uint32_t)(set->slots / BENCH_CHUNK);
+    bench_traces++; /* before the workers start: they read it */
     double t0 = bench_now_ms();
     if (threads <= 1) {
         bench_set_ftz();
@@ -432,15 +435,37 @@ static void rp_trace_array_incoherent(void *engine, const bench_rays *set, size_
 /* ---- large packets (Overbeck et al. 2008) -------------------------------------------------- */
 
 /* Packet arrays in a thread's scratch buffer: 17 ray and hit arrays of a 32x32 packet plus its
- * valid mask, then the counters, all inside the BENCH_CHUNK * BENCH_SCRATCH_RAY_BYTES bytes. */
+ * valid mask, then the counters, then auto's tally, all inside the BENCH_CHUNK *
+ * BENCH_SCRATCH_RAY_BYTES bytes. */
 #define BENCH_N_ARRAYS 18
 #define BENCH_COUNTERS_OFFSET ((size_t)BENCH_N_ARRAYS * RP_PACKET_N_MAX * RP_PACKET_N_MAX * 4)
+#define BENCH_TALLY_OFFSET ((BENCH_COUNTERS_OFFSET + sizeof(rp_counters_n) + 63) / 64 * 64)
+
+/* Auto's tally (rp_auto_tally) of a thread, for the engine and the trace of a set it was made
+ * in: each bench_trace_set starts afresh, as each frame of the renderer does. */
+typedef struct bench_tally {
+    const void *engine;
+    uint64_t trace;
+    rp_auto_tally tally;
+} bench_tally;
+
 _Static_assert(BENCH_COUNTERS_OFFSET % 64 == 0 &&
-                   BENCH_COUNTERS_OFFSET + sizeof(rp_counters_n) <=
-                       (size_t)BENCH_CHUNK * BENCH_SCRATCH_RAY_BYTES,
-               "a 32x32 packet and the counters fit in a thread's scratch");
+                   BENCH_TALLY_OFFSET + sizeof(bench_tally) <= (size_t)BENCH_CHUNK * BENCH_SCRATCH_RAY_BYTES,
+               "a 32x32 packet, the counters and the tally fit in a thread's scratch");
 
 bool bench_harness_only;
+
+/* The tally for engine e in a thread's scratch, zeroed when it was another engine's or another
+ * trace's. */
+static rp_auto_tally *bench_scratch_tally(void *scratch, const void *e) {
+    bench_tally *t = (bench_tally *)(void *)((char *)scratch + BENCH_TALLY_OFFSET);
+    if (t->engine != e || t->trace != bench_traces) {
+        memset(t, 0, sizeof *t);
+        t->engine = e;
+        t->trace = bench_traces;
+    }
+    return &t->tally;
+}
 
 rp_counters_n *bench_scratch_counters(void *scratch) {
     return (rp_counters_n *)(void *)((char *)scratch + BENCH_COUNTERS_OFFSET);
@@ -500,6 +525,7 @@ static void trace_n(const bench_n_engine *e, const bench_rays *set, size_t first
     int32_t *valid = packet_in_scratch(scratch, e->n, &p);
     rp_query_n_desc desc = e->desc;
     desc.counters = e->count ? bench_scratch_counters(scratch) : NULL;
+    desc.tally = bench_scratch_tally(scratch, e);
     size_t per = (size_t)e->n * e->n, tiles = per / 16;
     for (size_t base = 0; base + per <= count; base += per) {
         const uint16_t *tile_at = e->tile_at + base / 16;

@@ -53,6 +53,9 @@ typedef struct whitted_level {
     int32_t *valid;
     float *weight;
     whitted_slot *slots;
+    /* what auto learns about this level's packets (rp_auto_tally), per ray kind: which way pays
+     * differs by kind and by depth (primary rays, then the bounces); a frame's packets start afresh */
+    rp_auto_tally tally[RP_RAY_KIND_COUNT];
 } whitted_level;
 
 /* Per-thread state, padded so counters of different threads do not share a cache line. */
@@ -288,8 +291,10 @@ static void packet_set_ray(rp_rayhit_n *p, uint32_t q, v3 org, v3 dir, float tfa
     p->inst_id[q] = RP_INVALID_ID;
 }
 
-static rp_query_n_desc packet_query(const render_frame *f, render_thread *th, rp_ray_kind kind) {
-    rp_query_n_desc q = {.traversal = f->traversal[kind], .counters = th->work ? &th->work[kind] : NULL};
+static rp_query_n_desc packet_query(const render_frame *f, render_thread *th, whitted_level *lv, rp_ray_kind kind) {
+    rp_query_n_desc q = {.traversal = f->traversal[kind],
+                         .counters = th->work ? &th->work[kind] : NULL,
+                         .tally = &lv->tally[kind]};
     rp_frustum_kind fk = RP_FRUSTUM_NONE;
     switch (kind) {
     case RP_RAY_PRIMARY: fk = RP_FRUSTUM_PRIMARY; break;
@@ -322,7 +327,7 @@ static void packet_shadows(const render_frame *f, render_thread *th, whitted_lev
         }
         if (!live) continue;
         th->rays[RP_RAY_SHADOW] += live;
-        rp_query_n_desc qd = packet_query(f, th, RP_RAY_SHADOW);
+        rp_query_n_desc qd = packet_query(f, th, lv, RP_RAY_SHADOW);
         switch (light->type) {
         case RP_LIGHT_SOURCE_POINT:
             for (int k = 0; k < 3; k++) qd.point[k] = light->point.position[k];
@@ -380,7 +385,7 @@ static bool packet_trace(const render_frame *f, render_thread *th, int level, rp
     for (uint32_t q = 0; q < nn; q++) live += lv->valid[q] != 0;
     th->rays[kind] += live;
     p->valid = lv->valid;
-    rp_query_n_desc qd = packet_query(f, th, kind);
+    rp_query_n_desc qd = packet_query(f, th, lv, kind);
     rp_intersect_n(f->s->scene, &qd, p);
     for (uint32_t q = 0; q < nn; q++) {
         if (!lv->valid[q]) continue;

@@ -32,6 +32,9 @@ void sys_free(const sys_allocator *a, void *ptr, size_t size);
 
 /* Monotonic time in seconds. */
 double sys_seconds(void);
+/* A tick count for timing spans of microseconds at the cost of a few cycles: the time-stamp
+ * counter on x86 (constant rate on the CPUs raypack targets), nanoseconds elsewhere. */
+uint64_t sys_ticks(void);
 /* Number of hardware threads. */
 int sys_hardware_threads(void);
 /* Widest SIMD the CPU and OS support: 16 (AVX-512 F/VL/BW/DQ), 8 (AVX2+FMA), 4 (SSE4.2) or 1. */

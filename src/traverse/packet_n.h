@@ -11,15 +11,33 @@
  * wide BVH, done by the caller), as indices of rp_counters_n.traversal. */
 typedef enum pkt_alg { PKT_AUTO = 0, PKT_MASKED = 1, PKT_RANGED = 2, PKT_PARTITION = 3, PKT_SPAN = 4, PKT_SIMD = 5 } pkt_alg;
 
+/* Auto's classes of packets (kn_prepare); a coherent packet always goes to Span, the others
+ * have two ways each, which rp_auto_tally learns to choose from. */
+typedef enum auto_class {
+    AUTO_PARTING = 0,    /* the spread is too wide for Span: Partition (way 0) or Span (1) */
+    AUTO_INCOHERENT = 1, /* ... and for a packet, and most SIMD rays are incoherent too: a packet (0)
+                            or SIMD rays (1) */
+    AUTO_COHERENT = 2
+} auto_class;
+
+/* What a kernel did with a packet. */
+typedef struct kn_result {
+    uint32_t live;  /* live rays */
+    auto_class cls; /* AUTO_COHERENT when not traced by auto */
+    int way;        /* the way its class took; for AUTO_INCOHERENT's SIMD rays (1) the packet is
+                       left untouched, for the caller to trace one SIMD ray at a time */
+    uint64_t start; /* sys_ticks() when the way was chosen (any class but AUTO_COHERENT, with
+                       q->auto_timed) */
+} kn_result;
+
 typedef struct rp_kernels_n {
     const char *name;
     int width; /* rays per SIMD ray */
     /* n x n rays through the binary BVH (acc->nodes2) with algorithm alg (PKT_AUTO: chosen from the
      * packet's coherence), culling with the frustum q->kind asks for; then the non-triangle
-     * primitives ray by ray. Counts into c when c != NULL. False, with the packet untouched, when
-     * PKT_AUTO found it too incoherent for a packet: the caller traces its SIMD rays. */
-    bool (*intersect_n)(const rp_accel *acc, const frustum_req *q, pkt_alg alg, rp_rayhit_n *p, rp_counters_n *c);
-    bool (*occluded_n)(const rp_accel *acc, const frustum_req *q, pkt_alg alg, rp_rayhit_n *p, rp_counters_n *c);
+     * primitives ray by ray. Counts into c when c != NULL. */
+    kn_result (*intersect_n)(const rp_accel *acc, const frustum_req *q, pkt_alg alg, rp_rayhit_n *p, rp_counters_n *c);
+    kn_result (*occluded_n)(const rp_accel *acc, const frustum_req *q, pkt_alg alg, rp_rayhit_n *p, rp_counters_n *c);
 } rp_kernels_n;
 
 /* Frusta are tested only where they can spare this many ray tests (see packet_n.inc). */
@@ -58,6 +76,19 @@ typedef struct rp_kernels_n {
  * ray by ray); 7/8: conference 0.98, rings 1.16. AVX2 (`--isa avx2`), half -> 3/4: conference
  * 0.97 -> 1.00, but rings 1.39 -> 1.19 (32x32: 1.40 -> 1.04), so 8-wide SIMD rays keep half. */
 #define AUTO_SIMD_SHARE(W) ((W) >= 16 ? 0.75f : 0.5f)
+/* These thresholds sort packets into three classes (auto_class); without a tally they also choose
+ * the way: Span for coherent packets, Partition for parting ones, SIMD rays for incoherent ones.
+ * With a tally (rp_auto_tally, which the renderer and the bench keep per thread and kind of
+ * packet) the two ways of the parting and the incoherent class are timed as they are taken, and
+ * each packet takes the way that has cost less per ray (api_n.c). The thresholds alone could not
+ * tell apart the incoherent packets that SIMD rays trace faster (rings' curved mirrors) from those
+ * Span traces faster (conference's flat ones, 3-8% behind Span); per-packet timing can. Both ways of
+ * a class are compared on one tree for the parting class; the incoherent class's SIMD rays walk
+ * the wide BVH, a second tree in the caches, whose cost to the packets after them the timing does
+ * not see: timing the parting class against SIMD rays as well sent conference's parting packets
+ * ray by ray and left auto at 0.92-0.96 of the best fixed algorithm on its reflections (`raypack
+ * bench --grid`, 8x8 to 32x32, timed in pairs) against 0.96-0.99 without that choice, so it is
+ * not offered. */
 /* ... in scenes of at least this many cells only: in a tree of a few hundred nodes every ray
  * visits much the same nodes, however it points (`raypack bench --vs embree`, diffuse rays, 16x16
  * auto: cornell's 36 triangles 0.91x and spd_teapot's 2328 0.80x with SIMD rays, bart_museum5's

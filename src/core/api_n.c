@@ -192,25 +192,6 @@ static void trace_small(rp_scene *scene, rp_traversal mode, rp_rayhit_n *p, bool
     }
 }
 
-/* Auto's learned choice for the two classes of packets its measure cannot settle
- * (rp_auto_tally): until each way of a class has TALLY_WARM packets the ways take turns; then each
- * packet goes the way whose packets took less time per live ray, every TALLY_EXPLORE-th the other
- * way. A way's figures are halved when they reach 2 * TALLY_WINDOW packets, so they follow the
- * recent packets; a packet counts for at most TALLY_CAP times its way's mean, so a thread
- * preempted during one does not skew the choice for long. */
-#define TALLY_WARM 4
-#define TALLY_EXPLORE 16
-#define TALLY_WINDOW 64
-#define TALLY_CAP 16
-
-/* The way the next packet of class c takes. */
-static uint32_t tally_way(const rp_auto_tally *t, int c) {
-    const uint64_t *n = t->packets[c], *rays = t->rays[c], *ticks = t->ticks[c];
-    if (n[0] < TALLY_WARM || n[1] < TALLY_WARM) return n[1] <= n[0];
-    bool faster = (double)ticks[1] * (double)rays[0] < (double)ticks[0] * (double)rays[1];
-    return faster != (t->seen[c] % TALLY_EXPLORE == TALLY_EXPLORE - 1);
-}
-
 /* Adds a packet of class c with `rays` live rays that took `ticks` by way `way`. */
 static void tally_add(rp_auto_tally *t, int c, int way, uint64_t rays, uint64_t ticks) {
     uint64_t *n = &t->packets[c][way], *r = &t->rays[c][way], *sum = &t->ticks[c][way];
@@ -259,12 +240,8 @@ static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p
         c->rays += p->n * p->n;
     }
     const rp_kernels_n *k = kernels_n(scene->device);
-    /* auto's way for each class of packet: the tally's choice or, without one, Partition for
-     * parting packets and SIMD rays for incoherent ones (found in scenes of AUTO_SIMD_MIN_CELLS) */
     rp_auto_tally *t = alg == PKT_AUTO ? d.tally : NULL;
-    q.auto_ways = t ? tally_way(t, AUTO_PARTING) << AUTO_PARTING | tally_way(t, AUTO_INCOHERENT) << AUTO_INCOHERENT
-                    : 1u << AUTO_INCOHERENT;
-    q.auto_timed = t != NULL;
+    q.tally = t;
     kn_result r = any ? k->occluded_n(&scene->accel, &q, alg, p, c) : k->intersect_n(&scene->accel, &q, alg, p, c);
     if (r.cls == AUTO_INCOHERENT && r.way) trace_small(scene, RP_TRAVERSAL_SIMD, p, any);
     if (t && r.cls != AUTO_COHERENT) tally_add(t, (int)r.cls, r.way, r.live, sys_ticks() - r.start);

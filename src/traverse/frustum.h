@@ -31,8 +31,8 @@ typedef struct frustum_req {
     float lo[3], hi[3]; /* the scene's bounds (sec. 4.3's far plane) */
     float auto_span;    /* auto traversal: the largest direction spread traced with Span */
     float auto_simd;    /* ... and the largest always traced as a packet (infinite: all) */
-    uint32_t auto_ways; /* bit c: the way (0 or 1) that packets of auto_class c take */
-    bool auto_timed;    /* time the ways taken (kn_result.start) */
+    const rp_auto_tally *tally; /* ... and what it learned of the classes it cannot settle (NULL:
+                                   their fixed ways; packet_n.h, auto_way) */
 } frustum_req;
 
 /* The u and v axes across dominant axis k. */

@@ -20,6 +20,27 @@ typedef enum auto_class {
     AUTO_COHERENT = 2
 } auto_class;
 
+/* Auto's learned choice for the two classes of packets its measure cannot settle
+ * (rp_auto_tally): until each way of a class has TALLY_WARM packets the ways take turns; then each
+ * packet goes the way whose packets took less time per live ray, every TALLY_EXPLORE-th the other
+ * way. A way's figures are halved when they reach 2 * TALLY_WINDOW packets, so they follow the
+ * recent packets; a packet counts for at most TALLY_CAP times its way's mean, so a thread
+ * preempted during one does not skew the choice for long (tally_add, api_n.c). */
+#define TALLY_WARM 4
+#define TALLY_EXPLORE 16
+#define TALLY_WINDOW 64
+#define TALLY_CAP 16
+
+/* The way the next packet of class c (not AUTO_COHERENT) takes: the tally's choice or, without
+ * one, Partition for parting packets and SIMD rays for incoherent ones. */
+static inline int auto_way(const rp_auto_tally *t, auto_class c) {
+    if (!t) return c == AUTO_INCOHERENT;
+    const uint64_t *n = t->packets[c], *rays = t->rays[c], *ticks = t->ticks[c];
+    if (n[0] < TALLY_WARM || n[1] < TALLY_WARM) return n[1] <= n[0];
+    bool faster = (double)ticks[1] * (double)rays[0] < (double)ticks[0] * (double)rays[1];
+    return faster != (t->seen[c] % TALLY_EXPLORE == TALLY_EXPLORE - 1);
+}
+
 /* What a kernel did with a packet. */
 typedef struct kn_result {
     uint32_t live;  /* live rays */
@@ -27,7 +48,7 @@ typedef struct kn_result {
     int way;        /* the way its class took; for AUTO_INCOHERENT's SIMD rays (1) the packet is
                        left untouched, for the caller to trace one SIMD ray at a time */
     uint64_t start; /* sys_ticks() when the way was chosen (any class but AUTO_COHERENT, with
-                       q->auto_timed) */
+                       q->tally) */
 } kn_result;
 
 typedef struct rp_kernels_n {

@@ -13,8 +13,8 @@
 #include "rp_test.h"
 
 enum { RAY_PRIMARY, RAY_SHADOW, RAY_REFLECT, RAY_REFRACT, RAY_TYPES };
-static const char *ray_names[RAY_TYPES] = {"primary", "shadow", "reflection", "refraction"};
-static const rp_frustum_kind ray_frustum[RAY_TYPES] = {RP_FRUSTUM_PRIMARY, RP_FRUSTUM_SHADOW, RP_FRUSTUM_SECONDARY,
+static const char *ray_names[RAY_TYPES] __attribute__((unused)) = {"primary", "shadow", "reflection", "refraction"};
+static const rp_frustum_kind ray_frustum[RAY_TYPES] __attribute__((unused)) = {RP_FRUSTUM_PRIMARY, RP_FRUSTUM_SHADOW, RP_FRUSTUM_SECONDARY,
                                                        RP_FRUSTUM_SECONDARY};
 static const rp_traversal modes[] = {RP_TRAVERSAL_MASKED, RP_TRAVERSAL_RANGED, RP_TRAVERSAL_PARTITION,
                                      RP_TRAVERSAL_SPAN,   RP_TRAVERSAL_AUTO,   RP_TRAVERSAL_SINGLE,

@@ -20,12 +20,14 @@ static void widen(float lo[2], float hi[2], float abs_margin) {
 }
 
 /* Side planes between rectangle (lo0, hi0) at s p_k = k0 and (lo1, hi1) at s p_k = k1: a ray inside
- * both rectangles stays inside the planes between them, where all geometry lies. */
-static void set_planes(frustum *f, int k, float s, float k0, float k1, const float lo0[2], const float hi0[2],
-                       const float lo1[2], const float hi1[2], float scale) {
+ * both rectangles stays inside the planes between them, where all geometry lies. In double: the
+ * rectangles of an apex frustum differ by slopes much smaller than the ulp of the apex's
+ * coordinates, which a float rectangle at distance 1 from the apex would round away. */
+static void set_planes(frustum *f, int k, float s, double k0, double k1, const double lo0[2], const double hi0[2],
+                       const double lo1[2], const double hi1[2], float scale) {
     int ax[2];
     frustum_axes(k, &ax[0], &ax[1]);
-    double D = (double)k1 - (double)k0, K0 = (double)s * k0; /* K0: the plane's coordinate */
+    double D = k1 - k0, K0 = (double)s * k0; /* K0: the plane's coordinate */
     int pi = 0;
     for (int a = 0; a < 2; a++) {
         for (int side = 0; side < 2; side++) {
@@ -55,11 +57,12 @@ void frustum_apex(frustum *f, const float apex[3], int k, float s, const float l
     widen(slo, shi, WIDEN_ABS * (1.0f + amax));
     /* the apex, widened in world units for the rounding of ray origins; the far rectangle is the
      * widened apex plus the slopes, so the widening moves each plane outward at every distance */
-    float lo0[2] = {apex[iu], apex[iv]}, hi0[2] = {apex[iu], apex[iv]};
-    widen(lo0, hi0, WIDEN_ABS * scale);
-    float lo1[2] = {lo0[0] + slo[0], lo0[1] + slo[1]}, hi1[2] = {hi0[0] + shi[0], hi0[1] + shi[1]};
-    float k0 = s * apex[k];
-    set_planes(f, k, s, k0, k0 + 1.0f, lo0, hi0, lo1, hi1, scale);
+    float wlo[2] = {apex[iu], apex[iv]}, whi[2] = {apex[iu], apex[iv]};
+    widen(wlo, whi, WIDEN_ABS * scale);
+    double lo0[2] = {wlo[0], wlo[1]}, hi0[2] = {whi[0], whi[1]};
+    double lo1[2] = {lo0[0] + slo[0], lo0[1] + slo[1]}, hi1[2] = {hi0[0] + shi[0], hi0[1] + shi[1]};
+    double k0 = (double)s * apex[k];
+    set_planes(f, k, s, k0, k0 + 1.0, lo0, hi0, lo1, hi1, scale);
     f->cone = true;
     memcpy(f->apex, apex, sizeof f->apex);
 }
@@ -69,7 +72,8 @@ void frustum_near_far(frustum *f, int k, float s, float k0, float k1, const floa
     float a0[2] = {lo0[0], lo0[1]}, b0[2] = {hi0[0], hi0[1]}, a1[2] = {lo1[0], lo1[1]}, b1[2] = {hi1[0], hi1[1]};
     widen(a0, b0, WIDEN_ABS * scale);
     widen(a1, b1, WIDEN_ABS * scale);
-    set_planes(f, k, s, k0, k1, a0, b0, a1, b1, scale);
+    const double A0[2] = {a0[0], a0[1]}, B0[2] = {b0[0], b0[1]}, A1[2] = {a1[0], a1[1]}, B1[2] = {b1[0], b1[1]};
+    set_planes(f, k, s, k0, k1, A0, B0, A1, B1, scale);
     f->cone = false;
 }
 

@@ -1,0 +1,289 @@
+// rp-test: labels=core timeout=900
+/* Large packets never lose a hit, whatever the camera and the caller's layout (issue: a frustum
+ * made from the slopes of an 8x8 packet rounded them to the ulp of a far-from-origin apex and
+ * culled the triangle one ray hit). Random cameras on shared scenes, from inside and outside the
+ * scene's bounds, grazing its faces, with fov from 1 to 170 degrees and image widths from 64 to
+ * 8192 (so packets of very narrow and very wide spread); an n x n block of the image at a random
+ * place, its rays sometimes shuffled inside the packet and some dead; shadow packets from its hits
+ * toward a random light; reflection packets off the hit surfaces. Every traversal x packet size x
+ * frustum setting, closest hit and any hit, ray by ray against rp_intersect1 / rp_occluded1.
+ *
+ * Every ISA's kernels (the best with all cameras, the others with a quarter).
+ * `test_packets_random --long [CAMERAS]` runs many more cameras (default 4000 per scene) with
+ * seeds after the CI list; `--seed S` runs one. */
+#include <math.h>
+
+#include "raypack.h"
+#include "raypack_io.h"
+#include "rp_test.h"
+#include "sys/sys.h"
+
+#include "packets_n_gen.h"
+
+/* splitmix64: a seed per (scene, camera), so any failure is replayed by its seed alone. */
+static uint64_t rng_next(uint64_t *s) {
+    uint64_t z = (*s += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+static float rng_float(uint64_t *s) { return (float)(rng_next(s) >> 40) * (1.0f / 16777216.0f); }
+static uint32_t rng_below(uint64_t *s, uint32_t n) { return (uint32_t)(rng_next(s) % n); }
+
+typedef struct cam {
+    float eye[3], f[3], r[3], u[3], th;
+    int width, height;
+} cam;
+
+static void rand_dir(uint64_t *s, float d[3]) {
+    float z = 2.0f * rng_float(s) - 1.0f, a = 6.2831853f * rng_float(s), q = sqrtf(fmaxf(0.0f, 1.0f - z * z));
+    d[0] = q * cosf(a), d[1] = q * sinf(a), d[2] = z;
+}
+
+/* A camera of one of four kinds: outside the bounds looking in, inside looking anywhere, grazing a
+ * face of the bounds, or far away with a tiny fov. */
+static void rand_camera(const world *w, uint64_t *s, cam *c) {
+    float ext[3], mid[3], diag = 0.0f;
+    for (int a = 0; a < 3; a++) {
+        ext[a] = w->hi[a] - w->lo[a], mid[a] = 0.5f * (w->lo[a] + w->hi[a]);
+        diag += ext[a] * ext[a];
+    }
+    diag = sqrtf(diag);
+    float look[3], fov;
+    uint32_t kind = rng_below(s, 4);
+    for (int a = 0; a < 3; a++) look[a] = w->lo[a] + rng_float(s) * ext[a];
+    if (kind == 0) { /* outside, looking at a point inside */
+        float d[3];
+        rand_dir(s, d);
+        float dist = diag * (0.6f + 2.4f * rng_float(s));
+        for (int a = 0; a < 3; a++) c->eye[a] = mid[a] + dist * d[a];
+        fov = 5.0f + 115.0f * rng_float(s);
+    } else if (kind == 1) { /* inside, any direction */
+        float d[3];
+        rand_dir(s, d);
+        for (int a = 0; a < 3; a++) c->eye[a] = w->lo[a] + rng_float(s) * ext[a], look[a] = c->eye[a] + d[a];
+        fov = 1.0f + 169.0f * rng_float(s);
+    } else if (kind == 2) { /* grazing: just off a face of the bounds, looking along it */
+        int ax = (int)rng_below(s, 3), side = (int)rng_below(s, 2);
+        for (int a = 0; a < 3; a++) c->eye[a] = w->lo[a] + rng_float(s) * ext[a];
+        float off = ext[ax] * (rng_float(s) - 0.5f) * 0.02f;
+        c->eye[ax] = (side ? w->hi[ax] : w->lo[ax]) + off;
+        for (int a = 0; a < 3; a++) look[a] = w->lo[a] + rng_float(s) * ext[a];
+        look[ax] = c->eye[ax] + (rng_float(s) - 0.5f) * 0.02f * ext[ax];
+        fov = 10.0f + 160.0f * rng_float(s);
+    } else { /* far away, narrow */
+        float d[3];
+        rand_dir(s, d);
+        float dist = diag * (2.0f + 8.0f * rng_float(s));
+        for (int a = 0; a < 3; a++) c->eye[a] = mid[a] + dist * d[a];
+        fov = 1.0f + 9.0f * rng_float(s);
+    }
+    float up[3];
+    do {
+        rand_dir(s, up);
+        if (rng_below(s, 2)) up[0] = 0, up[1] = 1, up[2] = 0;
+        for (int a = 0; a < 3; a++) c->f[a] = look[a] - c->eye[a];
+        normalize(c->f);
+        cross(c->f, up, c->r);
+    } while (!(dot(c->r, c->r) > 1e-4f));
+    normalize(c->r);
+    cross(c->r, c->f, c->u);
+    c->th = tanf(fov * 0.5f * 3.14159265f / 180.0f);
+    static const int widths[] = {64, 256, 640, 1024, 2048, 8192};
+    c->width = widths[rng_below(s, 6)];
+    c->height = (int)((float)c->width * (0.5f + rng_float(s)));
+    if (c->height < 32) c->height = 32;
+}
+
+/* DESIGN.md's primary ray of pixel (x, y) + jitter. */
+static void cam_ray(const cam *c, int x, int y, float jx, float jy, rp_ray *r) {
+    float sx = (2.0f * ((float)x + jx) / (float)c->width - 1.0f) * c->th * ((float)c->width / (float)c->height);
+    float sy = (1.0f - 2.0f * ((float)y + jy) / (float)c->height) * c->th;
+    float d[3];
+    for (int a = 0; a < 3; a++) d[a] = c->f[a] + sx * c->r[a] + sy * c->u[a];
+    normalize(d);
+    *r = (rp_ray){.org_x = c->eye[0], .org_y = c->eye[1], .org_z = c->eye[2], .tnear = 0.0f, .dir_x = d[0],
+                  .dir_y = d[1], .dir_z = d[2], .tfar = INFINITY, .mask = 0xFFFFFFFFu};
+}
+
+typedef struct stats {
+    uint64_t rays, hits, bad, cameras;
+} stats;
+
+/* Traces rays[0 .. n*n) (slot q of the packet holds rays[q]) with every traversal and frustum
+ * setting; counts the rays whose answer differs from the single-ray one. */
+static void trace_all(rp_device *dev, rp_scene *scene, const test_ray *rays, uint32_t n, rp_frustum_kind fk,
+                      const float point[3], const char *what, uint64_t seed, stats *st) {
+    rp_rayhit_n p;
+    if (!rp_rayhit_n_alloc(dev, n, &p)) {
+        CHECK(!"packet allocates");
+        return;
+    }
+    uint32_t count = n * n;
+    int32_t *valid = malloc(sizeof(int32_t) * count);
+    for (uint32_t q = 0; q < count; q++) valid[q] = rays[q].live ? -1 : 0;
+    p.valid = valid;
+    rp_auto_tally tally;
+    memset(&tally, 0, sizeof tally);
+    for (size_t m = 0; m < sizeof modes / sizeof modes[0]; m++)
+        for (int fr = 0; fr < 2; fr++)
+            for (int occ = 0; occ < 2; occ++) {
+                rp_query_n_desc d = {.traversal = modes[m], .frustum = fr ? fk : RP_FRUSTUM_NONE,
+                                     .tally = modes[m] == RP_TRAVERSAL_AUTO && occ ? &tally : NULL};
+                if (point) memcpy(d.point, point, sizeof d.point);
+                for (uint32_t q = 0; q < count; q++) {
+                    const rp_ray *r = &rays[q].ray;
+                    p.org_x[q] = r->org_x, p.org_y[q] = r->org_y, p.org_z[q] = r->org_z;
+                    p.dir_x[q] = r->dir_x, p.dir_y[q] = r->dir_y, p.dir_z[q] = r->dir_z;
+                    p.tnear[q] = r->tnear, p.tfar[q] = rays[q].live ? r->tfar : 42.0f;
+                    p.geom_id[q] = RP_INVALID_ID, p.prim_id[q] = 777u;
+                }
+                if (occ) rp_occluded_n(scene, &d, &p);
+                else rp_intersect_n(scene, &d, &p);
+                uint32_t bad = 0, first = UINT32_MAX;
+                for (uint32_t q = 0; q < count; q++) {
+                    const test_ray *t = &rays[q];
+                    bool wrong;
+                    if (!t->live) wrong = p.tfar[q] != 42.0f || p.geom_id[q] != RP_INVALID_ID;
+                    else if (occ) wrong = (p.tfar[q] == -INFINITY) != t->occluded;
+                    else wrong = p.geom_id[q] != t->ref.hit.geom_id ||
+                                 (t->ref.hit.geom_id != RP_INVALID_ID &&
+                                  (p.prim_id[q] != t->ref.hit.prim_id || p.tfar[q] != t->ref.ray.tfar ||
+                                   p.u[q] != t->ref.hit.u || p.v[q] != t->ref.hit.v));
+                    if (wrong && first == UINT32_MAX) first = q;
+                    bad += wrong;
+                }
+                if (m == 0 && !fr && !occ) st->rays += count;
+                st->bad += bad;
+                CHECKF(bad == 0,
+                       "seed %llu: %s %ux%u %s, frustum %s, %s: %u of %u rays differ from single rays (first: slot %u, "
+                       "ref geom %u prim %u t %.9g)",
+                       (unsigned long long)seed, what, n, n, mode_names[m], fr ? "on" : "off",
+                       occ ? "occluded" : "intersect", bad, count, first, rays[first].ref.hit.geom_id,
+                       rays[first].ref.hit.prim_id, (double)rays[first].ref.ray.tfar);
+            }
+    free(valid);
+    rp_rayhit_n_free(dev, &p);
+}
+
+/* One random camera: a primary packet, then shadow and reflection packets from its hits. */
+static void check_camera(rp_device *dev, rp_scene *scene, const world *w, uint64_t seed, stats *st) {
+    uint64_t s = seed;
+    cam c;
+    rand_camera(w, &s, &c);
+    static const uint32_t sizes[] = {4, 8, 16, 32};
+    uint32_t n = sizes[rng_below(&s, 4)];
+    if ((int)n > c.width) n = 4;
+    int x0 = (int)rng_below(&s, (uint32_t)(c.width - (int)n + 1)), y0 = (int)rng_below(&s, (uint32_t)(c.height - (int)n + 1));
+    bool jitter = rng_below(&s, 3) == 0, shuffle = rng_below(&s, 3) == 0, dead = rng_below(&s, 2) == 0;
+    uint32_t count = n * n;
+    test_ray *prim = calloc(count, sizeof *prim), *sec = calloc(count, sizeof *sec);
+    uint32_t *perm = malloc(sizeof(uint32_t) * count);
+    for (uint32_t q = 0; q < count; q++) perm[q] = q;
+    if (shuffle)
+        for (uint32_t q = count - 1; q > 0; q--) {
+            uint32_t j = rng_below(&s, q + 1), t = perm[q];
+            perm[q] = perm[j], perm[j] = t;
+        }
+    /* slot perm[q] holds the ray of the block's pixel q (its Morton position when not shuffled) */
+    for (uint32_t y = 0; y < n; y++)
+        for (uint32_t x = 0; x < n; x++) {
+            uint32_t q = perm[rp_packet_n_index(n, x, y)];
+            test_ray *t = &prim[q];
+            float jx = jitter ? rng_float(&s) : 0.5f, jy = jitter ? rng_float(&s) : 0.5f;
+            cam_ray(&c, x0 + (int)x, y0 + (int)y, jx, jy, &t->ray);
+            t->live = !dead || rng_below(&s, 8) != 0;
+            if (t->live) reference(scene, t);
+        }
+    trace_all(dev, scene, prim, n, RP_FRUSTUM_PRIMARY, NULL, "primary", seed, st);
+    float diag = 0.0f, light[3];
+    for (int a = 0; a < 3; a++) diag += (w->hi[a] - w->lo[a]) * (w->hi[a] - w->lo[a]);
+    diag = sqrtf(diag);
+    for (int a = 0; a < 3; a++) light[a] = w->lo[a] + (w->hi[a] - w->lo[a]) * (1.4f * rng_float(&s) - 0.2f);
+    for (int kind = 0; kind < 2; kind++) { /* 0: shadow toward the light, 1: mirror reflection */
+        uint32_t live = 0;
+        for (uint32_t q = 0; q < count; q++) {
+            const rp_rayhit *h = &prim[q].ref;
+            test_ray *t = &sec[q];
+            memset(t, 0, sizeof *t);
+            t->live = prim[q].live && h->hit.geom_id != RP_INVALID_ID;
+            float d[3] = {h->ray.dir_x, h->ray.dir_y, h->ray.dir_z};
+            float nrm[3] = {h->hit.Ng_x, h->hit.Ng_y, h->hit.Ng_z};
+            if (t->live && !(dot(nrm, nrm) > 0.0f)) t->live = false;
+            if (!t->live) {
+                t->ray = prim[q].ray;
+                continue;
+            }
+            float pt[3], nd[3];
+            pt[0] = h->ray.org_x + h->ray.tfar * d[0], pt[1] = h->ray.org_y + h->ray.tfar * d[1];
+            pt[2] = h->ray.org_z + h->ray.tfar * d[2];
+            if (kind == 0) {
+                for (int a = 0; a < 3; a++) nd[a] = light[a] - pt[a];
+                t->ray = (rp_ray){.org_x = pt[0], .org_y = pt[1], .org_z = pt[2], .tnear = 1e-4f, .dir_x = nd[0],
+                                  .dir_y = nd[1], .dir_z = nd[2], .tfar = 1.0f - 1e-4f, .mask = 0xFFFFFFFFu};
+            } else {
+                normalize(nrm);
+                float cs = dot(d, nrm);
+                for (int a = 0; a < 3; a++) nd[a] = d[a] - 2.0f * cs * nrm[a];
+                t->ray = (rp_ray){.org_x = pt[0], .org_y = pt[1], .org_z = pt[2], .tnear = 1e-4f * diag,
+                                  .dir_x = nd[0], .dir_y = nd[1], .dir_z = nd[2], .tfar = INFINITY, .mask = 0xFFFFFFFFu};
+            }
+            reference(scene, t);
+            live++;
+        }
+        if (!live) continue;
+        if (kind == 0) trace_all(dev, scene, sec, n, RP_FRUSTUM_SHADOW, light, "shadow", seed, st);
+        else trace_all(dev, scene, sec, n, RP_FRUSTUM_SECONDARY, NULL, "reflection", seed, st);
+    }
+    for (uint32_t q = 0; q < count; q++) st->hits += prim[q].live && prim[q].ref.hit.geom_id != RP_INVALID_ID;
+    st->cameras++;
+    free(perm);
+    free(prim);
+    free(sec);
+}
+
+int main(int argc, char **argv) {
+    int cameras = rp_test_sanitized() ? 150 : 1500; /* per scene, in CI (release: about 10 s) */
+    uint64_t first = 1, only = 0;
+    for (int i = 1; i < argc; i++) {
+        if (strcmp(argv[i], "--long") == 0) {
+            cameras = i + 1 < argc && argv[i + 1][0] != '-' ? atoi(argv[++i]) : 4000;
+            first = 1000000; /* past the CI list */
+        } else if (strcmp(argv[i], "--seed") == 0 && i + 1 < argc) {
+            only = strtoull(argv[++i], NULL, 10);
+        }
+    }
+    static const char *files[] = {"conference_geom.obj.gz", "bart_kitchen.tar.gz", "cornell_box/cornell_box.obj", "cornell_original/CornellBox-Original.obj",
+                                  "stanford_bunny_bun_zipper.ply.gz", "spd_rings_s5.nff.gz"};
+    for (size_t f = 0; f < sizeof files / sizeof files[0]; f++) {
+        world w;
+        if (!load_world(files[f], files[f], &w)) {
+            CHECKF(0, "%s loads", files[f]);
+            continue;
+        }
+        /* every ISA's kernels: the best with all the cameras, the others with a quarter */
+        static const int isas[] = {16, 8, 4, 1};
+        for (size_t ii = 0; ii < sizeof isas / sizeof isas[0]; ii++) {
+            if (isas[ii] > sys_cpu_simd_width()) continue;
+            int n_cams = isas[ii] == sys_cpu_simd_width() ? cameras : cameras / 4;
+            rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 1, .isa = isas[ii]});
+            rp_scene *scene = make_scene(dev, &w.sd);
+            stats st = {0};
+            for (int c = 0; c < n_cams; c++) {
+                uint64_t seed = ((uint64_t)f << 40) + first + (uint64_t)c;
+                if (only && seed != only) continue;
+                check_camera(dev, scene, &w, seed, &st);
+            }
+            printf("%-40s %2d-wide %5llu cameras, %8llu rays, %6llu primary hits, %llu wrong answers\n", files[f],
+                   isas[ii], (unsigned long long)st.cameras, (unsigned long long)st.rays, (unsigned long long)st.hits,
+                   (unsigned long long)st.bad);
+            /* the cameras must see the scene, or the test tests nothing */
+            if (!only)
+                CHECKF(st.hits > st.rays / 200, "%s: too few primary hits (%llu)", files[f], (unsigned long long)st.hits);
+            rp_scene_release(scene);
+            rp_device_release(dev);
+        }
+        rp_scene_data_free(&w.sd);
+    }
+    return RP_TEST_END();
+}

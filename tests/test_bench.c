@@ -326,9 +326,22 @@ static void check_vs_json(const jvalue *root, const char *what) {
         CHECKF(json_num(rp, "mrays_min") <= json_num(rp, "mrays_max"), "%s: rays.%s min <= max", what,
                kinds[k]);
         const jvalue *all = json_get(r, "embree_all");
-        CHECKF(json_num(all, k == 1 ? "rtcOccluded1" : "rtcIntersect1") >= 0 &&
-                   json_num(all, k == 1 ? "rtcOccluded16" : "rtcIntersect16") >= 0,
-               "%s: rays.%s.embree_all", what, kinds[k]);
+        /* every Embree API with both context flags on every set (DESIGN.md: Embree at its best) */
+        static const char *apis[] = {"1", "4", "8", "16", "1M"}, *flags[] = {"coherent", "incoherent"};
+        for (int a = 0; a < 5; a++)
+            for (int fl = 0; fl < 2; fl++) {
+                char key[64];
+                snprintf(key, sizeof key, "%s%s/%s", k == 1 ? "rtcOccluded" : "rtcIntersect", apis[a], flags[fl]);
+                CHECKF(json_num(all, key) >= 0, "%s: rays.%s.embree_all.%s", what, kinds[k], key);
+            }
+        const jvalue *ef = json_get(emb, "flags"), *em = json_get(emb, "mode"), *ea = json_get(emb, "api");
+        CHECKF(ef && ef->type == J_STRING && (strcmp(ef->string, "coherent") == 0 || strcmp(ef->string, "incoherent") == 0),
+               "%s: rays.%s.embree.flags", what, kinds[k]);
+        if (ef && em && ea && ef->type == J_STRING && em->type == J_STRING && ea->type == J_STRING) {
+            char key[64];
+            snprintf(key, sizeof key, "%s/%s", ea->string, ef->string);
+            CHECKF(strcmp(key, em->string) == 0, "%s: rays.%s.embree.mode is api/flags", what, kinds[k]);
+        }
         CHECKF(json_num(r, "ratio") >= 0, "%s: rays.%s.ratio", what, kinds[k]);
         /* the best modes timed with the engines' calls skipped */
         const jvalue *h = json_get(r, "harness");
@@ -338,7 +351,7 @@ static void check_vs_json(const jvalue *root, const char *what) {
                "%s: rays.%s.harness", what, kinds[k]);
         CHECKF(json_num(h, "tracing_ratio") >= 0, "%s: rays.%s.harness.tracing_ratio", what, kinds[k]);
         /* each engine's best is the faster of its two finalists, timed `repeats` times */
-        const char *fin[2] = {"raypack_finalists", "embree_finalists"}, *name[2] = {"mode", "api"};
+        const char *fin[2] = {"raypack_finalists", "embree_finalists"}, *name[2] = {"mode", "mode"};
         const jvalue *best[2] = {rp, emb};
         for (int e = 0; e < 2; e++) {
             const jvalue *fv = json_get(r, fin[e]), *bn = json_get(best[e], name[e]);

@@ -772,7 +772,6 @@ bool bench_rays_alloc(bench_rays *set, bench_kind kind, int width, int height) {
     memset(set, 0, sizeof *set);
     set->kind = kind;
     set->occlusion = kind == BENCH_SHADOW;
-    set->coherent = kind == BENCH_PRIMARY || kind == BENCH_SHADOW;
     set->slots = blocks * BENCH_CHUNK;
     set->rays = alloc_aligned(set->slots * sizeof(bench_ray));
     set->valid = alloc_aligned(set->slots * sizeof(int32_t));

@@ -79,7 +79,6 @@ typedef struct bench_ray {
 typedef struct bench_rays {
     bench_kind kind;
     bool occlusion;          /* shadow rays: any hit */
-    bool coherent;           /* primary and shadow rays: packets get the coherent hints */
     size_t slots;            /* a multiple of BENCH_CHUNK */
     size_t count;            /* valid slots */
     bench_ray *rays;         /* slots */

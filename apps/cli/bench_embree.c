@@ -15,7 +15,7 @@
 
 /* Builds of each kind whose median is reported. */
 #define EMB_BUILD_REPEATS 5
-#define EMB_MAX_MODES 8
+#define EMB_MAX_MODES 12
 #define EMB_SCREEN 2    /* screening passes per mode */
 #define EMB_FINALISTS 2 /* modes per engine timed `repeats` times */
 /* More mismatching rays than 1 in this many fails the run. */
@@ -242,23 +242,39 @@ static void emb_trace_stream(void *engine, const bench_rays *set, size_t first, 
     }
 }
 
-/* Embree's APIs for a set: rtcIntersect1 first (the reference), then the packet sizes and the
- * stream call; occlusion sets get the rtcOccluded versions. */
-static int emb_modes(emb_engine *engine, bool occlusion, bench_mode *modes) {
-    const bench_mode all[] = {
-        {occlusion ? "rtcOccluded1" : "rtcIntersect1",
-         occlusion ? emb_trace_occluded1 : emb_trace_intersect1, engine},
-        {occlusion ? "rtcOccluded4" : "rtcIntersect4",
-         occlusion ? emb_trace_occluded4 : emb_trace_intersect4, engine},
-        {occlusion ? "rtcOccluded8" : "rtcIntersect8",
-         occlusion ? emb_trace_occluded8 : emb_trace_intersect8, engine},
-        {occlusion ? "rtcOccluded16" : "rtcIntersect16",
-         occlusion ? emb_trace_occluded16 : emb_trace_intersect16, engine},
-        {occlusion ? "rtcOccluded1M" : "rtcIntersect1M", emb_trace_stream, engine},
-    };
-    int n = (int)(sizeof all / sizeof all[0]);
-    for (int i = 0; i < n; i++) modes[i] = all[i];
+/* Embree's APIs for a set, each with both context flags (DESIGN.md: Embree at its best on every
+ * set; COHERENT makes its packets several times faster on reflections off flat mirrors too):
+ * rtcIntersect1 first (the reference), then the packet sizes and the stream call; occlusion sets
+ * get the rtcOccluded versions. engines[0] has the COHERENT flag, engines[1] INCOHERENT; a mode's
+ * name is the API, '/', and the flag. */
+static int emb_modes(emb_engine engines[2], bool occlusion, bench_mode *modes) {
+    static const char *names[2][2][5] = {
+        {{"rtcIntersect1/coherent", "rtcIntersect4/coherent", "rtcIntersect8/coherent", "rtcIntersect16/coherent",
+          "rtcIntersect1M/coherent"},
+         {"rtcIntersect1/incoherent", "rtcIntersect4/incoherent", "rtcIntersect8/incoherent",
+          "rtcIntersect16/incoherent", "rtcIntersect1M/incoherent"}},
+        {{"rtcOccluded1/coherent", "rtcOccluded4/coherent", "rtcOccluded8/coherent", "rtcOccluded16/coherent",
+          "rtcOccluded1M/coherent"},
+         {"rtcOccluded1/incoherent", "rtcOccluded4/incoherent", "rtcOccluded8/incoherent",
+          "rtcOccluded16/incoherent", "rtcOccluded1M/incoherent"}}};
+    const bench_trace_fn fns[5] = {occlusion ? emb_trace_occluded1 : emb_trace_intersect1,
+                                   occlusion ? emb_trace_occluded4 : emb_trace_intersect4,
+                                   occlusion ? emb_trace_occluded8 : emb_trace_intersect8,
+                                   occlusion ? emb_trace_occluded16 : emb_trace_intersect16, emb_trace_stream};
+    int n = 0;
+    for (int api = 0; api < 5; api++)
+        for (int fl = 0; fl < 2; fl++) modes[n++] = (bench_mode){names[occlusion][fl][api], fns[api], &engines[fl]};
     return n;
+}
+
+/* The API part of an Embree mode's name into buf, and its flag ("coherent" or "incoherent"). */
+static const char *emb_api(const char *mode, char *buf, size_t size) {
+    const char *slash = strchr(mode, '/');
+    size_t len = slash ? (size_t)(slash - mode) : strlen(mode);
+    if (len >= size) len = size - 1;
+    memcpy(buf, mode, len);
+    buf[len] = 0;
+    return slash ? slash + 1 : "";
 }
 
 /* Results of one ray set. */
@@ -271,7 +287,7 @@ typedef struct emb_set_result {
     int rp_best, emb_best;
     bool rp_final[EMB_MAX_MODES], emb_final[EMB_MAX_MODES]; /* timed `repeats` times */
     bench_stat rp_harness, emb_harness; /* the best modes with bench_harness_only */
-    emb_engine engine;
+    emb_engine engines[2]; /* COHERENT, INCOHERENT */
 } emb_set_result;
 
 /* Embree's tracing time per ray over raypack's, each mode's harness time taken out of its
@@ -376,7 +392,10 @@ static bool emb_write_json(const bench_ctx *ctx, const emb_build_result *b,
                 r->emb_diff[0].ties);
         fprintf(f, "   \"raypack\": {\"mode\": \"%s\", ", r->rp_modes[r->rp_best].name);
         write_stat(f, r->rp_stat[r->rp_best]);
-        fprintf(f, "},\n   \"embree\": {\"api\": \"%s\", ", r->emb_modes[r->emb_best].name);
+        char api[32];
+        const char *flags = emb_api(r->emb_modes[r->emb_best].name, api, sizeof api);
+        fprintf(f, "},\n   \"embree\": {\"api\": \"%s\", \"flags\": \"%s\", \"mode\": \"%s\", ", api, flags,
+                r->emb_modes[r->emb_best].name);
         write_stat(f, r->emb_stat[r->emb_best]);
         fprintf(f, "},\n   \"raypack_all\": {");
         for (int m = 0; m < r->rp_count; m++)
@@ -419,16 +438,16 @@ static void emb_print(const bench_ctx *ctx, const emb_build_result *b, const emb
     printf("%-24s %10.2f %10.2f\n", "embree (high)", b->emb_hq_ms, (double)b->emb_hq_bytes / mib);
     printf("(median of %d builds each; traced: raypack default, embree medium)\n\n", EMB_BUILD_REPEATS);
 
-    printf("%-11s %-8s %-17s %28s\n", "rays", "engine", "mode", "Mrays/s median (min - max)");
+    printf("%-11s %-8s %-25s %28s\n", "rays", "engine", "mode", "Mrays/s median (min - max)");
     for (int k = 0; k < BENCH_KIND_COUNT; k++) {
         const emb_set_result *r = &res[k];
         for (int m = 0; m < r->rp_count; m++)
-            printf("%-11s %-8s %-17s %10.2f (%7.2f - %7.2f)%s\n",
+            printf("%-11s %-8s %-25s %10.2f (%7.2f - %7.2f)%s\n",
                    m == 0 ? bench_kind_name((bench_kind)k) : "", "raypack", r->rp_modes[m].name,
                    r->rp_stat[m].median, r->rp_stat[m].min, r->rp_stat[m].max,
                    m == r->rp_best ? "  *" : r->rp_final[m] ? "  +" : "");
         for (int m = 0; m < r->emb_count; m++)
-            printf("%-11s %-8s %-17s %10.2f (%7.2f - %7.2f)%s   mismatches %zu\n", "", "embree",
+            printf("%-11s %-8s %-25s %10.2f (%7.2f - %7.2f)%s   mismatches %zu\n", "", "embree",
                    r->emb_modes[m].name, r->emb_stat[m].median, r->emb_stat[m].min,
                    r->emb_stat[m].max, m == r->emb_best ? "  *" : r->emb_final[m] ? "  +" : "   ",
                    r->emb_diff[m].total);
@@ -437,12 +456,12 @@ static void emb_print(const bench_ctx *ctx, const emb_build_result *b, const emb
            "engine's; the rest: %d screening passes)\n",
            ctx->opts.repeats, EMB_SCREEN);
 
-    printf("\n%-11s %9s %10s  %-16s %8s  %-15s %8s  %6s\n", "rays", "count", "mismatch",
+    printf("\n%-11s %9s %10s  %-16s %8s  %-25s %8s  %6s\n", "rays", "count", "mismatch",
            "raypack best", "Mrays/s", "embree best", "Mrays/s", "ratio");
     for (int k = 0; k < BENCH_KIND_COUNT; k++) {
         const emb_set_result *r = &res[k];
         double e = r->emb_stat[r->emb_best].median, p = r->rp_stat[r->rp_best].median;
-        printf("%-11s %9zu %10zu  %-16s %8.2f  %-15s %8.2f  %6.3f\n", bench_kind_name((bench_kind)k),
+        printf("%-11s %9zu %10zu  %-16s %8.2f  %-25s %8.2f  %6.3f\n", bench_kind_name((bench_kind)k),
                ctx->sets[k].count, r->mismatches, r->rp_modes[r->rp_best].name, p,
                r->emb_modes[r->emb_best].name, e, e > 0.0 ? p / e : 0.0);
     }
@@ -492,11 +511,10 @@ int bench_vs_embree(bench_ctx *ctx) {
     for (int k = 0; k < BENCH_KIND_COUNT; k++) {
         const bench_rays *set = &ctx->sets[k];
         emb_set_result *r = &res[k];
-        r->engine.scene = emb_scene;
-        r->engine.flags = set->coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT
-                                        : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+        r->engines[0] = (emb_engine){emb_scene, RTC_INTERSECT_CONTEXT_FLAG_COHERENT};
+        r->engines[1] = (emb_engine){emb_scene, RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT};
         r->rp_count = bench_raypack_modes(ctx, set, r->rp_modes, EMB_MAX_MODES);
-        r->emb_count = emb_modes(&r->engine, set->occlusion, r->emb_modes);
+        r->emb_count = emb_modes(r->engines, set->occlusion, r->emb_modes);
         for (int m = 1; m < r->rp_count; m++) {
             bench_trace_set(ctx, ctx->opts.threads, &r->rp_modes[m], set, &hits);
             bench_diff d = bench_compare(&ctx->mesh, set, &ctx->ref[k], &hits);

@@ -321,8 +321,11 @@ typedef enum rp_traversal {
     RP_TRAVERSAL_PARTITION = 3, /* ray index list partitioned in place (sec. 3.3) */
     RP_TRAVERSAL_SINGLE = 4,    /* every ray on its own, as rp_intersect1 */
     RP_TRAVERSAL_SIMD = 5,      /* every SIMD ray (4, 8 or 16 rays, the device's width) on its own */
-    RP_TRAVERSAL_SPAN = 6       /* Ranged narrowed from both ends, leaves tested on the rays that hit
+    RP_TRAVERSAL_SPAN = 6,      /* Ranged narrowed from both ends, leaves tested on the rays that hit
                                    their box (beyond the paper; auto's choice for coherent packets) */
+    RP_TRAVERSAL_MLRT = 7       /* multi-level ray tracing (Reshetov et al. 2005): the packet's frustum,
+                                   then its quadrants', find the deepest node each must start from;
+                                   Span from there. Needs a frustum kind; without one it is Span */
 } rp_traversal;
 
 /* Which bounding frustum culls boxes and triangles (sec. 4); the frustum is always conservative. */
@@ -341,8 +344,11 @@ typedef struct rp_counters_n {
     uint64_t tri_tests;                   /* SIMD ray - triangle tests */
     uint64_t frustum_box_tests, frustum_box_culls;
     uint64_t frustum_tri_tests, frustum_tri_culls;
-    uint64_t traversal[6];                /* packets traced by auto, masked, ranged, partition, span,
-                                             SIMD rays (auto, incoherent packets) */
+    uint64_t traversal[7];                /* packets traced by auto, masked, ranged, partition, span,
+                                             SIMD rays (auto, incoherent packets), mlrt */
+    uint64_t mlrt_entries;                /* mlrt: sub-packets started at an entry point */
+    uint64_t mlrt_rays_below_root;        /* ... their live rays whose entry point is not the root */
+    uint64_t mlrt_entry_depth;            /* ... the entry points' depths, summed over those rays */
     uint64_t box_tests_depth[RP_COUNTERS_N_DEPTH]; /* box_tests by depth of the box (root: 0) */
     uint64_t tri_tests_depth[RP_COUNTERS_N_DEPTH]; /* tri_tests by depth of the leaf */
 } rp_counters_n;

@@ -18,8 +18,8 @@ static const rp_frustum_kind ray_frustum[RAY_TYPES] __attribute__((unused)) = {R
                                                        RP_FRUSTUM_SECONDARY};
 static const rp_traversal modes[] = {RP_TRAVERSAL_MASKED, RP_TRAVERSAL_RANGED, RP_TRAVERSAL_PARTITION,
                                      RP_TRAVERSAL_SPAN,   RP_TRAVERSAL_AUTO,   RP_TRAVERSAL_SINGLE,
-                                     RP_TRAVERSAL_SIMD};
-static const char *mode_names[] = {"masked", "ranged", "partition", "span", "auto", "single", "simd"};
+                                     RP_TRAVERSAL_SIMD,   RP_TRAVERSAL_MLRT};
+static const char *mode_names[] = {"masked", "ranged", "partition", "span", "auto", "single", "simd", "mlrt"};
 
 /* One ray of the image, with its single-ray reference answers. */
 typedef struct test_ray {

@@ -242,6 +242,92 @@ static void check_camera(rp_device *dev, rp_scene *scene, const world *w, uint64
     free(sec);
 }
 
+/* Traces one 32x32 primary packet of camera c (pixels 496..527 of its 1024x1024 image) with MLRT
+ * and returns its counters and hits. */
+static rp_counters_n mlrt_packet(rp_scene *scene, rp_rayhit_n *p, const cam *c, uint32_t *hits) {
+    for (uint32_t y = 0; y < 32; y++)
+        for (uint32_t x = 0; x < 32; x++) {
+            rp_ray r;
+            cam_ray(c, 496 + (int)x, 496 + (int)y, 0.5f, 0.5f, &r);
+            uint32_t q = rp_packet_n_index(32, x, y);
+            p->org_x[q] = r.org_x, p->org_y[q] = r.org_y, p->org_z[q] = r.org_z;
+            p->dir_x[q] = r.dir_x, p->dir_y[q] = r.dir_y, p->dir_z[q] = r.dir_z;
+            p->tnear[q] = 0.0f, p->tfar[q] = INFINITY, p->geom_id[q] = RP_INVALID_ID;
+        }
+    rp_counters_n cn;
+    memset(&cn, 0, sizeof cn);
+    rp_intersect_n(scene,
+                   &(rp_query_n_desc){.traversal = RP_TRAVERSAL_MLRT, .frustum = RP_FRUSTUM_PRIMARY, .counters = &cn},
+                   p);
+    *hits = 0;
+    for (uint32_t q = 0; q < 32 * 32; q++) *hits += p->geom_id[q] != RP_INVALID_ID;
+    return cn;
+}
+
+static void look_at(cam *c, const float eye[3], const float look[3], float fov) {
+    *c = (cam){.width = 1024, .height = 1024};
+    for (int a = 0; a < 3; a++) c->eye[a] = eye[a], c->f[a] = look[a] - eye[a];
+    normalize(c->f);
+    float up[3] = {0, 1, 0};
+    if (fabsf(c->f[1]) > 0.9f) up[0] = 1, up[1] = 0;
+    cross(c->f, up, c->r);
+    normalize(c->r);
+    cross(c->r, c->f, c->u);
+    c->th = tanf(0.5f * fov * 3.14159265f / 180.0f);
+}
+
+/* MLRT's entry points: over a 16x16 grid of separate quads seen from above, a narrow packet on one
+ * quad starts all its rays deep below the root (the tree's clusters are what the frustum culls);
+ * a packet aimed away from a shared scene traces nothing at all. */
+static void check_mlrt_entries(const world *w) {
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 1});
+    rp_rayhit_n p;
+    CHECK(rp_rayhit_n_alloc(dev, 32, &p));
+    enum { G = 16 };
+    float pos[G * G * 4 * 3];
+    uint32_t idx[G * G * 6];
+    for (int j = 0; j < G; j++)
+        for (int i = 0; i < G; i++) {
+            int c = j * G + i;
+            const float qx[4] = {0, 1, 1, 0}, qz[4] = {0, 0, 1, 1};
+            for (int v = 0; v < 4; v++) {
+                pos[12 * c + 3 * v + 0] = 10.0f * (float)i + qx[v];
+                pos[12 * c + 3 * v + 1] = 0.0f;
+                pos[12 * c + 3 * v + 2] = 10.0f * (float)j + qz[v];
+            }
+            const uint32_t t[6] = {0, 1, 2, 0, 2, 3};
+            for (int k = 0; k < 6; k++) idx[6 * c + k] = 4u * (uint32_t)c + t[k];
+        }
+    rp_scene *grid = make_scene(dev, &(rp_scene_data){.positions = pos, .vertex_count = G * G * 4, .indices = idx,
+                                                      .triangle_count = G * G * 2});
+    cam c;
+    look_at(&c, (float[3]){70.5f, 40.0f, 90.5f}, (float[3]){70.5f, 0.0f, 90.5f}, 2.0f);
+    uint32_t hits;
+    rp_counters_n cn = mlrt_packet(grid, &p, &c, &hits);
+    CHECKF(cn.traversal[6] == 1, "grid: the packet went to MLRT");
+    CHECKF(hits == 1024 && cn.mlrt_rays_below_root == 1024 && cn.mlrt_entry_depth >= 6 * 1024,
+           "grid: MLRT entry points: %llu of 1024 rays below the root, mean depth %.1f (%u hits)",
+           (unsigned long long)cn.mlrt_rays_below_root,
+           cn.mlrt_rays_below_root ? (double)cn.mlrt_entry_depth / (double)cn.mlrt_rays_below_root : 0.0, hits);
+    rp_scene_release(grid);
+    rp_scene *scene = make_scene(dev, &w->sd);
+    float mid[3], diag = 0.0f, eye[3], away[3];
+    for (int a = 0; a < 3; a++) {
+        mid[a] = 0.5f * (w->lo[a] + w->hi[a]);
+        diag += (w->hi[a] - w->lo[a]) * (w->hi[a] - w->lo[a]);
+    }
+    diag = sqrtf(diag);
+    for (int a = 0; a < 3; a++) eye[a] = mid[a] + 2.0f * diag * (a == 0 ? 0.8f : 0.6f * (a == 2)), away[a] = 2 * eye[a] - mid[a];
+    look_at(&c, eye, away, 30.0f);
+    cn = mlrt_packet(scene, &p, &c, &hits);
+    CHECKF(hits == 0 && cn.box_tests == 0 && cn.tri_tests == 0,
+           "%s: a packet aimed away from the scene: %u hits, %llu box and %llu triangle tests", w->name, hits,
+           (unsigned long long)cn.box_tests, (unsigned long long)cn.tri_tests);
+    rp_rayhit_n_free(dev, &p);
+    rp_scene_release(scene);
+    rp_device_release(dev);
+}
+
 int main(int argc, char **argv) {
     int cameras = rp_test_sanitized() ? 150 : 1500; /* per scene, in CI (release: about 10 s) */
     uint64_t first = 1, only = 0;
@@ -261,6 +347,7 @@ int main(int argc, char **argv) {
             CHECKF(0, "%s loads", files[f]);
             continue;
         }
+        if (!only) check_mlrt_entries(&w);
         /* every ISA's kernels: the best with all the cameras, the others with a quarter */
         static const int isas[] = {16, 8, 4, 1};
         for (size_t ii = 0; ii < sizeof isas / sizeof isas[0]; ii++) {

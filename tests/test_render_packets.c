@@ -13,7 +13,7 @@
 
 static const rp_traversal TRAVERSALS[] = {RP_TRAVERSAL_AUTO,      RP_TRAVERSAL_MASKED, RP_TRAVERSAL_RANGED,
                                           RP_TRAVERSAL_PARTITION, RP_TRAVERSAL_SPAN,   RP_TRAVERSAL_SINGLE,
-                                          RP_TRAVERSAL_SIMD};
+                                          RP_TRAVERSAL_SIMD, RP_TRAVERSAL_MLRT};
 static const int PACKETS[] = {4, 8, 16, 32};
 
 static void check_scene(rp_device *dev, const char *name, const rp_scene_data *data, int w, int h) {

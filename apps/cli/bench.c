@@ -608,6 +608,8 @@ int bench_raypack_modes(bench_ctx *ctx, const bench_rays *set, bench_mode *modes
         {"array_incoherent", rp_trace_array_incoherent, scene},
         {"n16_auto_frustum", n_fn, &ne[0]},
         {"n8_auto_frustum", n_fn, &ne[1]},
+        {"n32_mlrt", n_fn, &ne[2]},
+        {"n16_mlrt", n_fn, &ne[3]},
     };
     int n = (int)(sizeof all / sizeof all[0]);
     if (n > max) n = max;
@@ -616,6 +618,8 @@ int bench_raypack_modes(bench_ctx *ctx, const bench_rays *set, bench_mode *modes
         rp_frustum_kind fr = set_frustum(set->kind);
         bench_n_engine_init(&ne[0], scene, 16, RP_TRAVERSAL_AUTO, fr, ctx->light);
         bench_n_engine_init(&ne[1], scene, 8, RP_TRAVERSAL_AUTO, fr, ctx->light);
+        bench_n_engine_init(&ne[2], scene, 32, RP_TRAVERSAL_MLRT, fr, ctx->light);
+        bench_n_engine_init(&ne[3], scene, 16, RP_TRAVERSAL_MLRT, fr, ctx->light);
     }
     for (int i = 0; i < n; i++) modes[i] = all[i];
     return n;

@@ -163,8 +163,9 @@ static inline void bench_block_pixel(uint32_t slot, uint32_t *lx, uint32_t *ly) 
     }
 }
 
-/* Large-packet modes each set gets in bench_raypack_modes: 16x16 and 8x8, auto, frustum on. */
-#define BENCH_N_MODES 2
+/* Large-packet modes each set gets in bench_raypack_modes: 16x16 and 8x8 auto, 32x32 and 16x16
+ * MLRT, frustum on. */
+#define BENCH_N_MODES 4
 
 /* How bench_make_next makes a ray from the hit of its parent. */
 typedef enum bench_next {

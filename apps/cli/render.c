@@ -38,7 +38,9 @@ static void render_usage(FILE *out) {
             "  --traversal NAME       how Whitted's ray packets walk the BVH: auto (per packet, from\n"
             "                         its coherence: span, partition or its SIMD rays alone),\n"
             "                         masked, ranged, partition, span (ranged narrowed from both\n"
-            "                         ends), single (each ray alone) or simd (each SIMD ray alone)\n"
+            "                         ends), single (each ray alone), simd (each SIMD ray alone) or\n"
+            "                         mlrt (multi-level: entry points found by the packets' and\n"
+            "                         their quadrants' frusta, then span; needs --frustum on)\n"
             "                         [auto]; every choice gives the same image\n"
             "  --packet N             Whitted traces packets of N x N rays, N = 4, 8, 16 or 32 [16]\n"
             "  --frustum on|off       cull with the packets' frusta [on]\n"
@@ -81,7 +83,7 @@ static const struct {
 } TRAVERSALS[] = {{"auto", RP_TRAVERSAL_AUTO},           {"masked", RP_TRAVERSAL_MASKED},
                   {"ranged", RP_TRAVERSAL_RANGED},       {"partition", RP_TRAVERSAL_PARTITION},
                   {"span", RP_TRAVERSAL_SPAN},           {"single", RP_TRAVERSAL_SINGLE},
-                  {"simd", RP_TRAVERSAL_SIMD}};
+                  {"simd", RP_TRAVERSAL_SIMD},           {"mlrt", RP_TRAVERSAL_MLRT}};
 
 /* Returns CLI_EXIT_OK when the options parsed, else the exit status. */
 static int parse_options(int argc, char **argv, render_options *o, bool *help) {
@@ -153,8 +155,8 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
                 }
             }
             if (!o->traversal_name) {
-                fprintf(stderr, "raypack render: --traversal expects auto, masked, ranged, partition, span, single "
-                                "or simd, got '%s'\n", v);
+                fprintf(stderr, "raypack render: --traversal expects auto, masked, ranged, partition, span, single, "
+                                "simd or mlrt, got '%s'\n", v);
                 return CLI_EXIT_USAGE;
             }
         } else if (strcmp(a, "--packet") == 0) {
@@ -341,6 +343,15 @@ static void print_work(const rp_render_stats *rs) {
         printf("auto     %-10s %9llu packets: span %llu, partition %llu, SIMD rays alone %llu\n", KIND_NAMES[k],
                (unsigned long long)c->traversal[0], (unsigned long long)c->traversal[4],
                (unsigned long long)c->traversal[3], (unsigned long long)c->traversal[5]);
+    }
+    for (int k = 0; k < RP_RAY_KIND_COUNT; k++) {
+        const rp_counters_n *c = &rs->work[k];
+        if (!c->traversal[6]) continue;
+        uint64_t rays = c->rays ? c->rays : 1, below = c->mlrt_rays_below_root;
+        printf("mlrt     %-10s %9llu packets, %llu sub-packets from entry points, %.1f%% of rays below the root "
+               "(mean depth %.1f)\n", KIND_NAMES[k], (unsigned long long)c->traversal[6],
+               (unsigned long long)c->mlrt_entries, 100.0 * (double)below / (double)rays,
+               below ? (double)c->mlrt_entry_depth / (double)below : 0.0);
     }
     for (int which = 0; which < 2; which++) {
         printf("%s\n", which ? "tri tests by leaf depth (root 0):" : "box tests by BVH depth (root 0):");

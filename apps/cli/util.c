@@ -101,7 +101,7 @@ rp_device *cli_device_new(const char *cmd, int threads, int isa) {
 }
 
 void cli_json_traversal(FILE *f, const rp_counters_n *c) {
-    static const char *const names[] = {"auto", "masked", "ranged", "partition", "span", "simd"};
+    static const char *const names[] = {"auto", "masked", "ranged", "partition", "span", "simd", "mlrt"};
     fputs("\"traversal\": {", f);
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         fprintf(f, "%s\"%s\": %llu", i ? ", " : "", names[i], (unsigned long long)c->traversal[i]);

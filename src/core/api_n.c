@@ -230,6 +230,7 @@ static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p
     case RP_TRAVERSAL_RANGED: alg = PKT_RANGED; break;
     case RP_TRAVERSAL_PARTITION: alg = PKT_PARTITION; break;
     case RP_TRAVERSAL_SPAN: alg = PKT_SPAN; break;
+    case RP_TRAVERSAL_MLRT: alg = PKT_MLRT; break;
     case RP_TRAVERSAL_AUTO:
     case RP_TRAVERSAL_SINGLE:
     case RP_TRAVERSAL_SIMD: alg = PKT_AUTO; break;

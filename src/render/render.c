@@ -601,6 +601,7 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     case RP_TRAVERSAL_RANGED:
     case RP_TRAVERSAL_PARTITION:
     case RP_TRAVERSAL_SPAN:
+    case RP_TRAVERSAL_MLRT:
     case RP_TRAVERSAL_SINGLE:
     case RP_TRAVERSAL_SIMD:
         break;

@@ -63,6 +63,9 @@ void frustum_apex(frustum *f, const float apex[3], int k, float s, const float l
     double lo1[2] = {lo0[0] + slo[0], lo0[1] + slo[1]}, hi1[2] = {hi0[0] + shi[0], hi0[1] + shi[1]};
     double k0 = (double)s * apex[k];
     set_planes(f, k, s, k0, k0 + 1.0, lo0, hi0, lo1, hi1, scale);
+    /* every ray's points lie on the apex's side of the near plane: primary rays start at the
+     * apex, shadow rays end before it, both facing s along k */
+    f->near_k = k, f->near_s = s, f->near_d = (float)(k0 - (double)WIDEN_ABS * scale);
     f->cone = true;
     memcpy(f->apex, apex, sizeof f->apex);
 }
@@ -74,6 +77,7 @@ void frustum_near_far(frustum *f, int k, float s, float k0, float k1, const floa
     widen(a1, b1, WIDEN_ABS * scale);
     const double A0[2] = {a0[0], a0[1]}, B0[2] = {b0[0], b0[1]}, A1[2] = {a1[0], a1[1]}, B1[2] = {b1[0], b1[1]};
     set_planes(f, k, s, k0, k1, A0, B0, A1, B1, scale);
+    f->near_k = k, f->near_s = s, f->near_d = k0 - WIDEN_ABS * scale; /* k0: the rearmost origin */
     f->cone = false;
 }
 

@@ -21,6 +21,9 @@ typedef struct frustum {
     float n[4][3];    /* plane normals (unit length); inside: n . p + d >= 0 */
     float d[4];
     float tol;        /* a point is outside a plane when n . p + d < -tol */
+    int near_k;       /* the near plane across the dominant axis: every point of every ray has */
+    float near_s;     /* near_s * p[near_k] >= near_d (apex frusta: the apex's plane; near/far */
+    float near_d;     /* frusta: the rearmost origin's); boxes wholly behind it are culled */
 } frustum;
 
 /* What a kernel needs to build a packet's frustum. */
@@ -51,8 +54,10 @@ void frustum_near_far(frustum *f, int k, float s, float k0, float k1, const floa
 /* Fills the scene's part of a request. */
 void frustum_req_init(frustum_req *q, rp_frustum_kind kind, const float point[3], const rp_bounds *scene);
 
-/* True when the box [lo, hi] lies outside one plane of the frustum. */
+/* True when the box [lo, hi] lies outside one plane of the frustum (the near plane included: a
+ * box behind the apex can straddle all four side planes). */
 static inline bool frustum_culls_box(const frustum *f, const float lo[3], const float hi[3]) {
+    if (f->near_s * (f->near_s > 0.0f ? hi[f->near_k] : lo[f->near_k]) < f->near_d - f->tol) return true;
     for (int i = 0; i < 4; i++) {
         const float *n = f->n[i];
         float x = n[0] >= 0.0f ? hi[0] : lo[0];

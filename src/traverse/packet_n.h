@@ -7,9 +7,17 @@
 #include "traverse/traverse.h"
 
 /* The three algorithms of sec. 3, Span (Ranged narrowed from both ends, packet_n.inc), the
- * per-packet choice and auto's way out for incoherent packets (one SIMD ray at a time through the
- * wide BVH, done by the caller), as indices of rp_counters_n.traversal. */
-typedef enum pkt_alg { PKT_AUTO = 0, PKT_MASKED = 1, PKT_RANGED = 2, PKT_PARTITION = 3, PKT_SPAN = 4, PKT_SIMD = 5 } pkt_alg;
+ * per-packet choice, auto's way out for incoherent packets (one SIMD ray at a time through the
+ * wide BVH, done by the caller) and multi-level ray tracing, as indices of rp_counters_n.traversal. */
+typedef enum pkt_alg {
+    PKT_AUTO = 0,
+    PKT_MASKED = 1,
+    PKT_RANGED = 2,
+    PKT_PARTITION = 3,
+    PKT_SPAN = 4,
+    PKT_SIMD = 5,
+    PKT_MLRT = 6 /* entry points found by the packet's frusta, then Span from them (packet_n.inc) */
+} pkt_alg;
 
 /* Auto's classes of packets (kn_prepare); a coherent packet always goes to Span, the others
  * have two ways each, which rp_auto_tally learns to choose from. */

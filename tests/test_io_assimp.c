@@ -1,7 +1,8 @@
 // rp-test: labels=io timeout=300
 /* glTF 2.0 and the other formats read through assimp (src/io/io_assimp.c): a handwritten glTF with
  * a node hierarchy (a translated parent, a mirrored child, a second instance of the mesh), a camera,
- * a KHR_lights_punctual point light and a material with an embedded (data URI) PNG; an ASCII STL;
+ * a KHR_lights_punctual point light and a material with an embedded PNG (a data URI in .gltf, a
+ * buffer view in .glb); an ASCII STL;
  * broken files; and the shared gltf_cube and gltf_suzanne scenes, Suzanne rendered (albedo) to
  * check that textures land where they belong. */
 #include <math.h>
@@ -85,6 +86,57 @@ static void write_gltf(const char *name, const char *bin) {
     write_text(name, text);
 }
 
+static int b64_value(char c) {
+    if (c >= 'A' && c <= 'Z') return c - 'A';
+    if (c >= 'a' && c <= 'z') return c - 'a' + 26;
+    if (c >= '0' && c <= '9') return c - '0' + 52;
+    return c == '+' ? 62 : c == '/' ? 63 : -1;
+}
+
+/* The same scene as one .glb: JSON chunk, then a BIN chunk holding the triangle's buffer and the
+ * PNG, which an image references through a buffer view (embedded, not a data URI). */
+static void write_glb(const char *name) {
+    unsigned char png[256];
+    size_t png_n = 0;
+    uint32_t acc = 0;
+    int bits = 0;
+    for (const char *p = png_2x2; *p && *p != '='; p++) {
+        acc = acc << 6 | (uint32_t)b64_value(*p);
+        if ((bits += 6) >= 8) png[png_n++] = (unsigned char)(acc >> (bits -= 8));
+    }
+    char json[8192];
+    int n = snprintf(json, sizeof json, "%.*s", (int)(strstr(gltf_head, "\"images\"") - gltf_head), gltf_head);
+    n += snprintf(json + n, sizeof json - (size_t)n,
+                  "\"images\":[{\"bufferView\":4,\"mimeType\":\"image/png\"}],\n"
+                  "\"buffers\":[{\"byteLength\":%zu}],\n"
+                  "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":6},{\"buffer\":0,\"byteOffset\":8,\"byteLength\":36},\n"
+                  "  {\"buffer\":0,\"byteOffset\":44,\"byteLength\":36},{\"buffer\":0,\"byteOffset\":80,\"byteLength\":24},\n"
+                  "  {\"buffer\":0,\"byteOffset\":104,\"byteLength\":%zu}],\n",
+                  104 + png_n, png_n);
+    n += snprintf(json + n, sizeof json - (size_t)n, "%s", strstr(gltf_tail_fmt, "\"accessors\""));
+    while (n % 4) json[n++] = ' ';
+    unsigned char bin[512];
+    memset(bin, 0, sizeof bin);
+    write_triangle_bin("glb_part.bin");
+    char path[1024];
+    FILE *f = fopen(tmp_path("glb_part.bin", path, sizeof path), "rb");
+    size_t got = f ? fread(bin, 1, 104, f) : 0;
+    if (f) fclose(f);
+    CHECK(got == 104);
+    memcpy(bin + 104, png, png_n);
+    uint32_t bin_n = (uint32_t)((104 + png_n + 3) & ~(size_t)3);
+    uint32_t header[3] = {0x46546C67u, 2, 12 + 8 + (uint32_t)n + 8 + bin_n};
+    uint32_t json_head[2] = {(uint32_t)n, 0x4E4F534Au}, bin_head[2] = {bin_n, 0x004E4942u};
+    f = fopen(tmp_path(name, path, sizeof path), "wb");
+    if (!f) exit(1);
+    fwrite(header, 4, 3, f);
+    fwrite(json_head, 4, 2, f);
+    fwrite(json, 1, (size_t)n, f);
+    fwrite(bin_head, 4, 2, f);
+    fwrite(bin, 1, bin_n, f);
+    fclose(f);
+}
+
 /* Corner c of triangle t: position, normal. */
 static const float *corner_pos(const rp_scene_data *s, size_t t, int c) { return s->positions + 3 * (size_t)s->indices[3 * t + c]; }
 static const float *corner_nrm(const rp_scene_data *s, size_t t, int c) { return s->normals + 3 * (size_t)s->normal_indices[3 * t + c]; }
@@ -97,13 +149,11 @@ static bool has_corner(const rp_scene_data *s, size_t t, float x, float y, float
     return false;
 }
 
-static void test_handwritten_gltf(void) {
-    write_triangle_bin("tri.bin");
-    write_gltf("scene.gltf", "tri.bin");
+static void test_handwritten_gltf(const char *name) {
     char path[1024], err[1024] = "";
     rp_scene_data s;
-    bool ok = rp_scene_data_load(tmp_path("scene.gltf", path, sizeof path), &s, err, sizeof err);
-    CHECKF(ok, "%s", err);
+    bool ok = rp_scene_data_load(tmp_path(name, path, sizeof path), &s, err, sizeof err);
+    CHECKF(ok, "%s: %s", name, err);
     if (!ok) return;
     /* two instances of the mesh, flattened with their node transforms */
     CHECK(s.triangle_count == 2);
@@ -263,7 +313,11 @@ int main(void) {
     const char *t = getenv("RP_TEST_TMP");
     snprintf(tmp_dir, sizeof tmp_dir, "%s", t ? t : "/tmp/rp_test_io_assimp");
     mkdir(tmp_dir, 0755);
-    test_handwritten_gltf();
+    write_triangle_bin("tri.bin");
+    write_gltf("scene.gltf", "tri.bin");
+    test_handwritten_gltf("scene.gltf");
+    write_glb("scene.glb");
+    test_handwritten_gltf("scene.glb");
     test_stl();
     test_errors();
     test_shared();

@@ -1,8 +1,9 @@
 # test_install: installs the build tree into a fresh prefix, then builds the out-of-tree consumer
 # against it both ways (pkg-config, and find_package in a CMake project of its own), runs both on
 # the given scenes, and checks the command and the man page. cmake -P with BUILD, SOURCE, WORK,
-# SCENES (;-list), CC.
+# SCENES (|-separated), CC and, for the Python package, PYTHON.
 set(prefix ${WORK}/prefix)
+string(REPLACE "|" ";" SCENES "${SCENES}") # |-separated: a ;-list does not survive add_test
 file(REMOVE_RECURSE ${WORK})
 file(MAKE_DIRECTORY ${WORK})
 set(passed 0)
@@ -51,6 +52,19 @@ step("find_package configure" ${CMAKE_COMMAND} -S ${SOURCE} -B ${WORK}/cmake_bui
 step("find_package build" ${CMAKE_COMMAND} --build ${WORK}/cmake_build)
 step("find_package program" ${WORK}/cmake_build/consumer ${SCENES})
 message("${last_out}")
+
+# the Python package, built on the installed libraries (RAYPACK_PREFIX) instead of the build tree
+if(PYTHON)
+  file(COPY ${SOURCE}/../../python/ DESTINATION ${WORK}/python PATTERN tests EXCLUDE PATTERN build EXCLUDE)
+  set(ENV{RAYPACK_PREFIX} ${prefix})
+  step("pip install ./python on the prefix" ${PYTHON} -m pip install --no-build-isolation --no-index
+       --no-deps --no-cache-dir --disable-pip-version-check --target ${WORK}/site ${WORK}/python)
+  set(ENV{PYTHONPATH} ${WORK}/site)
+  list(GET SCENES 0 first_scene)
+  step("python: raypack.load and intersect" ${PYTHON} -c
+       "import numpy as np, raypack; s = raypack.load('${first_scene}'); lo, hi = s.bounds; c = (lo + hi) / 2; \
+h = s.intersect(np.array([c], np.float32), np.array([[0, 0, -1]], np.float32)); assert h['geom_id'][0] == 0, h")
+endif()
 
 message("${passed} passed, ${failed} failed")
 if(failed GREATER 0)

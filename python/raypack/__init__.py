@@ -130,11 +130,11 @@ class Scene:
         out = {"t": np.empty(n, np.float32), "geom_id": np.empty(n, np.int32), "prim_id": np.empty(n, np.int32),
                "u": np.empty(n, np.float32), "v": np.empty(n, np.float32), "Ng": np.empty((n, 3), np.float32)}
         with self.device._lock:
-            lib.rpy_intersect(self._ptr, _ptr("float *", o), _ptr("float *", d), _ptr("float *", tn),
+            ok = lib.rpy_intersect(self._ptr, _ptr("float *", o), _ptr("float *", d), _ptr("float *", tn),
                               _ptr("float *", tf), n, bool(coherent), _ptr("float *", out["t"]),
                               _ptr("int32_t *", out["geom_id"]), _ptr("int32_t *", out["prim_id"]),
                               _ptr("float *", out["u"]), _ptr("float *", out["v"]), _ptr("float *", out["Ng"]))
-        if n and np.isnan(out["t"][0]):
+        if not ok:
             raise MemoryError("raypack: out of memory while tracing")
         return out
 
@@ -147,9 +147,9 @@ class Scene:
         tn, tf = _per_ray(tnear, n, "tnear"), _per_ray(tfar, n, "tfar")
         out = np.empty(n, np.uint8)
         with self.device._lock:
-            lib.rpy_occluded(self._ptr, _ptr("float *", o), _ptr("float *", d), _ptr("float *", tn),
+            ok = lib.rpy_occluded(self._ptr, _ptr("float *", o), _ptr("float *", d), _ptr("float *", tn),
                              _ptr("float *", tf), n, bool(coherent), _ptr("uint8_t *", out))
-        if n and out[0] == 2:
+        if not ok:
             raise MemoryError("raypack: out of memory while tracing")
         return out.astype(bool)
 

@@ -20,10 +20,10 @@ rpy_scene *rpy_scene_load(rp_device *dev, const char *path, char *err, size_t er
 void rpy_scene_free(rpy_scene *s);
 size_t rpy_scene_triangle_count(const rpy_scene *s);
 void rpy_scene_bounds(const rpy_scene *s, float *lower, float *upper);
-void rpy_intersect(rpy_scene *s, const float *org, const float *dir, const float *tnear,
+int rpy_intersect(rpy_scene *s, const float *org, const float *dir, const float *tnear,
                    const float *tfar, size_t n, int coherent, float *t, int32_t *geom_id,
                    int32_t *prim_id, float *u, float *v, float *ng);
-void rpy_occluded(rpy_scene *s, const float *org, const float *dir, const float *tnear,
+int rpy_occluded(rpy_scene *s, const float *org, const float *dir, const float *tnear,
                   const float *tfar, size_t n, int coherent, uint8_t *out);
 int rpy_render(rpy_scene *s, int width, int height, int spp, int integrator, int aov,
                int have_camera, const float *eye, const float *look, const float *up, float fov,

@@ -152,8 +152,7 @@ static void intersect_chunk(void *user, uint32_t index, uint32_t thread) {
 static void occluded_chunk(void *user, uint32_t index, uint32_t thread) {
     trace_job *j = user;
     size_t base = (size_t)index * RPY_CHUNK, k = j->n - base < RPY_CHUNK ? j->n - base : RPY_CHUNK;
-    rp_ray *r = &j->scratch[(size_t)thread * RPY_CHUNK].ray;
-    /* rp_ray packed: rays are laid out as an rp_ray array inside the rayhit scratch */
+    rp_ray *r = (rp_ray *)(j->scratch + (size_t)thread * RPY_CHUNK); /* an rp_ray array fits in it */
     for (size_t i = 0; i < k; i++) make_ray(j, base + i, &r[i]);
     rp_occluded_array(j->s->core, r, k, j->flags);
     for (size_t i = 0; i < k; i++) j->occluded[base + i] = r[i].tfar == -INFINITY;
@@ -162,7 +161,7 @@ static void occluded_chunk(void *user, uint32_t index, uint32_t thread) {
 static bool run_job(trace_job *j, rp_task_fn fn) {
     if (j->n == 0) return true;
     size_t threads = (size_t)rp_device_thread_count(j->s->dev);
-    j->scratch = aligned_alloc(64, threads * RPY_CHUNK * sizeof(rp_rayhit));
+    j->scratch = aligned_alloc(64, threads * RPY_CHUNK * sizeof(rp_rayhit)); /* a multiple of 64 */
     if (!j->scratch) return false;
     size_t chunks = (j->n + RPY_CHUNK - 1) / RPY_CHUNK;
     rp_device_parallel_for(j->s->dev, (uint32_t)chunks, fn, j);
@@ -170,22 +169,20 @@ static bool run_job(trace_job *j, rp_task_fn fn) {
     return true;
 }
 
-static void rpy_intersect(rpy_scene *s, const float *org, const float *dir, const float *tnear,
+static int rpy_intersect(rpy_scene *s, const float *org, const float *dir, const float *tnear,
                           const float *tfar, size_t n, int coherent, float *t, int32_t *geom_id,
                           int32_t *prim_id, float *u, float *v, float *ng) {
     trace_job j = {.s = s, .org = org, .dir = dir, .tnear = tnear, .tfar = tfar, .n = n,
                    .flags = coherent ? RP_QUERY_COHERENT : RP_QUERY_INCOHERENT,
                    .t = t, .u = u, .v = v, .ng = ng, .geom_id = geom_id, .prim_id = prim_id};
-    if (!run_job(&j, intersect_chunk))
-        for (size_t i = 0; i < n; i++) t[i] = NAN; /* out of memory: no answer rather than a wrong one */
+    return run_job(&j, intersect_chunk); /* 0: out of memory */
 }
 
-static void rpy_occluded(rpy_scene *s, const float *org, const float *dir, const float *tnear,
+static int rpy_occluded(rpy_scene *s, const float *org, const float *dir, const float *tnear,
                          const float *tfar, size_t n, int coherent, uint8_t *out) {
     trace_job j = {.s = s, .org = org, .dir = dir, .tnear = tnear, .tfar = tfar, .n = n,
                    .flags = coherent ? RP_QUERY_COHERENT : RP_QUERY_INCOHERENT, .occluded = out};
-    if (!run_job(&j, occluded_chunk))
-        for (size_t i = 0; i < n; i++) out[i] = 2; /* out of memory: neither answer */
+    return run_job(&j, occluded_chunk);
 }
 
 /* ---- rendering -------------------------------------------------------------------------------- */

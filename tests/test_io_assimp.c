@@ -2,8 +2,7 @@
 /* glTF 2.0 and the other formats read through assimp (src/io/io_assimp.c): a handwritten glTF with
  * a node hierarchy (a translated parent, a mirrored child, a second instance of the mesh), a camera,
  * a KHR_lights_punctual point light and a material with an embedded PNG (a data URI in .gltf, a
- * buffer view in .glb); an ASCII STL;
- * broken files; and the shared gltf_cube and gltf_suzanne scenes, Suzanne rendered (albedo) to
+ * buffer view in .glb); an ASCII STL; a COLLADA camera; broken files; and the shared gltf_cube and gltf_suzanne scenes, Suzanne rendered (albedo) to
  * check that textures land where they belong. */
 #include <math.h>
 #include <stdint.h>
@@ -225,6 +224,47 @@ static void test_stl(void) {
     rp_scene_data_free(&s);
 }
 
+/* COLLADA: a camera (yfov 40, aspect 2) under a translated node and a translated triangle. */
+static const char collada[] =
+    "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n"
+    "<COLLADA xmlns=\"http://www.collada.org/2005/11/COLLADASchema\" version=\"1.4.1\">\n"
+    "  <asset><unit name=\"meter\" meter=\"1\"/><up_axis>Y_UP</up_axis></asset>\n"
+    "  <library_cameras>\n"
+    "    <camera id=\"cam0\" name=\"cam0\"><optics><technique_common><perspective>\n"
+    "      <yfov>40</yfov><aspect_ratio>2</aspect_ratio><znear>0.1</znear><zfar>100</zfar>\n"
+    "    </perspective></technique_common></optics></camera>\n"
+    "  </library_cameras>\n"
+    "  <library_geometries>\n"
+    "    <geometry id=\"tri\" name=\"tri\"><mesh>\n"
+    "      <source id=\"pos\"><float_array id=\"pos-a\" count=\"9\">0 0 0 1 0 0 0 1 0</float_array>\n"
+    "        <technique_common><accessor source=\"#pos-a\" count=\"3\" stride=\"3\"><param name=\"X\" type=\"float\"/><param name=\"Y\" type=\"float\"/><param name=\"Z\" type=\"float\"/></accessor></technique_common></source>\n"
+    "      <vertices id=\"verts\"><input semantic=\"POSITION\" source=\"#pos\"/></vertices>\n"
+    "      <triangles count=\"1\"><input semantic=\"VERTEX\" source=\"#verts\" offset=\"0\"/><p>0 1 2</p></triangles>\n"
+    "    </mesh></geometry>\n"
+    "  </library_geometries>\n"
+    "  <library_visual_scenes>\n"
+    "    <visual_scene id=\"s\">\n"
+    "      <node id=\"camnode\" name=\"camnode\"><translate>0 0 7</translate><instance_camera url=\"#cam0\"/></node>\n"
+    "      <node id=\"m\" name=\"m\"><translate>3 0 0</translate><instance_geometry url=\"#tri\"/></node>\n"
+    "    </visual_scene>\n"
+    "  </library_visual_scenes>\n"
+    "  <scene><instance_visual_scene url=\"#s\"/></scene>\n"
+    "</COLLADA>\n"
+    "";
+
+static void test_collada(void) {
+    write_text("cam.dae", collada);
+    char path[1024], err[1024] = "";
+    rp_scene_data s;
+    bool ok = rp_scene_data_load(tmp_path("cam.dae", path, sizeof path), &s, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (!ok) return;
+    CHECK(s.triangle_count == 1 && has_corner(&s, 0, 4, 0, 0) && has_corner(&s, 0, 3, 1, 0));
+    CHECK(s.camera.valid && near(s.camera.eye[2], 7, 1e-5f) && s.camera.look[2] < 7);
+    CHECKF(near(s.camera.fov_deg, 40.0f, 0.01f), "fov %g, want 40", (double)s.camera.fov_deg);
+    rp_scene_data_free(&s);
+}
+
 static void expect_fail(const char *name, const char *needle) {
     char path[1024], err[1024] = "";
     rp_scene_data s;
@@ -319,6 +359,7 @@ int main(void) {
     write_glb("scene.glb");
     test_handwritten_gltf("scene.glb");
     test_stl();
+    test_collada();
     test_errors();
     test_shared();
     return RP_TEST_END();

@@ -217,13 +217,13 @@ static bool add_mesh(load_state *s, const struct aiMesh *mesh, const mat4 *t) {
     return true;
 }
 
-/* The camera, in its node's frame: mPosition, mLookAt (a direction) and mUp. Other importers give
- * the half horizontal angle as mHorizontalFOV (assimp's documentation). The glTF 2.0 importer
- * differs: a glTF camera sits at its node's origin, but assimp 5.2 also copies the node's
- * translation into mPosition (so it is ignored here), and its field of view is glTF's yfov times
- * aspectRatio (5.2; later versions: the whole horizontal angle, 2 atan(tan(yfov / 2) aspect)).
- * Either way it is turned back into the vertical angle; without an aspect ratio the image is taken
- * as square. */
+/* The camera, in its node's frame: mPosition, mLookAt (a direction) and mUp. assimp documents
+ * mHorizontalFOV as the half horizontal angle, but its importers store the whole one (COLLADA:
+ * 2 atan(aspect tan(yfov / 2)) from a yfov; FBX: FieldOfView). The glTF 2.0 importer of assimp 5.2
+ * differs twice: it stores glTF's yfov times aspectRatio, and it copies the node's translation
+ * into mPosition although a glTF camera sits at its node's origin (so mPosition is ignored for
+ * glTF). Either way the vertical angle of DESIGN.md's pinhole is recovered; without an aspect
+ * ratio the image is taken as square. */
 static void add_camera(load_state *s, const struct aiCamera *cam, const mat4 *t, bool gltf) {
     if (s->have_camera) return; /* the first camera the hierarchy reaches */
     rp_camera_data *c = &s->ctx->b.camera;
@@ -239,10 +239,8 @@ static void add_camera(load_state *s, const struct aiCamera *cam, const mat4 *t,
     double aspect = cam->mAspect > 0.0f ? (double)cam->mAspect : 1.0, h = (double)cam->mHorizontalFOV, fov;
     if (gltf && aiGetVersionMajor() == 5 && aiGetVersionMinor() < 3)
         fov = h / aspect;
-    else if (gltf)
-        fov = 2.0 * atan(tan(0.5 * h) / aspect);
     else
-        fov = 2.0 * atan(tan(h) / aspect);
+        fov = 2.0 * atan(tan(0.5 * h) / aspect);
     fov *= 180.0 / M_PI;
     c->fov_deg = (float)fov;
     c->valid = fov > 0.0 && fov < 180.0 && isfinite(fov);

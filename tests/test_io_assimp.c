@@ -2,8 +2,8 @@
 /* glTF 2.0 and the other formats read through assimp (src/io/io_assimp.c): a handwritten glTF with
  * a node hierarchy (a translated parent, a mirrored child, a second instance of the mesh), a camera,
  * a KHR_lights_punctual point light and a material with an embedded PNG (a data URI in .gltf, a
- * buffer view in .glb); an ASCII STL; a COLLADA camera; broken files; and the shared gltf_cube and gltf_suzanne scenes, Suzanne rendered (albedo) to
- * check that textures land where they belong. */
+ * buffer view in .glb); an ASCII STL; a COLLADA camera; broken files; and the shared gltf_cube
+ * and gltf_suzanne scenes, Suzanne rendered (albedo) to check that textures land where they belong. */
 #include <math.h>
 #include <stdint.h>
 #include <sys/stat.h>

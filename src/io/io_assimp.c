@@ -78,6 +78,7 @@ typedef struct load_state {
     const char *path;
     const struct aiScene *scene;
     uint32_t *materials; /* aiMaterial index -> builder material */
+    bool *light_done;    /* a light binds to the first node of its name only */
     bool have_camera;
 } load_state;
 
@@ -278,9 +279,10 @@ static bool visit(load_state *s, const struct aiNode *node, const mat4 *parent, 
         if (strcmp(s->scene->mCameras[i]->mName.data, node->mName.data) == 0)
             add_camera(s, s->scene->mCameras[i], &t, gltf);
     for (unsigned i = 0; i < s->scene->mNumLights; i++)
-        if (strcmp(s->scene->mLights[i]->mName.data, node->mName.data) == 0 &&
-            !add_light(s, s->scene->mLights[i], &t))
-            return false;
+        if (!s->light_done[i] && strcmp(s->scene->mLights[i]->mName.data, node->mName.data) == 0) {
+            s->light_done[i] = true;
+            if (!add_light(s, s->scene->mLights[i], &t)) return false;
+        }
     for (unsigned i = 0; i < node->mNumChildren; i++)
         if (!visit(s, node->mChildren[i], &t, gltf, depth + 1)) return false;
     return true;
@@ -316,6 +318,7 @@ bool assimp_load(io_ctx *ctx, const char *path) {
                 ok = io_error(ctx, path, 0, "out of memory");
         }
     }
+    if (ok && !(s.light_done = calloc(scene->mNumLights + 1, sizeof(bool)))) ok = io_error(ctx, path, 0, "out of memory");
     char ext[16];
     vfs_extension(path, ext, sizeof ext);
     bool gltf = strcmp(ext, "gltf") == 0 || strcmp(ext, "glb") == 0;
@@ -331,6 +334,7 @@ bool assimp_load(io_ctx *ctx, const char *path) {
         fclose(f);
     }
     free(s.materials);
+    free(s.light_done);
     aiReleaseImport(scene);
     return ok;
 }

@@ -7,6 +7,9 @@
 
 #include "io/io_internal.h"
 
+#if RP_IO_HAVE_LIBDEFLATE
+#include <libdeflate.h>
+#endif
 #if RP_IO_HAVE_ARCHIVE
 #include <archive.h>
 #include <archive_entry.h>
@@ -30,11 +33,52 @@ static size_t gzip_size_hint(const char *path, size_t file_size) {
     return hint;
 }
 
+#if RP_IO_HAVE_LIBDEFLATE
+/* Whole-buffer gzip inflate with libdeflate, 1.5-3.7x faster than zlib's streaming inflate on the
+ * shared scenes (spd_tree_s12: 1.66 s against 2.66 s in one run on a busy machine), into the size
+ * the gzip trailer states. False (nothing written) whenever that does not work out: multi-member
+ * files whose last ISIZE is not the total, sizes of 4 GiB or more, corrupt data. The caller then
+ * reads the file with zlib, which says what went wrong. */
+static bool deflate_read(const char *path, size_t file_size, size_t hint, io_buf *out) {
+    if (hint == 0 || file_size == 0) return false;
+    FILE *f = fopen(path, "rb");
+    if (!f) return false;
+    unsigned char *in = malloc(file_size);
+    bool ok = in && fread(in, 1, file_size, f) == file_size;
+    fclose(f);
+    char *data = ok ? malloc(hint + 1) : NULL;
+    struct libdeflate_decompressor *d = data ? libdeflate_alloc_decompressor() : NULL;
+    size_t in_pos = 0, size = 0;
+    ok = d != NULL;
+    while (ok && in_pos < file_size) { /* one gzip member per pass */
+        size_t used = 0, got = 0;
+        ok = libdeflate_gzip_decompress_ex(d, in + in_pos, file_size - in_pos, data + size, hint - size, &used,
+                                           &got) == LIBDEFLATE_SUCCESS;
+        in_pos += used;
+        size += got;
+    }
+    if (d) libdeflate_free_decompressor(d);
+    free(in);
+    if (!ok) {
+        free(data);
+        return false;
+    }
+    data[size] = '\0';
+    out->data = data;
+    out->size = size;
+    out->owned = true;
+    return true;
+}
+#endif
+
 static bool disk_read(const char *path, io_buf *out) {
     struct stat st;
     if (stat(path, &st) != 0 || !S_ISREG(st.st_mode)) return false;
     size_t file_size = (size_t)st.st_size;
     size_t hint = gzip_size_hint(path, file_size);
+#if RP_IO_HAVE_LIBDEFLATE
+    if (deflate_read(path, file_size, hint, out)) return true;
+#endif
     size_t cap = (hint > file_size ? hint : file_size) + 1;
     gzFile gz = gzopen(path, "rb");
     if (!gz) return false;

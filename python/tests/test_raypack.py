@@ -1,6 +1,7 @@
 """pytest tests of the raypack Python package (run by CTest through run_ctest.py)."""
 import os
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -144,6 +145,27 @@ def test_threads_and_devices():
     # same rays on a one-thread device: same answers
     s1 = raypack.load(scene_path("stanford_bunny_bun_zipper.ply.gz"), device=raypack.Device(threads=1))
     assert np.array_equal(s1.intersect(o, d)["prim_id"], ref)
+
+
+def test_gil_released_while_tracing():
+    s = raypack.load(scene_path("stanford_bunny_bun_zipper.ply.gz"))
+    o, d = bunny_rays(s, 1_000_000, 3)
+    started = threading.Event()
+
+    def work():
+        started.set()
+        s.intersect(o, d)
+
+    th = threading.Thread(target=work)
+    th.start()
+    started.wait()
+    ticks = 0
+    while th.is_alive():  # each sleep gives the GIL up; waking needs it back
+        time.sleep(0.001)
+        ticks += 1
+    th.join()
+    # held through the call, the loop would wake only in the few ms of Python before and after it
+    assert ticks >= 20, ticks
 
 
 def test_render():

@@ -1,7 +1,7 @@
 # Installing raypack: `cmake --install build/release --prefix P` (or `make install PREFIX=P`).
 #
 # What goes where, and why:
-#   include/raypack.h, raypack_io.h, raypack_render.h     the public headers
+#   include/raypack.h, raypack_io.h, raypack_render.h     the public headers (every include/*.h)
 #   lib/libraypack.so.0 (core, versioned soname)          what embedders link: only rp_ symbols
 #   lib/libraypack_static.a (core)                         the same, for static linking
 #   lib/libraypack_io.so.0, lib/libraypack_render.so.0     loaders + image files, renderer: so an
@@ -48,8 +48,8 @@ install(TARGETS ${RP_INSTALL_TARGETS} EXPORT raypackTargets
   ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
   RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR}
   INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
-install(FILES ${CMAKE_SOURCE_DIR}/include/raypack.h ${CMAKE_SOURCE_DIR}/include/raypack_io.h
-  ${CMAKE_SOURCE_DIR}/include/raypack_render.h DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+file(GLOB RP_PUBLIC_HEADERS CONFIGURE_DEPENDS ${CMAKE_SOURCE_DIR}/include/*.h)
+install(FILES ${RP_PUBLIC_HEADERS} DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 if(TARGET raypack_cli)
   install(TARGETS raypack_cli RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
   # The man page is the commands' own --help text, so it cannot drift from them.

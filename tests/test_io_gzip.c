@@ -2,7 +2,7 @@
 /* Reading .gz scene files (io_vfs.c): the whole-buffer inflate (libdeflate, when built with it)
  * and zlib's streaming one must give the same scene on every kind of gzip file: one member, several
  * members (the last trailer then states only its own size), a trailer whose size lies, and a
- * truncated file, which must fail with the file's name. */
+ * truncated file, which must fail with the file's name; and tar.gz archives likewise. */
 #include <math.h>
 #include <stdint.h>
 #include <sys/stat.h>
@@ -63,6 +63,27 @@ static void expect_scene(const char *name, int n) {
     rp_scene_data_free(&s);
 }
 
+/* A one-file ustar archive holding `text` as scene.obj; returns its size (a multiple of 512). */
+static size_t make_tar(const char *text, size_t n, unsigned char *out) {
+    memset(out, 0, 512);
+    snprintf((char *)out, 100, "scene.obj");
+    snprintf((char *)out + 100, 8, "0000644");
+    snprintf((char *)out + 108, 8, "0000000");
+    snprintf((char *)out + 116, 8, "0000000");
+    snprintf((char *)out + 124, 12, "%011o", (unsigned)n);
+    snprintf((char *)out + 136, 12, "%011o", 0u);
+    out[156] = '0';
+    memcpy(out + 257, "ustar\0" "00", 8);
+    memset(out + 148, ' ', 8);
+    unsigned sum = 0;
+    for (int i = 0; i < 512; i++) sum += out[i];
+    snprintf((char *)out + 148, 8, "%06o", sum);
+    size_t body = (n + 511) / 512 * 512;
+    memset(out + 512, 0, body + 1024); /* data, then two zero blocks */
+    memcpy(out + 512, text, n);
+    return 512 + body + 1024;
+}
+
 int main(void) {
     const char *t = getenv("RP_TEST_TMP");
     snprintf(tmp_dir, sizeof tmp_dir, "%s", t ? t : "/tmp/rp_test_io_gzip");
@@ -113,6 +134,23 @@ int main(void) {
     } else {
         CHECKF(strstr(err, "tail.obj.gz") != NULL, "message '%s'", err);
     }
+    /* tar.gz archives: one member (inflated whole) and two (the streaming fallback) */
+    unsigned char *tar = malloc(CAP + 4096);
+    size_t tn = make_tar(text, make_obj(text, CAP, 0, 2000), tar);
+    size_t ga = gz_member((const char *)tar, tn, gz, CAP);
+    write_file("one.tar.gz", gz, ga);
+    expect_scene("one.tar.gz", 2000);
+    size_t half = tn / 1024 * 512;
+    ga = gz_member((const char *)tar, half, gz, CAP);
+    ga += gz_member((const char *)tar + half, tn - half, gz + ga, CAP);
+    write_file("two.tar.gz", gz, ga);
+    expect_scene("two.tar.gz", 2000);
+    write_file("cut.tar.gz", gz, ga / 3);
+    ok = rp_scene_data_load(tmp_path("cut.tar.gz", path, sizeof path), &s, err, sizeof err);
+    CHECK(!ok);
+    if (ok) rp_scene_data_free(&s);
+    else CHECKF(strstr(err, "cut.tar.gz") != NULL, "message '%s'", err);
+    free(tar);
     free(lie);
     free(text);
     free(gz);

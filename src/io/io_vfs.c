@@ -226,9 +226,18 @@ bool vfs_open_archive(io_ctx *ctx, const char *path) {
     archive_read_support_filter_all(a);
     archive_read_support_format_tar(a);
     archive_read_support_format_gnutar(a);
-    if (archive_read_open_filename(a, path, 1u << 16) != ARCHIVE_OK) {
+    io_buf raw = {0};
+#if RP_IO_HAVE_LIBDEFLATE
+    /* a .tar.gz inflated whole by libdeflate (see deflate_read), then read as a plain tar */
+    struct stat st;
+    if (stat(path, &st) == 0 && S_ISREG(st.st_mode))
+        deflate_read(path, (size_t)st.st_size, gzip_size_hint(path, (size_t)st.st_size), &raw);
+#endif
+    if ((raw.data ? archive_read_open_memory(a, raw.data, raw.size)
+                  : archive_read_open_filename(a, path, 1u << 16)) != ARCHIVE_OK) {
         bool r = io_error(ctx, path, 0, "cannot open archive: %s", archive_error_string(a));
         archive_read_free(a);
+        vfs_buf_free(&raw);
         return r;
     }
     ctx->vfs.archive = path;
@@ -285,6 +294,7 @@ bool vfs_open_archive(io_ctx *ctx, const char *path) {
     if (ok && rc != ARCHIVE_EOF)
         ok = io_error(ctx, path, 0, "corrupt archive: %s", archive_error_string(a));
     archive_read_free(a);
+    vfs_buf_free(&raw);
     return ok;
 }
 #endif

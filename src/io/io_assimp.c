@@ -264,7 +264,8 @@ static bool add_light(load_state *s, const struct aiLight *l, const mat4 *t) {
 }
 
 static bool visit(load_state *s, const struct aiNode *node, const mat4 *parent, bool gltf, int depth) {
-    if (depth > 256) return io_error(s->ctx, s->path, 0, "node hierarchy deeper than 256 at '%s'", node->mName.data);
+    if (depth > 256)
+        return io_error(s->ctx, s->path, 0, "node hierarchy deeper than 256 at '%s'", node->mName.data);
     mat4 local = mat4_from_ai(&node->mTransformation);
     mat4 t = mat4_mul(parent, &local);
     for (unsigned i = 0; i < node->mNumMeshes; i++) {
@@ -322,7 +323,8 @@ bool assimp_load(io_ctx *ctx, const char *path) {
                 ok = io_error(ctx, path, 0, "out of memory");
         }
     }
-    if (ok && !(s.light_done = calloc(scene->mNumLights + 1, sizeof(bool)))) ok = io_error(ctx, path, 0, "out of memory");
+    if (ok && !(s.light_done = calloc(scene->mNumLights + 1, sizeof(bool))))
+        ok = io_error(ctx, path, 0, "out of memory");
     mat4 identity = {{{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}}};
     if (ok) ok = visit(&s, scene->mRootNode, &identity, gltf, 0);
     if (ok && ctx->b.tri_n == 0) ok = io_error(ctx, path, 0, "the file holds no triangles");
@@ -350,7 +352,8 @@ bool assimp_can_load(const char *ext) {
 }
 
 bool assimp_load(io_ctx *ctx, const char *path) {
-    return io_error(ctx, path, 0, "raypack was built without assimp (apt install libassimp-dev), so it cannot read this format");
+    return io_error(ctx, path, 0,
+                    "raypack was built without assimp (apt install libassimp-dev), so it cannot read this format");
 }
 
 #endif

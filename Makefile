@@ -1,9 +1,9 @@
 # The two commands of the README: `make demo` and `make test`. Both install what they need first.
 JOBS ?= $(shell nproc)
-DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev
+DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev libassimp-dev libdeflate-dev python3-dev python3-cffi python3-numpy python3-pytest python3-pip python3-setuptools
 SUDO := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 
-.PHONY: all deps release asan demo test test-release test-asan bench clean
+.PHONY: all deps release asan demo test test-release test-asan bench install clean
 
 all: release
 
@@ -37,6 +37,11 @@ test: test-release test-asan
 
 bench: release
 	./build/release/raypack bench
+
+# `make install PREFIX=/opt/raypack`: headers, libraries, the command, man page, pkg-config and CMake files.
+PREFIX ?= /usr/local
+install: release
+	cmake --install build/release --prefix $(PREFIX)
 
 clean:
 	rm -rf build

@@ -3,7 +3,10 @@
  * A loader turns a scene file into plain flat arrays (rp_scene_data): no pointers into other
  * objects, so a scene can be handed to the core API, sent to MPI ranks or copied to a GPU.
  * Formats: Wavefront OBJ+MTL, PLY (ASCII, binary LE/BE), NFF and BART's AFF; any of them gzip'd
- * (.gz), and tar archives (.tar, .tar.gz) holding a scene (BART's kitchen and museum).
+ * (.gz), and tar archives (.tar, .tar.gz) holding a scene (BART's kitchen and museum). glTF 2.0
+ * (.gltf, .glb) and the other formats assimp reads (FBX, COLLADA, 3DS, STL, ...) through assimp,
+ * from plain files: node hierarchies flattened, the first camera, point lights, and materials with
+ * the base colour (factor x texture, external or embedded) as kd and the emissive colour as ke.
  *
  * Ownership: every array in rp_scene_data is owned by it and freed by rp_scene_data_free.
  */

@@ -21,7 +21,7 @@ static void render_usage(FILE *out) {
     fprintf(out,
             "usage: raypack render [SCENE] [options]\n"
             "\n"
-            "Renders SCENE (OBJ, PLY, NFF, AFF; .gz and .tar.gz too), or the built-in room without one.\n"
+            "Renders SCENE (OBJ, PLY, NFF, AFF; .gz and .tar.gz too; glTF and assimp's formats), or the built-in room without one.\n"
             "\n"
             "options:\n"
             "  -o, --output FILE      image to write; the format follows the extension:\n"

@@ -131,6 +131,13 @@ void builder_material_defaults(rp_material_data *m, const char *name);
  * scene; returns its index, or IO_NONE after writing an error at file:line. */
 uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const char *file,
                   uint32_t line);
+/* Adds a texture decoded from an encoded image in memory (PNG, JPEG, ...; embedded in a scene
+ * file), shared under `key`; returns its index or IO_NONE after an error at file:line. */
+uint32_t tex_add_encoded(io_ctx *ctx, const char *key, const char *as_written, const void *data,
+                         size_t size, const char *file, uint32_t line);
+/* Adds decoded 8-bit RGB texels (malloc'ed; taken over, freed on failure) under `key`. */
+uint32_t tex_add_rgb(io_ctx *ctx, const char *key, const char *as_written, int32_t width,
+                     int32_t height, uint8_t *rgb, const char *file, uint32_t line);
 
 /* ---- polygons (io_poly.c) --------------------------------------------------------------------- */
 
@@ -143,6 +150,9 @@ void poly_triangulate(const float *pts, uint32_t n, uint32_t *tris, uint32_t *sc
 bool obj_load(io_ctx *ctx, const char *path);
 bool ply_load(io_ctx *ctx, const char *path);
 bool nff_load(io_ctx *ctx, const char *path);
+/* glTF and the other formats of assimp (io_assimp.c); assimp_can_load takes an extension ("glb"). */
+bool assimp_load(io_ctx *ctx, const char *path);
+bool assimp_can_load(const char *ext);
 
 /* ---- numbers ---------------------------------------------------------------------------------- */
 

@@ -318,7 +318,8 @@ static bool load_scene_file(io_ctx *ctx, const char *path, const char *shown) {
     if (strcmp(ext, "obj") == 0) return obj_load(ctx, path);
     if (strcmp(ext, "ply") == 0) return ply_load(ctx, path);
     if (strcmp(ext, "nff") == 0 || strcmp(ext, "aff") == 0) return nff_load(ctx, path);
-    return io_error(ctx, shown, 0, "unknown scene format '.%s' (expected .obj, .ply, .nff, .aff, .tar)", ext);
+    if (assimp_can_load(ext)) return assimp_load(ctx, path);
+    return io_error(ctx, shown, 0, "unknown scene format '.%s' (expected .obj, .ply, .nff, .aff, .tar, .gltf, .glb or another format assimp reads)", ext);
 }
 
 static void move_out(io_builder *b, rp_scene_data *out) {

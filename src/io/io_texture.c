@@ -132,6 +132,40 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
         io_error(ctx, file, line, "cannot decode texture '%s': %s", as_written, why);
         return IO_NONE;
     }
+    return tex_add_rgb(ctx, path, as_written, w, h, rgb, file, line);
+}
+
+uint32_t tex_add_encoded(io_ctx *ctx, const char *key, const char *as_written, const void *data,
+                         size_t size, const char *file, uint32_t line) {
+    io_builder *b = &ctx->b;
+    for (size_t i = 0; i < b->texture_n; i++)
+        if (strcmp(b->texture_keys[i], key) == 0) return (uint32_t)i;
+    int iw, ih, comp;
+    stbi_uc *px = size <= INT32_MAX ? stbi_load_from_memory((const stbi_uc *)data, (int)size, &iw, &ih, &comp, 3) : NULL;
+    if (!px) {
+        io_error(ctx, file, line, "cannot decode texture '%s': %s", as_written,
+                 size <= INT32_MAX ? stbi_failure_reason() : "too large");
+        return IO_NONE;
+    }
+    size_t n = (size_t)iw * (size_t)ih * 3;
+    uint8_t *rgb = malloc(n);
+    if (rgb) memcpy(rgb, px, n);
+    stbi_image_free(px);
+    if (!rgb) {
+        io_error(ctx, file, line, "out of memory");
+        return IO_NONE;
+    }
+    return tex_add_rgb(ctx, key, as_written, iw, ih, rgb, file, line);
+}
+
+uint32_t tex_add_rgb(io_ctx *ctx, const char *path, const char *as_written, int32_t w, int32_t h,
+                     uint8_t *rgb, const char *file, uint32_t line) {
+    io_builder *b = &ctx->b;
+    for (size_t i = 0; i < b->texture_n; i++)
+        if (strcmp(b->texture_keys[i], path) == 0) {
+            free(rgb);
+            return (uint32_t)i;
+        }
     char *key = strdup(path);
     if (!key || b->texture_n >= INT32_MAX ||
         !io_reserve((void **)&b->textures, &b->texture_cap, b->texture_n + 1, sizeof(rp_texture_data))) {

@@ -7,6 +7,9 @@
 
 #include "io/io_internal.h"
 
+#if RP_IO_HAVE_LIBDEFLATE
+#include <libdeflate.h>
+#endif
 #if RP_IO_HAVE_ARCHIVE
 #include <archive.h>
 #include <archive_entry.h>
@@ -30,11 +33,52 @@ static size_t gzip_size_hint(const char *path, size_t file_size) {
     return hint;
 }
 
+#if RP_IO_HAVE_LIBDEFLATE
+/* Whole-buffer gzip inflate with libdeflate, 1.5-3.7x faster than zlib's streaming inflate on the
+ * shared scenes (spd_tree_s12: 1.66 s against 2.66 s in one run on a busy machine), into the size
+ * the gzip trailer states. False (nothing written) whenever that does not work out: multi-member
+ * files whose last ISIZE is not the total, sizes of 4 GiB or more, corrupt data. The caller then
+ * reads the file with zlib, which says what went wrong. */
+static bool deflate_read(const char *path, size_t file_size, size_t hint, io_buf *out) {
+    if (hint == 0 || file_size == 0) return false;
+    FILE *f = fopen(path, "rb");
+    if (!f) return false;
+    unsigned char *in = malloc(file_size);
+    bool ok = in && fread(in, 1, file_size, f) == file_size;
+    fclose(f);
+    char *data = ok ? malloc(hint + 1) : NULL;
+    struct libdeflate_decompressor *d = data ? libdeflate_alloc_decompressor() : NULL;
+    size_t in_pos = 0, size = 0;
+    ok = d != NULL;
+    while (ok && in_pos < file_size) { /* one gzip member per pass */
+        size_t used = 0, got = 0;
+        ok = libdeflate_gzip_decompress_ex(d, in + in_pos, file_size - in_pos, data + size, hint - size, &used,
+                                           &got) == LIBDEFLATE_SUCCESS;
+        in_pos += used;
+        size += got;
+    }
+    if (d) libdeflate_free_decompressor(d);
+    free(in);
+    if (!ok) {
+        free(data);
+        return false;
+    }
+    data[size] = '\0';
+    out->data = data;
+    out->size = size;
+    out->owned = true;
+    return true;
+}
+#endif
+
 static bool disk_read(const char *path, io_buf *out) {
     struct stat st;
     if (stat(path, &st) != 0 || !S_ISREG(st.st_mode)) return false;
     size_t file_size = (size_t)st.st_size;
     size_t hint = gzip_size_hint(path, file_size);
+#if RP_IO_HAVE_LIBDEFLATE
+    if (deflate_read(path, file_size, hint, out)) return true;
+#endif
     size_t cap = (hint > file_size ? hint : file_size) + 1;
     gzFile gz = gzopen(path, "rb");
     if (!gz) return false;
@@ -182,9 +226,18 @@ bool vfs_open_archive(io_ctx *ctx, const char *path) {
     archive_read_support_filter_all(a);
     archive_read_support_format_tar(a);
     archive_read_support_format_gnutar(a);
-    if (archive_read_open_filename(a, path, 1u << 16) != ARCHIVE_OK) {
+    io_buf raw = {0};
+#if RP_IO_HAVE_LIBDEFLATE
+    /* a .tar.gz inflated whole by libdeflate (see deflate_read), then read as a plain tar */
+    struct stat st;
+    if (stat(path, &st) == 0 && S_ISREG(st.st_mode))
+        deflate_read(path, (size_t)st.st_size, gzip_size_hint(path, (size_t)st.st_size), &raw);
+#endif
+    if ((raw.data ? archive_read_open_memory(a, raw.data, raw.size)
+                  : archive_read_open_filename(a, path, 1u << 16)) != ARCHIVE_OK) {
         bool r = io_error(ctx, path, 0, "cannot open archive: %s", archive_error_string(a));
         archive_read_free(a);
+        vfs_buf_free(&raw);
         return r;
     }
     ctx->vfs.archive = path;
@@ -241,6 +294,7 @@ bool vfs_open_archive(io_ctx *ctx, const char *path) {
     if (ok && rc != ARCHIVE_EOF)
         ok = io_error(ctx, path, 0, "corrupt archive: %s", archive_error_string(a));
     archive_read_free(a);
+    vfs_buf_free(&raw);
     return ok;
 }
 #endif

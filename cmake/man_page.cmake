@@ -1,0 +1,18 @@
+# Writes raypack.1 from `raypack --help` and each command's --help (cmake -P, see install.cmake).
+execute_process(COMMAND ${RAYPACK} --help OUTPUT_VARIABLE top)
+set(page ".TH RAYPACK 1 \"\" \"raypack ${VERSION}\" \"User Commands\"\n.SH NAME\nraypack \\- real-time ray tracer: render, inspect and benchmark scenes\n.SH SYNOPSIS\n.nf\n")
+string(REPLACE "\\" "\\\\" top "${top}")
+string(APPEND page "${top}.fi\n")
+foreach(cmd render info bench)
+  execute_process(COMMAND ${RAYPACK} ${cmd} --help OUTPUT_VARIABLE help ERROR_VARIABLE help_err)
+  if(help STREQUAL "")
+    set(help "${help_err}")
+  endif()
+  string(REPLACE "\\" "\\\\" help "${help}")
+  # lines starting with . or ' are roff requests: escape them
+  string(REGEX REPLACE "\n([.'])" "\n\\\\&\\1" help "${help}")
+  string(TOUPPER ${cmd} title)
+  string(APPEND page ".SH ${title}\n.nf\n${help}.fi\n")
+endforeach()
+string(APPEND page ".SH SEE ALSO\nThe README and DESIGN.md of the raypack sources; pkg-config raypack raypack-render; find_package(raypack CONFIG).\n")
+file(WRITE ${OUT} "${page}")

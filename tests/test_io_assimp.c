@@ -1,0 +1,366 @@
+// rp-test: labels=io timeout=300
+/* glTF 2.0 and the other formats read through assimp (src/io/io_assimp.c): a handwritten glTF with
+ * a node hierarchy (a translated parent, a mirrored child, a second instance of the mesh), a camera,
+ * a KHR_lights_punctual point light and a material with an embedded PNG (a data URI in .gltf, a
+ * buffer view in .glb); an ASCII STL; a COLLADA camera; broken files; and the shared gltf_cube
+ * and gltf_suzanne scenes, Suzanne rendered (albedo) to check that textures land where they belong. */
+#include <math.h>
+#include <stdint.h>
+#include <sys/stat.h>
+
+#include "raypack_io.h"
+#include "raypack_render.h"
+#include "rp_test.h"
+
+static char tmp_dir[512];
+
+static const char *tmp_path(const char *name, char *buf, size_t size) {
+    snprintf(buf, size, "%s/%s", tmp_dir, name);
+    return buf;
+}
+
+static void write_bytes(const char *name, const void *data, size_t n) {
+    char path[1024];
+    FILE *f = fopen(tmp_path(name, path, sizeof path), "wb");
+    if (!f) {
+        fprintf(stderr, "cannot write %s\n", path);
+        exit(1);
+    }
+    fwrite(data, 1, n, f);
+    fclose(f);
+}
+
+static void write_text(const char *name, const char *text) { write_bytes(name, text, strlen(text)); }
+
+static bool near(float a, float b, float tol) { return fabsf(a - b) <= tol; }
+
+/* A 2x2 RGB PNG: red, green / blue, white. */
+static const char png_2x2[] =
+    "iVBORw0KGgoAAAANSUhEUgAAAAIAAAACCAIAAAD91JpzAAAAEklEQVR4nGP4z8DAAMIM/4EAAB/uBfsL2WiLAAAAAElFTkSuQmCC";
+
+/* One triangle: indices (3 ushort + pad) at 0, positions at 8, normals at 44, uvs at 80. */
+static void write_triangle_bin(const char *name) {
+    unsigned char buf[104];
+    memset(buf, 0, sizeof buf);
+    const uint16_t idx[3] = {0, 1, 2};
+    const float pos[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    const float nrm[9] = {0, 0, 1, 0, 0, 1, 0, 0, 1};
+    const float uv[6] = {0, 0, 1, 0, 0, 1};
+    memcpy(buf, idx, sizeof idx);
+    memcpy(buf + 8, pos, sizeof pos);
+    memcpy(buf + 44, nrm, sizeof nrm);
+    memcpy(buf + 80, uv, sizeof uv);
+    write_bytes(name, buf, sizeof buf);
+}
+
+static const char gltf_head[] =
+    "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_lights_punctual\"],\n"
+    "\"extensions\":{\"KHR_lights_punctual\":{\"lights\":[{\"type\":\"point\",\"color\":[1,0.5,0.25],\"intensity\":4}]}},\n"
+    "\"scene\":0,\"scenes\":[{\"nodes\":[0,2,4]}],\n"
+    "\"nodes\":[{\"name\":\"parent\",\"translation\":[10,0,0],\"children\":[1,3]},\n"
+    "  {\"name\":\"child\",\"scale\":[-1,1,1],\"mesh\":0},\n"
+    "  {\"name\":\"cam\",\"translation\":[0,0,5],\"camera\":0},\n"
+    "  {\"name\":\"lamp\",\"translation\":[0,2,0],\"extensions\":{\"KHR_lights_punctual\":{\"light\":0}}},\n"
+    "  {\"name\":\"copy\",\"translation\":[0,0,-3],\"mesh\":0}],\n"
+    "\"cameras\":[{\"type\":\"perspective\",\"perspective\":{\"yfov\":0.6,\"aspectRatio\":1.5,\"znear\":0.1,\"zfar\":100}}],\n"
+    "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":1,\"NORMAL\":2,\"TEXCOORD_0\":3},\"indices\":0,\"material\":0}]}],\n"
+    "\"materials\":[{\"name\":\"paint\",\"pbrMetallicRoughness\":{\"baseColorFactor\":[0.2,0.4,0.6,1],\"baseColorTexture\":{\"index\":0},\"metallicFactor\":0},\n"
+    "  \"emissiveFactor\":[1,0.5,0.25]}],\n"
+    "\"textures\":[{\"source\":0}],\n"
+    "\"images\":[{\"uri\":\"data:image/png;base64,";
+static const char gltf_tail_fmt[] =
+    "\"}],\n"
+    "\"buffers\":[{\"uri\":\"%s\",\"byteLength\":104}],\n"
+    "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":6},{\"buffer\":0,\"byteOffset\":8,\"byteLength\":36},\n"
+    "  {\"buffer\":0,\"byteOffset\":44,\"byteLength\":36},{\"buffer\":0,\"byteOffset\":80,\"byteLength\":24}],\n"
+    "\"accessors\":[{\"bufferView\":0,\"componentType\":5123,\"count\":3,\"type\":\"SCALAR\"},\n"
+    "  {\"bufferView\":1,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\",\"min\":[0,0,0],\"max\":[1,1,0]},\n"
+    "  {\"bufferView\":2,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"},\n"
+    "  {\"bufferView\":3,\"componentType\":5126,\"count\":3,\"type\":\"VEC2\"}]}\n";
+
+static void write_gltf(const char *name, const char *bin) {
+    char text[8192];
+    int n = snprintf(text, sizeof text, "%s%s", gltf_head, png_2x2);
+    snprintf(text + n, sizeof text - (size_t)n, gltf_tail_fmt, bin);
+    write_text(name, text);
+}
+
+static int b64_value(char c) {
+    if (c >= 'A' && c <= 'Z') return c - 'A';
+    if (c >= 'a' && c <= 'z') return c - 'a' + 26;
+    if (c >= '0' && c <= '9') return c - '0' + 52;
+    return c == '+' ? 62 : c == '/' ? 63 : -1;
+}
+
+/* The same scene as one .glb: JSON chunk, then a BIN chunk holding the triangle's buffer and the
+ * PNG, which an image references through a buffer view (embedded, not a data URI). */
+static void write_glb(const char *name) {
+    unsigned char png[256];
+    size_t png_n = 0;
+    uint32_t acc = 0;
+    int bits = 0;
+    for (const char *p = png_2x2; *p && *p != '='; p++) {
+        acc = acc << 6 | (uint32_t)b64_value(*p);
+        if ((bits += 6) >= 8) png[png_n++] = (unsigned char)(acc >> (bits -= 8));
+    }
+    char json[8192];
+    int n = snprintf(json, sizeof json, "%.*s", (int)(strstr(gltf_head, "\"images\"") - gltf_head), gltf_head);
+    n += snprintf(json + n, sizeof json - (size_t)n,
+                  "\"images\":[{\"bufferView\":4,\"mimeType\":\"image/png\"}],\n"
+                  "\"buffers\":[{\"byteLength\":%zu}],\n"
+                  "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":6},{\"buffer\":0,\"byteOffset\":8,\"byteLength\":36},\n"
+                  "  {\"buffer\":0,\"byteOffset\":44,\"byteLength\":36},{\"buffer\":0,\"byteOffset\":80,\"byteLength\":24},\n"
+                  "  {\"buffer\":0,\"byteOffset\":104,\"byteLength\":%zu}],\n",
+                  104 + png_n, png_n);
+    n += snprintf(json + n, sizeof json - (size_t)n, "%s", strstr(gltf_tail_fmt, "\"accessors\""));
+    while (n % 4) json[n++] = ' ';
+    unsigned char bin[512];
+    memset(bin, 0, sizeof bin);
+    write_triangle_bin("glb_part.bin");
+    char path[1024];
+    FILE *f = fopen(tmp_path("glb_part.bin", path, sizeof path), "rb");
+    size_t got = f ? fread(bin, 1, 104, f) : 0;
+    if (f) fclose(f);
+    CHECK(got == 104);
+    memcpy(bin + 104, png, png_n);
+    uint32_t bin_n = (uint32_t)((104 + png_n + 3) & ~(size_t)3);
+    uint32_t header[3] = {0x46546C67u, 2, 12 + 8 + (uint32_t)n + 8 + bin_n};
+    uint32_t json_head[2] = {(uint32_t)n, 0x4E4F534Au}, bin_head[2] = {bin_n, 0x004E4942u};
+    f = fopen(tmp_path(name, path, sizeof path), "wb");
+    if (!f) exit(1);
+    fwrite(header, 4, 3, f);
+    fwrite(json_head, 4, 2, f);
+    fwrite(json, 1, (size_t)n, f);
+    fwrite(bin_head, 4, 2, f);
+    fwrite(bin, 1, bin_n, f);
+    fclose(f);
+}
+
+/* Corner c of triangle t: position, normal. */
+static const float *corner_pos(const rp_scene_data *s, size_t t, int c) { return s->positions + 3 * (size_t)s->indices[3 * t + c]; }
+static const float *corner_nrm(const rp_scene_data *s, size_t t, int c) { return s->normals + 3 * (size_t)s->normal_indices[3 * t + c]; }
+
+static bool has_corner(const rp_scene_data *s, size_t t, float x, float y, float z) {
+    for (int c = 0; c < 3; c++) {
+        const float *p = corner_pos(s, t, c);
+        if (near(p[0], x, 1e-5f) && near(p[1], y, 1e-5f) && near(p[2], z, 1e-5f)) return true;
+    }
+    return false;
+}
+
+static void test_handwritten_gltf(const char *name) {
+    char path[1024], err[1024] = "";
+    rp_scene_data s;
+    bool ok = rp_scene_data_load(tmp_path(name, path, sizeof path), &s, err, sizeof err);
+    CHECKF(ok, "%s: %s", name, err);
+    if (!ok) return;
+    /* two instances of the mesh, flattened with their node transforms */
+    CHECK(s.triangle_count == 2);
+    CHECK(s.normals != NULL && s.texcoords != NULL);
+    int mirrored = -1, moved = -1;
+    for (size_t t = 0; t < s.triangle_count && t < 2; t++) {
+        if (has_corner(&s, t, 10, 0, 0) && has_corner(&s, t, 9, 0, 0) && has_corner(&s, t, 10, 1, 0)) mirrored = (int)t;
+        if (has_corner(&s, t, 0, 0, -3) && has_corner(&s, t, 1, 0, -3) && has_corner(&s, t, 0, 1, -3)) moved = (int)t;
+    }
+    CHECKF(mirrored >= 0, "the mirrored child's triangle is not at x = 10, 9");
+    CHECKF(moved >= 0, "the translated copy is not at z = -3");
+    /* front faces stay in front: the winding's normal agrees with the vertex normals, mirror or not */
+    for (int k = 0; k < 2 && mirrored >= 0 && moved >= 0; k++) {
+        size_t t = (size_t)(k ? mirrored : moved);
+        const float *a = corner_pos(&s, t, 0), *b = corner_pos(&s, t, 1), *c = corner_pos(&s, t, 2);
+        float e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        float ng_z = e1[0] * e2[1] - e1[1] * e2[0];
+        const float *n = corner_nrm(&s, t, 0);
+        CHECKF(near(n[2], 1.0f, 1e-5f) && ng_z > 0.0f, "triangle %zu: normal z %g, winding normal z %g", t, (double)n[2], (double)ng_z);
+    }
+    /* material: base colour factor as kd, texture from the data URI, emissive as ke */
+    uint32_t m = s.tri_materials[0];
+    CHECK(m < s.material_count);
+    if (m < s.material_count) {
+        const rp_material_data *md = &s.materials[m];
+        CHECKF(near(md->kd[0], 0.2f, 1e-6f) && near(md->kd[1], 0.4f, 1e-6f) && near(md->kd[2], 0.6f, 1e-6f),
+               "kd %g %g %g", (double)md->kd[0], (double)md->kd[1], (double)md->kd[2]);
+        CHECKF(near(md->ke[0], 1.0f, 1e-6f) && near(md->ke[1], 0.5f, 1e-6f) && near(md->ke[2], 0.25f, 1e-6f),
+               "ke %g %g %g", (double)md->ke[0], (double)md->ke[1], (double)md->ke[2]);
+        CHECK(strcmp(md->name, "paint") == 0);
+        CHECK(md->map_kd >= 0 && (size_t)md->map_kd < s.texture_count);
+        if (md->map_kd >= 0 && (size_t)md->map_kd < s.texture_count) {
+            const rp_texture_data *t = &s.textures[md->map_kd];
+            CHECK(t->width == 2 && t->height == 2);
+            CHECK(t->rgb[0] == 255 && t->rgb[1] == 0 && t->rgb[2] == 0);       /* top left red */
+            CHECK(t->rgb[9] == 255 && t->rgb[10] == 255 && t->rgb[11] == 255); /* bottom right white */
+        }
+    }
+    /* camera: the node's position, looking down its -z, vertical fov = yfov */
+    CHECK(s.camera.valid);
+    CHECKF(near(s.camera.eye[0], 0, 1e-5f) && near(s.camera.eye[1], 0, 1e-5f) && near(s.camera.eye[2], 5, 1e-5f),
+           "eye %g %g %g", (double)s.camera.eye[0], (double)s.camera.eye[1], (double)s.camera.eye[2]);
+    CHECK(s.camera.look[2] < s.camera.eye[2] && near(s.camera.look[0], 0, 1e-5f) && near(s.camera.look[1], 0, 1e-5f));
+    CHECK(near(s.camera.up[1], 1, 1e-5f));
+    CHECKF(near(s.camera.fov_deg, 0.6f * 180.0f / (float)M_PI, 0.01f), "fov %g, want %g", (double)s.camera.fov_deg,
+           0.6 * 180.0 / M_PI);
+    /* the point light, under the translated parent */
+    CHECK(s.light_count == 1);
+    if (s.light_count == 1) {
+        const rp_light_data *l = &s.lights[0];
+        CHECKF(near(l->position[0], 10, 1e-5f) && near(l->position[1], 2, 1e-5f) && near(l->position[2], 0, 1e-5f),
+               "light at %g %g %g", (double)l->position[0], (double)l->position[1], (double)l->position[2]);
+        CHECKF(near(l->color[0], 4, 1e-4f) && near(l->color[1], 2, 1e-4f) && near(l->color[2], 1, 1e-4f),
+               "light colour %g %g %g", (double)l->color[0], (double)l->color[1], (double)l->color[2]);
+    }
+    rp_scene_data_free(&s);
+}
+
+static void test_stl(void) {
+    write_text("tri.stl", "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 2 0 0\nvertex 0 3 0\n"
+                          "endloop\nendfacet\nendsolid t\n");
+    char path[1024], err[1024] = "";
+    rp_scene_data s;
+    bool ok = rp_scene_data_load(tmp_path("tri.stl", path, sizeof path), &s, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (!ok) return;
+    CHECK(s.triangle_count == 1 && s.material_count >= 1);
+    CHECK(has_corner(&s, 0, 2, 0, 0) && has_corner(&s, 0, 0, 3, 0));
+    rp_scene_data_free(&s);
+}
+
+/* COLLADA: a camera (yfov 40, aspect 2) under a translated node and a translated triangle. */
+static const char collada[] =
+    "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n"
+    "<COLLADA xmlns=\"http://www.collada.org/2005/11/COLLADASchema\" version=\"1.4.1\">\n"
+    "  <asset><unit name=\"meter\" meter=\"1\"/><up_axis>Y_UP</up_axis></asset>\n"
+    "  <library_cameras>\n"
+    "    <camera id=\"cam0\" name=\"cam0\"><optics><technique_common><perspective>\n"
+    "      <yfov>40</yfov><aspect_ratio>2</aspect_ratio><znear>0.1</znear><zfar>100</zfar>\n"
+    "    </perspective></technique_common></optics></camera>\n"
+    "  </library_cameras>\n"
+    "  <library_geometries>\n"
+    "    <geometry id=\"tri\" name=\"tri\"><mesh>\n"
+    "      <source id=\"pos\"><float_array id=\"pos-a\" count=\"9\">0 0 0 1 0 0 0 1 0</float_array>\n"
+    "        <technique_common><accessor source=\"#pos-a\" count=\"3\" stride=\"3\"><param name=\"X\" type=\"float\"/><param name=\"Y\" type=\"float\"/><param name=\"Z\" type=\"float\"/></accessor></technique_common></source>\n"
+    "      <vertices id=\"verts\"><input semantic=\"POSITION\" source=\"#pos\"/></vertices>\n"
+    "      <triangles count=\"1\"><input semantic=\"VERTEX\" source=\"#verts\" offset=\"0\"/><p>0 1 2</p></triangles>\n"
+    "    </mesh></geometry>\n"
+    "  </library_geometries>\n"
+    "  <library_visual_scenes>\n"
+    "    <visual_scene id=\"s\">\n"
+    "      <node id=\"camnode\" name=\"camnode\"><translate>0 0 7</translate><instance_camera url=\"#cam0\"/></node>\n"
+    "      <node id=\"m\" name=\"m\"><translate>3 0 0</translate><instance_geometry url=\"#tri\"/></node>\n"
+    "    </visual_scene>\n"
+    "  </library_visual_scenes>\n"
+    "  <scene><instance_visual_scene url=\"#s\"/></scene>\n"
+    "</COLLADA>\n"
+    "";
+
+static void test_collada(void) {
+    write_text("cam.dae", collada);
+    char path[1024], err[1024] = "";
+    rp_scene_data s;
+    bool ok = rp_scene_data_load(tmp_path("cam.dae", path, sizeof path), &s, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (!ok) return;
+    CHECK(s.triangle_count == 1 && has_corner(&s, 0, 4, 0, 0) && has_corner(&s, 0, 3, 1, 0));
+    CHECK(s.camera.valid && near(s.camera.eye[2], 7, 1e-5f) && s.camera.look[2] < 7);
+    CHECKF(near(s.camera.fov_deg, 40.0f, 0.01f), "fov %g, want 40", (double)s.camera.fov_deg);
+    rp_scene_data_free(&s);
+}
+
+static void expect_fail(const char *name, const char *needle) {
+    char path[1024], err[1024] = "";
+    rp_scene_data s;
+    bool ok = rp_scene_data_load(tmp_path(name, path, sizeof path), &s, err, sizeof err);
+    CHECKF(!ok, "%s loaded", name);
+    if (ok) {
+        rp_scene_data_free(&s);
+        return;
+    }
+    CHECKF(strstr(err, name) != NULL && strstr(err, ": error: ") != NULL, "%s: message '%s' does not name it", name, err);
+    if (needle) CHECKF(strstr(err, needle) != NULL, "%s: message '%s' lacks '%s'", name, err, needle);
+    CHECK(s.triangle_count == 0 && s.positions == NULL);
+}
+
+static void test_errors(void) {
+    expect_fail("absent.gltf", NULL);
+    write_text("broken.gltf", "{ \"asset\": { \"version\": \"2.0\" }, \"meshes\": [ {");
+    expect_fail("broken.gltf", NULL);
+    write_gltf("nobin.gltf", "nothere.bin");
+    expect_fail("nobin.gltf", NULL);
+    write_text("empty.gltf", "{\"asset\":{\"version\":\"2.0\"},\"scenes\":[{\"nodes\":[]}],\"scene\":0}");
+    expect_fail("empty.gltf", NULL);
+    write_text("zipped.gltf.gz", "not really gzip");
+    expect_fail("zipped.gltf.gz", "gzip");
+    write_text("bad.stl", "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0\n");
+    expect_fail("bad.stl", NULL);
+}
+
+/* The shared scenes: counts, attributes, textures; Suzanne's eyes (yellow in her base colour
+ * texture) come out in the albedo where eyes are, left and right of the centre, in the upper half. */
+static void test_shared(void) {
+    char path[1024], err[1024] = "";
+    rp_scene_data s;
+    if (rp_test_scene("gltf_cube/Cube.gltf", path, sizeof path)) {
+        bool ok = rp_scene_data_load(path, &s, err, sizeof err);
+        CHECKF(ok, "%s", err);
+        if (ok) {
+            CHECK(s.triangle_count == 12 && s.normals && s.texcoords);
+            CHECK(s.texture_count == 1 && s.textures[0].width == 512 && s.textures[0].height == 512);
+            CHECK(s.materials[s.tri_materials[0]].map_kd == 0);
+            rp_scene_data_free(&s);
+        }
+    } else {
+        CHECK(!"gltf_cube missing");
+    }
+    if (!rp_test_scene("gltf_suzanne/Suzanne.gltf", path, sizeof path)) {
+        CHECK(!"gltf_suzanne missing");
+        return;
+    }
+    bool ok = rp_scene_data_load(path, &s, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (!ok) return;
+    CHECK(s.triangle_count == 3936 && s.normals && s.texcoords && s.normal_count == s.vertex_count);
+    CHECK(s.texture_count == 1 && s.textures[0].width == 1024);
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
+    rp_render_scene *rs = rp_render_scene_new(dev, &s, NULL, err, sizeof err);
+    CHECKF(rs != NULL, "%s", err);
+    if (rs) {
+        enum { W = 96, H = 96 };
+        static float px[W * H * 3];
+        rp_camera cam = {.type = RP_CAMERA_PINHOLE,
+                         .pinhole = {.eye = {0, 0.5f, 4}, .look = {0, 0, 0}, .up = {0, 1, 0}, .fov_deg = 45}};
+        rp_render_desc rd = {.width = W, .height = H, .integrator = RP_INTEGRATOR_AOV, .aov = RP_AOV_ALBEDO, .camera = &cam};
+        CHECK(rp_render(rs, &rd, px, NULL));
+        int yellow_l = 0, yellow_r = 0, yellow_low = 0, grey = 0;
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++) {
+                const float *p = px + 3 * (y * W + x);
+                if (p[0] > 0.3f && p[1] > 0.2f && p[2] < 0.5f * p[1]) {
+                    if (y > H * 6 / 10) yellow_low++;
+                    else if (x < W / 2) yellow_l++;
+                    else yellow_r++;
+                } else if (p[0] > 0.01f && fabsf(p[0] - p[2]) < 0.05f) {
+                    grey++;
+                }
+            }
+        CHECKF(yellow_l > 10 && yellow_r > 10 && yellow_low == 0 && grey > 20 * (yellow_l + yellow_r) / 4,
+               "eyes: %d left, %d right, %d low; %d grey", yellow_l, yellow_r, yellow_low, grey);
+        rp_render_scene_release(rs);
+    }
+    rp_device_release(dev);
+    rp_scene_data_free(&s);
+}
+
+int main(void) {
+    const char *t = getenv("RP_TEST_TMP");
+    snprintf(tmp_dir, sizeof tmp_dir, "%s", t ? t : "/tmp/rp_test_io_assimp");
+    mkdir(tmp_dir, 0755);
+    write_triangle_bin("tri.bin");
+    write_gltf("scene.gltf", "tri.bin");
+    test_handwritten_gltf("scene.gltf");
+    write_glb("scene.glb");
+    test_handwritten_gltf("scene.glb");
+    test_stl();
+    test_collada();
+    test_errors();
+    test_shared();
+    return RP_TEST_END();
+}

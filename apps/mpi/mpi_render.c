@@ -12,7 +12,9 @@
  * go back to the queue and the others render them, and the frame comes out the same. That needs the
  * job to outlive the client: `mpirun --enable-recovery` (without it mpirun kills every rank when one
  * dies). MPI_Finalize would then wait for the dead rank forever, so after the last frame is written a
- * server that lost a client ends the job with MPI_Abort(0) (exit status 0, every rank stopped). The
+ * server that lost a client tells the others to leave without it, kills a lost client that still
+ * runs on its host (one that hangs), and leaves too; a lost client on another host is stopped with
+ * MPI_Abort(0) (exit status 0). The
  * server's own death ends the job (mpirun kills the clients; under --enable-recovery each client
  * gives up after hearing nothing for 4 timeouts). */
 #include "cli.h"
@@ -381,7 +383,7 @@ static void tile_worker_free(tile_worker *w) {
 
 /* ---- the client ---- */
 
-static int run_client(const mpi_options *o, int rank) {
+static int run_client(const mpi_options *o, int rank, bool *no_finalize) {
     double idle_s = 4.0 * o->timeout_s; /* silence from rank 0 after which a client gives up */
     if (test_hook("STALL", rank)) {
         for (;;) sleep_us(1000000); /* a client that never answers: rank 0 must time out */
@@ -426,7 +428,7 @@ static int run_client(const mpi_options *o, int rank) {
         goto done;
     }
 
-    long kill_after = test_hook("KILL", rank);
+    long kill_after = test_hook("KILL", rank), hang_after = test_hook("HANG", rank);
     long rendered = 0;
     uint8_t *msg = NULL;
     size_t msg_cap = 0;
@@ -440,10 +442,14 @@ static int run_client(const mpi_options *o, int rank) {
         MPI_Recv(&job, (int)sizeof job, MPI_BYTE, 0, TAG_JOB, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
         if (job.kind == JOB_QUIT) {
             status = CLI_EXIT_OK;
+            *no_finalize = job.tile != 0;
             break;
         }
         /* kill -9 in the middle of a frame, holding this tile and the one queued behind it */
         if (kill_after && rendered == kill_after) raise(SIGKILL);
+        /* ... or hang there, alive but silent */
+        if (hang_after && rendered == hang_after)
+            for (;;) sleep_us(1000000);
         rp_render_stats rst;
         result_msg res = {.kind = RESULT_TILE, .frame = job.frame, .tile = job.tile,
                           .region = {job.region[0], job.region[1], job.region[2], job.region[3]}};
@@ -812,14 +818,31 @@ static bool server_start(server *s, rank_scene *rs, double *scene_bytes) {
     return true;
 }
 
-static void quit_clients(server *s) {
-    job_msg q = {.kind = JOB_QUIT};
+/* Ends the clients. After a lost client MPI_Finalize would wait for it forever, so the live ones
+ * are told to leave without it (q.tile = 1), and a lost one still running on this host (it hangs
+ * rather than died) is killed; true when every lost client was on this host, so that the job can end
+ * without MPI_Abort. */
+static bool quit_clients(server *s) {
+    job_msg q = {.kind = JOB_QUIT, .tile = s->lost_client ? 1u : 0u};
+    char host[64] = "";
+    gethostname(host, sizeof host - 1);
+    bool local = true;
     for (int c = 0; c < s->size - 1; c++) {
         client *cl = &s->clients[c];
-        if (!cl->alive) continue;
-        send_until(&q, sizeof q, cl->rank, TAG_JOB, MPI_Wtime() + s->o->timeout_s);
+        if (cl->alive) {
+            send_until(&q, sizeof q, cl->rank, TAG_JOB, MPI_Wtime() + s->o->timeout_s);
+        } else if (strcmp(cl->hello.host, host) == 0 && cl->hello.pid > 1) {
+            kill((pid_t)cl->hello.pid, SIGKILL);
+        } else {
+            local = false;
+        }
     }
+    return local;
 }
+
+/* run_server's results beyond the exit statuses: every frame written, but a client was lost (and
+ * any lost one still running was on this host and is killed, or was elsewhere). */
+enum { SERVER_LOST_LOCAL = -1, SERVER_LOST_REMOTE = -2 };
 
 static int run_server(const mpi_options *o, int size) {
     double t0 = cli_now_ms();
@@ -888,6 +911,7 @@ static int run_server(const mpi_options *o, int size) {
         for (int c = 0; c < size - 1; c++)
             printf("client   rank %d: pid %d on %s, %d threads\n", s.clients[c].rank, s.clients[c].hello.pid,
                    s.clients[c].hello.host, s.clients[c].threads);
+        fflush(stdout); /* who the clients are, before the frames: a supervisor (or the kill test) reads it */
     }
     int frames = o->frames > 0 ? o->frames : 1;
     double total_ms = 0.0;
@@ -966,7 +990,7 @@ static int run_server(const mpi_options *o, int size) {
     status = CLI_EXIT_OK;
 done:
     fflush(stdout);
-    if (status == CLI_EXIT_OK && size > 1) quit_clients(&s);
+    bool all_local = status == CLI_EXIT_OK && size > 1 ? quit_clients(&s) : true;
     tile_worker_free(&w);
     free(s.state);
     free(s.owner);
@@ -975,7 +999,8 @@ done:
     free(s.msg);
     free(s.clients);
     rank_scene_free(&rs);
-    return s.lost_client && status == CLI_EXIT_OK ? -1 : status;
+    if (s.lost_client && status == CLI_EXIT_OK) return all_local ? SERVER_LOST_LOCAL : SERVER_LOST_REMOTE;
+    return status;
 }
 
 int cli_render_mpi(int argc, char **argv) {
@@ -1000,13 +1025,14 @@ int cli_render_mpi(int argc, char **argv) {
     int status;
     if (rank == 0) {
         status = run_server(&o, size);
-        if (status == -1) {
-            /* A client was lost: MPI_Finalize would wait for it forever. Every frame is written;
-             * end the job, stopping a client that hangs rather than died. */
+        if (status == SERVER_LOST_LOCAL || status == SERVER_LOST_REMOTE) {
+            /* A client was lost: MPI_Finalize would wait for it forever. Every frame is written and
+             * the others have left; a lost client elsewhere may still hang, which only MPI_Abort
+             * stops (exit status 0 all the same). */
             fflush(stdout);
             fflush(stderr);
-            MPI_Abort(MPI_COMM_WORLD, 0);
-            return CLI_EXIT_OK;
+            if (status == SERVER_LOST_REMOTE) MPI_Abort(MPI_COMM_WORLD, 0);
+            _exit(CLI_EXIT_OK);
         }
         if (status != CLI_EXIT_OK) {
             /* Clients may be waiting in a handshake that will never finish: stop them all. */
@@ -1016,8 +1042,9 @@ int cli_render_mpi(int argc, char **argv) {
             return status;
         }
     } else {
-        status = run_client(&o, rank);
-        if (status != CLI_EXIT_OK) {
+        bool no_finalize = false;
+        status = run_client(&o, rank, &no_finalize);
+        if (status != CLI_EXIT_OK || no_finalize) {
             /* the server reports what went wrong (or is gone); leave without the collective finalize */
             fflush(stderr);
             _exit(status);

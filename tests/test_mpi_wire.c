@@ -100,11 +100,18 @@ static void check_tile(const float *px, size_t n) {
     size_t cap = wire_tile_bound(n);
     uint8_t *out = malloc(cap), *scratch = malloc(4 * n);
     float *back = malloc(4 * n);
-    size_t len = wire_tile_pack(px, n, 1, scratch, out, cap);
-    CHECK(len > 0 && len <= cap);
-    CHECK(wire_tile_unpack(out, len, n, scratch, back) && memcmp(px, back, 4 * n) == 0);
-    CHECK(!wire_tile_unpack(out, len / 2, n, scratch, back));       /* truncated */
-    CHECK(!wire_tile_unpack(out, len, n + 1, scratch, back) || n == 0); /* another size */
+    wire_codec *c = wire_codec_new();
+    CHECK(c != NULL);
+    for (int round = 0; round < 2 && c; round++) { /* twice: the codec's streams are reused */
+        size_t len = wire_tile_pack(c, px, n, scratch, out, cap);
+        CHECK(len > 0 && len <= cap);
+        CHECK(wire_tile_unpack(c, out, len, n, scratch, back) && memcmp(px, back, 4 * n) == 0);
+        CHECK(!wire_tile_unpack(c, out, len - 1, n, scratch, back));        /* truncated */
+        CHECK(!wire_tile_unpack(c, out, 2 * n + 1, n, scratch, back));      /* the deflated part cut */
+        CHECK(!wire_tile_unpack(c, out, len, n + 1, scratch, back));        /* another size */
+        CHECK(!wire_tile_pack(c, px, n, scratch, out, cap - 1));             /* too small a buffer */
+    }
+    wire_codec_free(c);
     free(out);
     free(scratch);
     free(back);

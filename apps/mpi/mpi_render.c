@@ -76,7 +76,9 @@ typedef struct result_msg {
     uint32_t kind;
     uint32_t frame, tile;
     int32_t region[4];
-    double render_ms;
+    double render_ms;         /* wall time of rp_render */
+    double render_cpu_ms;     /* CPU time of the client's process (all its threads) in rp_render */
+    double pack_cpu_ms;       /* CPU time copying the region out and compressing it */
     uint64_t floats, rays;
 } result_msg;
 
@@ -94,6 +96,13 @@ typedef struct mpi_options {
 } mpi_options;
 
 /* ---- small helpers ---- */
+
+/* CPU time of this process, all threads, in milliseconds. */
+static double cpu_ms(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
 
 static void sleep_us(long us) {
     struct timespec ts = {.tv_sec = us / 1000000, .tv_nsec = (us % 1000000) * 1000};
@@ -331,6 +340,8 @@ typedef struct tile_worker {
     float *tile;         /* the region's floats, contiguous */
     uint8_t *scratch, *packed;
     size_t tile_cap, packed_cap;
+    wire_codec *codec;
+    double render_cpu_ms;  /* of the last tile */
 } tile_worker;
 
 static rp_render_desc job_desc(const job_msg *j) {
@@ -360,13 +371,16 @@ static bool tile_render(tile_worker *w, rp_render_scene *scene, const job_msg *j
         w->tile = malloc(n * sizeof(float));
         w->scratch = malloc(n * sizeof(float));
         w->packed = malloc(w->packed_cap);
-        if (!w->tile || !w->scratch || !w->packed) {
+        if (!w->codec) w->codec = wire_codec_new();
+        if (!w->tile || !w->scratch || !w->packed || !w->codec) {
             w->tile_cap = 0;
             return false;
         }
     }
     rp_render_desc d = job_desc(j);
+    double c0 = cpu_ms();
     if (!rp_render(scene, &d, w->frame, st)) return false;
+    w->render_cpu_ms = cpu_ms() - c0;
     for (int y = 0; y < th; y++)
         memcpy(w->tile + (size_t)y * (size_t)tw * 3,
                w->frame + ((size_t)(j->region[1] + y) * (size_t)j->width + (size_t)j->region[0]) * 3,
@@ -379,6 +393,7 @@ static void tile_worker_free(tile_worker *w) {
     free(w->tile);
     free(w->scratch);
     free(w->packed);
+    wire_codec_free(w->codec);
 }
 
 /* ---- the client ---- */
@@ -457,10 +472,14 @@ static int run_client(const mpi_options *o, int rank, bool *no_finalize) {
         const void *body = NULL;
         char err[256];
         if (tile_render(&w, rs.scene, &job, &rst)) {
+            double c0 = cpu_ms();
             res.floats = (uint64_t)(job.region[2] - job.region[0]) * (uint64_t)(job.region[3] - job.region[1]) * 3;
-            payload = wire_tile_pack(w.tile, (size_t)res.floats, 1, w.scratch, w.packed, w.packed_cap);
+            payload = wire_tile_pack(w.codec, w.tile, (size_t)res.floats, w.scratch, w.packed, w.packed_cap);
             body = w.packed;
             res.render_ms = rst.render_ms;
+            res.render_cpu_ms = w.render_cpu_ms;
+            /* the copy out of the frame is in render_cpu_ms's complement: count it with the packing */
+            res.pack_cpu_ms = cpu_ms() - c0;
             for (int k = 0; k < RP_RAY_KIND_COUNT; k++) res.rays += rst.rays[k];
         }
         if (!payload) {
@@ -525,8 +544,11 @@ typedef struct server {
     float *image;
     uint8_t *msg, *scratch;
     size_t msg_cap;
+    wire_codec *codec;
+    float *tile_px;      /* one tile's floats, decompressed */
     bool lost_client;
     job_msg proto_job;   /* this frame's settings and camera */
+    double render_cpu_ms, pack_cpu_ms; /* this frame, summed over the tiles kept */
 } server;
 
 static void tile_region(const server *s, int t, int32_t r[4]) {
@@ -631,11 +653,10 @@ static bool take_result(server *s, const MPI_Status *st) {
     int32_t r[4];
     tile_region(s, (int)res.tile, r);
     size_t n = (size_t)(r[2] - r[0]) * (size_t)(r[3] - r[1]) * 3;
-    float *px = (float *)malloc(n * sizeof(float));
-    bool ok = px && res.floats == n &&
-              wire_tile_unpack(s->msg + sizeof res, (size_t)bytes - sizeof res, n, s->scratch, px);
+    float *px = s->tile_px;
+    bool ok = res.floats == n &&
+              wire_tile_unpack(s->codec, s->msg + sizeof res, (size_t)bytes - sizeof res, n, s->scratch, px);
     if (!ok) {
-        free(px);
         fprintf(stderr, "raypack render: rank %d sent a corrupt tile %u of frame %u\n", cl->rank, res.tile, res.frame);
         return false;
     }
@@ -649,8 +670,9 @@ static bool take_result(server *s, const MPI_Status *st) {
         s->done++;
         cl->tiles++;
         cl->tile_ms_all += res.render_ms;
+        s->render_cpu_ms += res.render_cpu_ms;
+        s->pack_cpu_ms += res.pack_cpu_ms;
     }
-    free(px);
     return true;
 }
 
@@ -693,7 +715,7 @@ static bool server_frame(server *s) {
                 drop_client(s, c, why);
             }
         }
-        sleep_us(50);
+        sleep_us(200); /* a tile takes milliseconds: polling faster only takes the clients' cores */
     }
     return true;
 }
@@ -889,7 +911,9 @@ static int run_server(const mpi_options *o, int size) {
     s.image = malloc((size_t)wd * (size_t)ht * 3 * sizeof(float));
     s.scratch = malloc((size_t)o->tile * (size_t)o->tile * 3 * sizeof(float));
     s.clients = calloc((size_t)(size > 1 ? size - 1 : 1), sizeof *s.clients);
-    if (!s.state || !s.owner || !s.image || !s.scratch || !s.clients) {
+    s.codec = wire_codec_new();
+    s.tile_px = malloc((size_t)o->tile * (size_t)o->tile * 3 * sizeof(float));
+    if (!s.state || !s.owner || !s.image || !s.scratch || !s.clients || !s.codec || !s.tile_px) {
         fprintf(stderr, "raypack render: out of memory for a %dx%d image\n", wd, ht);
         goto done;
     }
@@ -921,7 +945,8 @@ static int run_server(const mpi_options *o, int size) {
                                 .integrator = (int32_t)o->integrator, .packet = o->packet, .camera = fc,
                                 /* rp_render_desc: 0 is the default depth (5), negative is none */
                                 .max_depth = o->max_depth < 0 ? 0 : (o->max_depth == 0 ? -1 : o->max_depth)};
-        double f0 = cli_now_ms();
+        double f0 = cli_now_ms(), c0 = cpu_ms();
+        s.render_cpu_ms = s.pack_cpu_ms = 0.0;
         if (size == 1) {
             memset(s.state, TILE_PENDING, (size_t)s.tiles);
             for (int t = 0; t < s.tiles; t++) {
@@ -941,7 +966,7 @@ static int run_server(const mpi_options *o, int size) {
         } else if (!server_frame(&s)) {
             goto done;
         }
-        double frame_ms = cli_now_ms() - f0;
+        double frame_ms = cli_now_ms() - f0, server_cpu_ms = cpu_ms() - c0;
         total_ms += frame_ms;
         char path[1100];
         frame_path(o->output, frames, f, path, sizeof path);
@@ -962,6 +987,11 @@ static int run_server(const mpi_options *o, int size) {
                    fc.pinhole.eye[1], fc.pinhole.eye[2], fc.pinhole.look[0], fc.pinhole.look[1], fc.pinhole.look[2],
                    fc.pinhole.up[0], fc.pinhole.up[1], fc.pinhole.up[2], fc.pinhole.fov_deg);
             if (size > 1) {
+                /* what the frame cost in CPU time: rendering (as a single process would) against
+                 * what distribution adds (packing on the clients, serving on rank 0) */
+                printf("cost     frame %d: clients' CPU in rp_render %.1f ms, packing %.1f ms; rank 0's CPU %.1f ms; "
+                       "overhead %.2f%%\n", f, s.render_cpu_ms, s.pack_cpu_ms, server_cpu_ms,
+                       s.render_cpu_ms > 0.0 ? 100.0 * (s.pack_cpu_ms + server_cpu_ms) / s.render_cpu_ms : 0.0);
                 printf("share    frame %d:", f);
                 for (int c = 0; c < size - 1; c++)
                     printf(" rank %d %.1f%%%s", s.clients[c].rank, 100.0 * (double)s.clients[c].tiles / s.tiles,
@@ -998,6 +1028,8 @@ done:
     free(s.scratch);
     free(s.msg);
     free(s.clients);
+    free(s.tile_px);
+    wire_codec_free(s.codec);
     rank_scene_free(&rs);
     if (s.lost_client && status == CLI_EXIT_OK) return all_local ? SERVER_LOST_LOCAL : SERVER_LOST_REMOTE;
     return status;

@@ -229,22 +229,64 @@ bool wire_scene_unpack(const uint8_t *buf, size_t size, rp_scene_data *s, char *
     return true;
 }
 
-size_t wire_tile_bound(size_t n) { return (size_t)compressBound((uLong)(n * sizeof(float))); }
+struct wire_codec {
+    z_stream def, inf;
+    bool def_ok, inf_ok;
+};
 
-size_t wire_tile_pack(const float *px, size_t n, int level, uint8_t *scratch, uint8_t *out, size_t cap) {
-    const uint8_t *b = (const uint8_t *)px;
-    for (size_t i = 0; i < n; i++)
-        for (size_t k = 0; k < 4; k++) scratch[k * n + i] = b[4 * i + k];
-    uLongf len = (uLongf)cap;
-    if (compress2(out, &len, scratch, (uLong)(4 * n), level) != Z_OK) return 0;
-    return (size_t)len;
+wire_codec *wire_codec_new(void) {
+    wire_codec *c = calloc(1, sizeof *c);
+    if (!c) return NULL;
+    c->def_ok = deflateInit(&c->def, 1) == Z_OK;
+    c->inf_ok = inflateInit(&c->inf) == Z_OK;
+    if (!c->def_ok || !c->inf_ok) {
+        wire_codec_free(c);
+        return NULL;
+    }
+    return c;
 }
 
-bool wire_tile_unpack(const uint8_t *in, size_t size, size_t n, uint8_t *scratch, float *px) {
-    uLongf len = (uLongf)(4 * n);
-    if (uncompress(scratch, &len, in, (uLong)size) != Z_OK || len != 4 * n) return false;
+void wire_codec_free(wire_codec *c) {
+    if (!c) return;
+    if (c->def_ok) deflateEnd(&c->def);
+    if (c->inf_ok) inflateEnd(&c->inf);
+    free(c);
+}
+
+size_t wire_tile_bound(size_t n) { return 2 * n + (size_t)compressBound((uLong)(2 * n)); }
+
+size_t wire_tile_pack(wire_codec *c, const float *px, size_t n, uint8_t *scratch, uint8_t *out, size_t cap) {
+    if (cap < wire_tile_bound(n)) return 0;
+    const uint8_t *b = (const uint8_t *)px;
+    /* plane k holds byte k of every float; planes 0 and 1 go out raw, first */
+    for (size_t k = 0; k < 4; k++) {
+        uint8_t *d = k < 2 ? out + k * n : scratch + (k - 2) * n;
+        for (size_t i = 0; i < n; i++) d[i] = b[4 * i + k];
+    }
+    z_stream *z = &c->def;
+    if (deflateReset(z) != Z_OK) return 0;
+    z->next_in = scratch;
+    z->avail_in = (uInt)(2 * n);
+    z->next_out = out + 2 * n;
+    z->avail_out = (uInt)(cap - 2 * n);
+    if (deflate(z, Z_FINISH) != Z_STREAM_END) return 0;
+    return 2 * n + (size_t)z->total_out;
+}
+
+bool wire_tile_unpack(wire_codec *c, const uint8_t *in, size_t size, size_t n, uint8_t *scratch, float *px) {
+    if (size < 2 * n) return false;
+    z_stream *z = &c->inf;
+    if (inflateReset(z) != Z_OK) return false;
+    z->next_in = (Bytef *)(uintptr_t)(in + 2 * n);
+    z->avail_in = (uInt)(size - 2 * n);
+    z->next_out = scratch;
+    z->avail_out = (uInt)(2 * n);
+    /* all of the input, and exactly 2 n bytes out of it */
+    if (inflate(z, Z_FINISH) != Z_STREAM_END || z->total_out != 2 * n || z->avail_in != 0) return false;
     uint8_t *b = (uint8_t *)px;
-    for (size_t i = 0; i < n; i++)
-        for (size_t k = 0; k < 4; k++) b[4 * i + k] = scratch[k * n + i];
+    for (size_t k = 0; k < 4; k++) {
+        const uint8_t *s = k < 2 ? in + k * n : scratch + (k - 2) * n;
+        for (size_t i = 0; i < n; i++) b[4 * i + k] = s[i];
+    }
     return true;
 }

@@ -102,14 +102,17 @@ static void check_tile(const float *px, size_t n) {
     float *back = malloc(4 * n);
     wire_codec *c = wire_codec_new();
     CHECK(c != NULL);
-    for (int round = 0; round < 2 && c; round++) { /* twice: the codec's streams are reused */
-        size_t len = wire_tile_pack(c, px, n, scratch, out, cap);
+    for (int round = 0; round < 4 && c; round++) { /* fast and small, twice: the streams are reused */
+        int raw = 2 + round % 2;
+        size_t len = wire_tile_pack(c, px, n, raw, scratch, out, cap);
         CHECK(len > 0 && len <= cap);
         CHECK(wire_tile_unpack(c, out, len, n, scratch, back) && memcmp(px, back, 4 * n) == 0);
         CHECK(!wire_tile_unpack(c, out, len - 1, n, scratch, back));        /* truncated */
-        CHECK(!wire_tile_unpack(c, out, 2 * n + 1, n, scratch, back));      /* the deflated part cut */
+        CHECK(!wire_tile_unpack(c, out, 1 + (size_t)raw * n + 1, n, scratch, back)); /* deflated part cut */
         CHECK(!wire_tile_unpack(c, out, len, n + 1, scratch, back));        /* another size */
-        CHECK(!wire_tile_pack(c, px, n, scratch, out, cap - 1));             /* too small a buffer */
+        CHECK(!wire_tile_pack(c, px, n, raw, scratch, out, cap - 1));        /* too small a buffer */
+        out[0] = 7;
+        CHECK(!wire_tile_unpack(c, out, len, n, scratch, back));            /* unknown plane split */
     }
     wire_codec_free(c);
     free(out);

@@ -253,39 +253,44 @@ void wire_codec_free(wire_codec *c) {
     free(c);
 }
 
-size_t wire_tile_bound(size_t n) { return 2 * n + (size_t)compressBound((uLong)(2 * n)); }
+size_t wire_tile_bound(size_t n) { return 1 + 3 * n + (size_t)compressBound((uLong)(2 * n)); }
 
-size_t wire_tile_pack(wire_codec *c, const float *px, size_t n, uint8_t *scratch, uint8_t *out, size_t cap) {
-    if (cap < wire_tile_bound(n)) return 0;
+size_t wire_tile_pack(wire_codec *c, const float *px, size_t n, int raw_planes, uint8_t *scratch, uint8_t *out,
+                      size_t cap) {
+    if (cap < wire_tile_bound(n) || raw_planes < 2 || raw_planes > 3) return 0;
+    size_t raw = (size_t)raw_planes;
     const uint8_t *b = (const uint8_t *)px;
-    /* plane k holds byte k of every float; planes 0 and 1 go out raw, first */
+    out[0] = (uint8_t)raw;
+    /* plane k holds byte k of every float; the low planes go out raw, first */
     for (size_t k = 0; k < 4; k++) {
-        uint8_t *d = k < 2 ? out + k * n : scratch + (k - 2) * n;
+        uint8_t *d = k < raw ? out + 1 + k * n : scratch + (k - raw) * n;
         for (size_t i = 0; i < n; i++) d[i] = b[4 * i + k];
     }
     z_stream *z = &c->def;
     if (deflateReset(z) != Z_OK) return 0;
     z->next_in = scratch;
-    z->avail_in = (uInt)(2 * n);
-    z->next_out = out + 2 * n;
-    z->avail_out = (uInt)(cap - 2 * n);
+    z->avail_in = (uInt)((4 - raw) * n);
+    z->next_out = out + 1 + raw * n;
+    z->avail_out = (uInt)(cap - 1 - raw * n);
     if (deflate(z, Z_FINISH) != Z_STREAM_END) return 0;
-    return 2 * n + (size_t)z->total_out;
+    return 1 + raw * n + (size_t)z->total_out;
 }
 
 bool wire_tile_unpack(wire_codec *c, const uint8_t *in, size_t size, size_t n, uint8_t *scratch, float *px) {
-    if (size < 2 * n) return false;
+    if (size < 1 || (in[0] != 2 && in[0] != 3)) return false;
+    size_t raw = in[0];
+    if (size < 1 + raw * n) return false;
     z_stream *z = &c->inf;
     if (inflateReset(z) != Z_OK) return false;
-    z->next_in = (Bytef *)(uintptr_t)(in + 2 * n);
-    z->avail_in = (uInt)(size - 2 * n);
+    z->next_in = (Bytef *)(uintptr_t)(in + 1 + raw * n);
+    z->avail_in = (uInt)(size - 1 - raw * n);
     z->next_out = scratch;
-    z->avail_out = (uInt)(2 * n);
-    /* all of the input, and exactly 2 n bytes out of it */
-    if (inflate(z, Z_FINISH) != Z_STREAM_END || z->total_out != 2 * n || z->avail_in != 0) return false;
+    z->avail_out = (uInt)((4 - raw) * n);
+    /* all of the input, and exactly the deflated planes out of it */
+    if (inflate(z, Z_FINISH) != Z_STREAM_END || z->total_out != (4 - raw) * n || z->avail_in != 0) return false;
     uint8_t *b = (uint8_t *)px;
     for (size_t k = 0; k < 4; k++) {
-        const uint8_t *s = k < 2 ? in + k * n : scratch + (k - 2) * n;
+        const uint8_t *s = k < raw ? in + 1 + k * n : scratch + (k - raw) * n;
         for (size_t i = 0; i < n; i++) b[4 * i + k] = s[i];
     }
     return true;

@@ -699,6 +699,7 @@ static bool server_frame(server *s) {
     s->done = 0;
     for (int c = 0; c < nc; c++) s->clients[c].tiles = s->clients[c].bytes_in = s->clients[c].bytes_out = 0;
     double timeout = s->o->timeout_s;
+    long idle_us = 10;
     while (s->done < s->tiles) {
         int alive = 0;
         for (int c = 0; c < nc; c++) {
@@ -719,6 +720,7 @@ static bool server_frame(server *s) {
         int flag = 0;
         MPI_Iprobe(MPI_ANY_SOURCE, TAG_RESULT, MPI_COMM_WORLD, &flag, &st);
         if (flag) {
+            idle_us = 10;
             if (!take_result(s, &st)) return false;
             if (s->kill_after && s->done >= s->kill_after) raise(SIGKILL); /* the test of rank 0's death */
             continue;
@@ -732,7 +734,10 @@ static bool server_frame(server *s) {
                 drop_client(s, c, why);
             }
         }
-        sleep_us(200); /* a tile takes milliseconds: polling faster only takes the clients' cores */
+        /* Back off while nothing comes: every client holds a tile queued ahead, so a late look costs
+         * no client time, and a busy rank 0 would take cores from clients on the same node. */
+        sleep_us(idle_us);
+        if (idle_us < 1000) idle_us *= 2;
     }
     return true;
 }

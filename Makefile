@@ -1,6 +1,8 @@
 # The two commands of the README: `make demo` and `make test`. Both install what they need first.
 JOBS ?= $(shell nproc)
-DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev libassimp-dev libdeflate-dev python3-dev python3-cffi python3-numpy python3-pytest python3-pip python3-setuptools
+DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev \
+        libassimp-dev libdeflate-dev python3-dev python3-cffi python3-numpy python3-pytest python3-pip python3-setuptools \
+        openmpi-bin libopenmpi-dev
 SUDO := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 
 .PHONY: all deps release asan demo test test-release test-asan bench install clean

@@ -164,6 +164,8 @@ typedef struct rp_render_desc {
     rp_traversal traversal;     /* packet traversal of every ray kind; 0 (AUTO): chosen per kind */
     bool no_frustum;            /* true: packets are traced without frustum culling */
     bool count_work;            /* true: fill rp_render_stats.work (packet tracing only) */
+    int sample_start;           /* first sample index: a frame renders samples [sample_start, sample_start + spp), so callers can accumulate frames progressively; 0: from the first */
+    int region[4];              /* x0, y0, x1, y1 of the pixels to render (others untouched); all 0: the whole image */
 } rp_render_desc;
 
 typedef struct rp_render_stats {
@@ -177,8 +179,9 @@ RP_API rp_render_desc rp_render_desc_defaults(const rp_render_desc *desc);
 /* Channels per pixel of the frame desc describes: 1 for the depth AOV, else 3. */
 RP_API int rp_render_channels(const rp_render_desc *desc);
 /* Renders a frame into pixels (width * height * rp_render_channels floats, linear, top row first)
- * on the device's threads. stats may be NULL. Returns false on bad arguments (a packet size other
- * than 4, 8, 16 or 32) or out of memory. */
+ * on the device's threads; with desc.region only the pixels inside it are written, each exactly as
+ * the whole frame would have it. stats may be NULL. Returns false on bad arguments (a packet size
+ * other than 4, 8, 16 or 32, a region not inside the image) or out of memory. */
 RP_API bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels,
                       rp_render_stats *stats);
 

@@ -13,6 +13,8 @@ enum { CLI_EXIT_OK = 0, CLI_EXIT_FAILURE = 1, CLI_EXIT_USAGE = 2 };
 
 /* Subcommands: argv[0] is the subcommand's name ("render", "info", "bench"). */
 int cli_render(int argc, char **argv);
+/* `raypack render --mpi` under mpirun (apps/mpi, built when MPI is found). */
+int cli_render_mpi(int argc, char **argv);
 /* Prints what a scene holds and what its acceleration structure looks like. */
 int cli_info(int argc, char **argv);
 /* Benchmarks (apps/cli/bench*.c). */

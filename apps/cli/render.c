@@ -51,6 +51,7 @@ static void render_usage(FILE *out) {
             "                         ray-box and ray-triangle tests, frustum culls and the tests by\n"
             "                         BVH depth (counted in SIMD rays)\n"
             "  --stats-json FILE      write times, ray counts, Mrays/s and those counters as JSON\n"
+            "  --mpi                  distributed rendering under mpirun (raypack render --mpi --help)\n"
             "  --quiet                no progress and no report\n"
             "  -h, --help             this help\n"
             "\n"
@@ -399,6 +400,16 @@ static void json_work(FILE *f, const rp_render_stats *rs) {
 }
 
 int cli_render(int argc, char **argv) {
+    for (int i = 1; i < argc; i++)
+        if (strcmp(argv[i], "--mpi") == 0) {
+#ifdef RP_HAVE_MPI
+            return cli_render_mpi(argc, argv);
+#else
+            fprintf(stderr, "raypack render: --mpi: this raypack was built without MPI (install libopenmpi-dev "
+                            "and openmpi-bin, then rebuild)\n");
+            return CLI_EXIT_USAGE;
+#endif
+        }
     render_options o = {.output = "raypack.png", .max_depth = -1, .integrator = RP_INTEGRATOR_WHITTED,
                         .integrator_name = "whitted", .traversal_name = "auto", .packet = 16};
     bool help = false;

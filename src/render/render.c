@@ -82,6 +82,7 @@ typedef struct render_frame {
     float *pixels;
     uint32_t tiles_x, tiles_y;
     uint32_t tile;             /* tile side in pixels (a multiple of the packet side) */
+    int rx0, ry0, rx1, ry1;    /* the region rendered (desc.region, or the whole image); tiles start at its corner */
     bool packets;              /* Whitted in n x n packets */
     rp_traversal traversal[RP_RAY_KIND_COUNT];
     render_thread *threads;
@@ -497,8 +498,8 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
     const rp_render_desc *d = &f->desc;
     if (atomic_load_explicit(&f->failed, memory_order_relaxed)) return;
     int ts = (int)f->tile;
-    int x0 = (int)(index % f->tiles_x) * ts, y0 = (int)(index / f->tiles_x) * ts;
-    int x1 = x0 + ts < d->width ? x0 + ts : d->width, y1 = y0 + ts < d->height ? y0 + ts : d->height;
+    int x0 = f->rx0 + (int)(index % f->tiles_x) * ts, y0 = f->ry0 + (int)(index / f->tiles_x) * ts;
+    int x1 = x0 + ts < f->rx1 ? x0 + ts : f->rx1, y1 = y0 + ts < f->ry1 ? y0 + ts : f->ry1;
     int tw = x1 - x0, n = tw * (y1 - y0);
     int spp = d->integrator == RP_INTEGRATOR_AOV ? 1 : d->spp;
     uint64_t rays_before = 0;
@@ -608,8 +609,19 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     default:
         return false;
     }
+    /* A region (an MPI client's tile): the same pixels, so tiles of it start at its corner; a
+     * pixel's value does not depend on which tile or packet holds it. */
+    const int *rg = dd.region;
+    bool whole = rg[0] == 0 && rg[1] == 0 && rg[2] == 0 && rg[3] == 0;
+    if (!whole && !(rg[0] >= 0 && rg[1] >= 0 && rg[0] < rg[2] && rg[1] < rg[3] && rg[2] <= dd.width &&
+                    rg[3] <= dd.height))
+        return false;
     render_frame *f = calloc(1, sizeof *f);
     if (!f) return false;
+    f->rx0 = whole ? 0 : rg[0];
+    f->ry0 = whole ? 0 : rg[1];
+    f->rx1 = whole ? dd.width : rg[2];
+    f->ry1 = whole ? dd.height : rg[3];
     f->s = scene;
     f->desc = dd;
     f->packets = packets;
@@ -648,8 +660,8 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
         ts = (ts < n ? n : ts + n - 1) / n * n;
     }
     f->tile = ts;
-    f->tiles_x = ((uint32_t)f->desc.width + ts - 1) / ts;
-    f->tiles_y = ((uint32_t)f->desc.height + ts - 1) / ts;
+    f->tiles_x = ((uint32_t)(f->rx1 - f->rx0) + ts - 1) / ts;
+    f->tiles_y = ((uint32_t)(f->ry1 - f->ry0) + ts - 1) / ts;
     atomic_init(&f->tiles_done, 0u);
     atomic_init(&f->rays_done, 0u);
     atomic_flag_clear(&f->reporting);

@@ -1,0 +1,543 @@
+/* The display server: the handshake, the tiles of every frame handed out with one queued ahead
+ * per client, lost clients' tiles re-issued, the images written, the report. */
+#include <errno.h>
+#include <math.h>
+#include <mpi.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "cli.h"
+#include "mpi_render.h"
+
+enum { QUEUE_AHEAD = 2 }; /* tiles a client holds: the one it renders and the one queued behind it */
+
+typedef struct client {
+    int rank;
+    bool alive;
+    hello_msg hello;
+    int threads;
+    int held;                      /* tiles issued and not returned */
+    uint32_t held_tile[QUEUE_AHEAD];
+    job_msg job[QUEUE_AHEAD];      /* send buffers, one per slot, live until their request completes */
+    MPI_Request req[QUEUE_AHEAD];
+    double last_heard;             /* MPI_Wtime of its last result, or of an issue to it while it held none */
+    uint64_t tiles, bytes_in, bytes_out;          /* this frame */
+    uint64_t tiles_all, bytes_in_all, bytes_out_all;
+    double tile_ms_all;
+} client;
+
+enum { TILE_PENDING = 0, TILE_ISSUED = 1, TILE_DONE = 2 };
+
+typedef struct server {
+    const mpir_options *o;
+    int size;
+    client *clients;     /* ranks 1..size-1 at [rank - 1] */
+    int width, height;
+    int tiles_x, tiles_y, tiles;
+    uint8_t *state;      /* per tile */
+    int *owner;          /* the client that rendered each tile last frame (affinity), -1 none */
+    int done;
+    float *image;
+    uint8_t *msg, *scratch;
+    size_t msg_cap;
+    wire_codec *codec;
+    float *tile_px;      /* one tile's floats, decompressed */
+    bool lost_client;
+    job_msg proto_job;   /* this frame's settings and camera */
+    double render_cpu_ms, pack_cpu_ms; /* this frame, summed over the tiles kept */
+    long kill_after;     /* test hook: rank 0 dies after this many tiles of a frame */
+} server;
+
+static void tile_region(const server *s, int t, int32_t r[4]) {
+    int ts = s->o->tile;
+    r[0] = (t % s->tiles_x) * ts;
+    r[1] = (t / s->tiles_x) * ts;
+    r[2] = r[0] + ts < s->width ? r[0] + ts : s->width;
+    r[3] = r[1] + ts < s->height ? r[1] + ts : s->height;
+}
+
+/* The next tile for client c: one it rendered last frame if any is pending (its caches hold that
+ * part of the scene, the survey's affinity), else one nobody alive rendered, else the first pending
+ * one (taken from a busier client, which balances the load). -1 when none is left. */
+static int pick_tile(const server *s, int c) {
+    int first = -1;
+    for (int t = 0; t < s->tiles; t++) {
+        if (s->state[t] != TILE_PENDING) continue;
+        if (s->owner[t] == c) return t;
+        if (first < 0 && (s->owner[t] < 0 || !s->clients[s->owner[t]].alive)) first = t;
+    }
+    if (first >= 0) return first;
+    for (int t = 0; t < s->tiles; t++)
+        if (s->state[t] == TILE_PENDING) return t;
+    return -1;
+}
+
+static bool issue(server *s, int c, int t) {
+    client *cl = &s->clients[c];
+    int slot = -1;
+    for (int k = 0; k < QUEUE_AHEAD && slot < 0; k++) {
+        if (cl->req[k] != MPI_REQUEST_NULL) {
+            int done = 0;
+            MPI_Test(&cl->req[k], &done, MPI_STATUS_IGNORE);
+            if (!done) continue;
+        }
+        slot = k;
+    }
+    if (slot < 0) return false; /* both sends still in flight: try again later */
+    job_msg *j = &cl->job[slot];
+    *j = s->proto_job;
+    j->kind = JOB_TILE;
+    j->tile = (uint32_t)t;
+    tile_region(s, t, j->region);
+    if (MPI_Isend(j, (int)sizeof *j, MPI_BYTE, cl->rank, TAG_JOB, MPI_COMM_WORLD, &cl->req[slot]) != MPI_SUCCESS)
+        return false;
+    if (cl->held == 0) cl->last_heard = MPI_Wtime();
+    cl->held_tile[cl->held++] = (uint32_t)t;
+    cl->bytes_out += sizeof *j;
+    s->state[t] = TILE_ISSUED;
+    return true;
+}
+
+static void drop_client(server *s, int c, const char *why) {
+    client *cl = &s->clients[c];
+    fprintf(stderr, "raypack render: rank %d (pid %d on %s) %s; its %d tile%s go%s to the others\n", cl->rank,
+            cl->hello.pid, cl->hello.host, why, cl->held, cl->held == 1 ? "" : "s", cl->held == 1 ? "es" : "");
+    for (int k = 0; k < cl->held; k++)
+        if (s->state[cl->held_tile[k]] == TILE_ISSUED) s->state[cl->held_tile[k]] = TILE_PENDING;
+    cl->held = 0;
+    cl->alive = false;
+    s->lost_client = true;
+}
+
+/* Receives one result; false on a fatal error (message printed). */
+static bool take_result(server *s, const MPI_Status *st) {
+    int bytes = 0;
+    MPI_Get_count(st, MPI_BYTE, &bytes);
+    if ((size_t)bytes > s->msg_cap) {
+        free(s->msg);
+        s->msg_cap = (size_t)bytes;
+        s->msg = malloc(s->msg_cap);
+        if (!s->msg) {
+            fprintf(stderr, "raypack render: out of memory for a %d-byte tile\n", bytes);
+            return false;
+        }
+    }
+    MPI_Recv(s->msg, bytes, MPI_BYTE, st->MPI_SOURCE, TAG_RESULT, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    int c = st->MPI_SOURCE - 1;
+    client *cl = &s->clients[c];
+    if (!cl->alive) return true; /* dropped as silent: its tiles were re-issued, this one is a duplicate */
+    result_msg res;
+    if ((size_t)bytes < sizeof res) {
+        fprintf(stderr, "raypack render: rank %d sent a %d-byte result\n", cl->rank, bytes);
+        return false;
+    }
+    memcpy(&res, s->msg, sizeof res);
+    if (res.kind == RESULT_ERROR) {
+        s->msg[bytes - 1] = '\0';
+        fprintf(stderr, "raypack render: %s\n", (const char *)s->msg + sizeof res);
+        return false;
+    }
+    int k = 0;
+    while (k < cl->held && cl->held_tile[k] != res.tile) k++;
+    if (res.frame != s->proto_job.frame || k == cl->held) {
+        fprintf(stderr, "raypack render: rank %d returned tile %u of frame %u, which it was not rendering\n", cl->rank,
+                res.tile, res.frame);
+        return false;
+    }
+    cl->held_tile[k] = cl->held_tile[--cl->held];
+    cl->last_heard = MPI_Wtime();
+    cl->bytes_in += (uint64_t)bytes;
+    int32_t r[4];
+    tile_region(s, (int)res.tile, r);
+    size_t n = (size_t)(r[2] - r[0]) * (size_t)(r[3] - r[1]) * 3;
+    float *px = s->tile_px;
+    bool ok = res.floats == n &&
+              wire_tile_unpack(s->codec, s->msg + sizeof res, (size_t)bytes - sizeof res, n, s->scratch, px);
+    if (!ok) {
+        fprintf(stderr, "raypack render: rank %d sent a corrupt tile %u of frame %u\n", cl->rank, res.tile, res.frame);
+        return false;
+    }
+    if (s->state[res.tile] != TILE_DONE) {
+        int tw = r[2] - r[0];
+        for (int y = r[1]; y < r[3]; y++)
+            memcpy(s->image + ((size_t)y * (size_t)s->width + (size_t)r[0]) * 3, px + (size_t)(y - r[1]) * (size_t)tw * 3,
+                   (size_t)tw * 3 * sizeof(float));
+        s->state[res.tile] = TILE_DONE;
+        s->owner[res.tile] = c;
+        s->done++;
+        cl->tiles++;
+        cl->tile_ms_all += res.render_ms;
+        s->render_cpu_ms += res.render_cpu_ms;
+        s->pack_cpu_ms += res.pack_cpu_ms;
+    }
+    return true;
+}
+
+/* Renders one frame with the clients; false on a fatal error. */
+static bool server_frame(server *s) {
+    int nc = s->size - 1;
+    memset(s->state, TILE_PENDING, (size_t)s->tiles);
+    s->done = 0;
+    for (int c = 0; c < nc; c++) s->clients[c].tiles = s->clients[c].bytes_in = s->clients[c].bytes_out = 0;
+    double timeout = s->o->timeout_s;
+    long idle_us = 10;
+    while (s->done < s->tiles) {
+        int alive = 0;
+        for (int c = 0; c < nc; c++) {
+            client *cl = &s->clients[c];
+            if (!cl->alive) continue;
+            alive++;
+            while (cl->held < QUEUE_AHEAD) {
+                int t = pick_tile(s, c);
+                if (t < 0 || !issue(s, c, t)) break;
+            }
+        }
+        if (!alive) {
+            fprintf(stderr, "raypack render: no render client is left (all were lost); frame %u is incomplete\n",
+                    s->proto_job.frame);
+            return false;
+        }
+        MPI_Status st;
+        int flag = 0;
+        MPI_Iprobe(MPI_ANY_SOURCE, TAG_RESULT, MPI_COMM_WORLD, &flag, &st);
+        if (flag) {
+            idle_us = 10;
+            if (!take_result(s, &st)) return false;
+            if (s->kill_after && s->done >= s->kill_after) raise(SIGKILL); /* the test of rank 0's death */
+            continue;
+        }
+        double now = MPI_Wtime();
+        for (int c = 0; c < nc; c++) {
+            client *cl = &s->clients[c];
+            if (cl->alive && cl->held > 0 && now - cl->last_heard > timeout) {
+                char why[128];
+                snprintf(why, sizeof why, "sent nothing for %.1f s while rendering", now - cl->last_heard);
+                drop_client(s, c, why);
+            }
+        }
+        /* Back off while nothing comes: every client holds a tile queued ahead, so a late look costs
+         * no client time, and a busy rank 0 would take cores from clients on the same node. */
+        mpir_sleep_us(idle_us);
+        if (idle_us < 1000) idle_us *= 2;
+    }
+    return true;
+}
+
+/* "out.png" -> "out_0007.png" for frame 7 of a sequence. */
+static void frame_path(const char *output, int frames, int frame, char *buf, size_t size) {
+    if (frames <= 1) {
+        snprintf(buf, size, "%s", output);
+        return;
+    }
+    const char *dot = strrchr(output, '.');
+    snprintf(buf, size, "%.*s_%04d%s", (int)(dot - output), output, frame, dot);
+}
+
+/* The camera of frame i: the base camera, its eye orbiting the look point about the up axis, or
+ * moved in a straight line to --to-eye / --to-look. Printed with 9 digits, which round-trip floats. */
+static rp_camera frame_camera(const mpir_options *o, const rp_camera *base, int i) {
+    rp_camera c = *base;
+    if (o->frames <= 1) return c;
+    if (o->has_to_eye || o->has_to_look) {
+        double t = (double)i / (double)(o->frames - 1);
+        for (int k = 0; k < 3; k++) {
+            if (o->has_to_eye) c.pinhole.eye[k] = (float)((1.0 - t) * base->pinhole.eye[k] + t * o->to_eye[k]);
+            if (o->has_to_look) c.pinhole.look[k] = (float)((1.0 - t) * base->pinhole.look[k] + t * o->to_look[k]);
+        }
+        return c;
+    }
+    double ang = (double)o->orbit * 3.14159265358979323846 / 180.0 * i / o->frames;
+    double u[3], v[3], len = 0.0;
+    for (int k = 0; k < 3; k++) len += (double)base->pinhole.up[k] * base->pinhole.up[k];
+    len = sqrt(len);
+    for (int k = 0; k < 3; k++) {
+        u[k] = base->pinhole.up[k] / len;
+        v[k] = (double)base->pinhole.eye[k] - base->pinhole.look[k];
+    }
+    /* Rodrigues' rotation of v about u */
+    double cu[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+    double d = u[0] * v[0] + u[1] * v[1] + u[2] * v[2], cs = cos(ang), sn = sin(ang);
+    for (int k = 0; k < 3; k++)
+        c.pinhole.eye[k] = (float)(base->pinhole.look[k] + v[k] * cs + cu[k] * sn + u[k] * d * (1.0 - cs));
+    return c;
+}
+
+/* Handshake: every client's hello, then (with --mpi-bcast) the scene, then every client's ready. */
+static bool server_start(server *s, mpir_scene *rs, double *scene_bytes) {
+    int nc = s->size - 1;
+    double deadline = MPI_Wtime() + s->o->timeout_s;
+    for (int c = 0; c < nc; c++) {
+        client *cl = &s->clients[c];
+        MPI_Status st;
+        if (!mpir_probe_until(cl->rank, TAG_HELLO, deadline, &st)) {
+            fprintf(stderr, "raypack render: rank %d did not answer within %.1f s (--mpi-timeout): is it running "
+                            "raypack render --mpi?\n", cl->rank, s->o->timeout_s);
+            return false;
+        }
+        int bytes = 0;
+        MPI_Get_count(&st, MPI_BYTE, &bytes);
+        hello_msg h;
+        memset(&h, 0, sizeof h);
+        MPI_Recv(&h, (int)sizeof h, MPI_BYTE, cl->rank, TAG_HELLO, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+        h.host[sizeof h.host - 1] = '\0';
+        if (bytes != (int)sizeof h || h.magic != MPIR_MAGIC) {
+            fprintf(stderr, "raypack render: rank %d is not a raypack render client (its first message: %d bytes)\n",
+                    cl->rank, bytes);
+            return false;
+        }
+        if (h.protocol != MPIR_PROTOCOL || h.version[0] != RP_VERSION_MAJOR || h.version[1] != RP_VERSION_MINOR ||
+            h.version[2] != RP_VERSION_PATCH || h.desc_bytes != sizeof(rp_render_desc)) {
+            fprintf(stderr, "raypack render: rank %d (pid %d on %s) runs raypack %d.%d.%d with MPI protocol %u "
+                            "(render desc %u bytes); rank 0 runs %d.%d.%d with protocol %u (%zu bytes): run the "
+                            "same build on every rank\n",
+                    cl->rank, h.pid, h.host, h.version[0], h.version[1], h.version[2], h.protocol, h.desc_bytes,
+                    RP_VERSION_MAJOR, RP_VERSION_MINOR, RP_VERSION_PATCH, MPIR_PROTOCOL, sizeof(rp_render_desc));
+            return false;
+        }
+        cl->hello = h;
+    }
+    if (s->o->bcast) {
+        uint8_t *buf = NULL;
+        size_t n = 0;
+        if (!wire_scene_pack(&rs->data, &buf, &n)) {
+            fprintf(stderr, "raypack render: out of memory packing the scene\n");
+            return false;
+        }
+        uint64_t size = n;
+        bool ok = mpir_bcast_until(&size, sizeof size, MPI_Wtime() + s->o->timeout_s) &&
+                  mpir_bcast_until(buf, n, MPI_Wtime() + s->o->timeout_s + (double)n / 1e8);
+        free(buf);
+        if (!ok) {
+            fprintf(stderr, "raypack render: broadcasting the scene (%zu bytes) did not finish within %.1f s\n", n,
+                    s->o->timeout_s);
+            return false;
+        }
+        *scene_bytes = (double)n;
+    }
+    deadline = MPI_Wtime() + s->o->timeout_s;
+    for (int c = 0; c < nc; c++) {
+        client *cl = &s->clients[c];
+        MPI_Status st;
+        if (!mpir_probe_until(cl->rank, TAG_READY, deadline, &st)) {
+            fprintf(stderr, "raypack render: rank %d (pid %d on %s) did not report its scene ready within %.1f s "
+                            "(--mpi-timeout)\n", cl->rank, cl->hello.pid, cl->hello.host, s->o->timeout_s);
+            return false;
+        }
+        ready_msg r;
+        MPI_Recv(&r, (int)sizeof r, MPI_BYTE, cl->rank, TAG_READY, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+        r.err[sizeof r.err - 1] = '\0';
+        if (!r.ok) {
+            fprintf(stderr, "raypack render: rank %d (pid %d on %s) has no scene: %s\n", cl->rank, cl->hello.pid,
+                    cl->hello.host, r.err);
+            return false;
+        }
+        if (r.triangles != rs->data.triangle_count) {
+            fprintf(stderr, "raypack render: rank %d loaded %llu triangles from %s, rank 0 %zu: not the same scene\n",
+                    cl->rank, (unsigned long long)r.triangles, s->o->scene ? s->o->scene : "(built-in room)",
+                    rs->data.triangle_count);
+            return false;
+        }
+        cl->threads = r.threads;
+        cl->alive = true;
+    }
+    return true;
+}
+
+/* Ends the clients. After a lost client MPI_Finalize would wait for it forever, so the live ones
+ * are told to leave without it (q.tile = 1), and a lost one still running on this host (it hangs
+ * rather than died) is killed; true when every lost client was on this host, so that the job can end
+ * without MPI_Abort. */
+static bool quit_clients(server *s) {
+    job_msg q = {.kind = JOB_QUIT, .tile = s->lost_client ? 1u : 0u};
+    char host[64] = "";
+    gethostname(host, sizeof host - 1);
+    bool local = true;
+    for (int c = 0; c < s->size - 1; c++) {
+        client *cl = &s->clients[c];
+        if (cl->alive) {
+            mpir_send_until(&q, sizeof q, cl->rank, TAG_JOB, MPI_Wtime() + s->o->timeout_s);
+        } else if (strcmp(cl->hello.host, host) == 0 && cl->hello.pid > 1) {
+            kill((pid_t)cl->hello.pid, SIGKILL);
+        } else {
+            local = false;
+        }
+    }
+    return local;
+}
+
+
+int mpir_server_run(const mpir_options *o, int size) {
+    double t0 = cli_now_ms();
+    int status = CLI_EXIT_FAILURE;
+    server s;
+    memset(&s, 0, sizeof s);
+    s.o = o;
+    s.size = size;
+    s.kill_after = mpir_test_hook("KILL", 0);
+    mpir_scene rs;
+    memset(&rs, 0, sizeof rs);
+    mpir_tile_worker w = {0};
+    char err[512] = "";
+    /* With clients rank 0 only hands out tiles: one thread, so it does not take their cores. */
+    if (!mpir_scene_load(&rs, o->scene, err, sizeof err) || !mpir_scene_build(&rs, o, size > 1 ? 1 : o->threads, err, sizeof err)) {
+        fprintf(stderr, "%s%s\n", strstr(err, "error:") ? "" : "raypack render: ", err);
+        return CLI_EXIT_FAILURE;
+    }
+    double load_ms = cli_now_ms() - t0;
+
+    rp_camera cam = rp_render_scene_default_camera(rs.scene);
+    if (o->has_eye) memcpy(cam.pinhole.eye, o->eye, sizeof o->eye);
+    if (o->has_look) memcpy(cam.pinhole.look, o->look, sizeof o->look);
+    if (o->has_up) memcpy(cam.pinhole.up, o->up, sizeof o->up);
+    if (o->has_fov) cam.pinhole.fov_deg = o->fov;
+    /* image size: the rule of `raypack render` */
+    int sw = rs.data.camera.width > 0 ? rs.data.camera.width : 512;
+    int sh = rs.data.camera.height > 0 ? rs.data.camera.height : 512;
+    int wd = o->width, ht = o->height;
+    if (!wd && !ht) {
+        wd = sw;
+        ht = sh;
+    } else if (!ht) {
+        ht = (int)fmax(1.0, floor((double)wd * sh / sw + 0.5));
+    } else if (!wd) {
+        wd = (int)fmax(1.0, floor((double)ht * sw / sh + 0.5));
+    }
+    s.width = wd;
+    s.height = ht;
+    s.tiles_x = (wd + o->tile - 1) / o->tile;
+    s.tiles_y = (ht + o->tile - 1) / o->tile;
+    s.tiles = s.tiles_x * s.tiles_y;
+    s.state = calloc((size_t)s.tiles, 1);
+    s.owner = malloc((size_t)s.tiles * sizeof *s.owner);
+    s.image = malloc((size_t)wd * (size_t)ht * 3 * sizeof(float));
+    s.scratch = malloc((size_t)o->tile * (size_t)o->tile * 3 * sizeof(float));
+    s.clients = calloc((size_t)(size > 1 ? size - 1 : 1), sizeof *s.clients);
+    s.codec = wire_codec_new();
+    s.tile_px = malloc((size_t)o->tile * (size_t)o->tile * 3 * sizeof(float));
+    if (!s.state || !s.owner || !s.image || !s.scratch || !s.clients || !s.codec || !s.tile_px) {
+        fprintf(stderr, "raypack render: out of memory for a %dx%d image\n", wd, ht);
+        goto done;
+    }
+    for (int t = 0; t < s.tiles; t++) s.owner[t] = -1;
+    for (int c = 0; c < size - 1; c++) {
+        s.clients[c].rank = c + 1;
+        for (int k = 0; k < QUEUE_AHEAD; k++) s.clients[c].req[k] = MPI_REQUEST_NULL;
+    }
+    double scene_bytes = 0.0;
+    if (size > 1 && !server_start(&s, &rs, &scene_bytes)) goto done;
+    if (!o->quiet) {
+        printf("mpi      %d ranks: rank 0 serves %d tiles of %dx%d per frame (%dx%d image) to %d client%s", size,
+               s.tiles, o->tile, o->tile, wd, ht, size - 1, size == 2 ? "" : "s");
+        if (size == 1) printf(" (none: rank 0 renders alone)");
+        printf("; scene %s%s, load+build %.1f ms", o->bcast && size > 1 ? "broadcast" : "loaded by every rank",
+               scene_bytes > 0.0 ? "" : "", load_ms);
+        if (scene_bytes > 0.0) printf(", %.2f MiB sent", scene_bytes / 1048576.0);
+        printf("\n");
+        for (int c = 0; c < size - 1; c++)
+            printf("client   rank %d: pid %d on %s, %d threads\n", s.clients[c].rank, s.clients[c].hello.pid,
+                   s.clients[c].hello.host, s.clients[c].threads);
+        fflush(stdout); /* who the clients are, before the frames: a supervisor (or the kill test) reads it */
+    }
+    int frames = o->frames > 0 ? o->frames : 1;
+    double total_ms = 0.0;
+    for (int f = 0; f < frames; f++) {
+        rp_camera fc = frame_camera(o, &cam, f);
+        s.proto_job = (job_msg){.frame = (uint32_t)f, .width = wd, .height = ht, .spp = o->spp,
+                                .integrator = (int32_t)o->integrator, .packet = o->packet, .camera = fc,
+                                .raw_planes = o->raw_planes,
+                                /* rp_render_desc: 0 is the default depth (5), negative is none */
+                                .max_depth = o->max_depth < 0 ? 0 : (o->max_depth == 0 ? -1 : o->max_depth)};
+        double f0 = cli_now_ms(), c0 = mpir_cpu_ms();
+        s.render_cpu_ms = s.pack_cpu_ms = 0.0;
+        if (size == 1) {
+            memset(s.state, TILE_PENDING, (size_t)s.tiles);
+            for (int t = 0; t < s.tiles; t++) {
+                job_msg j = s.proto_job;
+                j.tile = (uint32_t)t;
+                tile_region(&s, t, j.region);
+                rp_render_stats rst;
+                if (!mpir_tile_render(&w, rs.scene, &j, &rst)) {
+                    fprintf(stderr, "raypack render: rendering failed (out of memory?)\n");
+                    goto done;
+                }
+                int tw = j.region[2] - j.region[0];
+                for (int y = j.region[1]; y < j.region[3]; y++)
+                    memcpy(s.image + ((size_t)y * (size_t)wd + (size_t)j.region[0]) * 3,
+                           w.tile + (size_t)(y - j.region[1]) * (size_t)tw * 3, (size_t)tw * 3 * sizeof(float));
+            }
+        } else if (!server_frame(&s)) {
+            goto done;
+        }
+        double frame_ms = cli_now_ms() - f0, server_cpu_ms = mpir_cpu_ms() - c0;
+        total_ms += frame_ms;
+        char path[1100];
+        frame_path(o->output, frames, f, path, sizeof path);
+        if (!rp_image_write(path, wd, ht, 3, s.image, err, sizeof err)) {
+            fprintf(stderr, "raypack render: %s\n", err);
+            goto done;
+        }
+        if (!o->quiet) {
+            uint64_t in = 0, out = 0;
+            for (int c = 0; c < size - 1; c++) {
+                in += s.clients[c].bytes_in;
+                out += s.clients[c].bytes_out;
+            }
+            printf("frame    %d: %s, %.1f ms, received %.1f KiB (%.2f of the raw floats), sent %.1f KiB; camera "
+                   "eye %.9g,%.9g,%.9g look %.9g,%.9g,%.9g up %.9g,%.9g,%.9g fov %.9g\n",
+                   f, path, frame_ms, (double)in / 1024.0,
+                   (double)in / ((double)wd * ht * 3 * sizeof(float)), (double)out / 1024.0, fc.pinhole.eye[0],
+                   fc.pinhole.eye[1], fc.pinhole.eye[2], fc.pinhole.look[0], fc.pinhole.look[1], fc.pinhole.look[2],
+                   fc.pinhole.up[0], fc.pinhole.up[1], fc.pinhole.up[2], fc.pinhole.fov_deg);
+            if (size > 1) {
+                /* what the frame cost in CPU time: rendering (as a single process would) against
+                 * what distribution adds (packing on the clients, serving on rank 0) */
+                printf("cost     frame %d: clients' CPU in rp_render %.1f ms, packing %.1f ms; rank 0's CPU %.1f ms; "
+                       "overhead %.2f%%\n", f, s.render_cpu_ms, s.pack_cpu_ms, server_cpu_ms,
+                       s.render_cpu_ms > 0.0 ? 100.0 * (s.pack_cpu_ms + server_cpu_ms) / s.render_cpu_ms : 0.0);
+                printf("share    frame %d:", f);
+                for (int c = 0; c < size - 1; c++)
+                    printf(" rank %d %.1f%%%s", s.clients[c].rank, 100.0 * (double)s.clients[c].tiles / s.tiles,
+                           s.clients[c].alive ? "" : " (lost)");
+                printf("\n");
+            }
+        }
+        for (int c = 0; c < size - 1; c++) {
+            client *cl = &s.clients[c];
+            cl->tiles_all += cl->tiles;
+            cl->bytes_in_all += cl->bytes_in;
+            cl->bytes_out_all += cl->bytes_out;
+        }
+    }
+    if (!o->quiet) {
+        printf("total    %d frame%s in %.1f ms, %.1f ms per frame", frames, frames == 1 ? "" : "s", total_ms,
+               total_ms / frames);
+        for (int c = 0; c < size - 1; c++) {
+            client *cl = &s.clients[c];
+            printf("%s rank %d: %llu tiles, %.3f ms per tile, %.1f KiB in, %.1f KiB out", c ? ";" : "\n        ",
+                   cl->rank, (unsigned long long)cl->tiles_all, cl->tiles_all ? cl->tile_ms_all / (double)cl->tiles_all : 0.0,
+                   (double)cl->bytes_in_all / 1024.0, (double)cl->bytes_out_all / 1024.0);
+        }
+        printf("\n");
+    }
+    status = CLI_EXIT_OK;
+done:
+    fflush(stdout);
+    bool all_local = status == CLI_EXIT_OK && size > 1 ? quit_clients(&s) : true;
+    mpir_tile_worker_free(&w);
+    free(s.state);
+    free(s.owner);
+    free(s.image);
+    free(s.scratch);
+    free(s.msg);
+    free(s.clients);
+    free(s.tile_px);
+    wire_codec_free(s.codec);
+    mpir_scene_free(&rs);
+    if (s.lost_client && status == CLI_EXIT_OK) return all_local ? SERVER_LOST_LOCAL : SERVER_LOST_REMOTE;
+    return status;
+}

@@ -1,0 +1,297 @@
+/* Byte formats of the MPI renderer (see wire.h). A scene is a header (magic, format version, the
+ * sizes of the structs it carries) followed by each array as a 64-bit count and its bytes. */
+#include "wire.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <zlib.h>
+
+#define WIRE_MAGIC 0x43535052u /* "RPSC" */
+#define WIRE_VERSION 1u
+
+typedef struct writer {
+    uint8_t *buf;
+    size_t size, cap;
+    bool failed;
+} writer;
+
+static void put(writer *w, const void *p, size_t n) {
+    if (w->failed || n == 0) return;
+    if (w->size + n > w->cap) {
+        size_t cap = w->cap ? w->cap : 4096;
+        while (cap < w->size + n) cap *= 2;
+        uint8_t *b = realloc(w->buf, cap);
+        if (!b) {
+            w->failed = true;
+            return;
+        }
+        w->buf = b;
+        w->cap = cap;
+    }
+    memcpy(w->buf + w->size, p, n);
+    w->size += n;
+}
+
+static void put_u64(writer *w, uint64_t v) { put(w, &v, sizeof v); }
+
+/* An optional array: its element count (0 when absent) and its bytes. */
+static void put_array(writer *w, const void *p, size_t count, size_t elem) {
+    put_u64(w, p ? count : 0);
+    if (p) put(w, p, count * elem);
+}
+
+bool wire_scene_pack(const rp_scene_data *s, uint8_t **out, size_t *size) {
+    writer w = {0};
+    uint32_t head[6] = {WIRE_MAGIC, WIRE_VERSION, (uint32_t)sizeof(rp_material_data),
+                        (uint32_t)sizeof(rp_texture_data), (uint32_t)sizeof(rp_light_data),
+                        (uint32_t)sizeof(rp_camera_data)};
+    put(&w, head, sizeof head);
+    put_array(&w, s->positions, 3 * s->vertex_count, sizeof(float));
+    put_array(&w, s->normals, 3 * s->normal_count, sizeof(float));
+    put_array(&w, s->texcoords, 2 * s->texcoord_count, sizeof(float));
+    put_array(&w, s->indices, 3 * s->triangle_count, sizeof(uint32_t));
+    put_array(&w, s->normal_indices, 3 * s->triangle_count, sizeof(uint32_t));
+    put_array(&w, s->texcoord_indices, 3 * s->triangle_count, sizeof(uint32_t));
+    put_array(&w, s->tri_materials, s->triangle_count, sizeof(uint32_t));
+    put_array(&w, s->spheres, s->sphere_count, sizeof(rp_sphere_data));
+    put_array(&w, s->cones, s->cone_count, sizeof(rp_cone_data));
+    put_array(&w, s->materials, s->material_count, sizeof(rp_material_data));
+    put_array(&w, s->lights, s->light_count, sizeof(rp_light_data));
+    put_u64(&w, s->texture_count);
+    for (size_t i = 0; i < s->texture_count; i++) {
+        rp_texture_data t = s->textures[i];
+        const uint8_t *rgb = t.rgb;
+        t.rgb = NULL;
+        put(&w, &t, sizeof t);
+        put_array(&w, rgb, (size_t)t.width * (size_t)t.height * 3, 1);
+    }
+    put(&w, &s->camera, sizeof s->camera);
+    put(&w, s->background, sizeof s->background);
+    uint8_t bg = s->has_background;
+    put(&w, &bg, 1);
+    put_u64(&w, s->file_bytes);
+    put(&w, &s->parse_ms, sizeof s->parse_ms);
+    if (w.failed) {
+        free(w.buf);
+        return false;
+    }
+    *out = w.buf;
+    *size = w.size;
+    return true;
+}
+
+typedef struct reader {
+    const uint8_t *p;
+    size_t left;
+    const char *what; /* the first field that did not fit */
+} reader;
+
+static bool get(reader *r, void *dst, size_t n, const char *what) {
+    if (r->what) return false;
+    if (n > r->left) {
+        r->what = what;
+        return false;
+    }
+    memcpy(dst, r->p, n);
+    r->p += n;
+    r->left -= n;
+    return true;
+}
+
+/* Reads an optional array of `expect` elements (or any count when expect is SIZE_MAX, returned in
+ * *count); NULL in *dst when the sender had none. */
+static bool get_array(reader *r, void **dst, size_t elem, size_t expect, size_t *count, const char *what) {
+    uint64_t n = 0;
+    *dst = NULL;
+    if (!get(r, &n, sizeof n, what)) return false;
+    if (count) *count = (size_t)n;
+    if (n == 0) return true;
+    if ((expect != SIZE_MAX && n != expect) || n > r->left / elem) {
+        r->what = what;
+        return false;
+    }
+    *dst = malloc((size_t)n * elem);
+    if (!*dst) {
+        r->what = "memory";
+        return false;
+    }
+    return get(r, *dst, (size_t)n * elem, what);
+}
+
+static bool indices_below(const uint32_t *idx, size_t n, size_t limit) {
+    for (size_t i = 0; idx && i < n; i++)
+        if (idx[i] >= limit) return false;
+    return true;
+}
+
+bool wire_scene_unpack(const uint8_t *buf, size_t size, rp_scene_data *s, char *err, size_t err_size) {
+    memset(s, 0, sizeof *s);
+    reader r = {.p = buf, .left = size};
+    uint32_t head[6];
+    if (!get(&r, head, sizeof head, "header") || head[0] != WIRE_MAGIC) {
+        snprintf(err, err_size, "not a raypack scene message (%zu bytes)", size);
+        return false;
+    }
+    if (head[1] != WIRE_VERSION || head[2] != sizeof(rp_material_data) || head[3] != sizeof(rp_texture_data) ||
+        head[4] != sizeof(rp_light_data) || head[5] != sizeof(rp_camera_data)) {
+        snprintf(err, err_size, "scene message of format %u (structs %u/%u/%u/%u bytes); this build reads format %u "
+                                "(%zu/%zu/%zu/%zu)", head[1], head[2], head[3], head[4], head[5], WIRE_VERSION,
+                 sizeof(rp_material_data), sizeof(rp_texture_data), sizeof(rp_light_data), sizeof(rp_camera_data));
+        return false;
+    }
+    size_t n = 0, tris = 0;
+    void *p;
+    get_array(&r, &p, sizeof(float), SIZE_MAX, &n, "positions");
+    s->positions = p;
+    s->vertex_count = n / 3;
+    get_array(&r, &p, sizeof(float), SIZE_MAX, &n, "normals");
+    s->normals = p;
+    s->normal_count = n / 3;
+    get_array(&r, &p, sizeof(float), SIZE_MAX, &n, "texcoords");
+    s->texcoords = p;
+    s->texcoord_count = n / 2;
+    get_array(&r, &p, sizeof(uint32_t), SIZE_MAX, &tris, "indices");
+    s->indices = p;
+    s->triangle_count = tris / 3;
+    get_array(&r, &p, sizeof(uint32_t), tris, NULL, "normal indices");
+    s->normal_indices = p;
+    get_array(&r, &p, sizeof(uint32_t), tris, NULL, "texcoord indices");
+    s->texcoord_indices = p;
+    get_array(&r, &p, sizeof(uint32_t), tris / 3, NULL, "triangle materials");
+    s->tri_materials = p;
+    get_array(&r, &p, sizeof(rp_sphere_data), SIZE_MAX, &s->sphere_count, "spheres");
+    s->spheres = p;
+    get_array(&r, &p, sizeof(rp_cone_data), SIZE_MAX, &s->cone_count, "cones");
+    s->cones = p;
+    get_array(&r, &p, sizeof(rp_material_data), SIZE_MAX, &s->material_count, "materials");
+    s->materials = p;
+    get_array(&r, &p, sizeof(rp_light_data), SIZE_MAX, &s->light_count, "lights");
+    s->lights = p;
+    uint64_t textures = 0;
+    if (get(&r, &textures, sizeof textures, "texture count")) {
+        if (textures > r.left / sizeof(rp_texture_data)) {
+            r.what = "texture count";
+        } else if (textures) {
+            s->textures = calloc((size_t)textures, sizeof *s->textures);
+            if (!s->textures) r.what = "memory";
+            else s->texture_count = (size_t)textures;
+        }
+    }
+    for (size_t i = 0; i < s->texture_count && !r.what; i++) {
+        rp_texture_data *t = &s->textures[i];
+        if (!get(&r, t, sizeof *t, "texture")) break;
+        t->rgb = NULL;
+        if (t->width < 0 || t->height < 0) {
+            r.what = "texture size";
+            break;
+        }
+        get_array(&r, &p, 1, (size_t)t->width * (size_t)t->height * 3, NULL, "texture pixels");
+        t->rgb = p;
+        t->path[sizeof t->path - 1] = '\0';
+    }
+    get(&r, &s->camera, sizeof s->camera, "camera");
+    get(&r, s->background, sizeof s->background, "background");
+    uint8_t bg = 0;
+    get(&r, &bg, 1, "background");
+    s->has_background = bg != 0;
+    uint64_t fb = 0;
+    get(&r, &fb, sizeof fb, "file size");
+    s->file_bytes = (size_t)fb;
+    get(&r, &s->parse_ms, sizeof s->parse_ms, "parse time");
+    if (!r.what && r.left) r.what = "trailing bytes";
+    /* The renderer trusts a loader's indices; these came over the wire, so check them. */
+    if (!r.what) {
+        size_t nt = s->triangle_count * 3;
+        if (!s->indices != !s->tri_materials && s->triangle_count) r.what = "triangle materials";
+        else if (s->material_count == 0) r.what = "materials";
+        else if (!indices_below(s->indices, nt, s->vertex_count)) r.what = "indices";
+        else if (!indices_below(s->normal_indices, nt, s->normal_count)) r.what = "normal indices";
+        else if (!indices_below(s->texcoord_indices, nt, s->texcoord_count)) r.what = "texcoord indices";
+        else if (!indices_below(s->tri_materials, s->triangle_count, s->material_count)) r.what = "triangle materials";
+        for (size_t i = 0; !r.what && i < s->sphere_count; i++)
+            if (s->spheres[i].material >= s->material_count) r.what = "sphere materials";
+        for (size_t i = 0; !r.what && i < s->cone_count; i++)
+            if (s->cones[i].material >= s->material_count) r.what = "cone materials";
+        for (size_t i = 0; !r.what && i < s->material_count; i++) {
+            int32_t t = s->materials[i].map_kd;
+            if (t < -1 || (t >= 0 && (size_t)t >= s->texture_count)) r.what = "material textures";
+        }
+        for (size_t i = 0; !r.what && i < s->texture_count; i++)
+            if (!s->textures[i].rgb && s->textures[i].width && s->textures[i].height) r.what = "texture pixels";
+    }
+    if (r.what) {
+        snprintf(err, err_size, "bad scene message (%zu bytes): %s %s", size, r.what,
+                 strcmp(r.what, "memory") == 0 ? "ran out" : "do not fit");
+        rp_scene_data_free(s);
+        return false;
+    }
+    return true;
+}
+
+struct wire_codec {
+    z_stream def, inf;
+    bool def_ok, inf_ok;
+};
+
+wire_codec *wire_codec_new(void) {
+    wire_codec *c = calloc(1, sizeof *c);
+    if (!c) return NULL;
+    c->def_ok = deflateInit(&c->def, 1) == Z_OK;
+    c->inf_ok = inflateInit(&c->inf) == Z_OK;
+    if (!c->def_ok || !c->inf_ok) {
+        wire_codec_free(c);
+        return NULL;
+    }
+    return c;
+}
+
+void wire_codec_free(wire_codec *c) {
+    if (!c) return;
+    if (c->def_ok) deflateEnd(&c->def);
+    if (c->inf_ok) inflateEnd(&c->inf);
+    free(c);
+}
+
+size_t wire_tile_bound(size_t n) { return 1 + 3 * n + (size_t)compressBound((uLong)(2 * n)); }
+
+size_t wire_tile_pack(wire_codec *c, const float *px, size_t n, int raw_planes, uint8_t *scratch, uint8_t *out,
+                      size_t cap) {
+    if (cap < wire_tile_bound(n) || raw_planes < 2 || raw_planes > 3) return 0;
+    size_t raw = (size_t)raw_planes;
+    const uint8_t *b = (const uint8_t *)px;
+    out[0] = (uint8_t)raw;
+    /* plane k holds byte k of every float; the low planes go out raw, first */
+    for (size_t k = 0; k < 4; k++) {
+        uint8_t *d = k < raw ? out + 1 + k * n : scratch + (k - raw) * n;
+        for (size_t i = 0; i < n; i++) d[i] = b[4 * i + k];
+    }
+    z_stream *z = &c->def;
+    if (deflateReset(z) != Z_OK) return 0;
+    z->next_in = scratch;
+    z->avail_in = (uInt)((4 - raw) * n);
+    z->next_out = out + 1 + raw * n;
+    z->avail_out = (uInt)(cap - 1 - raw * n);
+    if (deflate(z, Z_FINISH) != Z_STREAM_END) return 0;
+    return 1 + raw * n + (size_t)z->total_out;
+}
+
+bool wire_tile_unpack(wire_codec *c, const uint8_t *in, size_t size, size_t n, uint8_t *scratch, float *px) {
+    if (size < 1 || (in[0] != 2 && in[0] != 3)) return false;
+    size_t raw = in[0];
+    if (size < 1 + raw * n) return false;
+    z_stream *z = &c->inf;
+    if (inflateReset(z) != Z_OK) return false;
+    z->next_in = (Bytef *)(uintptr_t)(in + 1 + raw * n);
+    z->avail_in = (uInt)(size - 1 - raw * n);
+    z->next_out = scratch;
+    z->avail_out = (uInt)((4 - raw) * n);
+    /* all of the input, and exactly the deflated planes out of it */
+    if (inflate(z, Z_FINISH) != Z_STREAM_END || z->total_out != (4 - raw) * n || z->avail_in != 0) return false;
+    uint8_t *b = (uint8_t *)px;
+    for (size_t k = 0; k < 4; k++) {
+        const uint8_t *s = k < raw ? in + 1 + k * n : scratch + (k - raw) * n;
+        for (size_t i = 0; i < n; i++) b[4 * i + k] = s[i];
+    }
+    return true;
+}

@@ -1,0 +1,241 @@
+/* `mpirun raypack render --mpi` on localhost (registered as test_mpi_render when MPI is found):
+ * the image of -np 1..4, of --mpi-bcast (also when only rank 0 can read the scene), PNG output and
+ * a 3-frame orbit are byte-identical to the single-process `raypack render` of the same camera; a
+ * client killed mid-frame (by itself, and with kill -9 from outside) or hanging mid-frame loses no
+ * frame and changes no pixel; rank 0's death ends the job without a hang; a client that never answers, one of another protocol and one whose
+ * scene is broken end the job with a clear message from rank 0 within the time-out. Every mpirun
+ * runs under timeout(1), so nothing can hang CI. */
+#include <signal.h>
+#include <stdbool.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "rp_test.h"
+
+static char exe[1024], mpirun[1024], tmp[1024], kitchen[1024];
+static char output[65536];
+static double elapsed_s;
+
+static double now_s(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+/* Runs a shell command (stdout and stderr captured together), bounded by timeout(1); returns its
+ * exit status (124 on time-out). */
+static int run(const char *cmd) {
+    char full[16384];
+    snprintf(full, sizeof full, "timeout -k 5 90 %s 2>&1", cmd);
+    double t0 = now_s();
+    FILE *p = popen(full, "r");
+    if (!p) return -1;
+    size_t n = fread(output, 1, sizeof output - 1, p);
+    output[n] = '\0';
+    int st = pclose(p);
+    elapsed_s = now_s() - t0;
+    return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+}
+
+static bool same_file(const char *a, const char *b) {
+    FILE *fa = fopen(a, "rb"), *fb = fopen(b, "rb");
+    bool same = fa && fb;
+    while (same) {
+        int ca = fgetc(fa), cb = fgetc(fb);
+        if (ca != cb) same = false;
+        if (ca == EOF || cb == EOF) break;
+    }
+    if (fa) fclose(fa);
+    if (fb) fclose(fb);
+    return same;
+}
+
+/* mpirun with the options every run needs; extra goes before the program (mpirun options). */
+static int run_mpi(const char *extra, int np, const char *args) {
+    char cmd[12288];
+    snprintf(cmd, sizeof cmd, "'%s' --oversubscribe %s -np %d '%s' render %s", mpirun, extra, np, exe, args);
+    return run(cmd);
+}
+
+static const char *SIZE = "--width 200 --height 150 --mpi-tile 32";
+
+static void file_in_tmp(char *buf, size_t size, const char *name) { snprintf(buf, size, "%s/%s", tmp, name); }
+
+/* The orbit's frames against single-process renders of the cameras rank 0 printed. */
+static void check_frames(const char *prefix, int frames, const char *what) {
+    const char *p = output;
+    for (int f = 0; f < frames; f++) {
+        char tag[32], eye[128], look[128], up[128], fov[64];
+        snprintf(tag, sizeof tag, "frame    %d:", f);
+        const char *line = strstr(p, tag);
+        const char *cam = line ? strstr(line, "camera eye ") : NULL;
+        CHECKF(cam && sscanf(cam, "camera eye %127s look %127s up %127s fov %63s", eye, look, up, fov) == 4,
+               "%s: no camera for frame %d in:\n%s", what, f, output);
+        if (!cam) return;
+        char saved[sizeof output];
+        memcpy(saved, output, sizeof output);
+        char ref[1200], got[1200], cmd[8192];
+        snprintf(ref, sizeof ref, "%s/orbit_ref_%d.pfm", tmp, f);
+        snprintf(got, sizeof got, "%s/%s_%04d.pfm", tmp, prefix, f);
+        snprintf(cmd, sizeof cmd, "'%s' render '%s' --width 200 --height 150 --eye %s --look %s --up %s --fov %s -o '%s' --quiet",
+                 exe, kitchen, eye, look, up, fov, ref);
+        CHECK(run(cmd) == 0);
+        CHECKF(same_file(ref, got), "%s: frame %d differs from the single process (%s, %s)", what, f, got, ref);
+        memcpy(output, saved, sizeof output);
+        p = cam;
+    }
+}
+
+int main(void) {
+    const char *env = getenv("RP_CLI");
+    if (env) snprintf(exe, sizeof exe, "%s", env);
+    else {
+        char self[900];
+        ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+        if (n > 0) {
+            self[n] = '\0';
+            char *slash = strrchr(self, '/');
+            if (slash) *slash = '\0';
+            snprintf(exe, sizeof exe, "%s/../raypack", self);
+        }
+    }
+    snprintf(mpirun, sizeof mpirun, "%s", getenv("RP_MPIEXEC") ? getenv("RP_MPIEXEC") : "mpirun");
+    const char *dir = getenv("RP_TEST_TMP");
+    snprintf(tmp, 900, "%s", dir ? dir : "/tmp/raypack_test_mpi");
+    mkdir(tmp, 0777);
+    char buf[1024], args[8192], ref[1200], got[1200];
+    /* BART's kitchen; in the sanitized build, where every rank's load is slow, the smaller museum */
+    const char *k = rp_test_scene(rp_test_sanitized() ? "bart_museum5.tar.gz" : "bart_kitchen.tar.gz", buf, sizeof buf);
+    CHECK(k != NULL && access(exe, X_OK) == 0);
+    if (!k || access(exe, X_OK) != 0) return RP_TEST_END();
+    snprintf(kitchen, sizeof kitchen, "%s", k);
+
+    /* The single-process references. */
+    file_in_tmp(ref, sizeof ref, "ref.pfm");
+    snprintf(args, sizeof args, "'%s' render '%s' --width 200 --height 150 -o '%s' --quiet", exe, kitchen, ref);
+    CHECK(run(args) == 0);
+    char refpng[1200];
+    file_in_tmp(refpng, sizeof refpng, "ref.png");
+    snprintf(args, sizeof args, "'%s' render '%s' --width 200 --height 150 -o '%s' --quiet", exe, kitchen, refpng);
+    CHECK(run(args) == 0);
+
+    /* -np 1 (rank 0 alone) .. 4 (three clients on two cores). */
+    for (int np = 1; np <= 4; np++) {
+        char name[32];
+        snprintf(name, sizeof name, "np%d.pfm", np);
+        file_in_tmp(got, sizeof got, name);
+        snprintf(args, sizeof args, "'%s' --mpi %s -o '%s'", kitchen, SIZE, got);
+        int rc = run_mpi("", np, args);
+        CHECKF(rc == 0 && same_file(ref, got), "-np %d: exit %d, image %s:\n%s", np, rc,
+               same_file(ref, got) ? "identical" : "differs", output);
+        if (np > 1) CHECKF(strstr(output, "share    frame 0: rank 1"), "-np %d reports no shares:\n%s", np, output);
+    }
+    file_in_tmp(got, sizeof got, "np3.png");
+    snprintf(args, sizeof args, "'%s' --mpi %s -o '%s' --mpi-tile 48", kitchen, SIZE, got);
+    CHECKF(run_mpi("", 3, args) == 0 && same_file(refpng, got), "PNG through -np 3 differs:\n%s", output);
+
+    /* --mpi-bcast: every rank can read the file, then only rank 0 (the clients run in a folder
+     * where the scene's path names nothing). */
+    file_in_tmp(got, sizeof got, "bcast.pfm");
+    snprintf(args, sizeof args, "'%s' --mpi --mpi-bcast --mpi-compress small %s -o '%s'", kitchen, SIZE, got);
+    CHECKF(run_mpi("", 3, args) == 0 && same_file(ref, got) && strstr(output, "scene broadcast"),
+           "--mpi-bcast:\n%s", output);
+    char a[1100], b[1100], link[1200];
+    file_in_tmp(a, sizeof a, "rank0");
+    file_in_tmp(b, sizeof b, "others");
+    mkdir(a, 0777);
+    mkdir(b, 0777);
+    snprintf(link, sizeof link, "%s/scene.tar.gz", a);
+    unlink(link);
+    CHECK(symlink(kitchen, link) == 0);
+    char broken[1200];
+    snprintf(broken, sizeof broken, "%s/scene.tar.gz", b);
+    FILE *f = fopen(broken, "wb");
+    if (f) {
+        fputs("this is not a tar archive\n", f);
+        fclose(f);
+    }
+    file_in_tmp(got, sizeof got, "bcast0.pfm");
+    snprintf(args, sizeof args,
+             "'%s' --oversubscribe -np 1 --wdir '%s' '%s' render scene.tar.gz --mpi --mpi-bcast %s -o '%s' : "
+             "-np 2 --wdir '%s' '%s' render scene.tar.gz --mpi --mpi-bcast %s -o '%s'",
+             mpirun, a, exe, SIZE, got, b, exe, SIZE, got);
+    CHECKF(run(args) == 0 && same_file(ref, got), "--mpi-bcast with a scene only rank 0 can read:\n%s", output);
+    /* Without --mpi-bcast the clients' broken file is an error on rank 0, naming rank and file. */
+    snprintf(args, sizeof args,
+             "'%s' --oversubscribe -np 1 --wdir '%s' '%s' render scene.tar.gz --mpi %s -o '%s' --mpi-timeout 20 : "
+             "-np 2 --wdir '%s' '%s' render scene.tar.gz --mpi %s -o '%s' --mpi-timeout 20",
+             mpirun, a, exe, SIZE, got, b, exe, SIZE, got);
+    int rc = run(args);
+    CHECKF(rc != 0 && rc != 124 && strstr(output, "rank 1") && strstr(output, "has no scene: scene.tar.gz"),
+           "a client's broken scene: exit %d:\n%s", rc, output);
+
+    /* A 3-frame orbit: every frame equals the single process at that frame's camera. */
+    file_in_tmp(got, sizeof got, "orbit.pfm");
+    snprintf(args, sizeof args, "'%s' --mpi %s --frames 3 --orbit 60 -o '%s'", kitchen, SIZE, got);
+    CHECKF(run_mpi("", 3, args) == 0, "orbit:\n%s", output);
+    check_frames("orbit", 3, "orbit");
+
+    /* A client kills itself (SIGKILL) holding two tiles mid-frame: they go to the others. */
+    file_in_tmp(got, sizeof got, "killed.pfm");
+    snprintf(args, sizeof args, "'%s' --mpi %s -o '%s' --mpi-timeout 2", kitchen, SIZE, got);
+    rc = run_mpi("--enable-recovery -x RAYPACK_MPI_TEST_KILL=2:3", 4, args);
+    CHECKF(rc == 0 && same_file(ref, got) && strstr(output, "rank 2 (pid") && strstr(output, "go to the others") &&
+           elapsed_s < 40.0, "killed client: exit %d after %.1f s:\n%s", rc, elapsed_s, output);
+    /* ... or hangs there, alive: the job still ends, with the image. */
+    file_in_tmp(got, sizeof got, "hung.pfm");
+    snprintf(args, sizeof args, "'%s' --mpi %s -o '%s' --mpi-timeout 2", kitchen, SIZE, got);
+    rc = run_mpi("--enable-recovery -x RAYPACK_MPI_TEST_HANG=1:2", 3, args);
+    CHECKF(rc == 0 && same_file(ref, got) && strstr(output, "rank 1 (pid") && elapsed_s < 40.0,
+           "hanging client: exit %d after %.1f s:\n%s", rc, elapsed_s, output);
+
+    /* kill -9 from outside, as soon as rank 0 has named its clients, during the orbit. */
+    file_in_tmp(got, sizeof got, "orbitk.pfm");
+    snprintf(args, sizeof args,
+             "timeout -k 5 90 '%s' --oversubscribe --enable-recovery -np 3 '%s' render '%s' --mpi %s --frames 3 "
+             "--orbit 60 -o '%s' --mpi-timeout 2 2>&1",
+             mpirun, exe, kitchen, SIZE, got);
+    FILE *p = popen(args, "r");
+    CHECK(p != NULL);
+    if (p) {
+        size_t len = 0;
+        char line[4096];
+        int killed = 0;
+        while (fgets(line, sizeof line, p)) {
+            int pid;
+            if (!killed && sscanf(line, "client   rank 2: pid %d", &pid) == 1 && pid > 1) killed = kill(pid, SIGKILL) == 0;
+            size_t n = strlen(line);
+            if (len + n < sizeof output) {
+                memcpy(output + len, line, n);
+                len += n;
+            }
+        }
+        output[len] = '\0';
+        int st = pclose(p);
+        CHECKF(killed && WIFEXITED(st) && WEXITSTATUS(st) == 0 && strstr(output, "rank 2 (pid"),
+               "kill -9 from outside: killed %d, status %d:\n%s", killed, st, output);
+        check_frames("orbitk", 3, "orbit with a client killed");
+    }
+
+    /* Rank 0 dies mid-frame: the job ends (under --enable-recovery the clients give up after 4
+     * time-outs of silence), nothing hangs. */
+    file_in_tmp(got, sizeof got, "server_killed.pfm");
+    snprintf(args, sizeof args, "'%s' --mpi %s -o '%s' --mpi-timeout 2", kitchen, SIZE, got);
+    rc = run_mpi("--enable-recovery -x RAYPACK_MPI_TEST_KILL=0:5", 3, args);
+    /* (mpirun --enable-recovery exits 0 even so: the missing image is what tells) */
+    CHECKF(rc != 124 && elapsed_s < 40.0 && access(got, F_OK) != 0 && strstr(output, "giving up"),
+           "rank 0 killed: exit %d after %.1f s:\n%s", rc, elapsed_s, output);
+
+    /* A client that never answers, and one of another protocol: rank 0 says so within the time-out. */
+    file_in_tmp(got, sizeof got, "never.pfm");
+    snprintf(args, sizeof args, "'%s' --mpi %s -o '%s' --mpi-timeout 2", kitchen, SIZE, got);
+    rc = run_mpi("-x RAYPACK_MPI_TEST_STALL=2", 3, args);
+    CHECKF(rc != 0 && rc != 124 && strstr(output, "rank 2 did not answer within 2.0 s") && elapsed_s < 30.0,
+           "silent client: exit %d after %.1f s:\n%s", rc, elapsed_s, output);
+    rc = run_mpi("-x RAYPACK_MPI_TEST_PROTOCOL=1:99", 3, args);
+    CHECKF(rc != 0 && rc != 124 && strstr(output, "rank 1 (pid") && strstr(output, "protocol 99") &&
+           strstr(output, "run the same build on every rank"), "another protocol: exit %d:\n%s", rc, output);
+    return RP_TEST_END();
+}

@@ -410,6 +410,8 @@ static void handle_event(viewer *v, const SDL_Event *e) {
         if (e->button.button == SDL_BUTTON_LEFT) {
             v->orbit_drag = 1;
             pick_pivot(v, e->button.x, e->button.y);
+            printf("orbit: pivot %.9g,%.9g,%.9g\n", (double)v->pivot[0], (double)v->pivot[1], (double)v->pivot[2]);
+            fflush(stdout);
         }
         break;
     case SDL_MOUSEBUTTONUP:

@@ -10,7 +10,6 @@
 #include "viewer.h"
 
 #include <SDL.h>
-#include <ctype.h>
 #include <errno.h>
 #include <stdlib.h>
 #include <string.h>
@@ -82,9 +81,15 @@ static bool parse_item(view_script *s, char **w, int n, const char *origin, int 
         FAIL("expected 'FRAME ACTION [ARGS]' with FRAME a frame number >= 0");
     const char *a = w[1];
     if (strcmp(a, "down") == 0 || strcmp(a, "up") == 0 || strcmp(a, "key") == 0) {
-        if (n != 3) FAIL("'%s' expects one key name", a);
-        it.key = SDL_GetKeyFromName(w[2]);
-        if (it.key == SDLK_UNKNOWN) FAIL("unknown key '%s' (SDL key names: w, F12, Escape, -)", w[2]);
+        /* SDL's names may have spaces ("Left Shift"): the rest of the item is the name */
+        char name[64] = "";
+        for (int i = 2; i < n; i++) {
+            size_t l = strlen(name);
+            snprintf(name + l, sizeof name - l, "%s%s", i > 2 ? " " : "", w[i]);
+        }
+        if (n < 3) FAIL("'%s' expects a key name", a);
+        it.key = SDL_GetKeyFromName(name);
+        if (it.key == SDLK_UNKNOWN) FAIL("unknown key '%s' (SDL key names: w, F12, Escape, -, Left Shift)", name);
         it.kind = strcmp(a, "up") == 0 ? SCRIPT_KEY_UP : SCRIPT_KEY_DOWN;
         if (!add(s, it)) FAIL("out of memory");
         if (strcmp(a, "key") == 0) {

@@ -49,7 +49,7 @@ static void view_usage(FILE *out) {
             "                       move X Y, wheel N, quit; keys by SDL name (w, F12, Escape, -)\n"
             "  --no-overlay         no text over the image\n"
             "  --log                print a line per frame (size, samples, times, motion)\n"
-            "  --max-scale S        lowest resolution during motion is 1/S of the window's, 1..32 [8]\n"
+            "  --max-scale S        lowest resolution during motion is 1/S of the window's, 1..32 [16]\n"
             "\n"
             "keys: W/S A/D Q/E fly (Shift: 4x faster), right mouse button: look, left button: orbit\n"
             "  about the point under the cursor, wheel: fly speed, - and =: field of view, P: print the\n"
@@ -219,7 +219,10 @@ typedef struct viewer {
     rp_render_desc desc;        /* settings; size, camera and samples set per frame */
     view_camera cam, home;
     float *frame, *sum;         /* w * h * 3: the last rp_render output, the accumulated samples */
-    uint32_t *disp;             /* w * h xRGB8888: what the window shows */
+    uint32_t *disp;             /* w * h xRGB8888: what the window shows, when its surface is not that */
+    uint32_t *out;              /* where this frame's pixels go: the window's surface itself or disp */
+    int out_pitch;              /* in pixels */
+    bool direct;                /* out is the window's surface */
     int samples;                /* accumulated at full resolution */
     int spp_max;
     int depth;                  /* max depth, 0..64 (rp_render_desc's 0 is its default, 5) */
@@ -468,7 +471,7 @@ typedef struct present_job {
 enum { BAND_ROWS = 16 };
 
 static uint32_t xrgb(const float *c) {
-    return (uint32_t)view_srgb8(c[0]) << 16 | (uint32_t)view_srgb8(c[1]) << 8 | (uint32_t)view_srgb8(c[2]);
+    return 0xFF000000u | (uint32_t)view_srgb8(c[0]) << 16 | (uint32_t)view_srgb8(c[1]) << 8 | (uint32_t)view_srgb8(c[2]);
 }
 
 static void present_band(void *user, uint32_t index, uint32_t thread) {
@@ -487,13 +490,13 @@ static void present_band(void *user, uint32_t index, uint32_t thread) {
                     v->sum[i + k] = (j->samples == 1 ? 0.0f : v->sum[i + k]) + v->frame[i + k];
                     c[k] = j->samples == 1 ? v->sum[i + k] : v->sum[i + k] * inv;
                 }
-                v->disp[(size_t)y * (size_t)v->w + (size_t)x] = xrgb(c);
+                v->out[(size_t)y * (size_t)v->out_pitch + (size_t)x] = xrgb(c);
             }
         return;
     }
     for (int y = y0; y < y1; y++) {
         const float *row = v->frame + (size_t)(y / j->scale) * (size_t)j->fw * 3;
-        uint32_t *out = v->disp + (size_t)y * (size_t)v->w;
+        uint32_t *out = v->out + (size_t)y * (size_t)v->out_pitch;
         for (int x = 0; x < v->w;) {
             int fx = x / j->scale;
             uint32_t p = xrgb(row + (size_t)fx * 3);
@@ -513,11 +516,11 @@ static void draw_overlay(viewer *v, const char *const *lines, int n) {
     if (y1 > v->h) y1 = v->h;
     for (int y = 0; y < y1; y++)
         for (int x = 0; x < x1; x++) {
-            uint32_t *p = &v->disp[(size_t)y * (size_t)v->w + (size_t)x];
-            *p = (*p >> 2) & 0x3F3F3Fu;
+            uint32_t *p = &v->out[(size_t)y * (size_t)v->out_pitch + (size_t)x];
+            *p = ((*p >> 2) & 0x3F3F3Fu) | 0xFF000000u;
         }
     for (int i = 0; i < n; i++)
-        view_font_draw(v->disp, v->w, v->h, v->w, pad, pad + i * lh, sc, 0xFFE080u, lines[i]);
+        view_font_draw(v->out, v->w, v->h, v->out_pitch, pad, pad + i * lh, sc, 0xFFFFE080u, lines[i]);
 }
 
 static void overlay_text(viewer *v, int fw, int fh) {
@@ -538,17 +541,36 @@ static void overlay_text(viewer *v, int fw, int fh) {
     draw_overlay(v, lines, 3);
 }
 
-/* Copies disp into the window and shows it. */
+/* Where this frame's pixels go: straight into the window's surface when it is 32-bit xRGB (X11's
+ * usual visual), which saves a copy, else into disp for show to convert. */
+static bool target(viewer *v) {
+    SDL_Surface *s = SDL_GetWindowSurface(v->win);
+    if (!s) {
+        fprintf(stderr, "raypack view: no window surface: %s\n", SDL_GetError());
+        return false;
+    }
+    uint32_t f = s->format->format;
+    v->direct = !SDL_MUSTLOCK(s) && (f == SDL_PIXELFORMAT_RGB888 || f == SDL_PIXELFORMAT_ARGB8888) && s->w == v->w &&
+                s->h == v->h && s->pitch % 4 == 0;
+    v->out = v->direct ? s->pixels : v->disp;
+    v->out_pitch = v->direct ? s->pitch / 4 : v->w;
+    return true;
+}
+
+/* Shows this frame's pixels (converted into the window's format unless they are there already). */
 static bool show(viewer *v) {
     SDL_Surface *s = SDL_GetWindowSurface(v->win);
     if (!s) {
         fprintf(stderr, "raypack view: no window surface: %s\n", SDL_GetError());
         return false;
     }
-    if (SDL_MUSTLOCK(s)) SDL_LockSurface(s);
-    int rc = SDL_ConvertPixels(v->w, v->h, SDL_PIXELFORMAT_RGB888, v->disp, v->w * 4, s->format->format, s->pixels,
+    int rc = 0;
+    if (!v->direct) {
+        if (SDL_MUSTLOCK(s)) SDL_LockSurface(s);
+        rc = SDL_ConvertPixels(v->w, v->h, SDL_PIXELFORMAT_ARGB8888, v->disp, v->w * 4, s->format->format, s->pixels,
                                s->pitch);
-    if (SDL_MUSTLOCK(s)) SDL_UnlockSurface(s);
+        if (SDL_MUSTLOCK(s)) SDL_UnlockSurface(s);
+    }
     if (rc != 0 || SDL_UpdateWindowSurface(v->win) != 0) {
         fprintf(stderr, "raypack view: cannot draw into the window: %s\n", SDL_GetError());
         return false;
@@ -567,6 +589,7 @@ static int motion_scale(const viewer *v) {
 
 /* One frame: input, motion, maybe a render, the window. False on a fatal error. */
 static bool step(viewer *v, view_script *script, int frame, double dt) {
+    double t0 = cli_now_ms();
     view_script_push(script, frame);
     SDL_Event e;
     while (SDL_PollEvent(&e)) handle_event(v, &e);
@@ -576,12 +599,12 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
     if (moved || v->reset) v->samples = 0;
     v->reset = false;
     int cap = accumulates(&v->desc) ? v->spp_max : 1;
-    double t0 = cli_now_ms();
     int scale = moved ? motion_scale(v) : 1;
     bool render = moved || v->samples < cap;
     int fw = (v->w + scale - 1) / scale, fh = (v->h + scale - 1) / scale;
     present_job job = {.v = v, .fw = fw, .fh = fh, .scale = scale};
-    double render_ms = 0.0;
+    uint64_t rays = 0;
+    double render_ms = 0.0, convert_ms = 0.0, show_ms = 0.0;
     if (render) {
         rp_camera cam = view_camera_get(&v->cam);
         rp_render_desc d = v->desc;
@@ -597,10 +620,8 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
             return false;
         }
         render_ms = st.render_ms;
-        uint64_t rays = 0;
+        rays = 0;
         for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays += st.rays[k];
-        v->total_rays += rays;
-        v->total_render_ms += render_ms;
         v->mrays = render_ms > 0.0 ? (double)rays / (render_ms * 1e3) : 0.0;
         v->full_ms = render_ms * ((double)v->w * (double)v->h) / ((double)fw * (double)fh);
         v->scale = scale;
@@ -609,11 +630,16 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
             job.accumulate = true;
             job.samples = v->samples;
         }
+        double c0 = cli_now_ms();
+        if (!target(v)) return false;
         rp_device_parallel_for(v->dev, (uint32_t)((v->h + BAND_ROWS - 1) / BAND_ROWS), present_band, &job);
+        convert_ms = cli_now_ms() - c0;
     }
     if (render) {
         if (v->overlay) overlay_text(v, fw, fh);
+        double s0 = cli_now_ms();
         if (!show(v)) return false;
+        show_ms = cli_now_ms() - s0;
     } else if (v->redraw) {
         /* the surface still holds the last image: send it again */
         SDL_UpdateWindowSurface(v->win);
@@ -625,12 +651,16 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         double over = frame_ms - render_ms;
         v->overhead_ms = v->frames_done > 1 ? 0.8 * v->overhead_ms + 0.2 * over : over;
     }
-    v->total_frame_ms += frame_ms;
+    if (v->frames_done > 0) { /* the first frame also maps the window: the summary leaves it out */
+        v->total_frame_ms += frame_ms;
+        v->total_render_ms += render_ms;
+        v->total_rays += rays;
+    }
     v->last_frame_ms = frame_ms;
     if (v->opt.log)
-        printf("frame %d: %dx%d scale %d samples %d moved %d render %.2f ms frame %.2f ms\n", frame, fw, fh, scale,
-               v->samples, moved ? 1 : 0, render_ms, frame_ms);
-    (void)dt;
+        printf("frame %d: %dx%d scale %d samples %d moved %d render %.2f ms convert %.2f ms show %.2f ms frame %.2f "
+               "ms\n",
+               frame, fw, fh, scale, v->samples, moved ? 1 : 0, render_ms, convert_ms, show_ms, frame_ms);
     v->frames_done++;
     return true;
 }
@@ -706,7 +736,7 @@ static bool viewer_init(viewer *v) {
 int cli_view(int argc, char **argv) {
     viewer v;
     memset(&v, 0, sizeof v);
-    v.opt = (view_options){.fps = 20.0f, .max_scale = 8, .overlay = true};
+    v.opt = (view_options){.fps = 20.0f, .max_scale = 16, .overlay = true};
     bool help = false;
     char **rargv = calloc((size_t)argc + 1, sizeof *rargv);
     if (!rargv) return CLI_EXIT_FAILURE;
@@ -769,12 +799,15 @@ int cli_view(int argc, char **argv) {
             status = CLI_EXIT_FAILURE;
         double wall = cli_now_ms() - start;
         view_camera_print(&v.cam, stdout);
-        printf("summary: %d frames, %d samples, %.1f ms, %.2f fps; rays %llu, %.2f Mrays/s in rp_render "
-               "(%.1f ms), %.2f Mrays/s over the frames (%.1f ms)\n",
+        /* the window's cost: rays per ms of rp_render against rays per ms of whole frames (rp_render,
+         * the conversion, the overlay, the window and the events), frames after the first */
+        double in_render = v.total_render_ms > 0.0 ? (double)v.total_rays / (v.total_render_ms * 1e3) : 0.0;
+        double in_frames = v.total_frame_ms > 0.0 ? (double)v.total_rays / (v.total_frame_ms * 1e3) : 0.0;
+        printf("summary: %d frames, %d samples, %.1f ms, %.2f fps; after the first frame: %llu rays, %.2f Mrays/s in "
+               "rp_render (%.1f ms), %.2f Mrays/s over whole frames (%.1f ms), window cost %.1f%%\n",
                v.frames_done, v.samples, wall, wall > 0.0 ? v.frames_done * 1e3 / wall : 0.0,
-               (unsigned long long)v.total_rays,
-               v.total_render_ms > 0.0 ? (double)v.total_rays / (v.total_render_ms * 1e3) : 0.0, v.total_render_ms,
-               v.total_frame_ms > 0.0 ? (double)v.total_rays / (v.total_frame_ms * 1e3) : 0.0, v.total_frame_ms);
+               (unsigned long long)v.total_rays, in_render, v.total_render_ms, in_frames, v.total_frame_ms,
+               in_render > 0.0 ? 100.0 * (1.0 - in_frames / in_render) : 0.0);
         fflush(stdout);
     }
     viewer_free(&v);

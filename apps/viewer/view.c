@@ -444,6 +444,11 @@ static void handle_event(viewer *v, const SDL_Event *e) {
     }
     case SDL_WINDOWEVENT:
         if (e->window.event == SDL_WINDOWEVENT_EXPOSED) v->redraw = true;
+        /* keys released elsewhere never come back as key-up events (scripted keys are not affected) */
+        if (e->window.event == SDL_WINDOWEVENT_FOCUS_LOST && !v->deterministic) {
+            memset(v->held, 0, sizeof v->held);
+            v->look_drag = v->orbit_drag = 0;
+        }
         break;
     default: break;
     }

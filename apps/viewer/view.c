@@ -7,6 +7,7 @@
 
 #include <SDL.h>
 #include <errno.h>
+#include <pthread.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -235,6 +236,7 @@ typedef struct viewer {
     int look_drag, orbit_drag;  /* buttons held */
     float pivot[3];
     bool overlay, quit, camera_moved, reset, redraw;
+    bool pending;               /* the surface holds a frame not shown yet */
     int screenshots;
     /* what the overlay and the summary report */
     double fps, mrays, last_frame_ms;
@@ -255,7 +257,10 @@ static void print_settings(const viewer *v) {
 }
 
 /* Writes the window's pixels (read back from its surface) to path. */
+static bool flush(viewer *v);
+
 static bool save_screenshot(viewer *v, const char *path) {
+    if (!flush(v)) return false;
     SDL_Surface *s = SDL_GetWindowSurface(v->win);
     if (!s) {
         fprintf(stderr, "raypack view: cannot read the window: %s\n", SDL_GetError());
@@ -475,7 +480,7 @@ typedef struct present_job {
 
 enum { BAND_ROWS = 16 };
 
-static uint32_t xrgb(const float *c) {
+static inline uint32_t xrgb(const float *c) {
     return 0xFF000000u | (uint32_t)view_srgb8(c[0]) << 16 | (uint32_t)view_srgb8(c[1]) << 8 | (uint32_t)view_srgb8(c[2]);
 }
 
@@ -485,18 +490,26 @@ static void present_band(void *user, uint32_t index, uint32_t thread) {
     viewer *v = j->v;
     int y0 = (int)index * BAND_ROWS, y1 = y0 + BAND_ROWS < v->h ? y0 + BAND_ROWS : v->h;
     if (j->accumulate) {
+        /* as the tile renderer sums samples, then scales by 1/spp (but for one); the first sample
+         * is already in sum (step swapped the buffers) */
         float inv = 1.0f / (float)j->samples;
-        for (int y = y0; y < y1; y++)
+        for (int y = y0; y < y1; y++) {
+            float *restrict sum = v->sum + (size_t)y * (size_t)v->w * 3;
+            const float *restrict add = v->frame + (size_t)y * (size_t)v->w * 3;
+            uint32_t *restrict out = v->out + (size_t)y * (size_t)v->out_pitch;
+            if (j->samples == 1) {
+                for (int x = 0; x < v->w; x++) out[x] = xrgb(sum + 3 * x);
+                continue;
+            }
             for (int x = 0; x < v->w; x++) {
-                size_t i = ((size_t)y * (size_t)v->w + (size_t)x) * 3;
                 float c[3];
                 for (int k = 0; k < 3; k++) {
-                    /* as the tile renderer sums samples, then scales by 1/spp (but for one) */
-                    v->sum[i + k] = (j->samples == 1 ? 0.0f : v->sum[i + k]) + v->frame[i + k];
-                    c[k] = j->samples == 1 ? v->sum[i + k] : v->sum[i + k] * inv;
+                    sum[3 * x + k] += add[3 * x + k];
+                    c[k] = sum[3 * x + k] * inv;
                 }
-                v->out[(size_t)y * (size_t)v->out_pitch + (size_t)x] = xrgb(c);
+                out[x] = xrgb(c);
             }
+        }
         return;
     }
     for (int y = y0; y < y1; y++) {
@@ -544,6 +557,31 @@ static void overlay_text(viewer *v, int fw, int fh) {
     snprintf(l2, sizeof l2, "%dx%d (1/%d)  %d threads", fw, fh, v->scale, rp_device_thread_count(v->dev));
     const char *lines[3] = {l0, l1, l2};
     draw_overlay(v, lines, 3);
+}
+
+/* One rp_render call, run on a thread of its own. */
+typedef struct render_call {
+    rp_render_scene *scene;
+    rp_render_desc desc;
+    rp_camera cam;
+    float *pixels;
+    rp_render_stats stats;
+    bool ok;
+} render_call;
+
+static void *render_main(void *p) {
+    render_call *c = p;
+    c->ok = rp_render(c->scene, &c->desc, c->pixels, &c->stats);
+    return NULL;
+}
+
+static bool show(viewer *v);
+
+/* Shows the frame waiting in the window's surface, if any. */
+static bool flush(viewer *v) {
+    if (!v->pending) return true;
+    v->pending = false;
+    return show(v);
 }
 
 /* Where this frame's pixels go: straight into the window's surface when it is 32-bit xRGB (X11's
@@ -612,42 +650,55 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
     double render_ms = 0.0, convert_ms = 0.0, show_ms = 0.0;
     if (render) {
         rp_camera cam = view_camera_get(&v->cam);
-        rp_render_desc d = v->desc;
-        d.width = fw;
-        d.height = fh;
-        d.camera = &cam;
-        d.max_depth = v->depth == 0 ? -1 : v->depth;
-        d.spp = 1;
-        d.sample_start = scale == 1 ? v->samples : 0;
-        rp_render_stats st;
-        if (!rp_render(v->scene, &d, v->frame, &st)) {
+        render_call rc = {.scene = v->scene, .desc = v->desc, .cam = cam, .pixels = v->frame};
+        rc.desc.width = fw;
+        rc.desc.height = fh;
+        rc.desc.camera = &rc.cam;
+        rc.desc.max_depth = v->depth == 0 ? -1 : v->depth;
+        rc.desc.spp = 1;
+        rc.desc.sample_start = scale == 1 ? v->samples : 0;
+        /* the window shows the last frame while this one renders: its round trip to the display
+         * server overlaps the rendering instead of adding to it */
+        pthread_t th;
+        bool threaded = pthread_create(&th, NULL, render_main, &rc) == 0;
+        double s0 = cli_now_ms();
+        if (!flush(v)) {
+            if (threaded) pthread_join(th, NULL);
+            return false;
+        }
+        show_ms = cli_now_ms() - s0;
+        if (threaded) pthread_join(th, NULL);
+        else render_main(&rc);
+        if (!rc.ok) {
             fprintf(stderr, "raypack view: rendering failed (out of memory?)\n");
             return false;
         }
-        render_ms = st.render_ms;
+        render_ms = rc.stats.render_ms;
         rays = 0;
-        for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays += st.rays[k];
+        for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays += rc.stats.rays[k];
         v->mrays = render_ms > 0.0 ? (double)rays / (render_ms * 1e3) : 0.0;
         v->full_ms = render_ms * ((double)v->w * (double)v->h) / ((double)fw * (double)fh);
         v->scale = scale;
         if (scale == 1) {
             v->samples++;
+            if (v->samples == 1) { /* the frame is the sum of one sample */
+                float *t = v->sum;
+                v->sum = v->frame;
+                v->frame = t;
+            }
             job.accumulate = true;
             job.samples = v->samples;
         }
         double c0 = cli_now_ms();
         if (!target(v)) return false;
         rp_device_parallel_for(v->dev, (uint32_t)((v->h + BAND_ROWS - 1) / BAND_ROWS), present_band, &job);
-        convert_ms = cli_now_ms() - c0;
-    }
-    if (render) {
         if (v->overlay) overlay_text(v, fw, fh);
-        double s0 = cli_now_ms();
-        if (!show(v)) return false;
-        show_ms = cli_now_ms() - s0;
-    } else if (v->redraw) {
-        /* the surface still holds the last image: send it again */
-        SDL_UpdateWindowSurface(v->win);
+        v->pending = true;
+        convert_ms = cli_now_ms() - c0;
+    } else if (v->pending || v->redraw) {
+        /* nothing new: show what is pending, or send the surface again */
+        if (!v->pending) v->pending = true;
+        if (!flush(v)) return false;
     }
     v->redraw = false;
     double t1 = cli_now_ms();
@@ -800,6 +851,7 @@ int cli_view(int argc, char **argv) {
             int cap = accumulates(&v.desc) ? v.spp_max : 1;
             if (!v.deterministic && v.samples >= cap && !v.camera_moved) SDL_WaitEventTimeout(NULL, 50);
         }
+        if (status == CLI_EXIT_OK && !flush(&v)) status = CLI_EXIT_FAILURE;
         if (status == CLI_EXIT_OK && v.opt.frames > 0 && v.opt.screenshot && !save_screenshot(&v, v.opt.screenshot))
             status = CLI_EXIT_FAILURE;
         double wall = cli_now_ms() - start;

@@ -12,6 +12,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
+#include <string.h>
 
 #include <raypack.h>
 #include <raypack_render.h>
@@ -66,11 +67,36 @@ int view_font_width(const char *text, int scale);
 
 /* ---- sRGB ---- */
 
+/* The table's buckets: floats in [2^-13, 1] by their top 17 bits (exponent and 8 mantissa bits);
+ * every float below 2^-13 encodes to 0 (the code becomes 1 near 1.5e-4). 3329 words, 13 KiB. */
+#define VIEW_SRGB_LO 0x39000000u /* 2^-13 */
+enum {
+    VIEW_SRGB_SHIFT = 15,
+    VIEW_SRGB_FIRST = VIEW_SRGB_LO >> VIEW_SRGB_SHIFT,
+    VIEW_SRGB_BUCKETS = (0x3F800000u >> VIEW_SRGB_SHIFT) - VIEW_SRGB_FIRST + 1
+};
+/* Per bucket: bits 16-23 the code at its start, bits 0-15 the low 15 bits of the first pattern with
+ * the next code (0x8000: none); within a bucket the code rises by at most one (view_srgb_init). */
+extern uint32_t view_srgb_table[VIEW_SRGB_BUCKETS];
+extern bool view_srgb_exact; /* false: the table could not be built, use the formula */
+
 /* Builds the table (once; not thread-safe, call before the first view_srgb8). */
 void view_srgb_init(void);
-/* The 8-bit sRGB code of a linear value, equal to what rp_image_write stores in a PNG. */
-uint8_t view_srgb8(float v);
-/* The same by the formula (slow; the table's reference). */
+/* The same by the formula: rp_image_write's encode_srgb8, operation for operation. */
 uint8_t view_srgb8_formula(float v);
+
+/* The 8-bit sRGB code of a linear value, equal to what rp_image_write stores in a PNG. Branch-free
+ * but for the table's check: clamping to [0, 1] maps negatives and NaN to 0 as the formula does. */
+static inline uint32_t view_srgb8(float v) {
+    if (!view_srgb_exact) return view_srgb8_formula(v);
+    v = v > 0.0f ? v : 0.0f;
+    v = v < 1.0f ? v : 1.0f;
+    uint32_t b;
+    memcpy(&b, &v, sizeof b);
+    uint32_t i = b >> VIEW_SRGB_SHIFT;
+    i = i < VIEW_SRGB_FIRST ? VIEW_SRGB_FIRST : i;
+    uint32_t t = view_srgb_table[i - VIEW_SRGB_FIRST];
+    return ((t >> 16) & 0xFFu) + ((b & 0x7FFFu) >= (t & 0xFFFFu));
+}
 
 #endif

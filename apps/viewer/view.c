@@ -623,7 +623,8 @@ static bool show(viewer *v) {
 
 /* The resolution divisor for a frame during motion: the smallest whose estimated time fits. */
 static int motion_scale(const viewer *v) {
-    double budget = 1000.0 / (double)v->opt.fps - v->overhead_ms;
+    /* a fifth of the frame kept in reserve: a frame's cost varies with what comes into view */
+    double budget = 0.8 * 1000.0 / (double)v->opt.fps - v->overhead_ms;
     if (budget < 0.1) budget = 0.1;
     if (v->full_ms <= budget) return 1;
     int s = (int)ceil(sqrt(v->full_ms / budget));
@@ -824,6 +825,11 @@ int cli_view(int argc, char **argv) {
     view_srgb_init();
 
     int status = CLI_EXIT_FAILURE;
+    /* The window's surface is X11's own shared-memory image, not a texture of an OpenGL renderer:
+     * without a GPU that renderer is llvmpipe, whose threads would take the ray tracer's cores (and
+     * its GL libraries keep allocations LeakSanitizer reports). SDL_FRAMEBUFFER_ACCELERATION in the
+     * environment still decides. */
+    SDL_SetHintWithPriority(SDL_HINT_FRAMEBUFFER_ACCELERATION, "0", SDL_HINT_DEFAULT);
     if (SDL_Init(SDL_INIT_VIDEO) != 0) {
         fprintf(stderr, "raypack view: cannot start SDL video: %s (no display? run it under xvfb-run)\n",
                 SDL_GetError());

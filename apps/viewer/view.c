@@ -256,9 +256,9 @@ static void print_settings(const viewer *v) {
     fflush(stdout);
 }
 
-/* Writes the window's pixels (read back from its surface) to path. */
 static bool flush(viewer *v);
 
+/* Writes the window's pixels (read back from its surface, after showing what is pending) to path. */
 static bool save_screenshot(viewer *v, const char *path) {
     if (!flush(v)) return false;
     SDL_Surface *s = SDL_GetWindowSurface(v->win);

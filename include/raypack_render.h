@@ -147,7 +147,8 @@ typedef void (*rp_render_progress_fn)(void *user, uint32_t tiles_done, uint32_t 
 
 typedef struct rp_render_desc {
     int width, height;          /* 0: 512 */
-    int spp;                    /* samples per pixel, 0: 1 (pixel centre); more are jittered */
+    int spp;                    /* samples per pixel, 0: 1; sample 0 is the pixel centre, the others
+                                 * are jittered from (pixel, sample index) */
     rp_integrator_type integrator;
     rp_aov aov;                 /* with RP_INTEGRATOR_AOV; AOVs trace the pixel centre only */
     int max_depth;              /* Whitted: reflection/refraction bounces; 0: 5, negative: none */

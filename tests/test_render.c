@@ -158,11 +158,51 @@ static void test_analytic(void) {
     rp_device_release(dev);
 }
 
+/* Progressive frames (rp_render_desc.sample_start): frames of samples [k, k+1) summed for
+ * k = 0..n-1 and scaled by 1/n give exactly the floats of one n-spp frame, for the packet and the
+ * single-ray Whitted tracers and eye light; sample 0 is the pixel centre, so a 1-spp frame is too. */
+static void test_progressive(const char *name, const rp_scene_data *data) {
+    enum { N = 4 };
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
+    char err[256] = "";
+    rp_render_scene *rs = dev ? rp_render_scene_new(dev, data, NULL, err, sizeof err) : NULL;
+    CHECKF(rs != NULL, "%s", err);
+    float *ref = malloc(sizeof(float) * W * H * 3), *frame = malloc(sizeof(float) * W * H * 3);
+    float *sum = calloc(W * H * 3, sizeof(float));
+    struct { rp_integrator_type integ; int packet; } modes[] = {
+        {RP_INTEGRATOR_WHITTED, 0}, {RP_INTEGRATOR_WHITTED, -1}, {RP_INTEGRATOR_EYELIGHT, 0}};
+    for (size_t m = 0; rs && m < sizeof modes / sizeof modes[0]; m++) {
+        rp_render_desc d = {.width = W, .height = H, .integrator = modes[m].integ, .packet = modes[m].packet};
+        memset(sum, 0, sizeof(float) * W * H * 3);
+        for (int k = 0; k < N; k++) {
+            d.spp = 1;
+            d.sample_start = k;
+            CHECK(rp_render(rs, &d, frame, NULL));
+            if (k == 1) CHECKF(memcmp(frame, sum, sizeof(float) * W * H * 3) != 0, "%s: sample 1 is sample 0", name);
+            for (int i = 0; i < W * H * 3; i++) sum[i] += frame[i];
+            d.spp = k + 1;
+            d.sample_start = 0;
+            CHECK(rp_render(rs, &d, ref, NULL));
+            bool same = true;
+            for (int i = 0; i < W * H * 3 && same; i++)
+                same = (k == 0 ? sum[i] : sum[i] * (1.0f / (float)(k + 1))) == ref[i];
+            CHECKF(same, "%s mode %zu: %d accumulated 1-spp frames differ from one %d-spp frame", name, m, k + 1,
+                   k + 1);
+        }
+    }
+    free(ref);
+    free(frame);
+    free(sum);
+    rp_render_scene_release(rs);
+    rp_device_release(dev);
+}
+
 int main(void) {
     test_analytic();
     rp_scene_data room;
     CHECK(rp_default_scene(&room));
     test_scene("default_room", &room);
+    test_progressive("default_room", &room);
     rp_default_scene_free(&room);
 
     char buf[512], err[512] = "";

@@ -7,6 +7,8 @@
 #include <stdio.h>
 
 #include <raypack.h>
+#include <raypack_io.h>
+#include <raypack_render.h>
 
 /* Exit statuses: success, a load/render/write failure, a usage error. */
 enum { CLI_EXIT_OK = 0, CLI_EXIT_FAILURE = 1, CLI_EXIT_USAGE = 2 };
@@ -41,6 +43,29 @@ const char *cli_isa_name(int isa);
 const char *cli_flag_value(const char *cmd, int argc, char **argv, int *i);
 /* Writes `"traversal": {"auto": n, ..., "simd": n}`, the packets of c per traversal algorithm. */
 void cli_json_traversal(FILE *f, const rp_counters_n *c);
+/* What `raypack render`'s flags say about the scene, the camera and the rendering, for commands that
+ * render as it does (`raypack view`): the same flags give the same pixels. */
+typedef struct cli_render_setup {
+    const char *scene;          /* NULL: the built-in room */
+    int width, height;          /* 0: from the scene (cli_render_size) */
+    int spp, threads, isa;      /* spp 0: not given */
+    rp_render_desc desc;        /* integrator, depth, packets, traversal, frusta; no size or camera */
+    const char *integrator_name, *traversal_name;
+    bool has_eye, has_look, has_up, has_fov;
+    float eye[3], look[3], up[3], fov;
+} cli_render_setup;
+/* Parses argv (argv[0] the command's name) as `raypack render` does, into out; sets *help for -h.
+ * Returns CLI_EXIT_OK, or the exit status after printing why. */
+int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help);
+/* Loads the scene of the setup (the built-in room when it has none); prints why on failure. */
+bool cli_render_load(const char *cmd, const cli_render_setup *setup, rp_scene_data *data);
+/* Frees what cli_render_load loaded. */
+void cli_render_unload(const cli_render_setup *setup, rp_scene_data *data);
+/* The scene's camera with the setup's --eye/--look/--up/--fov in place of its parts. */
+rp_camera cli_render_camera(const cli_render_setup *setup, rp_render_scene *scene);
+/* The image size: --width/--height, the other from the scene's aspect, else the scene's, else 512. */
+void cli_render_size(const cli_render_setup *setup, const rp_scene_data *data, int *w, int *h);
+
 /* Largest thread count accepted by --threads. */
 #define CLI_MAX_THREADS 1024
 

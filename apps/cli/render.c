@@ -593,3 +593,83 @@ done:
     else rp_scene_data_free(&data);
     return status;
 }
+
+/* ---- the same setup for other commands (the viewer) ---- */
+
+int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
+    render_options o = {.output = "raypack.png", .max_depth = -1, .integrator = RP_INTEGRATOR_WHITTED,
+                        .integrator_name = "whitted", .traversal_name = "auto", .packet = 16};
+    int rc = parse_options(argc, argv, &o, help);
+    if (rc != CLI_EXIT_OK) return rc;
+    memset(out, 0, sizeof *out);
+    out->scene = o.scene;
+    out->width = o.width;
+    out->height = o.height;
+    out->spp = o.spp;
+    out->threads = o.threads;
+    out->isa = o.isa;
+    /* as cli_render fills its rp_render_desc */
+    out->desc = (rp_render_desc){
+        .spp = o.spp, .integrator = o.use_aov ? RP_INTEGRATOR_AOV : o.integrator, .aov = o.aov,
+        .max_depth = o.max_depth < 0 ? 0 : (o.max_depth == 0 ? -1 : o.max_depth),
+        .packet = o.packet, .traversal = o.traversal, .no_frustum = o.no_frustum,
+    };
+    out->integrator_name = o.use_aov ? o.aov_name : o.integrator_name;
+    out->traversal_name = o.traversal_name;
+    out->has_eye = o.has_eye;
+    out->has_look = o.has_look;
+    out->has_up = o.has_up;
+    out->has_fov = o.has_fov;
+    memcpy(out->eye, o.eye, sizeof o.eye);
+    memcpy(out->look, o.look, sizeof o.look);
+    memcpy(out->up, o.up, sizeof o.up);
+    out->fov = o.fov;
+    return CLI_EXIT_OK;
+}
+
+bool cli_render_load(const char *cmd, const cli_render_setup *setup, rp_scene_data *data) {
+    memset(data, 0, sizeof *data);
+    if (!setup->scene) {
+        if (rp_default_scene(data)) return true;
+        fprintf(stderr, "raypack %s: out of memory building the default scene\n", cmd);
+        return false;
+    }
+    FILE *probe = fopen(setup->scene, "rb");
+    if (!probe) {
+        fprintf(stderr, "raypack %s: cannot open scene %s: %s\n", cmd, setup->scene, strerror(errno));
+        return false;
+    }
+    fclose(probe);
+    char err[512] = "";
+    if (rp_scene_data_load(setup->scene, data, err, sizeof err)) return true;
+    fprintf(stderr, "%s\n", err[0] ? err : "raypack: cannot load the scene");
+    return false;
+}
+
+void cli_render_unload(const cli_render_setup *setup, rp_scene_data *data) {
+    if (!setup->scene) rp_default_scene_free(data);
+    else rp_scene_data_free(data);
+}
+
+rp_camera cli_render_camera(const cli_render_setup *setup, rp_render_scene *scene) {
+    rp_camera cam = rp_render_scene_default_camera(scene);
+    if (setup->has_eye) memcpy(cam.pinhole.eye, setup->eye, sizeof setup->eye);
+    if (setup->has_look) memcpy(cam.pinhole.look, setup->look, sizeof setup->look);
+    if (setup->has_up) memcpy(cam.pinhole.up, setup->up, sizeof setup->up);
+    if (setup->has_fov) cam.pinhole.fov_deg = setup->fov;
+    return cam;
+}
+
+void cli_render_size(const cli_render_setup *setup, const rp_scene_data *data, int *w, int *h) {
+    int sw = data->camera.width > 0 ? data->camera.width : 512, sh = data->camera.height > 0 ? data->camera.height : 512;
+    *w = setup->width;
+    *h = setup->height;
+    if (!*w && !*h) {
+        *w = sw;
+        *h = sh;
+    } else if (!*h) {
+        *h = (int)fmax(1.0, floor((double)*w * sh / sw + 0.5));
+    } else if (!*w) {
+        *w = (int)fmax(1.0, floor((double)*h * sw / sh + 0.5));
+    }
+}

@@ -18,6 +18,7 @@ rp_render_desc rp_render_desc_defaults(const rp_render_desc *desc) {
     if (d.width <= 0) d.width = 512;
     if (d.height <= 0) d.height = 512;
     if (d.spp <= 0) d.spp = 1;
+    if (d.sample_start < 0) d.sample_start = 0;
     if (d.max_depth == 0) d.max_depth = 5;
     if (d.max_depth < 0) d.max_depth = 0;
     if (d.tile_size <= 0) d.tile_size = 16;
@@ -455,6 +456,17 @@ static void report_progress(render_frame *f, uint32_t done) {
     atomic_flag_clear_explicit(&f->reporting, memory_order_release);
 }
 
+/* Where in pixel (x, y) sample `sample` (an index counted from the first sample of the pixel, not of
+ * the frame) goes: sample 0 at the centre, the others jittered. So a frame of samples [k, k+1)
+ * accumulated for k = 0..n-1 sums what one n-spp frame sums, in the same order (the viewer's
+ * progressive refinement), and a 1-spp frame is the pixel centre as before. */
+static void sample_offset(int x, int y, int sample, float *ox, float *oy) {
+    *ox = *oy = 0.5f;
+    if (sample == 0) return;
+    *ox = render_random((uint32_t)x, (uint32_t)y, (uint32_t)sample, 0);
+    *oy = render_random((uint32_t)x, (uint32_t)y, (uint32_t)sample, 1);
+}
+
 /* Whitted radiance of one n x n block of a tile for sample s, added to the tile's accumulator. */
 static bool render_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
                          int s) {
@@ -466,11 +478,8 @@ static bool render_block(const render_frame *f, render_thread *th, int bx, int b
         for (uint32_t i = 0; i < n; i++) {
             uint32_t q = rp_packet_n_index(n, i, j);
             int x = bx + (int)i, y = by + (int)j;
-            float ox = 0.5f, oy = 0.5f;
-            if (d->spp > 1) {
-                ox = render_random((uint32_t)x, (uint32_t)y, (uint32_t)s, 0);
-                oy = render_random((uint32_t)x, (uint32_t)y, (uint32_t)s, 1);
-            }
+            float ox, oy;
+            sample_offset(x, y, d->sample_start + s, &ox, &oy);
             /* Rays past the image's edge are made too (the frustum code ignores them) but not live. */
             rp_ray r;
             camera_ray(&f->cam, (float)x + ox, (float)y + oy, &r);
@@ -502,6 +511,7 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
     int x1 = x0 + ts < f->rx1 ? x0 + ts : f->rx1, y1 = y0 + ts < f->ry1 ? y0 + ts : f->ry1;
     int tw = x1 - x0, n = tw * (y1 - y0);
     int spp = d->integrator == RP_INTEGRATOR_AOV ? 1 : d->spp;
+    int first = d->integrator == RP_INTEGRATOR_AOV ? 0 : d->sample_start; /* AOVs: the pixel centre */
     uint64_t rays_before = 0;
     for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays_before += th->rays[k];
     memset(th->accum, 0, (size_t)n * 3 * sizeof(float));
@@ -517,11 +527,8 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
         }
         for (int i = 0; i < n; i++) {
             int x = x0 + i % tw, y = y0 + i / tw;
-            float ox = 0.5f, oy = 0.5f;
-            if (spp > 1) {
-                ox = render_random((uint32_t)x, (uint32_t)y, (uint32_t)s, 0);
-                oy = render_random((uint32_t)x, (uint32_t)y, (uint32_t)s, 1);
-            }
+            float ox, oy;
+            sample_offset(x, y, first + s, &ox, &oy);
             rp_rayhit *rh = &th->rayhits[i];
             camera_ray(&f->cam, (float)x + ox, (float)y + oy, &rh->ray);
             rh->ray.id = (uint32_t)i;

@@ -1,0 +1,880 @@
+/* `raypack view`: an SDL2 window on rp_render. While the camera is still, frames of one sample each
+ * accumulate (samples [k, k+1) through rp_render_desc.sample_start, which sum to what one k-spp
+ * render gives); when it moves, the accumulation restarts, at a lower resolution when a full frame
+ * would miss the --fps budget. The window's pixels are converted exactly as the PNG writer converts
+ * them, so a screenshot of a still camera equals `raypack render --spp N` of the printed camera. */
+#include "viewer.h"
+
+#include <SDL.h>
+#include <errno.h>
+#include <pthread.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+
+#include "cli.h"
+
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wconversion"
+#pragma GCC diagnostic ignored "-Wsign-conversion"
+#pragma GCC diagnostic ignored "-Wmissing-prototypes"
+#pragma GCC diagnostic ignored "-Wshadow"
+#pragma GCC diagnostic ignored "-Wswitch-enum"
+#pragma GCC diagnostic ignored "-Wunused-function"
+#define STB_IMAGE_WRITE_STATIC
+#define STB_IMAGE_WRITE_IMPLEMENTATION
+#include <stb/stb_image_write.h>
+#pragma GCC diagnostic pop
+
+static const char *const CMD = "view";
+
+static void view_usage(FILE *out) {
+    fprintf(out,
+            "usage: raypack view [SCENE] [render options] [view options]\n"
+            "\n"
+            "Opens a window on SCENE (the built-in room without one), rendered as `raypack render`\n"
+            "renders it: the render options (--width, --height, --integrator, --max-depth, --aov,\n"
+            "--threads, --isa, --traversal, --packet, --frustum, --eye, --look, --up, --fov) mean the\n"
+            "same, and --spp N stops the accumulation at N samples [1024].\n"
+            "\n"
+            "view options:\n"
+            "  --fps F              frame budget while the camera moves: frames that would take longer\n"
+            "                       than 1/F s render at a lower resolution, 1..1000 [20]\n"
+            "  --frames N           render N frames, then (with --screenshot) save the window, and quit\n"
+            "  --screenshot FILE    where --frames and F12 save the window (.png or .ppm, 8-bit sRGB)\n"
+            "                       [raypack-view-N.png for F12]\n"
+            "  --events FILE        scripted input: SDL events pushed at given frames (see --script)\n"
+            "  --script TEXT        the same inline: items 'FRAME ACTION [ARGS]' separated by ';':\n"
+            "                       down KEY, up KEY, key KEY (both), press|release left|middle|right X Y,\n"
+            "                       move X Y, wheel N, quit; keys by SDL name (w, F12, Escape, -)\n"
+            "  --no-overlay         no text over the image\n"
+            "  --log                print a line per frame (size, samples, times, motion)\n"
+            "  --max-scale S        lowest resolution during motion is 1/S of the window's, 1..32 [16]\n"
+            "\n"
+            "keys: W/S A/D Q/E fly (Shift: 4x faster), right mouse button: look, left button: orbit\n"
+            "  about the point under the cursor, wheel: fly speed, - and =: field of view, P: print the\n"
+            "  camera as flags, F12: screenshot, I: integrator, T: traversal, K: packet size (then\n"
+            "  single rays), F: frusta on/off, , and .: max depth, O: overlay, R: the scene's camera,\n"
+            "  H: this list, Escape: quit. With --frames or a script, motion per frame is fixed\n"
+            "  (speed / fps) so that runs repeat exactly.\n");
+}
+
+typedef struct view_options {
+    int frames, max_scale;
+    float fps;
+    const char *screenshot, *events, *script;
+    bool overlay, log;
+} view_options;
+
+/* Splits argv into the viewer's own flags and the render flags (left in rargv for cli_render_parse). */
+static int parse_view_options(int argc, char **argv, view_options *o, char **rargv, int *rargc, bool *help) {
+    *rargc = 0;
+    rargv[(*rargc)++] = argv[0];
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i], *v = NULL;
+#define VALUE()                                                                  \
+    do {                                                                         \
+        if (!(v = cli_flag_value(CMD, argc, argv, &i))) return CLI_EXIT_USAGE;   \
+    } while (0)
+        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+            *help = true;
+            return CLI_EXIT_OK;
+        } else if (strcmp(a, "--fps") == 0) {
+            VALUE();
+            if (!cli_parse_float(CMD, a, v, 1.0, 1000.0, false, &o->fps)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--frames") == 0) {
+            VALUE();
+            if (!cli_parse_int(CMD, a, v, 1, 100000000, &o->frames)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--max-scale") == 0) {
+            VALUE();
+            if (!cli_parse_int(CMD, a, v, 1, 32, &o->max_scale)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--screenshot") == 0) {
+            VALUE();
+            const char *dot = strrchr(v, '.');
+            if (!dot || (strcasecmp(dot, ".png") != 0 && strcasecmp(dot, ".ppm") != 0)) {
+                fprintf(stderr, "raypack view: --screenshot expects a file ending in .png or .ppm, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
+            o->screenshot = v;
+        } else if (strcmp(a, "--events") == 0) {
+            VALUE();
+            o->events = v;
+        } else if (strcmp(a, "--script") == 0) {
+            VALUE();
+            o->script = v;
+        } else if (strcmp(a, "--no-overlay") == 0) {
+            o->overlay = false;
+        } else if (strcmp(a, "--log") == 0) {
+            o->log = true;
+        } else if (strcmp(a, "-o") == 0 || strcmp(a, "--output") == 0 || strcmp(a, "--stats") == 0 ||
+                   strcmp(a, "--stats-json") == 0 || strcmp(a, "--quiet") == 0 || strcmp(a, "-q") == 0) {
+            fprintf(stderr, "raypack view: %s is an option of raypack render (the viewer saves with --screenshot)\n",
+                    a);
+            return CLI_EXIT_USAGE;
+        } else {
+            rargv[(*rargc)++] = argv[i];
+        }
+#undef VALUE
+    }
+    rargv[*rargc] = NULL;
+    return CLI_EXIT_OK;
+}
+
+/* Reads a whole small text file; NULL after printing why. */
+static char *read_text(const char *path) {
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        fprintf(stderr, "raypack view: cannot open %s: %s\n", path, strerror(errno));
+        return NULL;
+    }
+    size_t cap = 4096, n = 0;
+    char *buf = malloc(cap);
+    while (buf) {
+        if (n + 1 >= cap) {
+            if (cap >= ((size_t)16 << 20)) {
+                fprintf(stderr, "raypack view: %s: larger than 16 MiB\n", path);
+                free(buf);
+                buf = NULL;
+                break;
+            }
+            char *p = realloc(buf, cap *= 2);
+            if (!p) {
+                free(buf);
+                buf = NULL;
+                break;
+            }
+            buf = p;
+        }
+        size_t got = fread(buf + n, 1, cap - 1 - n, f);
+        n += got;
+        if (got == 0) break;
+    }
+    if (buf) buf[n] = '\0';
+    else fprintf(stderr, "raypack view: cannot read %s\n", path);
+    fclose(f);
+    return buf;
+}
+
+/* ---- settings the keys switch ---- */
+
+/* The integrator's name, NULL past the last one: -Wswitch-enum points here when one is added. */
+static const char *integrator_name(int t) {
+    switch ((rp_integrator_type)t) {
+    case RP_INTEGRATOR_WHITTED: return "whitted";
+    case RP_INTEGRATOR_EYELIGHT: return "eyelight";
+    case RP_INTEGRATOR_AOV: return "aov";
+    }
+    return NULL;
+}
+
+static const char *aov_name(rp_aov a) {
+    switch (a) {
+    case RP_AOV_DEPTH: return "depth";
+    case RP_AOV_NORMAL: return "normal";
+    case RP_AOV_PRIMID: return "primid";
+    case RP_AOV_ALBEDO: return "albedo";
+    }
+    return "?";
+}
+
+/* The traversal's name, NULL past the last one. */
+static const char *traversal_name(int t) {
+    switch ((rp_traversal)t) {
+    case RP_TRAVERSAL_AUTO: return "auto";
+    case RP_TRAVERSAL_MASKED: return "masked";
+    case RP_TRAVERSAL_RANGED: return "ranged";
+    case RP_TRAVERSAL_PARTITION: return "partition";
+    case RP_TRAVERSAL_SINGLE: return "single";
+    case RP_TRAVERSAL_SIMD: return "simd";
+    case RP_TRAVERSAL_SPAN: return "span";
+    }
+    return NULL;
+}
+
+/* The next integrator (the AOVs one by one, but depth, which has one channel). */
+static void next_integrator(rp_render_desc *d) {
+    if (d->integrator == RP_INTEGRATOR_AOV && d->aov < RP_AOV_ALBEDO) {
+        d->aov = (rp_aov)(d->aov + 1);
+        return;
+    }
+    int t = (int)d->integrator + 1;
+    if (!integrator_name(t)) t = 0;
+    d->integrator = (rp_integrator_type)t;
+    if (d->integrator == RP_INTEGRATOR_AOV) d->aov = RP_AOV_NORMAL;
+}
+
+/* Whether frames of further samples change the image (AOVs trace the pixel centre only). */
+static bool accumulates(const rp_render_desc *d) { return d->integrator != RP_INTEGRATOR_AOV; }
+
+/* ---- the viewer ---- */
+
+typedef struct viewer {
+    view_options opt;
+    cli_render_setup setup;
+    rp_scene_data data;
+    bool loaded;
+    rp_device *dev;
+    rp_render_scene *scene;
+    int w, h;                   /* the window's and the full resolution's size */
+    rp_render_desc desc;        /* settings; size, camera and samples set per frame */
+    view_camera cam, home;
+    float *frame, *sum;         /* w * h * 3: the last rp_render output, the accumulated samples */
+    uint32_t *disp;             /* w * h xRGB8888: what the window shows, when its surface is not that */
+    uint32_t *out;              /* where this frame's pixels go: the window's surface itself or disp */
+    int out_pitch;              /* in pixels */
+    bool direct;                /* out is the window's surface */
+    int samples;                /* accumulated at full resolution */
+    int spp_max;
+    int depth;                  /* max depth, 0..64 (rp_render_desc's 0 is its default, 5) */
+    int scale;                  /* divisor of the last frame's resolution */
+    double full_ms;             /* estimate of a full-resolution frame's rp_render time */
+    double overhead_ms;         /* conversion and presentation, smoothed */
+    bool deterministic;         /* fixed motion per frame (scripted or --frames runs) */
+    SDL_Window *win;
+    bool held[8];               /* w a s d q e, shift */
+    int look_drag, orbit_drag;  /* buttons held */
+    float pivot[3];
+    bool overlay, quit, camera_moved, reset, redraw;
+    bool pending;               /* the surface holds a frame not shown yet */
+    int screenshots;
+    /* what the overlay and the summary report */
+    double fps, mrays, last_frame_ms;
+    uint64_t total_rays;
+    double total_render_ms, total_frame_ms;
+    int frames_done;
+} viewer;
+
+enum { HELD_W, HELD_A, HELD_S, HELD_D, HELD_Q, HELD_E, HELD_SHIFT };
+
+static void print_settings(const viewer *v) {
+    const rp_render_desc *d = &v->desc;
+    printf("settings: integrator %s", integrator_name((int)d->integrator));
+    if (d->integrator == RP_INTEGRATOR_AOV) printf(" %s", aov_name(d->aov));
+    printf(", max depth %d, packet %d, traversal %s, frusta %s\n", v->depth, d->packet,
+           traversal_name((int)d->traversal), d->no_frustum ? "off" : "on");
+    fflush(stdout);
+}
+
+static bool flush(viewer *v);
+
+/* Writes the window's pixels (read back from its surface, after showing what is pending) to path. */
+static bool save_screenshot(viewer *v, const char *path) {
+    if (!flush(v)) return false;
+    SDL_Surface *s = SDL_GetWindowSurface(v->win);
+    if (!s) {
+        fprintf(stderr, "raypack view: cannot read the window: %s\n", SDL_GetError());
+        return false;
+    }
+    uint8_t *rgb = malloc((size_t)s->w * (size_t)s->h * 3);
+    if (!rgb) {
+        fprintf(stderr, "raypack view: out of memory for a screenshot\n");
+        return false;
+    }
+    bool ok = true;
+    if (SDL_MUSTLOCK(s)) SDL_LockSurface(s);
+    if (SDL_ConvertPixels(s->w, s->h, s->format->format, s->pixels, s->pitch, SDL_PIXELFORMAT_RGB24, rgb, s->w * 3) !=
+        0) {
+        fprintf(stderr, "raypack view: cannot read the window: %s\n", SDL_GetError());
+        ok = false;
+    }
+    if (SDL_MUSTLOCK(s)) SDL_UnlockSurface(s);
+    if (ok) {
+        const char *dot = strrchr(path, '.');
+        if (dot && strcasecmp(dot, ".ppm") == 0) {
+            FILE *f = fopen(path, "wb");
+            ok = f && fprintf(f, "P6\n%d %d\n255\n", s->w, s->h) > 0 &&
+                 fwrite(rgb, 1, (size_t)s->w * (size_t)s->h * 3, f) == (size_t)s->w * (size_t)s->h * 3;
+            if (f && fclose(f) != 0) ok = false;
+        } else {
+            ok = stbi_write_png(path, s->w, s->h, 3, rgb, s->w * 3) != 0;
+        }
+        if (!ok) fprintf(stderr, "raypack view: cannot write %s: %s\n", path, strerror(errno));
+        else printf("screenshot: %s (%dx%d, %d samples)\n", path, s->w, s->h, v->samples);
+        fflush(stdout);
+    }
+    free(rgb);
+    return ok;
+}
+
+/* The point under pixel (x, y) for orbiting, through one ray of the public API; the look-at point
+ * when the ray hits nothing. */
+static void pick_pivot(viewer *v, int x, int y) {
+    float dir[3];
+    view_camera_ray(&v->cam, v->w, v->h, (float)x + 0.5f, (float)y + 0.5f, dir);
+    rp_rayhit rh;
+    memset(&rh, 0, sizeof rh);
+    rh.ray.org_x = v->cam.eye[0];
+    rh.ray.org_y = v->cam.eye[1];
+    rh.ray.org_z = v->cam.eye[2];
+    rh.ray.dir_x = dir[0];
+    rh.ray.dir_y = dir[1];
+    rh.ray.dir_z = dir[2];
+    rh.ray.tfar = INFINITY;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.hit.geom_id = RP_INVALID_ID;
+    rh.hit.prim_id = RP_INVALID_ID;
+    rh.hit.inst_id = RP_INVALID_ID;
+    rp_intersect1(rp_render_scene_core(v->scene), &rh);
+    if (rh.hit.geom_id != RP_INVALID_ID) {
+        for (int k = 0; k < 3; k++) v->pivot[k] = v->cam.eye[k] + dir[k] * rh.ray.tfar;
+    } else {
+        memcpy(v->pivot, v->cam.look, sizeof v->pivot);
+    }
+}
+
+static void print_keys(void) {
+    printf("keys: W/S A/D Q/E fly (Shift 4x), right drag look, left drag orbit, wheel speed, - = fov,\n"
+           "      P camera, F12 screenshot, I integrator, T traversal, K packet, F frusta, , . depth,\n"
+           "      O overlay, R reset camera, Escape quit\n");
+    fflush(stdout);
+}
+
+static void on_key(viewer *v, const SDL_KeyboardEvent *k, bool down) {
+    SDL_Keycode key = k->keysym.sym;
+    int held = -1;
+    switch (key) {
+    case SDLK_w: held = HELD_W; break;
+    case SDLK_a: held = HELD_A; break;
+    case SDLK_s: held = HELD_S; break;
+    case SDLK_d: held = HELD_D; break;
+    case SDLK_q: held = HELD_Q; break;
+    case SDLK_e: held = HELD_E; break;
+    case SDLK_LSHIFT:
+    case SDLK_RSHIFT: held = HELD_SHIFT; break;
+    default: break;
+    }
+    if (held >= 0) {
+        v->held[held] = down;
+        return;
+    }
+    if (!down || k->repeat) return;
+    rp_render_desc *d = &v->desc;
+    bool settings = true;
+    switch (key) {
+    case SDLK_p: view_camera_print(&v->cam, stdout); settings = false; break;
+    case SDLK_F12: {
+        char name[64];
+        const char *path = v->opt.screenshot;
+        if (!path) {
+            snprintf(name, sizeof name, "raypack-view-%d.png", v->screenshots++);
+            path = name;
+        }
+        save_screenshot(v, path);
+        settings = false;
+        break;
+    }
+    case SDLK_i: next_integrator(d); break;
+    case SDLK_t: {
+        int t = (int)d->traversal + 1;
+        d->traversal = (rp_traversal)(traversal_name(t) ? t : 0);
+        break;
+    }
+    case SDLK_k: {
+        /* 4, 8, 16, 32, then one ray at a time (the reference tracer) */
+        d->packet = d->packet < 0 ? 4 : (d->packet == 32 ? -1 : 2 * d->packet);
+        break;
+    }
+    case SDLK_f: d->no_frustum = !d->no_frustum; break;
+    case SDLK_COMMA: v->depth = v->depth > 0 ? v->depth - 1 : 0; break;
+    case SDLK_PERIOD: v->depth = v->depth < 64 ? v->depth + 1 : 64; break;
+    case SDLK_MINUS:
+    case SDLK_KP_MINUS:
+        v->cam.fov_deg = fminf(160.0f, v->cam.fov_deg + 5.0f);
+        v->camera_moved = true;
+        settings = false;
+        break;
+    case SDLK_EQUALS:
+    case SDLK_PLUS:
+    case SDLK_KP_PLUS:
+        v->cam.fov_deg = fmaxf(5.0f, v->cam.fov_deg - 5.0f);
+        v->camera_moved = true;
+        settings = false;
+        break;
+    case SDLK_o: v->overlay = !v->overlay; settings = false; v->reset = true; break;
+    case SDLK_r: v->cam = v->home; v->camera_moved = true; settings = false; break;
+    case SDLK_h: print_keys(); settings = false; break;
+    case SDLK_SPACE:
+        printf("animation: this scene has no animation the viewer can play yet\n");
+        fflush(stdout);
+        settings = false;
+        break;
+    case SDLK_ESCAPE: v->quit = true; settings = false; break;
+    default: settings = false; break;
+    }
+    if (settings) {
+        v->reset = true;
+        print_settings(v);
+    }
+}
+
+static void handle_event(viewer *v, const SDL_Event *e) {
+    switch (e->type) {
+    case SDL_QUIT: v->quit = true; break;
+    case SDL_KEYDOWN:
+    case SDL_KEYUP: on_key(v, &e->key, e->type == SDL_KEYDOWN); break;
+    case SDL_MOUSEBUTTONDOWN:
+        if (e->button.button == SDL_BUTTON_RIGHT) v->look_drag = 1;
+        if (e->button.button == SDL_BUTTON_LEFT) {
+            v->orbit_drag = 1;
+            pick_pivot(v, e->button.x, e->button.y);
+            printf("orbit: pivot %.9g,%.9g,%.9g\n", (double)v->pivot[0], (double)v->pivot[1], (double)v->pivot[2]);
+            fflush(stdout);
+        }
+        break;
+    case SDL_MOUSEBUTTONUP:
+        if (e->button.button == SDL_BUTTON_RIGHT) v->look_drag = 0;
+        if (e->button.button == SDL_BUTTON_LEFT) v->orbit_drag = 0;
+        break;
+    case SDL_MOUSEMOTION: {
+        /* a window's width of motion turns by about 180 degrees */
+        float k = 3.14159265f / (float)v->w;
+        float yaw = -(float)e->motion.xrel * k, pitch = -(float)e->motion.yrel * k;
+        if (e->motion.xrel == 0 && e->motion.yrel == 0) break;
+        if (v->look_drag) {
+            view_camera_turn(&v->cam, yaw, pitch);
+            v->camera_moved = true;
+        } else if (v->orbit_drag) {
+            view_camera_orbit(&v->cam, v->pivot, yaw, pitch);
+            v->camera_moved = true;
+        }
+        break;
+    }
+    case SDL_MOUSEWHEEL: {
+        int steps = e->wheel.direction == SDL_MOUSEWHEEL_FLIPPED ? -e->wheel.y : e->wheel.y;
+        v->cam.speed *= powf(1.25f, (float)steps);
+        printf("speed: %.9g\n", (double)v->cam.speed);
+        fflush(stdout);
+        break;
+    }
+    case SDL_WINDOWEVENT:
+        if (e->window.event == SDL_WINDOWEVENT_EXPOSED) v->redraw = true;
+        /* keys released elsewhere never come back as key-up events (scripted keys are not affected) */
+        if (e->window.event == SDL_WINDOWEVENT_FOCUS_LOST && !v->deterministic) {
+            memset(v->held, 0, sizeof v->held);
+            v->look_drag = v->orbit_drag = 0;
+        }
+        break;
+    default: break;
+    }
+}
+
+/* Flies by the held keys for dt seconds. */
+static void fly(viewer *v, double dt) {
+    float step = v->cam.speed * (float)dt * (v->held[HELD_SHIFT] ? 4.0f : 1.0f);
+    float r = (float)(v->held[HELD_D] - v->held[HELD_A]), u = (float)(v->held[HELD_E] - v->held[HELD_Q]),
+          f = (float)(v->held[HELD_W] - v->held[HELD_S]);
+    if (r == 0.0f && u == 0.0f && f == 0.0f) return;
+    view_camera_move(&v->cam, r * step, u * step, f * step);
+    v->camera_moved = true;
+}
+
+/* ---- from the render buffer to the window's pixels, in bands of rows on the device's threads ---- */
+
+typedef struct present_job {
+    viewer *v;
+    int fw, fh, scale;     /* the frame's size and its divisor */
+    bool accumulate;       /* add the frame into sum and show sum / samples */
+    int samples;           /* after this frame */
+} present_job;
+
+enum { BAND_ROWS = 16 };
+
+static inline uint32_t xrgb(const float *c) {
+    return 0xFF000000u | (uint32_t)view_srgb8(c[0]) << 16 | (uint32_t)view_srgb8(c[1]) << 8 | (uint32_t)view_srgb8(c[2]);
+}
+
+static void present_band(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    const present_job *j = user;
+    viewer *v = j->v;
+    int y0 = (int)index * BAND_ROWS, y1 = y0 + BAND_ROWS < v->h ? y0 + BAND_ROWS : v->h;
+    if (j->accumulate) {
+        /* as the tile renderer sums samples, then scales by 1/spp (but for one); the first sample
+         * is already in sum (step swapped the buffers) */
+        float inv = 1.0f / (float)j->samples;
+        for (int y = y0; y < y1; y++) {
+            float *restrict sum = v->sum + (size_t)y * (size_t)v->w * 3;
+            const float *restrict add = v->frame + (size_t)y * (size_t)v->w * 3;
+            uint32_t *restrict out = v->out + (size_t)y * (size_t)v->out_pitch;
+            if (j->samples == 1) {
+                for (int x = 0; x < v->w; x++) out[x] = xrgb(sum + 3 * x);
+                continue;
+            }
+            for (int x = 0; x < v->w; x++) {
+                float c[3];
+                for (int k = 0; k < 3; k++) {
+                    sum[3 * x + k] += add[3 * x + k];
+                    c[k] = sum[3 * x + k] * inv;
+                }
+                out[x] = xrgb(c);
+            }
+        }
+        return;
+    }
+    for (int y = y0; y < y1; y++) {
+        const float *row = v->frame + (size_t)(y / j->scale) * (size_t)j->fw * 3;
+        uint32_t *out = v->out + (size_t)y * (size_t)v->out_pitch;
+        for (int x = 0; x < v->w;) {
+            int fx = x / j->scale;
+            uint32_t p = xrgb(row + (size_t)fx * 3);
+            for (int e = (fx + 1) * j->scale < v->w ? (fx + 1) * j->scale : v->w; x < e; x++) out[x] = p;
+        }
+    }
+}
+
+/* Darkens a box and writes the overlay's lines into it. */
+static void draw_overlay(viewer *v, const char *const *lines, int n) {
+    int sc = v->w >= 800 ? 2 : 1, pad = 3 * sc, lh = (VIEW_FONT_H + 3) * sc, bw = 0;
+    for (int i = 0; i < n; i++) {
+        int lw = view_font_width(lines[i], sc);
+        if (lw > bw) bw = lw;
+    }
+    int x1 = bw + 2 * pad < v->w ? bw + 2 * pad : v->w, y1 = n * lh + 2 * pad - 2 * sc;
+    if (y1 > v->h) y1 = v->h;
+    for (int y = 0; y < y1; y++)
+        for (int x = 0; x < x1; x++) {
+            uint32_t *p = &v->out[(size_t)y * (size_t)v->out_pitch + (size_t)x];
+            *p = ((*p >> 2) & 0x3F3F3Fu) | 0xFF000000u;
+        }
+    for (int i = 0; i < n; i++)
+        view_font_draw(v->out, v->w, v->h, v->out_pitch, pad, pad + i * lh, sc, 0xFFFFE080u, lines[i]);
+}
+
+static void overlay_text(viewer *v, int fw, int fh) {
+    char l0[128], l1[128], l2[128];
+    const rp_render_desc *d = &v->desc;
+    snprintf(l0, sizeof l0, "%.1f fps  %.1f Mrays/s  %d spp", v->fps, v->mrays, v->samples);
+    char integ[32];
+    snprintf(integ, sizeof integ, "%s%s%s", integrator_name((int)d->integrator),
+             d->integrator == RP_INTEGRATOR_AOV ? " " : "",
+             d->integrator == RP_INTEGRATOR_AOV ? aov_name(d->aov) : "");
+    char packet[32];
+    if (d->packet < 0) snprintf(packet, sizeof packet, "single rays");
+    else snprintf(packet, sizeof packet, "%dx%d", d->packet, d->packet);
+    snprintf(l1, sizeof l1, "%s depth %d  %s %s  frusta %s", integ, v->depth,
+             traversal_name((int)d->traversal), packet, d->no_frustum ? "off" : "on");
+    snprintf(l2, sizeof l2, "%dx%d (1/%d)  %d threads", fw, fh, v->scale, rp_device_thread_count(v->dev));
+    const char *lines[3] = {l0, l1, l2};
+    draw_overlay(v, lines, 3);
+}
+
+/* One rp_render call, run on a thread of its own. */
+typedef struct render_call {
+    rp_render_scene *scene;
+    rp_render_desc desc;
+    rp_camera cam;
+    float *pixels;
+    rp_render_stats stats;
+    bool ok;
+} render_call;
+
+static void *render_main(void *p) {
+    render_call *c = p;
+    c->ok = rp_render(c->scene, &c->desc, c->pixels, &c->stats);
+    return NULL;
+}
+
+static bool show(viewer *v);
+
+/* Shows the frame waiting in the window's surface, if any. */
+static bool flush(viewer *v) {
+    if (!v->pending) return true;
+    v->pending = false;
+    return show(v);
+}
+
+/* Where this frame's pixels go: straight into the window's surface when it is 32-bit xRGB (X11's
+ * usual visual), which saves a copy, else into disp for show to convert. */
+static bool target(viewer *v) {
+    SDL_Surface *s = SDL_GetWindowSurface(v->win);
+    if (!s) {
+        fprintf(stderr, "raypack view: no window surface: %s\n", SDL_GetError());
+        return false;
+    }
+    uint32_t f = s->format->format;
+    v->direct = !SDL_MUSTLOCK(s) && (f == SDL_PIXELFORMAT_RGB888 || f == SDL_PIXELFORMAT_ARGB8888) && s->w == v->w &&
+                s->h == v->h && s->pitch % 4 == 0;
+    v->out = v->direct ? s->pixels : v->disp;
+    v->out_pitch = v->direct ? s->pitch / 4 : v->w;
+    return true;
+}
+
+/* Shows this frame's pixels (converted into the window's format unless they are there already). */
+static bool show(viewer *v) {
+    SDL_Surface *s = SDL_GetWindowSurface(v->win);
+    if (!s) {
+        fprintf(stderr, "raypack view: no window surface: %s\n", SDL_GetError());
+        return false;
+    }
+    int rc = 0;
+    if (!v->direct) {
+        if (SDL_MUSTLOCK(s)) SDL_LockSurface(s);
+        rc = SDL_ConvertPixels(v->w, v->h, SDL_PIXELFORMAT_ARGB8888, v->disp, v->w * 4, s->format->format, s->pixels,
+                               s->pitch);
+        if (SDL_MUSTLOCK(s)) SDL_UnlockSurface(s);
+    }
+    if (rc != 0 || SDL_UpdateWindowSurface(v->win) != 0) {
+        fprintf(stderr, "raypack view: cannot draw into the window: %s\n", SDL_GetError());
+        return false;
+    }
+    return true;
+}
+
+/* The resolution divisor for a frame during motion: the smallest whose estimated time fits. */
+static int motion_scale(const viewer *v) {
+    /* a fifth of the frame kept in reserve: a frame's cost varies with what comes into view */
+    double budget = 0.8 * 1000.0 / (double)v->opt.fps - v->overhead_ms;
+    if (budget < 0.1) budget = 0.1;
+    if (v->full_ms <= budget) return 1;
+    int s = (int)ceil(sqrt(v->full_ms / budget));
+    return s < 1 ? 1 : (s > v->opt.max_scale ? v->opt.max_scale : s);
+}
+
+/* One frame: input, motion, maybe a render, the window. False on a fatal error. */
+static bool step(viewer *v, view_script *script, int frame, double dt) {
+    double t0 = cli_now_ms();
+    view_script_push(script, frame);
+    SDL_Event e;
+    while (SDL_PollEvent(&e)) handle_event(v, &e);
+    fly(v, dt);
+    bool moved = v->camera_moved;
+    v->camera_moved = false;
+    if (moved || v->reset) v->samples = 0;
+    v->reset = false;
+    int cap = accumulates(&v->desc) ? v->spp_max : 1;
+    int scale = moved ? motion_scale(v) : 1;
+    bool render = moved || v->samples < cap;
+    int fw = (v->w + scale - 1) / scale, fh = (v->h + scale - 1) / scale;
+    present_job job = {.v = v, .fw = fw, .fh = fh, .scale = scale};
+    uint64_t rays = 0;
+    double render_ms = 0.0, convert_ms = 0.0, show_ms = 0.0;
+    if (render) {
+        rp_camera cam = view_camera_get(&v->cam);
+        render_call rc = {.scene = v->scene, .desc = v->desc, .cam = cam, .pixels = v->frame};
+        rc.desc.width = fw;
+        rc.desc.height = fh;
+        rc.desc.camera = &rc.cam;
+        rc.desc.max_depth = v->depth == 0 ? -1 : v->depth;
+        rc.desc.spp = 1;
+        rc.desc.sample_start = scale == 1 ? v->samples : 0;
+        /* the window shows the last frame while this one renders: its round trip to the display
+         * server overlaps the rendering instead of adding to it */
+        pthread_t th;
+        bool threaded = pthread_create(&th, NULL, render_main, &rc) == 0;
+        double s0 = cli_now_ms();
+        if (!flush(v)) {
+            if (threaded) pthread_join(th, NULL);
+            return false;
+        }
+        show_ms = cli_now_ms() - s0;
+        if (threaded) pthread_join(th, NULL);
+        else render_main(&rc);
+        if (!rc.ok) {
+            fprintf(stderr, "raypack view: rendering failed (out of memory?)\n");
+            return false;
+        }
+        render_ms = rc.stats.render_ms;
+        rays = 0;
+        for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays += rc.stats.rays[k];
+        v->mrays = render_ms > 0.0 ? (double)rays / (render_ms * 1e3) : 0.0;
+        v->full_ms = render_ms * ((double)v->w * (double)v->h) / ((double)fw * (double)fh);
+        v->scale = scale;
+        if (scale == 1) {
+            v->samples++;
+            if (v->samples == 1) { /* the frame is the sum of one sample */
+                float *t = v->sum;
+                v->sum = v->frame;
+                v->frame = t;
+            }
+            job.accumulate = true;
+            job.samples = v->samples;
+        }
+        double c0 = cli_now_ms();
+        if (!target(v)) return false;
+        rp_device_parallel_for(v->dev, (uint32_t)((v->h + BAND_ROWS - 1) / BAND_ROWS), present_band, &job);
+        if (v->overlay) overlay_text(v, fw, fh);
+        v->pending = true;
+        convert_ms = cli_now_ms() - c0;
+    } else if (v->pending || v->redraw) {
+        /* nothing new: show what is pending, or send the surface again */
+        if (!v->pending) v->pending = true;
+        if (!flush(v)) return false;
+    }
+    v->redraw = false;
+    double t1 = cli_now_ms();
+    double frame_ms = t1 - t0;
+    if (render && v->frames_done > 0) { /* the first frame also maps the window */
+        double over = frame_ms - render_ms;
+        v->overhead_ms = v->frames_done > 1 ? 0.8 * v->overhead_ms + 0.2 * over : over;
+    }
+    if (v->frames_done > 0) { /* the first frame also maps the window: the summary leaves it out */
+        v->total_frame_ms += frame_ms;
+        v->total_render_ms += render_ms;
+        v->total_rays += rays;
+    }
+    v->last_frame_ms = frame_ms;
+    if (v->opt.log)
+        printf("frame %d: %dx%d scale %d samples %d moved %d render %.2f ms convert %.2f ms show %.2f ms frame %.2f "
+               "ms\n",
+               frame, fw, fh, scale, v->samples, moved ? 1 : 0, render_ms, convert_ms, show_ms, frame_ms);
+    v->frames_done++;
+    return true;
+}
+
+static void viewer_free(viewer *v) {
+    free(v->frame);
+    free(v->sum);
+    free(v->disp);
+    if (v->win) SDL_DestroyWindow(v->win);
+    rp_render_scene_release(v->scene);
+    if (v->dev) rp_device_release(v->dev);
+    if (v->loaded) cli_render_unload(&v->setup, &v->data);
+}
+
+static bool viewer_init(viewer *v) {
+    if (!cli_render_load(CMD, &v->setup, &v->data)) return false;
+    v->loaded = true;
+    if (v->setup.desc.integrator == RP_INTEGRATOR_AOV && v->setup.desc.aov == RP_AOV_DEPTH) {
+        fprintf(stderr, "raypack view: --aov depth has one channel; the viewer shows normal, primid or albedo\n");
+        return false;
+    }
+    v->dev = cli_device_new(CMD, v->setup.threads, v->setup.isa);
+    if (!v->dev) return false;
+    char err[512] = "";
+    v->scene = rp_render_scene_new(v->dev, &v->data, NULL, err, sizeof err);
+    if (!v->scene) {
+        fprintf(stderr, "raypack view: %s\n", err);
+        return false;
+    }
+    cli_render_size(&v->setup, &v->data, &v->w, &v->h);
+    if ((double)v->w * (double)v->h > 8192.0 * 8192.0) {
+        fprintf(stderr, "raypack view: a %dx%d window is too large\n", v->w, v->h);
+        return false;
+    }
+    v->desc = v->setup.desc;
+    v->depth = rp_render_desc_defaults(&v->desc).max_depth;
+    rp_camera cam = cli_render_camera(&v->setup, v->scene);
+    memcpy(v->cam.eye, cam.pinhole.eye, sizeof v->cam.eye);
+    memcpy(v->cam.look, cam.pinhole.look, sizeof v->cam.look);
+    memcpy(v->cam.up, cam.pinhole.up, sizeof v->cam.up);
+    v->cam.fov_deg = cam.pinhole.fov_deg;
+    /* a quarter of the scene's diagonal per second */
+    rp_bounds b;
+    rp_scene_get_bounds(rp_render_scene_core(v->scene), &b);
+    float dx = b.upper_x - b.lower_x, dy = b.upper_y - b.lower_y, dz = b.upper_z - b.lower_z;
+    float diag = sqrtf(dx * dx + dy * dy + dz * dz);
+    v->cam.speed = isfinite(diag) && diag > 0.0f ? 0.25f * diag : 1.0f;
+    v->home = v->cam;
+    size_t n = (size_t)v->w * (size_t)v->h;
+    v->frame = malloc(n * 3 * sizeof(float));
+    v->sum = malloc(n * 3 * sizeof(float));
+    v->disp = calloc(n, sizeof(uint32_t));
+    if (!v->frame || !v->sum || !v->disp) {
+        fprintf(stderr, "raypack view: out of memory for a %dx%d window\n", v->w, v->h);
+        return false;
+    }
+    char title[300];
+    snprintf(title, sizeof title, "raypack view - %s", v->setup.scene ? v->setup.scene : "built-in room");
+    v->win = SDL_CreateWindow(title, SDL_WINDOWPOS_UNDEFINED, SDL_WINDOWPOS_UNDEFINED, v->w, v->h, 0);
+    if (!v->win) {
+        fprintf(stderr, "raypack view: cannot open a %dx%d window: %s\n", v->w, v->h, SDL_GetError());
+        return false;
+    }
+    SDL_Surface *s = SDL_GetWindowSurface(v->win);
+    if (!s || s->w != v->w || s->h != v->h) {
+        fprintf(stderr, "raypack view: the window is %dx%d, not %dx%d: %s\n", s ? s->w : 0, s ? s->h : 0, v->w, v->h,
+                s ? "the screen is too small (xvfb-run -s '-screen 0 WxHx24')" : SDL_GetError());
+        return false;
+    }
+    return true;
+}
+
+int cli_view(int argc, char **argv) {
+    viewer v;
+    memset(&v, 0, sizeof v);
+    v.opt = (view_options){.fps = 20.0f, .max_scale = 16, .overlay = true};
+    bool help = false;
+    char **rargv = calloc((size_t)argc + 1, sizeof *rargv);
+    if (!rargv) return CLI_EXIT_FAILURE;
+    int rargc = 0;
+    int rc = parse_view_options(argc, argv, &v.opt, rargv, &rargc, &help);
+    if (rc == CLI_EXIT_OK && !help) rc = cli_render_parse(rargc, rargv, &v.setup, &help);
+    free(rargv);
+    if (rc != CLI_EXIT_OK) return rc;
+    if (help) {
+        view_usage(stdout);
+        return CLI_EXIT_OK;
+    }
+    view_script *script = NULL;
+    if (v.opt.events || v.opt.script) {
+        char *text = v.opt.events ? read_text(v.opt.events) : NULL;
+        if (v.opt.events && !text) return CLI_EXIT_FAILURE;
+        size_t n = (text ? strlen(text) : 0) + (v.opt.script ? strlen(v.opt.script) : 0) + 2;
+        char *all = malloc(n);
+        if (all) snprintf(all, n, "%s\n%s", text ? text : "", v.opt.script ? v.opt.script : "");
+        free(text);
+        if (!all) return CLI_EXIT_FAILURE;
+        script = view_script_parse(all, v.opt.events ? v.opt.events : "--script");
+        free(all);
+        if (!script) return CLI_EXIT_USAGE;
+    }
+    v.overlay = v.opt.overlay;
+    v.spp_max = v.setup.spp > 0 ? v.setup.spp : 1024;
+    v.deterministic = script != NULL || v.opt.frames > 0;
+    view_srgb_init();
+
+    int status = CLI_EXIT_FAILURE;
+    /* The window's surface is X11's own shared-memory image, not a texture of an OpenGL renderer:
+     * without a GPU that renderer is llvmpipe, whose threads would take the ray tracer's cores (and
+     * its GL libraries keep allocations LeakSanitizer reports). SDL_FRAMEBUFFER_ACCELERATION in the
+     * environment still decides. */
+    SDL_SetHintWithPriority(SDL_HINT_FRAMEBUFFER_ACCELERATION, "0", SDL_HINT_DEFAULT);
+    if (SDL_Init(SDL_INIT_VIDEO) != 0) {
+        fprintf(stderr, "raypack view: cannot start SDL video: %s (no display? run it under xvfb-run)\n",
+                SDL_GetError());
+        view_script_free(script);
+        return CLI_EXIT_FAILURE;
+    }
+    if (viewer_init(&v)) {
+        printf("view: %s, %dx%d, %d threads, speed %.9g\n", v.setup.scene ? v.setup.scene : "built-in room", v.w,
+               v.h, rp_device_thread_count(v.dev), (double)v.cam.speed);
+        view_camera_print(&v.cam, stdout);
+        print_settings(&v);
+        status = CLI_EXIT_OK;
+        double last = cli_now_ms(), start = last;
+        for (int frame = 0; !v.quit && (v.opt.frames == 0 || frame < v.opt.frames); frame++) {
+            double now = cli_now_ms();
+            double dt = v.deterministic ? 1.0 / (double)v.opt.fps : fmin(0.25, (now - last) / 1e3);
+            last = now;
+            if (!step(&v, script, frame, dt)) {
+                status = CLI_EXIT_FAILURE;
+                break;
+            }
+            double wall = cli_now_ms() - now;
+            v.fps = v.frames_done <= 1 ? 1000.0 / fmax(wall, 1e-3) : 0.9 * v.fps + 0.1 * 1000.0 / fmax(wall, 1e-3);
+            /* idle when the image is final and nobody is watching the clock */
+            int cap = accumulates(&v.desc) ? v.spp_max : 1;
+            if (!v.deterministic && v.samples >= cap && !v.camera_moved) SDL_WaitEventTimeout(NULL, 50);
+        }
+        if (status == CLI_EXIT_OK && !flush(&v)) status = CLI_EXIT_FAILURE;
+        if (status == CLI_EXIT_OK && v.opt.frames > 0 && v.opt.screenshot && !save_screenshot(&v, v.opt.screenshot))
+            status = CLI_EXIT_FAILURE;
+        double wall = cli_now_ms() - start;
+        view_camera_print(&v.cam, stdout);
+        /* the window's cost: rays per ms of rp_render against rays per ms of whole frames (rp_render,
+         * the conversion, the overlay, the window and the events), frames after the first */
+        double in_render = v.total_render_ms > 0.0 ? (double)v.total_rays / (v.total_render_ms * 1e3) : 0.0;
+        double in_frames = v.total_frame_ms > 0.0 ? (double)v.total_rays / (v.total_frame_ms * 1e3) : 0.0;
+        printf("summary: %d frames, %d samples, %.1f ms, %.2f fps; after the first frame: %llu rays, %.2f Mrays/s in "
+               "rp_render (%.1f ms), %.2f Mrays/s over whole frames (%.1f ms), window cost %.1f%%\n",
+               v.frames_done, v.samples, wall, wall > 0.0 ? v.frames_done * 1e3 / wall : 0.0,
+               (unsigned long long)v.total_rays, in_render, v.total_render_ms, in_frames, v.total_frame_ms,
+               in_render > 0.0 ? 100.0 * (1.0 - in_frames / in_render) : 0.0);
+        fflush(stdout);
+    }
+    viewer_free(&v);
+    view_script_free(script);
+    SDL_Quit();
+    return status;
+}

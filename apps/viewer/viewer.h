@@ -1,0 +1,102 @@
+/* `raypack view`: the interactive SDL2 viewer. It renders through the public rp_render API with the
+ * flags of `raypack render` (cli_render_parse), so the window shows the pixels `raypack render`
+ * writes for the same camera, settings and sample count. One concern per file:
+ *   view.c         options, the window, the frame loop (progressive refinement, resolution)
+ *   view_camera.c  fly / look / orbit camera
+ *   view_script.c  scripted input events (--events, --script) for tests and demos
+ *   view_font.c    the overlay's 5x7 bitmap font
+ *   view_srgb.c    linear float to 8-bit sRGB, exactly as the PNG writer does it, by table */
+#ifndef RP_VIEWER_H
+#define RP_VIEWER_H
+
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#include <raypack.h>
+#include <raypack_render.h>
+
+/* The subcommand (argv[0] is "view"). */
+int cli_view(int argc, char **argv);
+
+/* ---- camera ---- */
+
+/* The viewer's camera: a pinhole camera as rp_render takes it, moved in world space; up is the
+ * scene's up and stays fixed, so the horizon stays level. */
+typedef struct view_camera {
+    float eye[3], look[3], up[3];
+    float fov_deg;
+    float speed; /* fly speed, world units per second */
+} view_camera;
+
+/* Fly: moves eye and look together by (right, up, forward) * dist in the camera's frame. */
+void view_camera_move(view_camera *c, float right, float up, float forward);
+/* Mouse look: turns the view direction by yaw (about up) and pitch (about the right axis), radians. */
+void view_camera_turn(view_camera *c, float yaw, float pitch);
+/* Orbit: turns the eye about pivot by yaw and pitch, keeping where it looks relative to the pivot. */
+void view_camera_orbit(view_camera *c, const float pivot[3], float yaw, float pitch);
+/* The camera as rp_render takes it. */
+rp_camera view_camera_get(const view_camera *c);
+/* The primary ray direction through pixel coordinates (x, y) of a w x h image (DESIGN.md's camera). */
+void view_camera_ray(const view_camera *c, int w, int h, float x, float y, float dir[3]);
+/* Prints the camera as the flags `raypack render` takes, exactly (floats round-trip). */
+void view_camera_print(const view_camera *c, FILE *f);
+
+/* ---- scripted input ---- */
+
+typedef struct view_script view_script;
+/* Parses a script: items separated by ';' or new lines, each "FRAME ACTION [ARGS]" (see
+ * view_script.c); `origin` names the source in errors. Returns NULL after printing why. */
+view_script *view_script_parse(const char *text, const char *origin);
+/* Pushes the script's events for frame `frame` onto SDL's queue. */
+void view_script_push(view_script *s, int frame);
+/* The last frame the script acts on, or -1 when it is empty. */
+int view_script_last_frame(const view_script *s);
+void view_script_free(view_script *s);
+
+/* ---- overlay font ---- */
+
+enum { VIEW_FONT_W = 5, VIEW_FONT_H = 7 };
+/* Draws text into a 32-bit xRGB image (pitch in pixels) at (x, y), each font pixel a scale x scale
+ * block, in colour rgb; clipped to the image. Lower case draws as upper case. */
+void view_font_draw(uint32_t *pixels, int w, int h, int pitch, int x, int y, int scale, uint32_t rgb,
+                    const char *text);
+/* Width in pixels of text drawn at scale (one column of space between glyphs). */
+int view_font_width(const char *text, int scale);
+
+/* ---- sRGB ---- */
+
+/* The table's buckets: floats in [2^-13, 1] by their top 17 bits (exponent and 8 mantissa bits);
+ * every float below 2^-13 encodes to 0 (the code becomes 1 near 1.5e-4). 3329 words, 13 KiB. */
+#define VIEW_SRGB_LO 0x39000000u /* 2^-13 */
+enum {
+    VIEW_SRGB_SHIFT = 15,
+    VIEW_SRGB_FIRST = VIEW_SRGB_LO >> VIEW_SRGB_SHIFT,
+    VIEW_SRGB_BUCKETS = (0x3F800000u >> VIEW_SRGB_SHIFT) - VIEW_SRGB_FIRST + 1
+};
+/* Per bucket: bits 16-23 the code at its start, bits 0-15 the low 15 bits of the first pattern with
+ * the next code (0x8000: none); within a bucket the code rises by at most one (view_srgb_init). */
+extern uint32_t view_srgb_table[VIEW_SRGB_BUCKETS];
+extern bool view_srgb_exact; /* false: the table could not be built, use the formula */
+
+/* Builds the table (once; not thread-safe, call before the first view_srgb8). */
+void view_srgb_init(void);
+/* The same by the formula: rp_image_write's encode_srgb8, operation for operation. */
+uint8_t view_srgb8_formula(float v);
+
+/* The 8-bit sRGB code of a linear value, equal to what rp_image_write stores in a PNG. Branch-free
+ * but for the table's check: clamping to [0, 1] maps negatives and NaN to 0 as the formula does. */
+static inline uint32_t view_srgb8(float v) {
+    if (!view_srgb_exact) return view_srgb8_formula(v);
+    v = v > 0.0f ? v : 0.0f;
+    v = v < 1.0f ? v : 1.0f;
+    uint32_t b;
+    memcpy(&b, &v, sizeof b);
+    uint32_t i = b >> VIEW_SRGB_SHIFT;
+    i = i < VIEW_SRGB_FIRST ? VIEW_SRGB_FIRST : i;
+    uint32_t t = view_srgb_table[i - VIEW_SRGB_FIRST];
+    return ((t >> 16) & 0xFFu) + ((b & 0x7FFFu) >= (t & 0xFFFFu));
+}
+
+#endif

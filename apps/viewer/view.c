@@ -188,6 +188,7 @@ static const char *traversal_name(int t) {
     case RP_TRAVERSAL_SINGLE: return "single";
     case RP_TRAVERSAL_SIMD: return "simd";
     case RP_TRAVERSAL_SPAN: return "span";
+    case RP_TRAVERSAL_MLRT: return "mlrt";
     }
     return NULL;
 }

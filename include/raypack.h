@@ -215,10 +215,20 @@ typedef enum rp_build_quality {
     RP_BUILD_QUALITY_HIGH = 2    /* binned SAH, 64 bins */
 } rp_build_quality;
 
+/* The acceleration structure a scene's triangles are committed into; every kind answers every
+ * query with the same hits. Spheres and user primitives always go into a BVH of their own. */
+typedef enum rp_accel_type {
+    RP_ACCEL_BVH = 0,    /* binned SAH BVH, wide traversal layout (the default) */
+    RP_ACCEL_KDTREE = 1, /* SAH kd-tree, O(n log n) sweep build (Wald, Havran 2006) */
+    RP_ACCEL_BIH = 2     /* bounding interval hierarchy (Waechter, Keller 2006) */
+} rp_accel_type;
+#define RP_ACCEL_COUNT 3
+
 typedef struct rp_scene_desc {
     rp_build_quality quality;
     int bvh_width;      /* children per node of the traversal layout: 0 picks for the ISA, else 4, 8 or 16 */
     int max_leaf_size;  /* most primitives per leaf, 1..60 (0: 32); the SAH ends leaves below it */
+    rp_accel_type accel; /* 0: RP_ACCEL_BVH */
 } rp_scene_desc;
 
 /* Measurements of the last commit. */
@@ -236,6 +246,8 @@ typedef struct rp_scene_stats {
     double build_ms;           /* wall time of the last commit */
     size_t bytes;              /* memory held by the acceleration structures */
     uint64_t degenerate_prims; /* triangles with two equal vertices: never hit, left out */
+    rp_accel_type accel;       /* the structure of the triangles (binary_nodes .. sah_cost describe it) */
+    uint64_t tri_refs;         /* triangle references in its leaves (a kd-tree holds straddlers twice) */
 } rp_scene_stats;
 
 /* Returns the defaults for every zero field of desc. */
@@ -258,6 +270,8 @@ RP_API rp_error rp_scene_commit(rp_scene *scene);
 RP_API void rp_scene_get_bounds(const rp_scene *scene, rp_bounds *out);
 /* Measurements of the last commit. */
 RP_API void rp_scene_get_stats(const rp_scene *scene, rp_scene_stats *out);
+/* Name of an acceleration structure kind ("bvh", "kdtree", "bih"), or NULL for an unknown one. */
+RP_API const char *rp_accel_name(rp_accel_type type);
 
 /* ---- queries --------------------------------------------------------------------------------- */
 

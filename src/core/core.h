@@ -5,6 +5,7 @@
 #include <pthread.h>
 #include <stdatomic.h>
 
+#include "accel/accel.h"
 #include "accel/bvh/bvh.h"
 #include "raypack.h"
 #include "sys/sys.h"
@@ -51,6 +52,8 @@ struct rp_scene {
     uint32_t geom_count, geom_capacity;
     bool committed;       /* committed and not edited since */
     rp_accel accel;
+    const rp_kernels *kernels; /* the queries of the committed structure (the device's for a BVH) */
+    accel_built alt;      /* the triangles' kd-tree or BIH (desc.accel), else empty */
     /* storage behind accel */
     bvhw tri_bvh, prim_bvh;
     bvh2 tri_bvh2;        /* binary BVH of the triangles, leaves rewritten to tri4 blocks (large packets) */

@@ -16,10 +16,10 @@ rp_scene_desc rp_scene_desc_defaults(const rp_scene_desc *desc) {
 
 rp_scene *rp_scene_new(rp_device *device, const rp_scene_desc *desc) {
     if (!device) return NULL;
-    if (desc && ((unsigned)desc->quality > RP_BUILD_QUALITY_HIGH ||
+    if (desc && ((unsigned)desc->quality > RP_BUILD_QUALITY_HIGH || (unsigned)desc->accel >= RP_ACCEL_COUNT ||
                  (desc->bvh_width != 0 && desc->bvh_width != 4 && desc->bvh_width != 8 && desc->bvh_width != 16) ||
                  desc->max_leaf_size < 0 || desc->max_leaf_size > 60)) {
-        device_error(device, RP_ERROR_INVALID_ARGUMENT, "rp_scene_new: bad quality, bvh_width or max_leaf_size");
+        device_error(device, RP_ERROR_INVALID_ARGUMENT, "rp_scene_new: bad quality, accel, bvh_width or max_leaf_size");
         return NULL;
     }
     rp_scene *s = sys_calloc(&device->alloc, sizeof *s);
@@ -45,6 +45,7 @@ void scene_free_accel(rp_scene *s) {
     if (s->tri_bvh2.nodes) bvh2_free(a, &s->tri_bvh2);
     sys_free(a, s->tris, s->tri_block_count * sizeof(tri4));
     sys_free(a, s->prims, s->prim_count * sizeof(prim_ref));
+    accel_built_free(a, &s->alt);
     s->tris = NULL, s->prims = NULL;
     s->tri_block_count = s->prim_count = 0;
     memset(&s->accel, 0, sizeof s->accel);
@@ -135,6 +136,25 @@ void rp_scene_get_stats(const rp_scene *scene, rp_scene_stats *out) {
     *out = scene->stats;
 }
 
+const char *rp_accel_name(rp_accel_type type) {
+    switch (type) {
+    case RP_ACCEL_BVH: return "bvh";
+    case RP_ACCEL_KDTREE: return "kdtree";
+    case RP_ACCEL_BIH: return "bih";
+    }
+    return NULL;
+}
+
+/* The structures other than the BVH, by rp_accel_type (NULL: the BVH, built below). */
+static const accel_ops *accel_ops_of(rp_accel_type type) {
+    switch (type) {
+    case RP_ACCEL_KDTREE: return &accel_kdtree;
+    case RP_ACCEL_BIH: return &accel_bih;
+    case RP_ACCEL_BVH: return NULL;
+    }
+    return NULL;
+}
+
 /* ---- commit ------------------------------------------------------------------------------- */
 
 typedef struct gather {
@@ -188,6 +208,16 @@ static bool load_triangle(const rp_geometry *g, uint32_t prim, vec3 v[3]) {
         if (!v3_finite(v[k])) return false;
     }
     return true;
+}
+
+/* accel_tri_input.fetch: a gathered (so valid) triangle's vertices and its geometry's mask. */
+static void tri_fetch(const void *user, prim_ref r, float v[9], uint32_t *mask) {
+    const rp_scene *s = user;
+    const rp_geometry *g = s->geoms[r.geom];
+    vec3 p[3] = {{0}};
+    load_triangle(g, r.prim, p);
+    for (int k = 0; k < 3; k++) v[3 * k] = p[k].x, v[3 * k + 1] = p[k].y, v[3 * k + 2] = p[k].z;
+    *mask = g->mask;
 }
 
 /* Packing of the triangle BVH's leaves into tri4 blocks. A leaf's first block comes from a prefix
@@ -477,6 +507,7 @@ rp_error scene_build(rp_scene *s) {
     sys_pool *pool = locked ? s->device->pool : NULL;
     /* collect valid primitives */
     err = gather_triangles(s, pool, &tris, &st, &bounds);
+    box3 tri_bounds = bounds;
     for (uint32_t gi = 0; gi < s->geom_count && err == RP_ERROR_NONE; gi++) {
         rp_geometry *g = s->geoms[gi];
         if (!g) continue;
@@ -541,7 +572,24 @@ rp_error scene_build(rp_scene *s) {
     bd.block_size = 4;
     bd.trav_cost = s->desc.quality == RP_BUILD_QUALITY_LOW ? 1.0f : 0.5f;
     int width = pick_width(s);
-    if (err == RP_ERROR_NONE && tris.count) {
+    const accel_ops *ops = accel_ops_of(s->desc.accel);
+    if (err == RP_ERROR_NONE && tris.count && ops) {
+        sys_pool *tpool = tris.count >= SMALL_BUILD ? pool : NULL;
+        accel_tri_input in = {.boxes = tris.boxes, .refs = tris.refs, .count = tris.count, .bounds = tri_bounds,
+                              .fetch = tri_fetch, .user = s};
+        if (!ops->build(a, tpool, &in, &s->alt)) {
+            err = RP_ERROR_OUT_OF_MEMORY;
+        } else {
+            st.triangles = tris.count;
+            st.binary_nodes = s->alt.nodes_total;
+            st.wide_nodes = s->alt.inner_nodes;
+            st.leaves = s->alt.leaves;
+            st.depth = s->alt.root_depth;
+            st.sah_cost = s->alt.sah_cost;
+            st.bytes = s->alt.node_bytes + ((size_t)s->alt.block_count + 1) * sizeof(tri4);
+            st.tri_refs = s->alt.tri_refs;
+        }
+    } else if (err == RP_ERROR_NONE && tris.count) {
         /* small meshes on the calling thread: waking the others took longer than the work */
         sys_pool *tpool = tris.count >= SMALL_BUILD ? pool : NULL;
         bvh2 b2;
@@ -595,6 +643,7 @@ rp_error scene_build(rp_scene *s) {
                 st.leaves = b2.leaf_count;
                 st.depth = b2.depth;
                 st.sah_cost = b2.sah_cost;
+                st.tri_refs = tris.count;
                 st.bytes = s->tri_bvh.bytes + (size_t)pc.block_count * sizeof(tri4) + (size_t)b2.node_count * sizeof(bvh_node);
                 s->tri_bvh2 = b2;
                 b2.nodes = NULL;
@@ -630,7 +679,8 @@ rp_error scene_build(rp_scene *s) {
     gather_free(a, &tris);
     gather_free(a, &prims);
     if (err != RP_ERROR_NONE) return err;
-    st.bvh_width = (uint32_t)width;
+    st.bvh_width = ops ? 2u : (uint32_t)width;
+    st.accel = s->desc.accel;
     s->stats = st;
     s->bounds = (rp_bounds){bounds.lo.x, bounds.lo.y, bounds.lo.z, 0.0f, bounds.hi.x, bounds.hi.y, bounds.hi.z, 0.0f};
     uint32_t tri_mask_and = 0xFFFFFFFFu;
@@ -648,7 +698,10 @@ rp_error scene_build(rp_scene *s) {
         .prim_occluded = sphere_occluded_cb,
         .scene = s,
         .coherent_extent = coherent_extent(bounds, mean_side),
+        .alt = ops ? &s->alt : NULL,
+        .base = s->device->kernels,
     };
+    s->kernels = ops ? ops->kernels : s->device->kernels;
     return RP_ERROR_NONE;
 }
 

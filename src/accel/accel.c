@@ -23,13 +23,16 @@ tri4 *accel_blocks_alloc(const sys_allocator *a, uint32_t count) {
 
 void accel_fill_block(const accel_tri_input *in, const uint32_t *ids, uint32_t n, tri4 *dst) {
     for (uint32_t lane = 0; lane < 4; lane++) {
-        uint32_t src = lane < n ? lane : 0;
-        prim_ref r = in->refs[ids[src]];
+        if (lane >= n) { /* lane 0 again, never hit */
+            for (int q = 0; q < 9; q++) dst->v[q][lane] = dst->v[q][0];
+            dst->geom[lane] = dst->geom[0], dst->prim[lane] = dst->prim[0], dst->mask[lane] = 0;
+            continue;
+        }
+        prim_ref r = in->refs[ids[lane]];
         float v[9];
         uint32_t mask;
         in->fetch(in->user, r, v, &mask);
         for (int q = 0; q < 9; q++) dst->v[q][lane] = v[q];
-        dst->geom[lane] = r.geom, dst->prim[lane] = r.prim;
-        dst->mask[lane] = lane < n ? mask : 0;
+        dst->geom[lane] = r.geom, dst->prim[lane] = r.prim, dst->mask[lane] = mask;
     }
 }

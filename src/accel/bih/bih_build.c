@@ -14,6 +14,7 @@
 typedef struct bih_task {
     uint32_t node, begin, end, depth;
     float sb[6];
+    vf4 clo, chi; /* twice the centroids' bounds */
 } bih_task;
 
 typedef struct bih_ctx {
@@ -51,7 +52,13 @@ static void make_leaf(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, u
     }
 }
 
-static void split(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, float sb[6], uint32_t depth, bool spawn) {
+/* Twice the centroids' bounds of a range (lo + hi of each box), lanes x, y, z. */
+typedef struct cbounds {
+    vf4 lo, hi;
+} cbounds;
+
+static void split(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, float sb[6], cbounds cb, uint32_t depth,
+                  bool spawn) {
     for (;;) {
         if (end - begin <= BIH_LEAF_SIZE || depth >= BIH_MAX_DEPTH) {
             make_leaf(c, node, begin, end, depth);
@@ -59,55 +66,58 @@ static void split(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, float
         }
         if (spawn && depth == c->spawn_depth) {
             bih_task *t = &c->tasks[c->task_count++];
-            *t = (bih_task){node, begin, end, depth, {0}};
+            *t = (bih_task){node, begin, end, depth, {0}, cb.lo, cb.hi};
             memcpy(t->sb, sb, sizeof t->sb);
             return;
         }
-        int tries = 0;
-        for (;; tries++) {
+        /* Halve the split box until its plane parts the centroids. When every centroid lies on one
+         * side the paper halves the box and partitions again; the centroids' bounds tell the
+         * outcome of that pass in advance, so the same planes are found without it. */
+        int axis = 0;
+        float plane = 0.0f;
+        for (int tries = 0;; tries++) {
             float e0 = sb[3] - sb[0], e1 = sb[4] - sb[1], e2 = sb[5] - sb[2];
-            int axis = e1 > e0 ? (e2 > e1 ? 2 : 1) : (e2 > e0 ? 2 : 0);
-            float plane = 0.5f * (sb[axis] + sb[3 + axis]);
+            axis = e1 > e0 ? (e2 > e1 ? 2 : 1) : (e2 > e0 ? 2 : 0);
+            plane = 0.5f * (sb[axis] + sb[3 + axis]);
             /* nothing left to halve (equal centroids): a leaf of them all */
-            if (tries >= 48 || !(plane > sb[axis] && plane < sb[3 + axis])) {
+            if (tries >= 64 || !(plane > sb[axis] && plane < sb[3 + axis])) {
                 make_leaf(c, node, begin, end, depth);
                 return;
             }
             float twice = 2.0f * plane;
-            bvh_prim *p = c->p;
-            uint32_t i = begin, j = end;
-            float lmax = -INFINITY, rmin = INFINITY;
-            while (i < j) {
-                float ci = p[i].lo[axis] + p[i].hi[axis];
-                if (ci < twice) {
-                    lmax = fmaxf(lmax, p[i].hi[axis]);
-                    i++;
-                } else {
-                    j--;
-                    bvh_prim t = p[i];
-                    p[i] = p[j], p[j] = t;
-                    rmin = fminf(rmin, t.lo[axis]);
-                }
-            }
-            if (i == begin) {
-                sb[axis] = plane; /* all right of the plane */
-                continue;
-            }
-            if (i == end) {
-                sb[3 + axis] = plane;
-                continue;
-            }
-            uint32_t child = atomic_fetch_add_explicit(&c->next, 2, memory_order_relaxed);
-            c->nodes[node] = (bih_node){{lmax, rmin}, child << 2 | (uint32_t)axis};
-            float sl[6], sr[6];
-            memcpy(sl, sb, sizeof sl), memcpy(sr, sb, sizeof sr);
-            sl[3 + axis] = plane, sr[axis] = plane;
-            split(c, child, begin, i, sl, depth + 1, spawn);
-            /* the right side in this frame (a loop, not a call: the recursion's depth is the left path) */
-            node = child + 1, begin = i, depth = depth + 1;
-            memcpy(sb, sr, sizeof sr);
-            break;
+            if (cb.lo[axis] >= twice) sb[axis] = plane;          /* all on the right */
+            else if (cb.hi[axis] < twice) sb[3 + axis] = plane;  /* all on the left */
+            else break;
         }
+        float twice = 2.0f * plane;
+        bvh_prim *p = c->p;
+        uint32_t i = begin, j = end;
+        vf4 inf = vf4_splat(INFINITY), ninf = vf4_splat(-INFINITY);
+        vf4 lhi = ninf, rlo = inf; /* the sides' bounds: the clip planes */
+        cbounds cl = {inf, ninf}, cr = {inf, ninf};
+        while (i < j) {
+            vf4 c2 = p[i].lo + p[i].hi;
+            if (c2[axis] < twice) {
+                lhi = vf4_max(lhi, p[i].hi);
+                cl.lo = vf4_min(cl.lo, c2), cl.hi = vf4_max(cl.hi, c2);
+                i++;
+            } else {
+                j--;
+                bvh_prim t = p[i];
+                p[i] = p[j], p[j] = t;
+                rlo = vf4_min(rlo, t.lo);
+                cr.lo = vf4_min(cr.lo, c2), cr.hi = vf4_max(cr.hi, c2);
+            }
+        }
+        uint32_t child = atomic_fetch_add_explicit(&c->next, 2, memory_order_relaxed);
+        c->nodes[node] = (bih_node){{lhi[axis], rlo[axis]}, child << 2 | (uint32_t)axis};
+        float sl[6], sr[6];
+        memcpy(sl, sb, sizeof sl), memcpy(sr, sb, sizeof sr);
+        sl[3 + axis] = plane, sr[axis] = plane;
+        split(c, child, begin, i, sl, cl, depth + 1, spawn);
+        /* the right side in this frame (a loop, not a call: the recursion's depth is the left path) */
+        node = child + 1, begin = i, depth = depth + 1, cb = cr;
+        memcpy(sb, sr, sizeof sr);
     }
 }
 
@@ -115,7 +125,7 @@ static void task_run(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     bih_ctx *c = user;
     bih_task t = c->tasks[index];
-    split(c, t.node, t.begin, t.end, t.sb, t.depth, false);
+    split(c, t.node, t.begin, t.end, t.sb, (cbounds){t.clo, t.chi}, t.depth, false);
 }
 
 /* Numbers the blocks: a leaf's first position gets the leaf's first block. */
@@ -152,6 +162,12 @@ static void fill_task(void *user, uint32_t index, uint32_t thread) {
     uint32_t b = (uint32_t)(n * index / f->chunks), e = (uint32_t)(n * (index + 1) / f->chunks);
     for (uint32_t i = b; i < e; i++) {
         bih_node *nd = &c->nodes[i];
+        /* the references of a leaf a few nodes on (nodes come in about the boxes' order) */
+        if (i + 8 < e && c->nodes[i + 8].meta == BIH_LEAF) {
+            uint32_t f8;
+            memcpy(&f8, &c->nodes[i + 8].clip[0], 4);
+            __builtin_prefetch(&c->in->refs[id_of(&c->p[f8])]);
+        }
         if (nd->meta != BIH_LEAF) continue;
         uint32_t first, count;
         memcpy(&first, &nd->clip[0], 4), memcpy(&count, &nd->clip[1], 4);
@@ -207,7 +223,12 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     float sb[6] = {b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z};
     memcpy(out->bounds, sb, sizeof sb);
     atomic_store(&c.next, 1);
-    split(&c, 0, 0, n, sb, 1, pool != NULL);
+    cbounds cb = {vf4_splat(INFINITY), vf4_splat(-INFINITY)};
+    for (uint32_t i = 0; i < n; i++) {
+        vf4 c2 = in->boxes[i].lo + in->boxes[i].hi;
+        cb.lo = vf4_min(cb.lo, c2), cb.hi = vf4_max(cb.hi, c2);
+    }
+    split(&c, 0, 0, n, sb, cb, 1, pool != NULL);
     if (pool && c.task_count) sys_pool_parallel_for(pool, c.task_count, task_run, &c);
     uint32_t node_count = atomic_load(&c.next);
     uint32_t blocks = plan_blocks(&c, node_count, n);

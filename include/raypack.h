@@ -204,6 +204,10 @@ RP_API void rp_geometry_set_user(rp_geometry *geometry, uint32_t prim_count, rp_
                                  void *user);
 /* Sets the visibility mask tested against ray.mask (default 0xFFFFFFFF). */
 RP_API void rp_geometry_set_mask(rp_geometry *geometry, uint32_t mask);
+/* Says that the contents of a buffer changed in place (same count). Moved vertices of triangle
+ * geometries let the next rp_scene_commit refit the BVH instead of rebuilding it (see
+ * rp_scene_desc.refit_max_growth); a changed index buffer makes it rebuild. */
+RP_API void rp_geometry_update(rp_geometry *geometry, rp_buffer_type type);
 /* Marks the geometry's buffers as final; scenes holding it must be committed again. */
 RP_API void rp_geometry_commit(rp_geometry *geometry);
 
@@ -229,6 +233,9 @@ typedef struct rp_scene_desc {
     int bvh_width;      /* children per node of the traversal layout: 0 picks for the ISA, else 4, 8 or 16 */
     int max_leaf_size;  /* most primitives per leaf, 1..60 (0: 32); the SAH ends leaves below it */
     rp_accel_type accel; /* 0: RP_ACCEL_BVH */
+    float refit_max_growth; /* a commit after only vertices moved refits the BVH, unless its SAH cost
+                               grows past this times the last build's (then it rebuilds); 0: 1.5,
+                               < 0: always rebuild */
 } rp_scene_desc;
 
 /* Measurements of the last commit. */
@@ -248,6 +255,7 @@ typedef struct rp_scene_stats {
     uint64_t degenerate_prims; /* triangles with two equal vertices: never hit, left out */
     rp_accel_type accel;       /* the structure of the triangles (binary_nodes .. sah_cost describe it) */
     uint64_t tri_refs;         /* triangle references in its leaves (a kd-tree holds straddlers twice) */
+    uint32_t refit;            /* 1 when the last commit refitted the BVH rather than rebuilding it */
 } rp_scene_stats;
 
 /* Returns the defaults for every zero field of desc. */

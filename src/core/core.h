@@ -42,6 +42,7 @@ struct rp_geometry {
     rp_user_intersect_fn user_intersect;
     rp_user_occluded_fn user_occluded;
     void *user;
+    uint32_t topo;        /* bumped by every change but moved vertices: a scene refits only if unchanged */
 };
 
 struct rp_scene {
@@ -63,6 +64,11 @@ struct rp_scene {
     size_t prim_count;
     rp_scene_stats stats;
     rp_bounds bounds;
+    /* what the last build saw, to tell whether the next commit may refit */
+    bool attach_changed;  /* a geometry was attached or detached since */
+    uint32_t *built_topo; /* rp_geometry.topo of each geom_id (RP_INVALID_ID: none) */
+    uint32_t built_count, built_capacity;
+    double built_cost;    /* bvh2_blocks_cost of the last build */
 };
 
 /* Raises an error on the calling thread: keeps it if it is the first since the last read, and

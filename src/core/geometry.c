@@ -82,6 +82,8 @@ void rp_geometry_set_buffer(rp_geometry *geometry, rp_buffer_type type, rp_forma
     if (!check_buffer(geometry, type, format, byte_stride, "rp_geometry_set_buffer: bad type, format or stride"))
         return;
     geom_buffer *b = &geometry->buffers[type];
+    /* new vertices in the same number are moved vertices; anything else changes the topology */
+    if (type != RP_BUFFER_VERTEX || !b->set || b->count != count || b->format != format) geometry->topo++;
     free_owned(geometry, b);
     b->data = (const uint8_t *)data + byte_offset;
     b->stride = byte_stride ? byte_stride : format_size(format);
@@ -111,6 +113,7 @@ void *rp_geometry_new_buffer(rp_geometry *geometry, rp_buffer_type type, rp_form
         return NULL;
     }
     geom_buffer *b = &geometry->buffers[type];
+    geometry->topo++;
     free_owned(geometry, b);
     b->owned = p;
     b->owned_bytes = bytes;
@@ -130,6 +133,7 @@ void rp_geometry_set_user(rp_geometry *geometry, uint32_t prim_count, rp_user_bo
                      "rp_geometry_set_user: not a user geometry, or a NULL callback");
         return;
     }
+    geometry->topo++;
     geometry->user_count = prim_count;
     geometry->user_bounds = bounds;
     geometry->user_intersect = intersect;
@@ -138,7 +142,17 @@ void rp_geometry_set_user(rp_geometry *geometry, uint32_t prim_count, rp_user_bo
 }
 
 void rp_geometry_set_mask(rp_geometry *geometry, uint32_t mask) {
-    if (geometry) geometry->mask = mask;
+    if (geometry) geometry->mask = mask, geometry->topo++;
+}
+
+void rp_geometry_update(rp_geometry *geometry, rp_buffer_type type) {
+    if (!geometry) return;
+    if ((unsigned)type > RP_BUFFER_INDEX) {
+        device_error(geometry->device, RP_ERROR_INVALID_ARGUMENT, "rp_geometry_update: bad buffer type");
+        return;
+    }
+    /* vertices: nothing to record, a commit reads them again; indices: a new topology */
+    if (type == RP_BUFFER_INDEX || geometry->type != RP_GEOMETRY_TRIANGLE) geometry->topo++;
 }
 
 void rp_geometry_commit(rp_geometry *geometry) {

@@ -7,8 +7,13 @@
 #include "core/core.h"
 #include "geometry/sphere.h"
 
+static bool scene_refit(rp_scene *s);
+/* The node cost of the SAH a refit is judged by (in tri4 block tests, as the medium build's) */
+#define REFIT_TRAV_COST 0.5
+
 rp_scene_desc rp_scene_desc_defaults(const rp_scene_desc *desc) {
     rp_scene_desc d = desc ? *desc : (rp_scene_desc){0};
+    if (d.refit_max_growth == 0.0f) d.refit_max_growth = 1.5f;
     if (d.max_leaf_size <= 0) d.max_leaf_size = 32;
     if (d.max_leaf_size > 60) d.max_leaf_size = 60;
     return d;
@@ -57,6 +62,7 @@ void rp_scene_release(rp_scene *scene) {
     scene_free_accel(scene);
     for (uint32_t i = 0; i < scene->geom_count; i++) rp_geometry_release(scene->geoms[i]);
     sys_free(&dev->alloc, scene->geoms, scene->geom_capacity * sizeof(rp_geometry *));
+    sys_free(&dev->alloc, scene->built_topo, scene->built_capacity * sizeof(uint32_t));
     sys_free(&dev->alloc, scene, sizeof *scene);
     rp_device_release(dev);
 }
@@ -91,6 +97,7 @@ uint32_t rp_scene_attach(rp_scene *scene, rp_geometry *geometry) {
     rp_geometry_retain(geometry);
     scene->geoms[id] = geometry;
     scene->committed = false;
+    scene->attach_changed = true;
     return id;
 }
 
@@ -103,6 +110,7 @@ void rp_scene_detach(rp_scene *scene, uint32_t geom_id) {
     rp_geometry_release(scene->geoms[geom_id]);
     scene->geoms[geom_id] = NULL;
     scene->committed = false;
+    scene->attach_changed = true;
 }
 
 rp_geometry *rp_scene_get_geometry(rp_scene *scene, uint32_t geom_id) {
@@ -110,9 +118,32 @@ rp_geometry *rp_scene_get_geometry(rp_scene *scene, uint32_t geom_id) {
     return scene->geoms[geom_id];
 }
 
+/* Remembers what this build saw (scene_refit compares the next commit with it). */
+static void scene_record_build(rp_scene *s) {
+    const sys_allocator *a = &s->device->alloc;
+    if (s->geom_count > s->built_capacity) {
+        uint32_t *t = sys_alloc(a, (size_t)s->geom_count * sizeof *t);
+        if (!t) {
+            s->built_count = 0, s->attach_changed = true; /* no record: the next commit rebuilds */
+            return;
+        }
+        sys_free(a, s->built_topo, s->built_capacity * sizeof *t);
+        s->built_topo = t, s->built_capacity = s->geom_count;
+    }
+    for (uint32_t i = 0; i < s->geom_count; i++) s->built_topo[i] = s->geoms[i] ? s->geoms[i]->topo : RP_INVALID_ID;
+    s->built_count = s->geom_count;
+    s->attach_changed = false;
+    s->built_cost = s->tri_bvh2.nodes ? bvh2_blocks_cost(&s->tri_bvh2, REFIT_TRAV_COST) : 0.0;
+}
+
 rp_error rp_scene_commit(rp_scene *scene) {
     if (!scene) return RP_ERROR_INVALID_ARGUMENT;
     double t0 = sys_seconds();
+    if (scene_refit(scene)) {
+        scene->stats.build_ms = (sys_seconds() - t0) * 1e3;
+        scene->committed = true;
+        return RP_ERROR_NONE;
+    }
     scene_free_accel(scene);
     scene->committed = false;
     rp_error e = scene_build(scene);
@@ -121,6 +152,7 @@ rp_error rp_scene_commit(rp_scene *scene) {
         device_error(scene->device, e, "rp_scene_commit failed");
         return e;
     }
+    scene_record_build(scene);
     scene->stats.build_ms = (sys_seconds() - t0) * 1e3;
     scene->committed = true;
     return RP_ERROR_NONE;
@@ -739,4 +771,78 @@ static bool sphere_occluded_cb(const rp_accel *acc, prim_ref ref, const rp_ray *
     const float *c = geom_item(&g->buffers[RP_BUFFER_VERTEX], ref.prim);
     float org[3] = {ray->org_x, ray->org_y, ray->org_z}, dir[3] = {ray->dir_x, ray->dir_y, ray->dir_z}, t;
     return sphere_intersect(org, dir, ray->tnear, ray->tfar, c, c[3], &t);
+}
+
+/* ---- refit -------------------------------------------------------------------------------- */
+
+typedef struct refit_job {
+    const rp_scene *s;
+    tri4 *blocks;
+    uint32_t count, chunks;
+    _Atomic bool bad; /* a vertex became NaN / Inf: rebuild */
+} refit_job;
+
+/* Reloads the vertices of a chunk of the blocks from their lanes' (geom, prim); padding lanes
+ * repeat lane 0's triangle, so they reload it too. */
+static void refit_fill_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    refit_job *j = user;
+    uint32_t b = (uint32_t)((uint64_t)j->count * index / j->chunks), e = (uint32_t)((uint64_t)j->count * (index + 1) / j->chunks);
+    for (uint32_t i = b; i < e; i++) {
+        tri4 *t = &j->blocks[i];
+        for (int lane = 0; lane < 4; lane++) {
+            vec3 v[3];
+            if (!load_triangle(j->s->geoms[t->geom[lane]], t->prim[lane], v)) {
+                atomic_store(&j->bad, true);
+                return;
+            }
+            for (int q = 0; q < 3; q++) t->v[3 * q][lane] = v[q].x, t->v[3 * q + 1][lane] = v[q].y, t->v[3 * q + 2][lane] = v[q].z;
+        }
+    }
+}
+
+/* A commit after only vertices moved: the triangle BVH keeps its topology, its blocks get the
+ * new vertices, its boxes are refitted and the wide layout collapsed again from them. Declines
+ * (false, nothing changed that a rebuild does not redo) when the scene is not a plain triangle
+ * BVH scene whose geometries kept their topology since the last build, when a vertex became
+ * invalid, or when the refitted tree's SAH cost grew past refit_max_growth times the built one's. */
+static bool scene_refit(rp_scene *s) {
+    if (s->desc.accel != RP_ACCEL_BVH || s->desc.refit_max_growth < 0.0f || !s->tri_bvh2.nodes || !s->tris ||
+        s->attach_changed || s->geom_count != s->built_count || s->prim_count || s->stats.rejected_prims ||
+        s->stats.degenerate_prims)
+        return false;
+    for (uint32_t i = 0; i < s->geom_count; i++) {
+        const rp_geometry *g = s->geoms[i];
+        if (!g) {
+            if (s->built_topo[i] != RP_INVALID_ID) return false;
+            continue;
+        }
+        if (g->type != RP_GEOMETRY_TRIANGLE || g->topo != s->built_topo[i]) return false;
+    }
+    const sys_allocator *a = &s->device->alloc;
+    bool locked = pthread_mutex_trylock(&s->device->pool_lock) == 0;
+    sys_pool *pool = locked ? s->device->pool : NULL;
+    refit_job j = {.s = s, .blocks = s->tris, .count = (uint32_t)(s->tri_block_count - 1)};
+    j.chunks = pool && j.count >= 1024 ? (uint32_t)sys_pool_threads(pool) * 8 : 1;
+    atomic_store(&j.bad, false);
+    if (j.chunks > 1) sys_pool_parallel_for(pool, j.chunks, refit_fill_task, &j);
+    else refit_fill_task(&j, 0, 0);
+    bool ok = !atomic_load(&j.bad);
+    double cost = ok ? bvh2_refit_blocks(&s->tri_bvh2, s->tris, REFIT_TRAV_COST) : 0.0;
+    if (ok && cost > (double)s->desc.refit_max_growth * s->built_cost) ok = false;
+    bvhw wide = {0};
+    if (ok) ok = bvhw_from_bvh2(a, j.count >= 1024 ? pool : NULL, &s->tri_bvh2, s->tri_bvh.width, leaf_range, NULL, &wide);
+    if (locked) pthread_mutex_unlock(&s->device->pool_lock);
+    if (!ok) return false;
+    bvhw_free(a, &s->tri_bvh);
+    s->tri_bvh = wide;
+    const bvh_node *r = &s->tri_bvh2.nodes[0];
+    s->bounds = (rp_bounds){r->lo[0], r->lo[1], r->lo[2], 0.0f, r->hi[0], r->hi[1], r->hi[2], 0.0f};
+    s->accel.nodes = s->tri_bvh.nodes;
+    s->stats.wide_nodes = s->tri_bvh.node_count;
+    s->stats.sah_cost = cost;
+    s->stats.bytes = s->tri_bvh.bytes + (s->tri_block_count - 1) * sizeof(tri4) +
+                     (size_t)s->tri_bvh2.node_count * sizeof(bvh_node);
+    s->stats.refit = 1;
+    return true;
 }

@@ -110,8 +110,13 @@ RP_API void rp_device_parallel_for(rp_device *device, uint32_t count, rp_task_fn
 typedef enum rp_geometry_type {
     RP_GEOMETRY_TRIANGLE = 0, /* vertex buffer (FLOAT3) + index buffer (UINT3) */
     RP_GEOMETRY_SPHERE = 1,   /* vertex buffer (FLOAT4: center xyz, radius) */
-    RP_GEOMETRY_USER = 2      /* bounds and intersect callbacks */
+    RP_GEOMETRY_USER = 2,     /* bounds and intersect callbacks */
+    RP_GEOMETRY_INSTANCE = 3  /* a committed scene placed by an affine transform (rp_geometry_set_instance) */
 } rp_geometry_type;
+
+/* Instances nest to this depth: a scene holding instances of scenes that hold instances ... of
+ * scenes without any is RP_MAX_INSTANCE_DEPTH deep at most (a commit past it fails). */
+#define RP_MAX_INSTANCE_DEPTH 4
 
 typedef enum rp_buffer_type { RP_BUFFER_VERTEX = 0, RP_BUFFER_INDEX = 1 } rp_buffer_type;
 
@@ -147,7 +152,7 @@ typedef struct rp_hit {
     float u, v;             /* barycentrics: p = (1-u-v) v0 + u v1 + v v2 */
     uint32_t prim_id;
     uint32_t geom_id;       /* RP_INVALID_ID when nothing was hit */
-    uint32_t inst_id;
+    uint32_t inst_id;       /* the outermost instance's geom_id, RP_INVALID_ID outside instances */
 } rp_hit;
 
 typedef struct rp_rayhit {
@@ -202,6 +207,12 @@ RP_API void *rp_geometry_new_buffer(rp_geometry *geometry, rp_buffer_type type, 
 RP_API void rp_geometry_set_user(rp_geometry *geometry, uint32_t prim_count, rp_user_bounds_fn bounds,
                                  rp_user_intersect_fn intersect, rp_user_occluded_fn occluded,
                                  void *user);
+/* Places a committed scene (retained) in an RP_GEOMETRY_INSTANCE geometry: xfm is the row-major
+ * 3x4 affine map from the scene's space to its parent's (x' = xfm[0..2] . x + xfm[3], ...), which
+ * must be invertible. Rays are mapped into the scene's space (their t unchanged); a hit reports
+ * the instanced scene's geom_id and prim_id, the normal mapped back (inverse transpose) and
+ * inst_id the geom_id of the outermost instance. Re-commit the parent when the scene changes. */
+RP_API void rp_geometry_set_instance(rp_geometry *geometry, rp_scene *scene, const float xfm[12]);
 /* Sets the visibility mask tested against ray.mask (default 0xFFFFFFFF). */
 RP_API void rp_geometry_set_mask(rp_geometry *geometry, uint32_t mask);
 /* Says that the contents of a buffer changed in place (same count). Moved vertices of triangle

@@ -43,6 +43,8 @@ struct rp_geometry {
     rp_user_occluded_fn user_occluded;
     void *user;
     uint32_t topo;        /* bumped by every change but moved vertices: a scene refits only if unchanged */
+    rp_scene *inst;       /* RP_GEOMETRY_INSTANCE: the placed scene (retained) */
+    float xfm[12], inv[12]; /* its object-to-parent map and the inverse, row-major 3x4 */
 };
 
 struct rp_scene {
@@ -69,6 +71,7 @@ struct rp_scene {
     uint32_t *built_topo; /* rp_geometry.topo of each geom_id (RP_INVALID_ID: none) */
     uint32_t built_count, built_capacity;
     double built_cost;    /* bvh2_blocks_cost of the last build */
+    uint32_t inst_depth;  /* levels of instances below this scene (0: none) */
 };
 
 /* Raises an error on the calling thread: keeps it if it is the first since the last read, and

@@ -380,6 +380,21 @@ static bool leaf_range(void *user, const bvh_node *leaf, uint32_t *first, uint32
 static bool sphere_intersect_cb(const rp_accel *acc, prim_ref ref, rp_ray *ray, rp_hit *hit);
 static bool sphere_occluded_cb(const rp_accel *acc, prim_ref ref, const rp_ray *ray);
 
+/* Levels of instances from scene c down, walking the geometries as they are now (a cycle of
+ * instances reads as too deep, so a commit never makes one). */
+static uint32_t instance_depth(const rp_scene *c, uint32_t level) {
+    if (level > RP_MAX_INSTANCE_DEPTH) return level;
+    uint32_t d = level;
+    for (uint32_t i = 0; i < c->geom_count; i++) {
+        const rp_geometry *g = c->geoms[i];
+        if (!g || g->type != RP_GEOMETRY_INSTANCE || !g->inst) continue;
+        uint32_t k = instance_depth(g->inst, level + 1);
+        if (k > d) d = k;
+        if (d > RP_MAX_INSTANCE_DEPTH) break;
+    }
+    return d;
+}
+
 #define SMALL_BUILD 4096u /* primitives */
 
 /* As wide as the kernels' SIMD rays: a node's planes are one vector each. On AVX-512, BVH16 took
@@ -534,6 +549,7 @@ rp_error scene_build(rp_scene *s) {
     rp_error err = RP_ERROR_NONE;
     box3 bounds = box3_empty();
     double mean_side = 0.0; /* of the triangle leaves, for coherent_extent */
+    uint32_t inst_depth = 0;
     /* share the device's threads unless a parallel_for is running (commit called from a task) */
     bool locked = pthread_mutex_trylock(&s->device->pool_lock) == 0;
     sys_pool *pool = locked ? s->device->pool : NULL;
@@ -565,6 +581,38 @@ rp_error scene_build(rp_scene *s) {
                 }
                 st.spheres++;
             }
+            break;
+        }
+        case RP_GEOMETRY_INSTANCE: {
+            const rp_scene *c = g->inst;
+            uint32_t depth = c ? instance_depth(c, 1) : 0;
+            if (!c || !c->committed || depth > RP_MAX_INSTANCE_DEPTH) {
+                err = RP_ERROR_INVALID_GEOMETRY;
+                break;
+            }
+            if (depth > inst_depth) inst_depth = depth;
+            rp_bounds cb = c->bounds;
+            if (!(cb.lower_x <= cb.upper_x)) break; /* an empty scene: nothing to place */
+            box3 b = box3_empty();
+            for (int corner = 0; corner < 8; corner++) {
+                float p[3] = {corner & 1 ? cb.upper_x : cb.lower_x, corner & 2 ? cb.upper_y : cb.lower_y,
+                              corner & 4 ? cb.upper_z : cb.lower_z};
+                const float *m = g->xfm;
+                vec3 q = v3(m[0] * p[0] + m[1] * p[1] + m[2] * p[2] + m[3], m[4] * p[0] + m[5] * p[1] + m[6] * p[2] + m[7],
+                            m[8] * p[0] + m[9] * p[1] + m[10] * p[2] + m[11]);
+                b = box3_extend(b, q);
+            }
+            /* widened by a few ulps: the ray's mapping into the scene rounds */
+            vec3 e = v3_mul(v3_add(v3_max(v3(fabsf(b.lo.x), fabsf(b.lo.y), fabsf(b.lo.z)),
+                                          v3(fabsf(b.hi.x), fabsf(b.hi.y), fabsf(b.hi.z))), v3_sub(b.hi, b.lo)), 1e-6f);
+            b.lo = v3_sub(b.lo, e), b.hi = v3_add(b.hi, e);
+            if (!v3_finite(b.lo) || !v3_finite(b.hi)) {
+                st.rejected_prims++;
+                break;
+            }
+            bounds = box3_union(bounds, b);
+            if (!gather_push(a, &prims, b, gi, 0)) err = RP_ERROR_OUT_OF_MEMORY;
+            else st.user_prims++;
             break;
         }
         case RP_GEOMETRY_USER: {
@@ -711,6 +759,7 @@ rp_error scene_build(rp_scene *s) {
     gather_free(a, &tris);
     gather_free(a, &prims);
     if (err != RP_ERROR_NONE) return err;
+    s->inst_depth = inst_depth;
     st.bvh_width = ops ? 2u : (uint32_t)width;
     st.accel = s->desc.accel;
     s->stats = st;
@@ -739,10 +788,50 @@ rp_error scene_build(rp_scene *s) {
 
 /* ---- spheres and user primitives ---------------------------------------------------------- */
 
+/* A ray in an instance's space: origin and direction through the inverse map, t unchanged. */
+static void instance_ray(const rp_geometry *g, const rp_ray *ray, rp_ray *out) {
+    const float *m = g->inv;
+    *out = *ray;
+    out->org_x = m[0] * ray->org_x + m[1] * ray->org_y + m[2] * ray->org_z + m[3];
+    out->org_y = m[4] * ray->org_x + m[5] * ray->org_y + m[6] * ray->org_z + m[7];
+    out->org_z = m[8] * ray->org_x + m[9] * ray->org_y + m[10] * ray->org_z + m[11];
+    out->dir_x = m[0] * ray->dir_x + m[1] * ray->dir_y + m[2] * ray->dir_z;
+    out->dir_y = m[4] * ray->dir_x + m[5] * ray->dir_y + m[6] * ray->dir_z;
+    out->dir_z = m[8] * ray->dir_x + m[9] * ray->dir_y + m[10] * ray->dir_z;
+}
+
+/* The instanced scene's own queries (whatever its structure), the same leaf for every level. */
+static bool instance_intersect(const rp_geometry *g, uint32_t inst, rp_ray *ray, rp_hit *hit) {
+    const rp_scene *c = g->inst;
+    rp_rayhit rh;
+    memset(&rh, 0, sizeof rh);
+    instance_ray(g, ray, &rh.ray);
+    rh.hit.geom_id = RP_INVALID_ID;
+    c->kernels->intersect1(&c->accel, &rh);
+    if (rh.hit.geom_id == RP_INVALID_ID) return false;
+    const float *m = g->inv; /* normals go by the inverse transpose */
+    ray->tfar = rh.ray.tfar;
+    hit->Ng_x = m[0] * rh.hit.Ng_x + m[4] * rh.hit.Ng_y + m[8] * rh.hit.Ng_z;
+    hit->Ng_y = m[1] * rh.hit.Ng_x + m[5] * rh.hit.Ng_y + m[9] * rh.hit.Ng_z;
+    hit->Ng_z = m[2] * rh.hit.Ng_x + m[6] * rh.hit.Ng_y + m[10] * rh.hit.Ng_z;
+    hit->u = rh.hit.u, hit->v = rh.hit.v;
+    hit->geom_id = rh.hit.geom_id, hit->prim_id = rh.hit.prim_id;
+    hit->inst_id = inst; /* the outermost level writes last */
+    return true;
+}
+
+static bool instance_occluded(const rp_geometry *g, const rp_ray *ray) {
+    rp_ray r;
+    instance_ray(g, ray, &r);
+    g->inst->kernels->occluded1(&g->inst->accel, &r);
+    return r.tfar == -INFINITY;
+}
+
 static bool sphere_intersect_cb(const rp_accel *acc, prim_ref ref, rp_ray *ray, rp_hit *hit) {
     const rp_scene *s = acc->scene;
     const rp_geometry *g = s->geoms[ref.geom];
     if ((ray->mask & g->mask) == 0) return false;
+    if (g->type == RP_GEOMETRY_INSTANCE) return instance_intersect(g, ref.geom, ray, hit);
     if (g->type == RP_GEOMETRY_USER) {
         if (!g->user_intersect(g->user, ref.prim, ray, hit)) return false;
         hit->geom_id = ref.geom, hit->prim_id = ref.prim, hit->inst_id = RP_INVALID_ID;
@@ -767,6 +856,7 @@ static bool sphere_occluded_cb(const rp_accel *acc, prim_ref ref, const rp_ray *
     const rp_scene *s = acc->scene;
     const rp_geometry *g = s->geoms[ref.geom];
     if ((ray->mask & g->mask) == 0) return false;
+    if (g->type == RP_GEOMETRY_INSTANCE) return instance_occluded(g, ray);
     if (g->type == RP_GEOMETRY_USER) return g->user_occluded(g->user, ref.prim, ray);
     const float *c = geom_item(&g->buffers[RP_BUFFER_VERTEX], ref.prim);
     float org[3] = {ray->org_x, ray->org_y, ray->org_z}, dir[3] = {ray->dir_x, ray->dir_y, ray->dir_z}, t;

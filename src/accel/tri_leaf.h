@@ -106,10 +106,14 @@ static inline bool alt_leaf(const tri4 *blocks, const alt_ray *r, uint32_t first
 }
 
 /* The query entry points of a structure whose single-ray traversal is
- * bool TRAV(const rp_accel *acc, const accel_built *s, const alt_ray *r, alt_hit *h, bool any).
- * Packets of 4, 8 and 16 rays go ray by ray through it (no packet traversal of these structures
- * yet); spheres and user primitives go to the device's BVH kernels (acc->nodes is NULL). */
-#define ALT_KERNELS(NAME, TRAV)                                                                   \
+ * bool TRAV(const rp_accel *acc, const accel_built *s, const alt_ray *r, alt_hit *h, bool any)
+ * and whose packet traversal is
+ * bool PTRAV(const accel_built *s, const alt_ray *r, alt_hit *h, uint32_t live, int k, bool any,
+ *            uint32_t *occluded)
+ * (false: it does not take this packet, which then goes ray by ray through TRAV). Spheres and
+ * user primitives go to the device's BVH kernels (acc->nodes is NULL), after the triangles, as
+ * the BVH's kernels order them. */
+#define ALT_KERNELS(NAME, TRAV, PTRAV)                                                            \
     static void NAME##_intersect1(const rp_accel *acc, rp_rayhit *rh) {                           \
         if (!(rh->ray.tnear <= rh->ray.tfar)) return;                                             \
         const accel_built *s = acc->alt;                                                          \
@@ -118,15 +122,7 @@ static inline bool alt_leaf(const tri4 *blocks, const alt_ray *r, uint32_t first
             alt_ray_setup(&r, &rh->ray);                                                          \
             alt_hit h = {.t = rh->ray.tfar, .geom = RP_INVALID_ID, .prim = RP_INVALID_ID};        \
             TRAV(acc, s, &r, &h, false);                                                          \
-            if (h.geom != RP_INVALID_ID) {                                                        \
-                float n[3];                                                                       \
-                tri_normal(&s->blocks[h.block], h.lane, n);                                       \
-                rh->ray.tfar = h.t;                                                               \
-                rh->hit.u = h.u, rh->hit.v = h.v;                                                 \
-                rh->hit.Ng_x = n[0], rh->hit.Ng_y = n[1], rh->hit.Ng_z = n[2];                    \
-                rh->hit.geom_id = h.geom, rh->hit.prim_id = h.prim;                               \
-                rh->hit.inst_id = RP_INVALID_ID;                                                  \
-            }                                                                                     \
+            if (h.geom != RP_INVALID_ID) alt_write_hit(s, &h, rh);                                \
         }                                                                                         \
         if (acc->pnodes) acc->base->intersect1(acc, rh);                                          \
     }                                                                                             \
@@ -144,10 +140,10 @@ static inline bool alt_leaf(const tri4 *blocks, const alt_ray *r, uint32_t first
         }                                                                                         \
         if (acc->pnodes) acc->base->occluded1(acc, ray);                                          \
     }                                                                                             \
-    ALT_PACKET(NAME, 4)                                                                           \
-    ALT_PACKET(NAME, 8)                                                                           \
-    ALT_PACKET(NAME, 16)                                                                          \
-    RP_HIDDEN const rp_kernels NAME##_kernels = {                                                    \
+    ALT_PACKET(NAME, TRAV, PTRAV, 4)                                                              \
+    ALT_PACKET(NAME, TRAV, PTRAV, 8)                                                              \
+    ALT_PACKET(NAME, TRAV, PTRAV, 16)                                                             \
+    RP_HIDDEN const rp_kernels NAME##_kernels = {                                                 \
         .name = #NAME, .isa = 1,                                                                  \
         .intersect1 = NAME##_intersect1, .occluded1 = NAME##_occluded1,                           \
         .intersect4 = NAME##_intersect_4, .intersect8 = NAME##_intersect_8,                       \
@@ -155,18 +151,47 @@ static inline bool alt_leaf(const tri4 *blocks, const alt_ray *r, uint32_t first
         .occluded8 = NAME##_occluded_8, .occluded16 = NAME##_occluded_16,                         \
     };
 
-#define ALT_PACKET(NAME, K)                                                                       \
+static inline void alt_write_hit(const accel_built *s, const alt_hit *h, rp_rayhit *rh) {
+    float n[3];
+    tri_normal(&s->blocks[h->block], h->lane, n);
+    rh->ray.tfar = h->t;
+    rh->hit.u = h->u, rh->hit.v = h->v;
+    rh->hit.Ng_x = n[0], rh->hit.Ng_y = n[1], rh->hit.Ng_z = n[2];
+    rh->hit.geom_id = h->geom, rh->hit.prim_id = h->prim;
+    rh->hit.inst_id = RP_INVALID_ID;
+}
+
+/* Lane i of a packet as a single ray. */
+#define ALT_LANE(p, i)                                                                            \
+    (rp_ray) {                                                                                    \
+        .org_x = (p)->org_x[i], .org_y = (p)->org_y[i], .org_z = (p)->org_z[i], .tnear = (p)->tnear[i], \
+        .dir_x = (p)->dir_x[i], .dir_y = (p)->dir_y[i], .dir_z = (p)->dir_z[i], .time = (p)->time[i],   \
+        .tfar = (p)->tfar[i], .mask = (p)->mask[i], .id = (p)->id[i], .flags = (p)->flags[i]             \
+    }
+
+#define ALT_PACKET(NAME, TRAV, PTRAV, K)                                                          \
     static void NAME##_intersect_##K(const rp_accel *acc, const int32_t *valid, rp_rayhit##K *p) { \
+        const accel_built *s = acc->alt;                                                          \
+        alt_ray r[K];                                                                             \
+        alt_hit h[K];                                                                             \
+        uint32_t live = 0, occ = 0;                                                               \
         for (int i = 0; i < K; i++) {                                                             \
-            if (valid && !valid[i]) continue;                                                     \
+            if (!valid[i] || !(p->ray.tnear[i] <= p->ray.tfar[i])) continue;                      \
+            live |= 1u << i;                                                                      \
+            rp_ray one = ALT_LANE(&p->ray, i);                                                    \
+            alt_ray_setup(&r[i], &one);                                                           \
+            h[i] = (alt_hit){.t = one.tfar, .geom = RP_INVALID_ID, .prim = RP_INVALID_ID};        \
+        }                                                                                         \
+        if (!live) return;                                                                        \
+        if (s && s->block_count && !PTRAV(s, r, h, live, K, false, &occ))                         \
+            for (uint32_t m = live; m; m &= m - 1) TRAV(acc, s, &r[simd_ctz(m)], &h[simd_ctz(m)], false); \
+        for (uint32_t m = live; m; m &= m - 1) {                                                  \
+            uint32_t i = simd_ctz(m);                                                             \
             rp_rayhit one;                                                                        \
-            memset(&one, 0, sizeof one);                                                          \
-            one.ray.org_x = p->ray.org_x[i], one.ray.org_y = p->ray.org_y[i], one.ray.org_z = p->ray.org_z[i]; \
-            one.ray.dir_x = p->ray.dir_x[i], one.ray.dir_y = p->ray.dir_y[i], one.ray.dir_z = p->ray.dir_z[i]; \
-            one.ray.tnear = p->ray.tnear[i], one.ray.tfar = p->ray.tfar[i];                       \
-            one.ray.mask = p->ray.mask[i], one.ray.time = p->ray.time[i];                         \
+            one.ray = ALT_LANE(&p->ray, i);                                                       \
             one.hit.geom_id = RP_INVALID_ID;                                                      \
-            NAME##_intersect1(acc, &one);                                                         \
+            if (s && s->block_count && h[i].geom != RP_INVALID_ID) alt_write_hit(s, &h[i], &one); \
+            if (acc->pnodes) acc->base->intersect1(acc, &one);                                    \
             if (one.hit.geom_id == RP_INVALID_ID) continue;                                       \
             p->ray.tfar[i] = one.ray.tfar;                                                        \
             p->hit.Ng_x[i] = one.hit.Ng_x, p->hit.Ng_y[i] = one.hit.Ng_y, p->hit.Ng_z[i] = one.hit.Ng_z; \
@@ -176,16 +201,39 @@ static inline bool alt_leaf(const tri4 *blocks, const alt_ray *r, uint32_t first
         }                                                                                         \
     }                                                                                             \
     static void NAME##_occluded_##K(const rp_accel *acc, const int32_t *valid, rp_ray##K *p) {    \
+        const accel_built *s = acc->alt;                                                          \
+        alt_ray r[K];                                                                             \
+        alt_hit h[K];                                                                             \
+        uint32_t live = 0, occ = 0;                                                               \
         for (int i = 0; i < K; i++) {                                                             \
-            if (valid && !valid[i]) continue;                                                     \
-            rp_ray one;                                                                           \
-            memset(&one, 0, sizeof one);                                                          \
-            one.org_x = p->org_x[i], one.org_y = p->org_y[i], one.org_z = p->org_z[i];            \
-            one.dir_x = p->dir_x[i], one.dir_y = p->dir_y[i], one.dir_z = p->dir_z[i];            \
-            one.tnear = p->tnear[i], one.tfar = p->tfar[i], one.mask = p->mask[i];                \
-            NAME##_occluded1(acc, &one);                                                          \
+            if (!valid[i] || !(p->tnear[i] <= p->tfar[i])) continue;                              \
+            live |= 1u << i;                                                                      \
+            rp_ray one = ALT_LANE(p, i);                                                          \
+            alt_ray_setup(&r[i], &one);                                                           \
+            h[i] = (alt_hit){.t = one.tfar, .geom = RP_INVALID_ID, .prim = RP_INVALID_ID};        \
+        }                                                                                         \
+        if (!live) return;                                                                        \
+        if (s && s->block_count && !PTRAV(s, r, h, live, K, true, &occ))                          \
+            for (uint32_t m = live; m; m &= m - 1)                                                \
+                if (TRAV(acc, s, &r[simd_ctz(m)], &h[simd_ctz(m)], true)) occ |= m & -m;          \
+        for (uint32_t m = live; m; m &= m - 1) {                                                  \
+            uint32_t i = simd_ctz(m);                                                             \
+            if (occ & (1u << i)) {                                                                \
+                p->tfar[i] = -INFINITY;                                                           \
+                continue;                                                                         \
+            }                                                                                     \
+            if (!acc->pnodes) continue;                                                           \
+            rp_ray one = ALT_LANE(p, i);                                                          \
+            acc->base->occluded1(acc, &one);                                                      \
             p->tfar[i] = one.tfar;                                                                \
         }                                                                                         \
     }
+
+/* A structure without a packet traversal: every packet goes ray by ray. */
+static inline bool alt_no_packets(const accel_built *s, const alt_ray *r, alt_hit *h, uint32_t live, int k, bool any,
+                                  uint32_t *occluded) {
+    (void)s, (void)r, (void)h, (void)live, (void)k, (void)any, (void)occluded;
+    return false;
+}
 
 #endif

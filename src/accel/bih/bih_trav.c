@@ -2,7 +2,7 @@
  * cut by the two clip planes, the near child (by the direction's sign) is walked first and the far
  * one pushed with its interval; pending nodes that start beyond the closest hit are skipped. The
  * children's intervals may overlap, so the stack is not sorted: every entry is checked. Packets go
- * ray by ray (tri_leaf.h's ALT_KERNELS). */
+ * ray by ray (alt_no_packets). */
 #include "accel/bih/bih.h"
 #include "accel/tri_leaf.h"
 
@@ -62,4 +62,4 @@ static bool bih_trav(const rp_accel *acc, const accel_built *s, const alt_ray *r
     }
 }
 
-ALT_KERNELS(bih, bih_trav)
+ALT_KERNELS(bih, bih_trav, alt_no_packets)

@@ -110,8 +110,13 @@ RP_API void rp_device_parallel_for(rp_device *device, uint32_t count, rp_task_fn
 typedef enum rp_geometry_type {
     RP_GEOMETRY_TRIANGLE = 0, /* vertex buffer (FLOAT3) + index buffer (UINT3) */
     RP_GEOMETRY_SPHERE = 1,   /* vertex buffer (FLOAT4: center xyz, radius) */
-    RP_GEOMETRY_USER = 2      /* bounds and intersect callbacks */
+    RP_GEOMETRY_USER = 2,     /* bounds and intersect callbacks */
+    RP_GEOMETRY_INSTANCE = 3  /* a committed scene placed by an affine transform (rp_geometry_set_instance) */
 } rp_geometry_type;
+
+/* Instances nest to this depth: a scene holding instances of scenes that hold instances ... of
+ * scenes without any is RP_MAX_INSTANCE_DEPTH deep at most (a commit past it fails). */
+#define RP_MAX_INSTANCE_DEPTH 4
 
 typedef enum rp_buffer_type { RP_BUFFER_VERTEX = 0, RP_BUFFER_INDEX = 1 } rp_buffer_type;
 
@@ -147,7 +152,7 @@ typedef struct rp_hit {
     float u, v;             /* barycentrics: p = (1-u-v) v0 + u v1 + v v2 */
     uint32_t prim_id;
     uint32_t geom_id;       /* RP_INVALID_ID when nothing was hit */
-    uint32_t inst_id;
+    uint32_t inst_id;       /* the outermost instance's geom_id, RP_INVALID_ID outside instances */
 } rp_hit;
 
 typedef struct rp_rayhit {
@@ -202,8 +207,18 @@ RP_API void *rp_geometry_new_buffer(rp_geometry *geometry, rp_buffer_type type, 
 RP_API void rp_geometry_set_user(rp_geometry *geometry, uint32_t prim_count, rp_user_bounds_fn bounds,
                                  rp_user_intersect_fn intersect, rp_user_occluded_fn occluded,
                                  void *user);
+/* Places a committed scene (retained) in an RP_GEOMETRY_INSTANCE geometry: xfm is the row-major
+ * 3x4 affine map from the scene's space to its parent's (x' = xfm[0..2] . x + xfm[3], ...), which
+ * must be invertible. Rays are mapped into the scene's space (their t unchanged); a hit reports
+ * the instanced scene's geom_id and prim_id, the normal mapped back (inverse transpose) and
+ * inst_id the geom_id of the outermost instance. Re-commit the parent when the scene changes. */
+RP_API void rp_geometry_set_instance(rp_geometry *geometry, rp_scene *scene, const float xfm[12]);
 /* Sets the visibility mask tested against ray.mask (default 0xFFFFFFFF). */
 RP_API void rp_geometry_set_mask(rp_geometry *geometry, uint32_t mask);
+/* Says that the contents of a buffer changed in place (same count). Moved vertices of triangle
+ * geometries let the next rp_scene_commit refit the BVH instead of rebuilding it (see
+ * rp_scene_desc.refit_max_growth); a changed index buffer makes it rebuild. */
+RP_API void rp_geometry_update(rp_geometry *geometry, rp_buffer_type type);
 /* Marks the geometry's buffers as final; scenes holding it must be committed again. */
 RP_API void rp_geometry_commit(rp_geometry *geometry);
 
@@ -215,10 +230,23 @@ typedef enum rp_build_quality {
     RP_BUILD_QUALITY_HIGH = 2    /* binned SAH, 64 bins */
 } rp_build_quality;
 
+/* The acceleration structure a scene's triangles are committed into; every kind answers every
+ * query with the same hits. Spheres and user primitives always go into a BVH of their own. */
+typedef enum rp_accel_type {
+    RP_ACCEL_BVH = 0,    /* binned SAH BVH, wide traversal layout (the default) */
+    RP_ACCEL_KDTREE = 1, /* SAH kd-tree, O(n log n) sweep build (Wald, Havran 2006) */
+    RP_ACCEL_BIH = 2     /* bounding interval hierarchy (Waechter, Keller 2006) */
+} rp_accel_type;
+#define RP_ACCEL_COUNT 3
+
 typedef struct rp_scene_desc {
     rp_build_quality quality;
     int bvh_width;      /* children per node of the traversal layout: 0 picks for the ISA, else 4, 8 or 16 */
     int max_leaf_size;  /* most primitives per leaf, 1..60 (0: 32); the SAH ends leaves below it */
+    rp_accel_type accel; /* 0: RP_ACCEL_BVH */
+    float refit_max_growth; /* a commit after only vertices moved refits the BVH, unless its SAH cost
+                               grows past this times the last build's (then it rebuilds); 0: 1.5,
+                               < 0: always rebuild */
 } rp_scene_desc;
 
 /* Measurements of the last commit. */
@@ -236,6 +264,9 @@ typedef struct rp_scene_stats {
     double build_ms;           /* wall time of the last commit */
     size_t bytes;              /* memory held by the acceleration structures */
     uint64_t degenerate_prims; /* triangles with two equal vertices: never hit, left out */
+    rp_accel_type accel;       /* the structure of the triangles (binary_nodes .. sah_cost describe it) */
+    uint64_t tri_refs;         /* triangle references in its leaves (a kd-tree holds straddlers twice) */
+    uint32_t refit;            /* 1 when the last commit refitted the BVH rather than rebuilding it */
 } rp_scene_stats;
 
 /* Returns the defaults for every zero field of desc. */
@@ -258,6 +289,8 @@ RP_API rp_error rp_scene_commit(rp_scene *scene);
 RP_API void rp_scene_get_bounds(const rp_scene *scene, rp_bounds *out);
 /* Measurements of the last commit. */
 RP_API void rp_scene_get_stats(const rp_scene *scene, rp_scene_stats *out);
+/* Name of an acceleration structure kind ("bvh", "kdtree", "bih"), or NULL for an unknown one. */
+RP_API const char *rp_accel_name(rp_accel_type type);
 
 /* ---- queries --------------------------------------------------------------------------------- */
 

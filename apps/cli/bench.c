@@ -1032,6 +1032,10 @@ static void usage(FILE *f) {
             "                     ranged, partition, span and auto traversal x 4x4..32x32 packets x\n"
             "                     primary / +shadows / 2-deep refraction / 2-bounce reflection,\n"
             "                     frusta off and on, against single and SIMD rays (repeats 3)\n"
+            "  --accel-grid       every acceleration structure (bvh, kdtree, bih): build time,\n"
+            "                     memory and Mrays/s of single rays, SIMD rays and 16x16 packets\n"
+            "                     per ray kind, on the same rays (repeats 3)\n"
+            "  --accel KIND       the structure of plain bench and --grid: bvh, kdtree or bih\n"
             "  --threads N        tracing threads (default 2); plain bench also times 1 thread\n"
             "  --isa NAME         raypack's kernels: auto (the widest the CPU has), scalar, sse,\n"
             "                     avx2 or avx512 (default auto)\n"
@@ -1065,6 +1069,10 @@ static int parse_args(int argc, char **argv, bench_opts *o) {
             o->grid = true;
             continue;
         }
+        if (strcmp(a, "--accel-grid") == 0) {
+            o->accel_grid = true;
+            continue;
+        }
         const char *val = cli_flag_value(cmd, argc, argv, &i);
         if (!val) return CLI_EXIT_USAGE;
         bool ok = true;
@@ -1076,6 +1084,8 @@ static int parse_args(int argc, char **argv, bench_opts *o) {
             ok = cli_parse_int(cmd, a, val, 1, CLI_MAX_THREADS, &o->threads);
         } else if (strcmp(a, "--isa") == 0) {
             ok = cli_parse_isa(cmd, a, val, &o->isa);
+        } else if (strcmp(a, "--accel") == 0) {
+            ok = cli_parse_accel(cmd, a, val, &o->accel);
         } else if (strcmp(a, "--repeats") == 0) {
             ok = cli_parse_int(cmd, a, val, 1, 1000, &o->repeats);
             o->repeats_set = true;
@@ -1174,7 +1184,7 @@ static bool setup_raypack(bench_ctx *ctx) {
 }
 
 rp_scene *bench_build_raypack(bench_ctx *ctx, double *wall_ms, rp_scene_stats *stats) {
-    rp_scene *scene = rp_scene_new(ctx->device, NULL);
+    rp_scene *scene = rp_scene_new(ctx->device, &(rp_scene_desc){.accel = ctx->opts.accel});
     rp_geometry *geom = rp_geometry_new(ctx->device, RP_GEOMETRY_TRIANGLE);
     if (!scene || !geom) {
         if (geom) rp_geometry_release(geom);
@@ -1410,7 +1420,11 @@ int cli_bench(int argc, char **argv) {
         fprintf(stderr, "raypack bench: --grid and --vs embree are separate runs\n");
         return CLI_EXIT_USAGE;
     }
-    if (ctx.opts.grid && !ctx.opts.repeats_set) ctx.opts.repeats = 3;
+    if (ctx.opts.accel_grid && (ctx.opts.grid || ctx.opts.vs_embree)) {
+        fprintf(stderr, "raypack bench: --accel-grid is a run of its own\n");
+        return CLI_EXIT_USAGE;
+    }
+    if ((ctx.opts.grid || ctx.opts.accel_grid) && !ctx.opts.repeats_set) ctx.opts.repeats = 3;
 #if !defined(RP_HAVE_EMBREE)
     if (ctx.opts.vs_embree) {
         fprintf(stderr, "raypack bench: --vs embree: raypack was built without Embree "
@@ -1430,7 +1444,7 @@ int cli_bench(int argc, char **argv) {
         return rc;
     }
 #endif
-    rc = ctx.opts.grid ? bench_grid(&ctx) : bench_core(&ctx);
+    rc = ctx.opts.accel_grid ? bench_accel_grid(&ctx) : ctx.opts.grid ? bench_grid(&ctx) : bench_core(&ctx);
     teardown(&ctx);
     return rc;
 }

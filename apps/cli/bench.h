@@ -32,6 +32,8 @@ typedef struct bench_opts {
     const char *json_path;   /* NULL: no JSON */
     bool vs_embree;
     bool grid;               /* --grid: the experiment grid of Overbeck et al. 2008, sec. 5 */
+    bool accel_grid;         /* --accel-grid: every acceleration structure on the same rays */
+    rp_accel_type accel;     /* --accel: the structure raypack's scene is built with */
     bool repeats_set;        /* --repeats was given (the grid's default differs) */
     int threads;             /* >= 1 */
     int isa;                 /* --isa: rp_device_desc.isa, 0 the best the CPU has */
@@ -246,6 +248,8 @@ bool bench_make_ray_sets(bench_ctx *ctx);
 /* Prints the scene, camera, light and device lines. */
 void bench_print_header(const bench_ctx *ctx);
 
+/* `raypack bench --accel-grid`: every structure on the same rays (bench_accel.c); returns the exit code. */
+int bench_accel_grid(bench_ctx *ctx);
 /* `raypack bench --grid`: the paper's experiment grid (bench_grid.c); returns the exit code. */
 int bench_grid(bench_ctx *ctx);
 

@@ -11,13 +11,14 @@
 
 static void info_usage(FILE *out) {
     fprintf(out,
-            "usage: raypack info [SCENE] [--threads N]\n"
+            "usage: raypack info [SCENE] [--threads N] [--accel bvh|kdtree|bih]\n"
             "\n"
             "Loads SCENE (the built-in room without one), builds its BVH and prints its primitives, bounds,\n"
             "materials, textures, lights, camera, and the BVH's nodes, depth, SAH cost and build time.\n"
             "\n"
             "options:\n"
             "  --threads N   build threads, 1..%d; 0 for all hardware threads [0]\n"
+            "  --accel KIND  the triangles' structure: bvh, kdtree or bih [bvh]\n"
             "  --materials   list every material (else the first 16)\n"
             "  -h, --help    this help\n",
             CLI_MAX_THREADS);
@@ -37,6 +38,7 @@ int cli_info(int argc, char **argv) {
     const char *path = NULL;
     int threads = 0;
     bool all_materials = false;
+    rp_accel_type accel = RP_ACCEL_BVH;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
@@ -45,6 +47,9 @@ int cli_info(int argc, char **argv) {
         } else if (strcmp(a, "--threads") == 0) {
             const char *v = cli_flag_value("info", argc, argv, &i);
             if (!v || !cli_parse_int("info", a, v, 0, CLI_MAX_THREADS, &threads)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--accel") == 0) {
+            const char *v = cli_flag_value("info", argc, argv, &i);
+            if (!v || !cli_parse_accel("info", a, v, &accel)) return CLI_EXIT_USAGE;
         } else if (strcmp(a, "--materials") == 0) {
             all_materials = true;
         } else if (a[0] == '-' && a[1] != '\0') {
@@ -90,7 +95,8 @@ int cli_info(int argc, char **argv) {
         goto done;
     }
     char err[512] = "";
-    rs = rp_render_scene_new(device, &d, NULL, err, sizeof err);
+    rp_render_scene_desc rdesc = {.accel = {.accel = accel}};
+    rs = rp_render_scene_new(device, &d, &rdesc, err, sizeof err);
     if (!rs) {
         fprintf(stderr, "raypack info: %s\n", err);
         goto done;
@@ -135,10 +141,17 @@ int cli_info(int argc, char **argv) {
     if (d.camera.width > 0) printf(", %dx%d", d.camera.width, d.camera.height);
     printf("\n");
     if (d.has_background) printf("background  (%g, %g, %g)\n", d.background[0], d.background[1], d.background[2]);
-    printf("bvh         %llu binary nodes, %llu leaves, depth %u, SAH cost %.2f\n",
-           (unsigned long long)st.binary_nodes, (unsigned long long)st.leaves, st.depth, st.sah_cost);
-    printf("layout      %llu inner nodes of width %u, %.2f MiB\n", (unsigned long long)st.wide_nodes, st.bvh_width,
-           (double)st.bytes / 1048576.0);
+    if (st.accel == RP_ACCEL_BVH) {
+        printf("bvh         %llu binary nodes, %llu leaves, depth %u, SAH cost %.2f\n",
+               (unsigned long long)st.binary_nodes, (unsigned long long)st.leaves, st.depth, st.sah_cost);
+        printf("layout      %llu inner nodes of width %u, %.2f MiB\n", (unsigned long long)st.wide_nodes, st.bvh_width,
+               (double)st.bytes / 1048576.0);
+    } else {
+        printf("%-11s %llu nodes (%llu inner), %llu leaves, depth %u, %llu triangle references, SAH cost %.2f, %.2f MiB\n",
+               rp_accel_name(st.accel), (unsigned long long)st.binary_nodes, (unsigned long long)st.wide_nodes,
+               (unsigned long long)st.leaves, st.depth, (unsigned long long)st.tri_refs, st.sah_cost,
+               (double)st.bytes / 1048576.0);
+    }
     int nthreads = rp_device_thread_count(device);
     printf("build       %.1f ms on %d thread%s\n", st.build_ms, nthreads, nthreads == 1 ? "" : "s");
     status = CLI_EXIT_OK;

@@ -35,6 +35,7 @@ static void render_usage(FILE *out) {
             "  --threads N            worker threads, 1..%d; 0 for all hardware threads [0]\n"
             "  --isa NAME             kernels: auto (the widest the CPU has), scalar, sse, avx2\n"
             "                         or avx512 [auto]; every choice gives the same image\n"
+            "  --accel KIND           the triangles' structure: bvh, kdtree or bih [bvh]\n"
             "  --traversal NAME       how Whitted's ray packets walk the BVH: auto (per packet, from\n"
             "                         its coherence: span, partition or its SIMD rays alone),\n"
             "                         masked, ranged, partition, span (ranged narrowed from both\n"
@@ -76,6 +77,7 @@ typedef struct render_options {
     const char *traversal_name;
     int packet;
     bool no_frustum;
+    rp_accel_type accel;
 } render_options;
 
 static const struct {
@@ -119,6 +121,9 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
         } else if (strcmp(a, "--isa") == 0) {
             VALUE();
             if (!cli_parse_isa(CMD, a, v, &o->isa)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--accel") == 0) {
+            VALUE();
+            if (!cli_parse_accel(CMD, a, v, &o->accel)) return CLI_EXIT_USAGE;
         } else if (strcmp(a, "--integrator") == 0) {
             VALUE();
             if (strcmp(v, "eyelight") == 0) {
@@ -454,7 +459,8 @@ int cli_render(int argc, char **argv) {
     if (!device) goto done;
     double t1 = cli_now_ms();
     char err[512] = "";
-    scene = rp_render_scene_new(device, &data, NULL, err, sizeof err);
+    rp_render_scene_desc sdesc = {.accel = {.accel = o.accel}};
+    scene = rp_render_scene_new(device, &data, &sdesc, err, sizeof err);
     if (!scene) {
         fprintf(stderr, "raypack render: %s\n", err);
         goto done;

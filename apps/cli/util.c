@@ -81,6 +81,16 @@ bool cli_parse_isa(const char *cmd, const char *flag, const char *text, int *out
     return false;
 }
 
+bool cli_parse_accel(const char *cmd, const char *flag, const char *text, rp_accel_type *out) {
+    for (int k = 0; k < RP_ACCEL_COUNT; k++)
+        if (strcmp(text, rp_accel_name((rp_accel_type)k)) == 0) {
+            *out = (rp_accel_type)k;
+            return true;
+        }
+    fprintf(stderr, "raypack %s: %s expects bvh, kdtree or bih, got '%s'\n", cmd, flag, text);
+    return false;
+}
+
 const char *cli_isa_name(int isa) {
     for (size_t i = 0; i < sizeof isa_names / sizeof isa_names[0]; i++)
         if (isa_names[i].code == isa) return isa_names[i].name;

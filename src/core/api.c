@@ -18,35 +18,35 @@ static inline bool query_ok(rp_scene *scene, const void *rays, const char *fn) {
 }
 
 void rp_intersect1(rp_scene *scene, rp_rayhit *rayhit) {
-    if (query_ok(scene, rayhit, "rp_intersect1")) scene->device->kernels->intersect1(&scene->accel, rayhit);
+    if (query_ok(scene, rayhit, "rp_intersect1")) scene->kernels->intersect1(&scene->accel, rayhit);
 }
 
 void rp_occluded1(rp_scene *scene, rp_ray *ray) {
-    if (query_ok(scene, ray, "rp_occluded1")) scene->device->kernels->occluded1(&scene->accel, ray);
+    if (query_ok(scene, ray, "rp_occluded1")) scene->kernels->occluded1(&scene->accel, ray);
 }
 
 void rp_intersect4(rp_scene *scene, const int32_t *valid, rp_rayhit4 *rayhit) {
-    if (query_ok(scene, rayhit, "rp_intersect4")) scene->device->kernels->intersect4(&scene->accel, valid, rayhit);
+    if (query_ok(scene, rayhit, "rp_intersect4")) scene->kernels->intersect4(&scene->accel, valid, rayhit);
 }
 
 void rp_intersect8(rp_scene *scene, const int32_t *valid, rp_rayhit8 *rayhit) {
-    if (query_ok(scene, rayhit, "rp_intersect8")) scene->device->kernels->intersect8(&scene->accel, valid, rayhit);
+    if (query_ok(scene, rayhit, "rp_intersect8")) scene->kernels->intersect8(&scene->accel, valid, rayhit);
 }
 
 void rp_intersect16(rp_scene *scene, const int32_t *valid, rp_rayhit16 *rayhit) {
-    if (query_ok(scene, rayhit, "rp_intersect16")) scene->device->kernels->intersect16(&scene->accel, valid, rayhit);
+    if (query_ok(scene, rayhit, "rp_intersect16")) scene->kernels->intersect16(&scene->accel, valid, rayhit);
 }
 
 void rp_occluded4(rp_scene *scene, const int32_t *valid, rp_ray4 *ray) {
-    if (query_ok(scene, ray, "rp_occluded4")) scene->device->kernels->occluded4(&scene->accel, valid, ray);
+    if (query_ok(scene, ray, "rp_occluded4")) scene->kernels->occluded4(&scene->accel, valid, ray);
 }
 
 void rp_occluded8(rp_scene *scene, const int32_t *valid, rp_ray8 *ray) {
-    if (query_ok(scene, ray, "rp_occluded8")) scene->device->kernels->occluded8(&scene->accel, valid, ray);
+    if (query_ok(scene, ray, "rp_occluded8")) scene->kernels->occluded8(&scene->accel, valid, ray);
 }
 
 void rp_occluded16(rp_scene *scene, const int32_t *valid, rp_ray16 *ray) {
-    if (query_ok(scene, ray, "rp_occluded16")) scene->device->kernels->occluded16(&scene->accel, valid, ray);
+    if (query_ok(scene, ray, "rp_occluded16")) scene->kernels->occluded16(&scene->accel, valid, ray);
 }
 
 /* Copies up to 16 rays of an array into a packet (SoA); returns the valid mask. */
@@ -67,7 +67,7 @@ static void pack16(const rp_ray *src, size_t stride, size_t n, rp_ray16 *p, int3
 
 void rp_intersect_array(rp_scene *scene, rp_rayhit *rayhits, size_t count, uint32_t flags) {
     if (count == 0 || !query_ok(scene, rayhits, "rp_intersect_array")) return;
-    const rp_kernels *k = scene->device->kernels;
+    const rp_kernels *k = scene->kernels;
     if (!(flags & RP_QUERY_COHERENT)) {
         for (size_t i = 0; i < count; i++) k->intersect1(&scene->accel, &rayhits[i]);
         return;
@@ -92,7 +92,7 @@ void rp_intersect_array(rp_scene *scene, rp_rayhit *rayhits, size_t count, uint3
 
 void rp_occluded_array(rp_scene *scene, rp_ray *rays, size_t count, uint32_t flags) {
     if (count == 0 || !query_ok(scene, rays, "rp_occluded_array")) return;
-    const rp_kernels *k = scene->device->kernels;
+    const rp_kernels *k = scene->kernels;
     if (!(flags & RP_QUERY_COHERENT)) {
         for (size_t i = 0; i < count; i++) k->occluded1(&scene->accel, &rays[i]);
         return;

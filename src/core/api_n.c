@@ -92,7 +92,7 @@ static bool live(const rp_rayhit_n *p, uint32_t i) {
 
 /* RP_TRAVERSAL_SINGLE and RP_TRAVERSAL_SIMD: the rays without the large packet. */
 static void trace_small(rp_scene *scene, rp_traversal mode, rp_rayhit_n *p, bool any) {
-    const rp_kernels *k = scene->device->kernels;
+    const rp_kernels *k = scene->kernels;
     const rp_accel *acc = &scene->accel;
     uint32_t count = p->n * p->n;
     if (mode == RP_TRAVERSAL_SINGLE) {
@@ -214,6 +214,11 @@ static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p
     rp_query_n_desc d = rp_query_n_desc_defaults(desc);
     if (d.traversal == RP_TRAVERSAL_SINGLE || d.traversal == RP_TRAVERSAL_SIMD) {
         trace_small(scene, d.traversal, p, any);
+        return;
+    }
+    /* the large-packet kernels walk the BVH; a kd-tree's or BIH's packet is traced as its SIMD rays */
+    if (scene->accel.alt) {
+        trace_small(scene, RP_TRAVERSAL_SIMD, p, any);
         return;
     }
     /* a packet too small for frustum tests to pay (packet_n.inc) gets none */

@@ -5,6 +5,7 @@
 #include <pthread.h>
 #include <stdatomic.h>
 
+#include "accel/accel.h"
 #include "accel/bvh/bvh.h"
 #include "raypack.h"
 #include "sys/sys.h"
@@ -41,6 +42,9 @@ struct rp_geometry {
     rp_user_intersect_fn user_intersect;
     rp_user_occluded_fn user_occluded;
     void *user;
+    uint32_t topo;        /* bumped by every change but moved vertices: a scene refits only if unchanged */
+    rp_scene *inst;       /* RP_GEOMETRY_INSTANCE: the placed scene (retained) */
+    float xfm[12], inv[12]; /* its object-to-parent map and the inverse, row-major 3x4 */
 };
 
 struct rp_scene {
@@ -51,6 +55,8 @@ struct rp_scene {
     uint32_t geom_count, geom_capacity;
     bool committed;       /* committed and not edited since */
     rp_accel accel;
+    const rp_kernels *kernels; /* the queries of the committed structure (the device's for a BVH) */
+    accel_built alt;      /* the triangles' kd-tree or BIH (desc.accel), else empty */
     /* storage behind accel */
     bvhw tri_bvh, prim_bvh;
     bvh2 tri_bvh2;        /* binary BVH of the triangles, leaves rewritten to tri4 blocks (large packets) */
@@ -60,6 +66,12 @@ struct rp_scene {
     size_t prim_count;
     rp_scene_stats stats;
     rp_bounds bounds;
+    /* what the last build saw, to tell whether the next commit may refit */
+    bool attach_changed;  /* a geometry was attached or detached since */
+    uint32_t *built_topo; /* rp_geometry.topo of each geom_id (RP_INVALID_ID: none) */
+    uint32_t built_count, built_capacity;
+    double built_cost;    /* bvh2_blocks_cost of the last build */
+    uint32_t inst_depth;  /* levels of instances below this scene (0: none) */
 };
 
 /* Raises an error on the calling thread: keeps it if it is the first since the last read, and

@@ -1,4 +1,5 @@
 /* Geometries: buffers (shared or owned) and user callbacks. */
+#include <math.h>
 #include <string.h>
 
 #include "core/core.h"
@@ -14,7 +15,8 @@ static size_t format_size(rp_format f) {
 
 rp_geometry *rp_geometry_new(rp_device *device, rp_geometry_type type) {
     if (!device) return NULL;
-    if (type != RP_GEOMETRY_TRIANGLE && type != RP_GEOMETRY_SPHERE && type != RP_GEOMETRY_USER) {
+    if (type != RP_GEOMETRY_TRIANGLE && type != RP_GEOMETRY_SPHERE && type != RP_GEOMETRY_USER &&
+        type != RP_GEOMETRY_INSTANCE) {
         device_error(device, RP_ERROR_INVALID_ARGUMENT, "rp_geometry_new: unknown geometry type");
         return NULL;
     }
@@ -45,6 +47,7 @@ void rp_geometry_release(rp_geometry *geometry) {
     rp_device *dev = geometry->device;
     free_owned(geometry, &geometry->buffers[0]);
     free_owned(geometry, &geometry->buffers[1]);
+    rp_scene_release(geometry->inst);
     sys_free(&dev->alloc, geometry, sizeof *geometry);
     rp_device_release(dev);
 }
@@ -58,7 +61,8 @@ static bool check_buffer(rp_geometry *g, rp_buffer_type type, rp_format format, 
              (type == RP_BUFFER_INDEX && format == RP_FORMAT_UINT3);
         break;
     case RP_GEOMETRY_SPHERE: ok = type == RP_BUFFER_VERTEX && format == RP_FORMAT_FLOAT4; break;
-    case RP_GEOMETRY_USER: ok = false; break;
+    case RP_GEOMETRY_USER:
+    case RP_GEOMETRY_INSTANCE: ok = false; break;
     default: ok = false; break;
     }
     if (!ok) {
@@ -82,6 +86,8 @@ void rp_geometry_set_buffer(rp_geometry *geometry, rp_buffer_type type, rp_forma
     if (!check_buffer(geometry, type, format, byte_stride, "rp_geometry_set_buffer: bad type, format or stride"))
         return;
     geom_buffer *b = &geometry->buffers[type];
+    /* new vertices in the same number are moved vertices; anything else changes the topology */
+    if (type != RP_BUFFER_VERTEX || !b->set || b->count != count || b->format != format) geometry->topo++;
     free_owned(geometry, b);
     b->data = (const uint8_t *)data + byte_offset;
     b->stride = byte_stride ? byte_stride : format_size(format);
@@ -111,6 +117,7 @@ void *rp_geometry_new_buffer(rp_geometry *geometry, rp_buffer_type type, rp_form
         return NULL;
     }
     geom_buffer *b = &geometry->buffers[type];
+    geometry->topo++;
     free_owned(geometry, b);
     b->owned = p;
     b->owned_bytes = bytes;
@@ -130,6 +137,7 @@ void rp_geometry_set_user(rp_geometry *geometry, uint32_t prim_count, rp_user_bo
                      "rp_geometry_set_user: not a user geometry, or a NULL callback");
         return;
     }
+    geometry->topo++;
     geometry->user_count = prim_count;
     geometry->user_bounds = bounds;
     geometry->user_intersect = intersect;
@@ -138,7 +146,17 @@ void rp_geometry_set_user(rp_geometry *geometry, uint32_t prim_count, rp_user_bo
 }
 
 void rp_geometry_set_mask(rp_geometry *geometry, uint32_t mask) {
-    if (geometry) geometry->mask = mask;
+    if (geometry) geometry->mask = mask, geometry->topo++;
+}
+
+void rp_geometry_update(rp_geometry *geometry, rp_buffer_type type) {
+    if (!geometry) return;
+    if ((unsigned)type > RP_BUFFER_INDEX) {
+        device_error(geometry->device, RP_ERROR_INVALID_ARGUMENT, "rp_geometry_update: bad buffer type");
+        return;
+    }
+    /* vertices: nothing to record, a commit reads them again; indices: a new topology */
+    if (type == RP_BUFFER_INDEX || geometry->type != RP_GEOMETRY_TRIANGLE) geometry->topo++;
 }
 
 void rp_geometry_commit(rp_geometry *geometry) {
@@ -148,6 +166,43 @@ void rp_geometry_commit(rp_geometry *geometry) {
     case RP_GEOMETRY_TRIANGLE: ok = geometry->buffers[RP_BUFFER_VERTEX].set && geometry->buffers[RP_BUFFER_INDEX].set; break;
     case RP_GEOMETRY_SPHERE: ok = geometry->buffers[RP_BUFFER_VERTEX].set; break;
     case RP_GEOMETRY_USER: ok = geometry->user_intersect != NULL; break;
+    case RP_GEOMETRY_INSTANCE: ok = geometry->inst != NULL; break;
     }
     if (!ok) device_error(geometry->device, RP_ERROR_INVALID_GEOMETRY, "rp_geometry_commit: a buffer or callback is missing");
+}
+
+/* Inverse of a row-major 3x4 affine map (false when singular). */
+static bool affine_inverse(const float m[12], float out[12]) {
+    double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], i = m[10];
+    double A = e * i - f * h, B = f * g - d * i, C = d * h - e * g;
+    double det = a * A + b * B + c * C;
+    if (!(fabs(det) > 1e-30) || !isfinite(det)) return false;
+    double r[9] = {A / det, (c * h - b * i) / det, (b * f - c * e) / det,
+                   B / det, (a * i - c * g) / det, (c * d - a * f) / det,
+                   C / det, (b * g - a * h) / det, (a * e - b * d) / det};
+    for (int row = 0; row < 3; row++) {
+        double t = -(r[3 * row] * m[3] + r[3 * row + 1] * m[7] + r[3 * row + 2] * m[11]);
+        for (int k = 0; k < 3; k++) out[4 * row + k] = (float)r[3 * row + k];
+        out[4 * row + 3] = (float)t;
+    }
+    for (int k = 0; k < 12; k++)
+        if (!isfinite(out[k])) return false;
+    return true;
+}
+
+void rp_geometry_set_instance(rp_geometry *geometry, rp_scene *scene, const float xfm[12]) {
+    if (!geometry) return;
+    float inv[12];
+    if (geometry->type != RP_GEOMETRY_INSTANCE || !scene || !xfm || scene->device != geometry->device ||
+        !affine_inverse(xfm, inv)) {
+        device_error(geometry->device, RP_ERROR_INVALID_ARGUMENT,
+                     "rp_geometry_set_instance: not an instance, no scene (or another device's), or a singular transform");
+        return;
+    }
+    rp_scene_retain(scene);
+    rp_scene_release(geometry->inst);
+    geometry->inst = scene;
+    memcpy(geometry->xfm, xfm, sizeof geometry->xfm);
+    memcpy(geometry->inv, inv, sizeof geometry->inv);
+    geometry->topo++;
 }

@@ -7,8 +7,13 @@
 #include "core/core.h"
 #include "geometry/sphere.h"
 
+static bool scene_refit(rp_scene *s);
+/* The node cost of the SAH a refit is judged by (in tri4 block tests, as the medium build's) */
+#define REFIT_TRAV_COST 0.5
+
 rp_scene_desc rp_scene_desc_defaults(const rp_scene_desc *desc) {
     rp_scene_desc d = desc ? *desc : (rp_scene_desc){0};
+    if (d.refit_max_growth == 0.0f) d.refit_max_growth = 1.5f;
     if (d.max_leaf_size <= 0) d.max_leaf_size = 32;
     if (d.max_leaf_size > 60) d.max_leaf_size = 60;
     return d;
@@ -16,10 +21,10 @@ rp_scene_desc rp_scene_desc_defaults(const rp_scene_desc *desc) {
 
 rp_scene *rp_scene_new(rp_device *device, const rp_scene_desc *desc) {
     if (!device) return NULL;
-    if (desc && ((unsigned)desc->quality > RP_BUILD_QUALITY_HIGH ||
+    if (desc && ((unsigned)desc->quality > RP_BUILD_QUALITY_HIGH || (unsigned)desc->accel >= RP_ACCEL_COUNT ||
                  (desc->bvh_width != 0 && desc->bvh_width != 4 && desc->bvh_width != 8 && desc->bvh_width != 16) ||
                  desc->max_leaf_size < 0 || desc->max_leaf_size > 60)) {
-        device_error(device, RP_ERROR_INVALID_ARGUMENT, "rp_scene_new: bad quality, bvh_width or max_leaf_size");
+        device_error(device, RP_ERROR_INVALID_ARGUMENT, "rp_scene_new: bad quality, accel, bvh_width or max_leaf_size");
         return NULL;
     }
     rp_scene *s = sys_calloc(&device->alloc, sizeof *s);
@@ -45,6 +50,7 @@ void scene_free_accel(rp_scene *s) {
     if (s->tri_bvh2.nodes) bvh2_free(a, &s->tri_bvh2);
     sys_free(a, s->tris, s->tri_block_count * sizeof(tri4));
     sys_free(a, s->prims, s->prim_count * sizeof(prim_ref));
+    accel_built_free(a, &s->alt);
     s->tris = NULL, s->prims = NULL;
     s->tri_block_count = s->prim_count = 0;
     memset(&s->accel, 0, sizeof s->accel);
@@ -56,6 +62,7 @@ void rp_scene_release(rp_scene *scene) {
     scene_free_accel(scene);
     for (uint32_t i = 0; i < scene->geom_count; i++) rp_geometry_release(scene->geoms[i]);
     sys_free(&dev->alloc, scene->geoms, scene->geom_capacity * sizeof(rp_geometry *));
+    sys_free(&dev->alloc, scene->built_topo, scene->built_capacity * sizeof(uint32_t));
     sys_free(&dev->alloc, scene, sizeof *scene);
     rp_device_release(dev);
 }
@@ -90,6 +97,7 @@ uint32_t rp_scene_attach(rp_scene *scene, rp_geometry *geometry) {
     rp_geometry_retain(geometry);
     scene->geoms[id] = geometry;
     scene->committed = false;
+    scene->attach_changed = true;
     return id;
 }
 
@@ -102,6 +110,7 @@ void rp_scene_detach(rp_scene *scene, uint32_t geom_id) {
     rp_geometry_release(scene->geoms[geom_id]);
     scene->geoms[geom_id] = NULL;
     scene->committed = false;
+    scene->attach_changed = true;
 }
 
 rp_geometry *rp_scene_get_geometry(rp_scene *scene, uint32_t geom_id) {
@@ -109,9 +118,32 @@ rp_geometry *rp_scene_get_geometry(rp_scene *scene, uint32_t geom_id) {
     return scene->geoms[geom_id];
 }
 
+/* Remembers what this build saw (scene_refit compares the next commit with it). */
+static void scene_record_build(rp_scene *s) {
+    const sys_allocator *a = &s->device->alloc;
+    if (s->geom_count > s->built_capacity) {
+        uint32_t *t = sys_alloc(a, (size_t)s->geom_count * sizeof *t);
+        if (!t) {
+            s->built_count = 0, s->attach_changed = true; /* no record: the next commit rebuilds */
+            return;
+        }
+        sys_free(a, s->built_topo, s->built_capacity * sizeof *t);
+        s->built_topo = t, s->built_capacity = s->geom_count;
+    }
+    for (uint32_t i = 0; i < s->geom_count; i++) s->built_topo[i] = s->geoms[i] ? s->geoms[i]->topo : RP_INVALID_ID;
+    s->built_count = s->geom_count;
+    s->attach_changed = false;
+    s->built_cost = s->tri_bvh2.nodes ? bvh2_blocks_cost(&s->tri_bvh2, REFIT_TRAV_COST) : 0.0;
+}
+
 rp_error rp_scene_commit(rp_scene *scene) {
     if (!scene) return RP_ERROR_INVALID_ARGUMENT;
     double t0 = sys_seconds();
+    if (scene_refit(scene)) {
+        scene->stats.build_ms = (sys_seconds() - t0) * 1e3;
+        scene->committed = true;
+        return RP_ERROR_NONE;
+    }
     scene_free_accel(scene);
     scene->committed = false;
     rp_error e = scene_build(scene);
@@ -120,6 +152,7 @@ rp_error rp_scene_commit(rp_scene *scene) {
         device_error(scene->device, e, "rp_scene_commit failed");
         return e;
     }
+    scene_record_build(scene);
     scene->stats.build_ms = (sys_seconds() - t0) * 1e3;
     scene->committed = true;
     return RP_ERROR_NONE;
@@ -133,6 +166,25 @@ void rp_scene_get_bounds(const rp_scene *scene, rp_bounds *out) {
 void rp_scene_get_stats(const rp_scene *scene, rp_scene_stats *out) {
     if (!scene || !out) return;
     *out = scene->stats;
+}
+
+const char *rp_accel_name(rp_accel_type type) {
+    switch (type) {
+    case RP_ACCEL_BVH: return "bvh";
+    case RP_ACCEL_KDTREE: return "kdtree";
+    case RP_ACCEL_BIH: return "bih";
+    }
+    return NULL;
+}
+
+/* The structures other than the BVH, by rp_accel_type (NULL: the BVH, built below). */
+static const accel_ops *accel_ops_of(rp_accel_type type) {
+    switch (type) {
+    case RP_ACCEL_KDTREE: return &accel_kdtree;
+    case RP_ACCEL_BIH: return &accel_bih;
+    case RP_ACCEL_BVH: return NULL;
+    }
+    return NULL;
 }
 
 /* ---- commit ------------------------------------------------------------------------------- */
@@ -188,6 +240,16 @@ static bool load_triangle(const rp_geometry *g, uint32_t prim, vec3 v[3]) {
         if (!v3_finite(v[k])) return false;
     }
     return true;
+}
+
+/* accel_tri_input.fetch: a gathered (so valid) triangle's vertices and its geometry's mask. */
+static void tri_fetch(const void *user, prim_ref r, float v[9], uint32_t *mask) {
+    const rp_scene *s = user;
+    const rp_geometry *g = s->geoms[r.geom];
+    vec3 p[3] = {{0}};
+    load_triangle(g, r.prim, p);
+    for (int k = 0; k < 3; k++) v[3 * k] = p[k].x, v[3 * k + 1] = p[k].y, v[3 * k + 2] = p[k].z;
+    *mask = g->mask;
 }
 
 /* Packing of the triangle BVH's leaves into tri4 blocks. A leaf's first block comes from a prefix
@@ -317,6 +379,21 @@ static bool leaf_range(void *user, const bvh_node *leaf, uint32_t *first, uint32
 
 static bool sphere_intersect_cb(const rp_accel *acc, prim_ref ref, rp_ray *ray, rp_hit *hit);
 static bool sphere_occluded_cb(const rp_accel *acc, prim_ref ref, const rp_ray *ray);
+
+/* Levels of instances from scene c down, walking the geometries as they are now (a cycle of
+ * instances reads as too deep, so a commit never makes one). */
+static uint32_t instance_depth(const rp_scene *c, uint32_t level) {
+    if (level > RP_MAX_INSTANCE_DEPTH) return level;
+    uint32_t d = level;
+    for (uint32_t i = 0; i < c->geom_count; i++) {
+        const rp_geometry *g = c->geoms[i];
+        if (!g || g->type != RP_GEOMETRY_INSTANCE || !g->inst) continue;
+        uint32_t k = instance_depth(g->inst, level + 1);
+        if (k > d) d = k;
+        if (d > RP_MAX_INSTANCE_DEPTH) break;
+    }
+    return d;
+}
 
 #define SMALL_BUILD 4096u /* primitives */
 
@@ -472,11 +549,13 @@ rp_error scene_build(rp_scene *s) {
     rp_error err = RP_ERROR_NONE;
     box3 bounds = box3_empty();
     double mean_side = 0.0; /* of the triangle leaves, for coherent_extent */
+    uint32_t inst_depth = 0;
     /* share the device's threads unless a parallel_for is running (commit called from a task) */
     bool locked = pthread_mutex_trylock(&s->device->pool_lock) == 0;
     sys_pool *pool = locked ? s->device->pool : NULL;
     /* collect valid primitives */
     err = gather_triangles(s, pool, &tris, &st, &bounds);
+    box3 tri_bounds = bounds;
     for (uint32_t gi = 0; gi < s->geom_count && err == RP_ERROR_NONE; gi++) {
         rp_geometry *g = s->geoms[gi];
         if (!g) continue;
@@ -502,6 +581,38 @@ rp_error scene_build(rp_scene *s) {
                 }
                 st.spheres++;
             }
+            break;
+        }
+        case RP_GEOMETRY_INSTANCE: {
+            const rp_scene *c = g->inst;
+            uint32_t depth = c ? instance_depth(c, 1) : 0;
+            if (!c || !c->committed || depth > RP_MAX_INSTANCE_DEPTH) {
+                err = RP_ERROR_INVALID_GEOMETRY;
+                break;
+            }
+            if (depth > inst_depth) inst_depth = depth;
+            rp_bounds cb = c->bounds;
+            if (!(cb.lower_x <= cb.upper_x)) break; /* an empty scene: nothing to place */
+            box3 b = box3_empty();
+            for (int corner = 0; corner < 8; corner++) {
+                float p[3] = {corner & 1 ? cb.upper_x : cb.lower_x, corner & 2 ? cb.upper_y : cb.lower_y,
+                              corner & 4 ? cb.upper_z : cb.lower_z};
+                const float *m = g->xfm;
+                vec3 q = v3(m[0] * p[0] + m[1] * p[1] + m[2] * p[2] + m[3], m[4] * p[0] + m[5] * p[1] + m[6] * p[2] + m[7],
+                            m[8] * p[0] + m[9] * p[1] + m[10] * p[2] + m[11]);
+                b = box3_extend(b, q);
+            }
+            /* widened by a few ulps: the ray's mapping into the scene rounds */
+            vec3 e = v3_mul(v3_add(v3_max(v3(fabsf(b.lo.x), fabsf(b.lo.y), fabsf(b.lo.z)),
+                                          v3(fabsf(b.hi.x), fabsf(b.hi.y), fabsf(b.hi.z))), v3_sub(b.hi, b.lo)), 1e-6f);
+            b.lo = v3_sub(b.lo, e), b.hi = v3_add(b.hi, e);
+            if (!v3_finite(b.lo) || !v3_finite(b.hi)) {
+                st.rejected_prims++;
+                break;
+            }
+            bounds = box3_union(bounds, b);
+            if (!gather_push(a, &prims, b, gi, 0)) err = RP_ERROR_OUT_OF_MEMORY;
+            else st.user_prims++;
             break;
         }
         case RP_GEOMETRY_USER: {
@@ -541,7 +652,24 @@ rp_error scene_build(rp_scene *s) {
     bd.block_size = 4;
     bd.trav_cost = s->desc.quality == RP_BUILD_QUALITY_LOW ? 1.0f : 0.5f;
     int width = pick_width(s);
-    if (err == RP_ERROR_NONE && tris.count) {
+    const accel_ops *ops = accel_ops_of(s->desc.accel);
+    if (err == RP_ERROR_NONE && tris.count && ops) {
+        sys_pool *tpool = tris.count >= SMALL_BUILD ? pool : NULL;
+        accel_tri_input in = {.boxes = tris.boxes, .refs = tris.refs, .count = tris.count, .bounds = tri_bounds,
+                              .fetch = tri_fetch, .user = s};
+        if (!ops->build(a, tpool, &in, &s->alt)) {
+            err = RP_ERROR_OUT_OF_MEMORY;
+        } else {
+            st.triangles = tris.count;
+            st.binary_nodes = s->alt.nodes_total;
+            st.wide_nodes = s->alt.inner_nodes;
+            st.leaves = s->alt.leaves;
+            st.depth = s->alt.root_depth;
+            st.sah_cost = s->alt.sah_cost;
+            st.bytes = s->alt.node_bytes + ((size_t)s->alt.block_count + 1) * sizeof(tri4);
+            st.tri_refs = s->alt.tri_refs;
+        }
+    } else if (err == RP_ERROR_NONE && tris.count) {
         /* small meshes on the calling thread: waking the others took longer than the work */
         sys_pool *tpool = tris.count >= SMALL_BUILD ? pool : NULL;
         bvh2 b2;
@@ -595,6 +723,7 @@ rp_error scene_build(rp_scene *s) {
                 st.leaves = b2.leaf_count;
                 st.depth = b2.depth;
                 st.sah_cost = b2.sah_cost;
+                st.tri_refs = tris.count;
                 st.bytes = s->tri_bvh.bytes + (size_t)pc.block_count * sizeof(tri4) + (size_t)b2.node_count * sizeof(bvh_node);
                 s->tri_bvh2 = b2;
                 b2.nodes = NULL;
@@ -630,7 +759,9 @@ rp_error scene_build(rp_scene *s) {
     gather_free(a, &tris);
     gather_free(a, &prims);
     if (err != RP_ERROR_NONE) return err;
-    st.bvh_width = (uint32_t)width;
+    s->inst_depth = inst_depth;
+    st.bvh_width = ops ? 2u : (uint32_t)width;
+    st.accel = s->desc.accel;
     s->stats = st;
     s->bounds = (rp_bounds){bounds.lo.x, bounds.lo.y, bounds.lo.z, 0.0f, bounds.hi.x, bounds.hi.y, bounds.hi.z, 0.0f};
     uint32_t tri_mask_and = 0xFFFFFFFFu;
@@ -648,16 +779,59 @@ rp_error scene_build(rp_scene *s) {
         .prim_occluded = sphere_occluded_cb,
         .scene = s,
         .coherent_extent = coherent_extent(bounds, mean_side),
+        .alt = ops ? &s->alt : NULL,
+        .base = s->device->kernels,
     };
+    s->kernels = ops ? ops->kernels : s->device->kernels;
     return RP_ERROR_NONE;
 }
 
 /* ---- spheres and user primitives ---------------------------------------------------------- */
 
+/* A ray in an instance's space: origin and direction through the inverse map, t unchanged. */
+static void instance_ray(const rp_geometry *g, const rp_ray *ray, rp_ray *out) {
+    const float *m = g->inv;
+    *out = *ray;
+    out->org_x = m[0] * ray->org_x + m[1] * ray->org_y + m[2] * ray->org_z + m[3];
+    out->org_y = m[4] * ray->org_x + m[5] * ray->org_y + m[6] * ray->org_z + m[7];
+    out->org_z = m[8] * ray->org_x + m[9] * ray->org_y + m[10] * ray->org_z + m[11];
+    out->dir_x = m[0] * ray->dir_x + m[1] * ray->dir_y + m[2] * ray->dir_z;
+    out->dir_y = m[4] * ray->dir_x + m[5] * ray->dir_y + m[6] * ray->dir_z;
+    out->dir_z = m[8] * ray->dir_x + m[9] * ray->dir_y + m[10] * ray->dir_z;
+}
+
+/* The instanced scene's own queries (whatever its structure), the same leaf for every level. */
+static bool instance_intersect(const rp_geometry *g, uint32_t inst, rp_ray *ray, rp_hit *hit) {
+    const rp_scene *c = g->inst;
+    rp_rayhit rh;
+    memset(&rh, 0, sizeof rh);
+    instance_ray(g, ray, &rh.ray);
+    rh.hit.geom_id = RP_INVALID_ID;
+    c->kernels->intersect1(&c->accel, &rh);
+    if (rh.hit.geom_id == RP_INVALID_ID) return false;
+    const float *m = g->inv; /* normals go by the inverse transpose */
+    ray->tfar = rh.ray.tfar;
+    hit->Ng_x = m[0] * rh.hit.Ng_x + m[4] * rh.hit.Ng_y + m[8] * rh.hit.Ng_z;
+    hit->Ng_y = m[1] * rh.hit.Ng_x + m[5] * rh.hit.Ng_y + m[9] * rh.hit.Ng_z;
+    hit->Ng_z = m[2] * rh.hit.Ng_x + m[6] * rh.hit.Ng_y + m[10] * rh.hit.Ng_z;
+    hit->u = rh.hit.u, hit->v = rh.hit.v;
+    hit->geom_id = rh.hit.geom_id, hit->prim_id = rh.hit.prim_id;
+    hit->inst_id = inst; /* the outermost level writes last */
+    return true;
+}
+
+static bool instance_occluded(const rp_geometry *g, const rp_ray *ray) {
+    rp_ray r;
+    instance_ray(g, ray, &r);
+    g->inst->kernels->occluded1(&g->inst->accel, &r);
+    return r.tfar == -INFINITY;
+}
+
 static bool sphere_intersect_cb(const rp_accel *acc, prim_ref ref, rp_ray *ray, rp_hit *hit) {
     const rp_scene *s = acc->scene;
     const rp_geometry *g = s->geoms[ref.geom];
     if ((ray->mask & g->mask) == 0) return false;
+    if (g->type == RP_GEOMETRY_INSTANCE) return instance_intersect(g, ref.geom, ray, hit);
     if (g->type == RP_GEOMETRY_USER) {
         if (!g->user_intersect(g->user, ref.prim, ray, hit)) return false;
         hit->geom_id = ref.geom, hit->prim_id = ref.prim, hit->inst_id = RP_INVALID_ID;
@@ -682,8 +856,83 @@ static bool sphere_occluded_cb(const rp_accel *acc, prim_ref ref, const rp_ray *
     const rp_scene *s = acc->scene;
     const rp_geometry *g = s->geoms[ref.geom];
     if ((ray->mask & g->mask) == 0) return false;
+    if (g->type == RP_GEOMETRY_INSTANCE) return instance_occluded(g, ray);
     if (g->type == RP_GEOMETRY_USER) return g->user_occluded(g->user, ref.prim, ray);
     const float *c = geom_item(&g->buffers[RP_BUFFER_VERTEX], ref.prim);
     float org[3] = {ray->org_x, ray->org_y, ray->org_z}, dir[3] = {ray->dir_x, ray->dir_y, ray->dir_z}, t;
     return sphere_intersect(org, dir, ray->tnear, ray->tfar, c, c[3], &t);
+}
+
+/* ---- refit -------------------------------------------------------------------------------- */
+
+typedef struct refit_job {
+    const rp_scene *s;
+    tri4 *blocks;
+    uint32_t count, chunks;
+    _Atomic bool bad; /* a vertex became NaN / Inf: rebuild */
+} refit_job;
+
+/* Reloads the vertices of a chunk of the blocks from their lanes' (geom, prim); padding lanes
+ * repeat lane 0's triangle, so they reload it too. */
+static void refit_fill_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    refit_job *j = user;
+    uint32_t b = (uint32_t)((uint64_t)j->count * index / j->chunks), e = (uint32_t)((uint64_t)j->count * (index + 1) / j->chunks);
+    for (uint32_t i = b; i < e; i++) {
+        tri4 *t = &j->blocks[i];
+        for (int lane = 0; lane < 4; lane++) {
+            vec3 v[3];
+            if (!load_triangle(j->s->geoms[t->geom[lane]], t->prim[lane], v)) {
+                atomic_store(&j->bad, true);
+                return;
+            }
+            for (int q = 0; q < 3; q++) t->v[3 * q][lane] = v[q].x, t->v[3 * q + 1][lane] = v[q].y, t->v[3 * q + 2][lane] = v[q].z;
+        }
+    }
+}
+
+/* A commit after only vertices moved: the triangle BVH keeps its topology, its blocks get the
+ * new vertices, its boxes are refitted and the wide layout collapsed again from them. Declines
+ * (false, nothing changed that a rebuild does not redo) when the scene is not a plain triangle
+ * BVH scene whose geometries kept their topology since the last build, when a vertex became
+ * invalid, or when the refitted tree's SAH cost grew past refit_max_growth times the built one's. */
+static bool scene_refit(rp_scene *s) {
+    if (s->desc.accel != RP_ACCEL_BVH || s->desc.refit_max_growth < 0.0f || !s->tri_bvh2.nodes || !s->tris ||
+        s->attach_changed || s->geom_count != s->built_count || s->prim_count || s->stats.rejected_prims ||
+        s->stats.degenerate_prims)
+        return false;
+    for (uint32_t i = 0; i < s->geom_count; i++) {
+        const rp_geometry *g = s->geoms[i];
+        if (!g) {
+            if (s->built_topo[i] != RP_INVALID_ID) return false;
+            continue;
+        }
+        if (g->type != RP_GEOMETRY_TRIANGLE || g->topo != s->built_topo[i]) return false;
+    }
+    const sys_allocator *a = &s->device->alloc;
+    bool locked = pthread_mutex_trylock(&s->device->pool_lock) == 0;
+    sys_pool *pool = locked ? s->device->pool : NULL;
+    refit_job j = {.s = s, .blocks = s->tris, .count = (uint32_t)(s->tri_block_count - 1)};
+    j.chunks = pool && j.count >= 1024 ? (uint32_t)sys_pool_threads(pool) * 8 : 1;
+    atomic_store(&j.bad, false);
+    if (j.chunks > 1) sys_pool_parallel_for(pool, j.chunks, refit_fill_task, &j);
+    else refit_fill_task(&j, 0, 0);
+    bool ok = !atomic_load(&j.bad);
+    double cost = ok ? bvh2_refit_blocks(&s->tri_bvh2, s->tris, REFIT_TRAV_COST) : 0.0;
+    if (ok && cost > (double)s->desc.refit_max_growth * s->built_cost) ok = false;
+    bvhw wide = {0};
+    if (ok) ok = bvhw_from_bvh2(a, j.count >= 1024 ? pool : NULL, &s->tri_bvh2, s->tri_bvh.width, leaf_range, NULL, &wide);
+    if (locked) pthread_mutex_unlock(&s->device->pool_lock);
+    if (!ok) return false;
+    bvhw_free(a, &s->tri_bvh);
+    s->tri_bvh = wide;
+    const bvh_node *r = &s->tri_bvh2.nodes[0];
+    s->bounds = (rp_bounds){r->lo[0], r->lo[1], r->lo[2], 0.0f, r->hi[0], r->hi[1], r->hi[2], 0.0f};
+    s->accel.nodes = s->tri_bvh.nodes;
+    s->stats.wide_nodes = s->tri_bvh.node_count;
+    s->stats.sah_cost = cost;
+    s->stats.bytes = s->tri_bvh.bytes + (s->tri_block_count - 1) * sizeof(tri4) +
+                     (size_t)s->tri_bvh2.node_count * sizeof(bvh_node);
+    s->stats.refit = 1;
+    return true;
 }

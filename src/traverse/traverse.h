@@ -56,6 +56,9 @@ struct rp_accel {
     prim_occluded_fn prim_occluded;
     const void *scene;         /* the rp_scene, for the primitive callbacks */
     float coherent_extent;     /* packets whose origins spread further are traced ray by ray */
+    /* another structure holds the triangles (kd-tree, BIH: src/accel/accel.h), nodes is NULL */
+    const void *alt;           /* its accel_built, or NULL (the BVH above) */
+    const struct rp_kernels *base; /* the device's BVH kernels, for the spheres and user primitives */
 };
 
 typedef struct rp_kernels {

@@ -55,6 +55,12 @@ static inline bvh_prim bvh_prim_of(box3 b) {
 bool bvh_build(const sys_allocator *alloc, sys_pool *pool, bvh_prim *boxes, uint32_t n, const bvh_build_desc *desc,
                bvh2 *out);
 void bvh2_free(const sys_allocator *alloc, bvh2 *bvh);
+/* SAH cost of a binary BVH whose leaves are ranges of tri4 blocks: inner nodes trav_cost, leaves
+ * their blocks, each weighted by its half area over the root's. */
+double bvh2_blocks_cost(const bvh2 *bvh, double trav_cost);
+/* Refits such a BVH to its blocks' vertices (topology unchanged) and returns its new cost. */
+struct tri4;
+double bvh2_refit_blocks(bvh2 *bvh, const struct tri4 *blocks, double trav_cost);
 
 /* Wide node of width W (4, 8 or 16) is stored as floats bounds[6][W] (lo_x, hi_x, lo_y, hi_y,
  * lo_z, hi_z) followed by uint32_t child[W]. A child reference is either an inner node index or a

@@ -1,0 +1,405 @@
+// rp-test: labels=core timeout=600
+/* The kd-tree and the BIH (rp_scene_desc.accel) against a brute-force reference and against the
+ * BVH, every query kind: intersect / occluded of single rays, 4/8/16-ray packets, n x n packets
+ * (8x8, 16x16, every traversal) and arrays (both hints), on random rays over generated meshes
+ * (soups with duplicates and zero-area triangles, axis-aligned boxes, a sphere mesh, a mesh plus
+ * spheres) and the real cornell box, teapot and bunny: the same (geom, prim) as brute force and
+ * bit for bit the BVH's distance, barycentrics and normal. */
+#include <math.h>
+
+#include "mesh_gen.h"
+#include "raypack.h"
+#include "raypack_io.h"
+#include "rp_test.h"
+#include "sys/sys.h"
+#include "traverse/traverse.h"
+
+typedef struct ref_hit {
+    float t;
+    uint32_t prim;
+} ref_hit;
+
+/* Brute force over every triangle with the reference test and the (geom, prim) tie-break. */
+static ref_hit brute_force(const test_mesh *m, const rp_ray *r) {
+    ref_hit h = {r->tfar, RP_INVALID_ID};
+    float o[3] = {r->org_x, r->org_y, r->org_z}, d[3] = {r->dir_x, r->dir_y, r->dir_z};
+    for (uint32_t i = 0; i < m->nt; i++) {
+        const float *v0 = &m->v[3 * m->idx[3 * i]], *v1 = &m->v[3 * m->idx[3 * i + 1]], *v2 = &m->v[3 * m->idx[3 * i + 2]];
+        if (!isfinite(v0[0] + v0[1] + v0[2] + v1[0] + v1[1] + v1[2] + v2[0] + v2[1] + v2[2])) continue;
+        float t, u, v;
+        if (tri_intersect_ref(o, d, r->tnear, h.t, v0, v1, v2, &t, &u, &v) &&
+            (t < h.t || (t == h.t && i < h.prim))) {
+            h.t = t, h.prim = i;
+        }
+    }
+    return h;
+}
+
+/* Random rays: half from inside the bounds in random directions, half from outside aimed at
+ * random points of random triangles (so most of them hit). */
+static void make_rays(const test_mesh *m, rp_ray *rays, uint32_t n, uint64_t seed) {
+    test_rng g = {seed};
+    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t i = 0; i < m->nv; i++)
+        for (int a = 0; a < 3; a++) {
+            float x = m->v[3 * i + a];
+            if (x < lo[a]) lo[a] = x;
+            if (x > hi[a]) hi[a] = x;
+        }
+    for (uint32_t i = 0; i < n; i++) {
+        rp_ray *r = &rays[i];
+        float o[3], d[3];
+        if (i % 2) {
+            for (int a = 0; a < 3; a++) o[a] = lo[a] + (hi[a] - lo[a]) * test_rng_float(&g);
+            for (int a = 0; a < 3; a++) d[a] = test_rng_float(&g) * 2.0f - 1.0f;
+        } else {
+            uint32_t t = test_rng_u32(&g) % m->nt;
+            float b1 = test_rng_float(&g), b2 = test_rng_float(&g);
+            if (b1 + b2 > 1.0f) b1 = 1.0f - b1, b2 = 1.0f - b2;
+            float p[3];
+            for (int a = 0; a < 3; a++) {
+                float v0 = m->v[3 * m->idx[3 * t] + a], v1 = m->v[3 * m->idx[3 * t + 1] + a], v2 = m->v[3 * m->idx[3 * t + 2] + a];
+                p[a] = v0 + b1 * (v1 - v0) + b2 * (v2 - v0);
+                o[a] = lo[a] - (hi[a] - lo[a]) * 0.5f + (hi[a] - lo[a]) * 2.0f * test_rng_float(&g);
+                d[a] = p[a] - o[a];
+            }
+        }
+        uint32_t block = i / 16;
+        if (block % 4 == 3) {
+            /* shadow rays: from points on the mesh, spread over it, to one light far outside
+             * (one direction from spread origins: per-ray-mask traversal), the segments ending
+             * at the light or halfway */
+            test_rng pg = {seed * 1361u + block};
+            float light[3];
+            for (int a = 0; a < 3; a++) light[a] = hi[a] + (hi[a] - lo[a]) * (2.0f + test_rng_float(&pg));
+            uint32_t t = test_rng_u32(&g) % m->nt;
+            float b1 = test_rng_float(&g), b2 = test_rng_float(&g);
+            if (b1 + b2 > 1.0f) b1 = 1.0f - b1, b2 = 1.0f - b2;
+            for (int a = 0; a < 3; a++) {
+                float v0 = m->v[3 * m->idx[3 * t] + a], v1 = m->v[3 * m->idx[3 * t + 1] + a], v2 = m->v[3 * m->idx[3 * t + 2] + a];
+                o[a] = v0 + b1 * (v1 - v0) + b2 * (v2 - v0);
+                d[a] = light[a] - o[a];
+            }
+            *r = (rp_ray){.org_x = o[0], .org_y = o[1], .org_z = o[2], .tnear = 1e-3f, .dir_x = d[0], .dir_y = d[1],
+                          .dir_z = d[2], .tfar = i % 2 ? 1.0f : 0.5f, .mask = 0xFFFFFFFFu};
+            continue;
+        }
+        if (block % 4 != 2) {
+            /* packets of 16 that a camera would make: a shared origin outside the bounds and
+             * directions around one aimed at a triangle (block % 4 == 0), or spread across
+             * octant borders (block % 4 == 1, exercising the per-octant split) */
+            test_rng pg = {seed * 977u + block};
+            float po[3], pd[3];
+            uint32_t t = test_rng_u32(&pg) % m->nt;
+            for (int a = 0; a < 3; a++) {
+                po[a] = lo[a] - (hi[a] - lo[a]) * 0.5f + (hi[a] - lo[a]) * 2.0f * test_rng_float(&pg);
+                pd[a] = m->v[3 * m->idx[3 * t] + a] - po[a];
+            }
+            float spread = block % 4 == 0 ? 0.02f : 1.0f;
+            float len = sqrtf(pd[0] * pd[0] + pd[1] * pd[1] + pd[2] * pd[2]);
+            for (int a = 0; a < 3; a++) {
+                o[a] = po[a];
+                d[a] = pd[a] / len + (test_rng_float(&g) - 0.5f) * spread;
+            }
+            if (block % 4 == 1) d[i % 3] = (test_rng_float(&g) - 0.5f) * 0.2f; /* straddle an axis */
+        }
+        *r = (rp_ray){.org_x = o[0], .org_y = o[1], .org_z = o[2], .tnear = 0.0f, .dir_x = d[0], .dir_y = d[1],
+                      .dir_z = d[2], .tfar = INFINITY, .mask = 0xFFFFFFFFu};
+        if (i % 7 == 3) r->tfar = 0.5f; /* some finite segments, as for shadow rays */
+    }
+}
+
+
+/* One hit as every query reports it. */
+typedef struct got {
+    float t, u, v, ng[3];
+    uint32_t geom, prim;
+    int occluded;
+} got;
+
+static bool same_got(const got *a, const got *b) {
+    if (a->geom != b->geom) return false;
+    if (a->geom == RP_INVALID_ID) return true; /* a miss leaves prim_id as it was */
+    if (a->prim != b->prim) return false;
+    return memcmp(&a->t, &b->t, 4) == 0 && a->u == b->u && a->v == b->v && a->ng[0] == b->ng[0] &&
+           a->ng[1] == b->ng[1] && a->ng[2] == b->ng[2];
+}
+
+static void trace1(rp_scene *s, const rp_ray *r, got *g) {
+    rp_rayhit rh = {.ray = *r};
+    rh.hit.geom_id = RP_INVALID_ID;
+    rp_intersect1(s, &rh);
+    *g = (got){rh.ray.tfar, rh.hit.u, rh.hit.v, {rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z}, rh.hit.geom_id, rh.hit.prim_id, 0};
+    rp_ray o = *r;
+    rp_occluded1(s, &o);
+    g->occluded = o.tfar == -INFINITY;
+}
+
+#define TRACE_PACKET(W)                                                                           \
+    static void trace_##W(rp_scene *s, const rp_ray *rays, uint32_t n, got *out) {                \
+        for (uint32_t base = 0; base + W <= n; base += W) {                                       \
+            rp_rayhit##W p;                                                                       \
+            rp_ray##W sh;                                                                         \
+            int32_t valid[W];                                                                     \
+            memset(&p, 0, sizeof p);                                                              \
+            for (int i = 0; i < W; i++) {                                                         \
+                const rp_ray *r = &rays[base + (uint32_t)i];                                      \
+                valid[i] = (i % 5 == 4) ? 0 : -1;                                                 \
+                p.ray.org_x[i] = r->org_x, p.ray.org_y[i] = r->org_y, p.ray.org_z[i] = r->org_z;  \
+                p.ray.dir_x[i] = r->dir_x, p.ray.dir_y[i] = r->dir_y, p.ray.dir_z[i] = r->dir_z;  \
+                p.ray.tnear[i] = r->tnear, p.ray.tfar[i] = r->tfar, p.ray.mask[i] = r->mask;      \
+                p.hit.geom_id[i] = RP_INVALID_ID, p.hit.prim_id[i] = 12345u;                      \
+                sh.org_x[i] = r->org_x, sh.org_y[i] = r->org_y, sh.org_z[i] = r->org_z;           \
+                sh.dir_x[i] = r->dir_x, sh.dir_y[i] = r->dir_y, sh.dir_z[i] = r->dir_z;           \
+                sh.tnear[i] = r->tnear, sh.tfar[i] = r->tfar, sh.mask[i] = r->mask;               \
+                sh.time[i] = 0, sh.id[i] = 0, sh.flags[i] = 0;                                    \
+            }                                                                                     \
+            rp_intersect##W(s, valid, &p);                                                        \
+            rp_occluded##W(s, valid, &sh);                                                        \
+            for (int i = 0; i < W; i++) {                                                         \
+                got *g = &out[base + (uint32_t)i];                                                \
+                if (!valid[i]) {                                                                  \
+                    /* dead lanes stay untouched: marked so the comparison fails if not */      \
+                    bool clean = p.hit.prim_id[i] == 12345u && p.hit.geom_id[i] == RP_INVALID_ID && \
+                                 sh.tfar[i] == rays[base + (uint32_t)i].tfar;                     \
+                    *g = (got){0};                                                                \
+                    g->geom = clean ? 0xDEADu : 0xBADu;                                           \
+                    continue;                                                                     \
+                }                                                                                 \
+                *g = (got){p.ray.tfar[i], p.hit.u[i], p.hit.v[i], {p.hit.Ng_x[i], p.hit.Ng_y[i], p.hit.Ng_z[i]}, \
+                           p.hit.geom_id[i], p.hit.prim_id[i], sh.tfar[i] == -INFINITY};          \
+            }                                                                                     \
+        }                                                                                         \
+    }
+TRACE_PACKET(4)
+TRACE_PACKET(8)
+TRACE_PACKET(16)
+
+/* n x n packets of consecutive rays (their order in the packet: rp_packet_n_index's). */
+static void trace_n(rp_device *dev, rp_scene *s, uint32_t side, rp_traversal trav, const rp_ray *rays, uint32_t n,
+                    got *out) {
+    rp_rayhit_n p;
+    if (!rp_rayhit_n_alloc(dev, side, &p)) return;
+    uint32_t per = side * side;
+    float *keep = malloc(sizeof(float) * per);
+    for (uint32_t base = 0; base + per <= n; base += per) {
+        for (uint32_t i = 0; i < per; i++) {
+            const rp_ray *r = &rays[base + i];
+            p.org_x[i] = r->org_x, p.org_y[i] = r->org_y, p.org_z[i] = r->org_z;
+            p.dir_x[i] = r->dir_x, p.dir_y[i] = r->dir_y, p.dir_z[i] = r->dir_z;
+            p.tnear[i] = r->tnear, p.tfar[i] = r->tfar, p.geom_id[i] = RP_INVALID_ID;
+        }
+        rp_query_n_desc d = {.traversal = trav};
+        rp_intersect_n(s, &d, &p);
+        for (uint32_t i = 0; i < per; i++)
+            out[base + i] = (got){p.tfar[i], p.u[i], p.v[i], {p.Ng_x[i], p.Ng_y[i], p.Ng_z[i]}, p.geom_id[i], p.prim_id[i], 0};
+        for (uint32_t i = 0; i < per; i++) p.tfar[i] = rays[base + i].tfar;
+        rp_occluded_n(s, &d, &p);
+        for (uint32_t i = 0; i < per; i++) out[base + i].occluded = p.tfar[i] == -INFINITY;
+    }
+    free(keep);
+    rp_rayhit_n_free(dev, &p);
+}
+
+static void trace_array(rp_scene *s, const rp_ray *rays, uint32_t n, uint32_t flags, got *out) {
+    rp_rayhit *a = malloc(sizeof(rp_rayhit) * n);
+    rp_ray *o = malloc(sizeof(rp_ray) * n);
+    for (uint32_t i = 0; i < n; i++) {
+        a[i] = (rp_rayhit){.ray = rays[i]};
+        a[i].hit.geom_id = RP_INVALID_ID;
+        o[i] = rays[i];
+    }
+    rp_intersect_array(s, a, n, flags);
+    rp_occluded_array(s, o, n, flags);
+    for (uint32_t i = 0; i < n; i++)
+        out[i] = (got){a[i].ray.tfar, a[i].hit.u, a[i].hit.v, {a[i].hit.Ng_x, a[i].hit.Ng_y, a[i].hit.Ng_z},
+                       a[i].hit.geom_id, a[i].hit.prim_id, o[i].tfar == -INFINITY};
+    free(a);
+    free(o);
+}
+
+/* A scene of the mesh (geometry 0) and, when given, spheres (geometry 1). */
+static rp_scene *make_scene(rp_device *dev, rp_accel_type accel, const test_mesh *m, const float *spheres,
+                            uint32_t nspheres) {
+    rp_scene *s = rp_scene_new(dev, &(rp_scene_desc){.accel = accel});
+    rp_geometry *g = rp_geometry_new(dev, RP_GEOMETRY_TRIANGLE);
+    rp_geometry_set_buffer(g, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, m->v, 0, 0, m->nv);
+    rp_geometry_set_buffer(g, RP_BUFFER_INDEX, RP_FORMAT_UINT3, m->idx, 0, 0, m->nt);
+    rp_geometry_commit(g);
+    rp_scene_attach(s, g);
+    rp_geometry_release(g);
+    if (nspheres) {
+        rp_geometry *sp = rp_geometry_new(dev, RP_GEOMETRY_SPHERE);
+        rp_geometry_set_buffer(sp, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT4, spheres, 0, 0, nspheres);
+        rp_geometry_commit(sp);
+        rp_scene_attach(s, sp);
+        rp_geometry_release(sp);
+    }
+    CHECK(rp_scene_commit(s) == RP_ERROR_NONE);
+    return s;
+}
+
+/* Every query kind of every structure against the BVH's single rays (bit for bit) and, when
+ * brute is set, the BVH's against brute force. */
+static void check_mesh(const char *name, const test_mesh *m, uint32_t n, bool brute, const float *spheres,
+                       uint32_t nspheres) {
+    n = n / 256 * 256; /* whole 16x16 packets */
+    rp_ray *rays = malloc(sizeof(rp_ray) * n);
+    got *ref = malloc(sizeof(got) * n), *g = malloc(sizeof(got) * n);
+    make_rays(m, rays, n, 4242);
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
+    rp_scene *bvh = make_scene(dev, RP_ACCEL_BVH, m, spheres, nspheres);
+    uint32_t hits = 0, bad_brute = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        trace1(bvh, &rays[i], &ref[i]);
+        hits += ref[i].geom != RP_INVALID_ID;
+        if (brute) {
+            ref_hit b = brute_force(m, &rays[i]);
+            bool ok = b.prim == RP_INVALID_ID ? ref[i].geom == RP_INVALID_ID
+                                              : ref[i].geom == 0 && ref[i].prim == b.prim && ref[i].t == b.t;
+            bad_brute += !ok;
+        }
+    }
+    CHECKF(hits > n / 8, "%s: only %u of %u rays hit", name, hits, n);
+    CHECKF(bad_brute == 0, "%s: the BVH differs from brute force on %u rays", name, bad_brute);
+    for (int kind = RP_ACCEL_KDTREE; kind < RP_ACCEL_COUNT; kind++) {
+        const char *an = rp_accel_name((rp_accel_type)kind);
+        rp_scene *s = make_scene(dev, (rp_accel_type)kind, m, spheres, nspheres);
+        rp_scene_stats st;
+        rp_scene_get_stats(s, &st);
+        CHECKF(st.accel == (rp_accel_type)kind && st.triangles > 0 && st.leaves > 0 && st.tri_refs >= st.triangles &&
+                   st.bytes > 0, "%s %s: stats (accel %d, %llu refs)", name, an, (int)st.accel,
+               (unsigned long long)st.tri_refs);
+        uint32_t bad[12] = {0};
+        for (uint32_t i = 0; i < n; i++) {
+            trace1(s, &rays[i], &g[i]);
+            bad[0] += !same_got(&g[i], &ref[i]);
+            bad[1] += g[i].occluded != (ref[i].geom != RP_INVALID_ID);
+            if (getenv("RP_TEST_VERBOSE") && !same_got(&g[i], &ref[i]))
+                fprintf(stderr, "%s %s ray %u: bvh %u/%u t %.9g, got %u/%u t %.9g\n", name, an, i, ref[i].geom,
+                        ref[i].prim, (double)ref[i].t, g[i].geom, g[i].prim, (double)g[i].t);
+        }
+        void (*packets[3])(rp_scene *, const rp_ray *, uint32_t, got *) = {trace_4, trace_8, trace_16};
+        for (int w = 0; w < 3; w++) {
+            packets[w](s, rays, n, g);
+            for (uint32_t i = 0; i < n; i++) {
+                if (g[i].geom == 0xDEADu) continue;
+                bool b = g[i].geom == 0xBADu || !same_got(&g[i], &ref[i]) ||
+                         g[i].occluded != (ref[i].geom != RP_INVALID_ID);
+                if (b && getenv("RP_TEST_VERBOSE"))
+                    fprintf(stderr, "%s %s packet ray %u: bvh %u/%u t %.9g occl %d, got %u/%u t %.9g occl %d\n", name, an, i,
+                            ref[i].geom, ref[i].prim, (double)ref[i].t, ref[i].geom != RP_INVALID_ID, g[i].geom, g[i].prim,
+                            (double)g[i].t, g[i].occluded);
+                bad[2 + w] += b;
+            }
+        }
+        rp_traversal trav[2] = {RP_TRAVERSAL_AUTO, RP_TRAVERSAL_SINGLE};
+        uint32_t sides[2] = {8, 16};
+        for (int k = 0; k < 2; k++) {
+            trace_n(dev, s, sides[k], trav[k], rays, n, g);
+            for (uint32_t i = 0; i < n; i++)
+                bad[5 + k] += !same_got(&g[i], &ref[i]) || g[i].occluded != (ref[i].geom != RP_INVALID_ID);
+        }
+        for (int k = 0; k < 2; k++) {
+            trace_array(s, rays, n, k ? RP_QUERY_COHERENT : RP_QUERY_INCOHERENT, g);
+            for (uint32_t i = 0; i < n; i++)
+                bad[7 + k] += !same_got(&g[i], &ref[i]) || g[i].occluded != (ref[i].geom != RP_INVALID_ID);
+        }
+        static const char *what[9] = {"intersect1", "occluded1", "packet4", "packet8", "packet16", "8x8 auto",
+                                      "16x16 single", "array", "array coherent"};
+        for (int k = 0; k < 9; k++) CHECKF(bad[k] == 0, "%s %s: %s differs from the BVH on %u of %u rays", name, an, what[k], bad[k], n);
+        CHECK(rp_device_get_error(dev) == RP_ERROR_NONE);
+        printf("%s %s: %llu nodes, %llu leaves, depth %u, %llu refs for %llu triangles, %.2f ms\n", name, an,
+               (unsigned long long)st.binary_nodes, (unsigned long long)st.leaves, st.depth,
+               (unsigned long long)st.tri_refs, (unsigned long long)st.triangles, st.build_ms);
+        rp_scene_release(s);
+    }
+    printf("%s: %u triangles, %u spheres, %u rays, %u hit\n", name, m->nt, nspheres, n, hits);
+    rp_scene_release(bvh);
+    rp_device_release(dev);
+    free(rays), free(ref), free(g);
+}
+
+/* Axis-aligned boxes on a grid, some touching, some coplanar: the kd-tree's planar events and
+ * splits on the triangles' own planes. */
+static test_mesh boxes_mesh(int per_side) {
+    uint32_t nbox = (uint32_t)(per_side * per_side * per_side);
+    test_mesh m = {malloc(sizeof(float) * 24 * nbox), malloc(sizeof(uint32_t) * 36 * nbox), 8 * nbox, 12 * nbox};
+    static const uint32_t f[36] = {0, 1, 3, 0, 3, 2, 4, 6, 7, 4, 7, 5, 0, 4, 5, 0, 5, 1,
+                                   2, 3, 7, 2, 7, 6, 0, 2, 6, 0, 6, 4, 1, 5, 7, 1, 7, 3};
+    uint32_t b = 0;
+    for (int x = 0; x < per_side; x++)
+        for (int y = 0; y < per_side; y++)
+            for (int z = 0; z < per_side; z++, b++) {
+                float lo[3] = {(float)x, (float)y, (float)z}, size = (x + y + z) % 3 == 0 ? 1.0f : 0.5f;
+                for (uint32_t c = 0; c < 8; c++)
+                    for (int a = 0; a < 3; a++) m.v[24 * b + 3 * c + (uint32_t)a] = lo[a] + (float)((c >> (2 - a)) & 1u) * size;
+                for (int k = 0; k < 36; k++) m.idx[36 * b + (uint32_t)k] = 8 * b + f[k];
+            }
+    return m;
+}
+
+/* A shared scene through the loader, as one indexed mesh. */
+static bool load_mesh(const char *file, test_mesh *m) {
+    char path[1024], err[512];
+    if (!rp_test_scene(file, path, sizeof path)) return false;
+    rp_scene_data sd;
+    if (!rp_scene_data_load(path, &sd, err, sizeof err)) {
+        fprintf(stderr, "%s\n", err);
+        return false;
+    }
+    m->nv = (uint32_t)sd.vertex_count;
+    m->nt = (uint32_t)sd.triangle_count;
+    m->v = malloc(sizeof(float) * 3 * m->nv);
+    m->idx = malloc(sizeof(uint32_t) * 3 * m->nt);
+    memcpy(m->v, sd.positions, sizeof(float) * 3 * m->nv);
+    memcpy(m->idx, sd.indices, sizeof(uint32_t) * 3 * m->nt);
+    rp_scene_data_free(&sd);
+    return true;
+}
+
+
+int main(void) {
+    bool small = rp_test_sanitized();
+    test_mesh soup = test_mesh_soup(small ? 1000 : 5000, 0.08f, 11);
+    check_mesh("soup", &soup, small ? 512 : 4096, true, NULL, 0);
+    for (uint32_t t = 0; t < soup.nt / 10; t++) {
+        memcpy(&soup.v[9 * (t + soup.nt / 2)], &soup.v[9 * t], 9 * sizeof(float));
+        if (t % 3 == 0) memcpy(&soup.v[9 * t + 3], &soup.v[9 * t], 3 * sizeof(float)); /* v1 = v0 */
+    }
+    check_mesh("soup with duplicates", &soup, small ? 512 : 4096, true, NULL, 0);
+    float spheres[4 * 8];
+    for (int i = 0; i < 8; i++)
+        spheres[4 * i] = 0.1f * (float)i, spheres[4 * i + 1] = 0.5f, spheres[4 * i + 2] = 0.5f, spheres[4 * i + 3] = 0.05f;
+    check_mesh("soup and spheres", &soup, small ? 512 : 2048, false, spheres, 8);
+    test_mesh_free(&soup);
+    test_mesh bx = boxes_mesh(small ? 4 : 7);
+    check_mesh("boxes", &bx, small ? 512 : 4096, true, NULL, 0);
+    test_mesh_free(&bx);
+    float c[3] = {0.1f, -0.2f, 0.3f};
+    test_mesh sph = test_mesh_sphere(30, 60, c, 1.0f);
+    check_mesh("sphere", &sph, small ? 512 : 4096, true, NULL, 0);
+    test_mesh_free(&sph);
+    static const char *files[3] = {"cornell_box/cornell_box.obj", "spd_teapot.nff.gz", "stanford_bunny_bun_zipper.ply.gz"};
+    for (int f = 0; f < 3; f++) {
+        test_mesh m = {0};
+        bool ok = load_mesh(files[f], &m);
+        CHECKF(ok && m.nt > 0, "%s loads", files[f]);
+        if (ok) check_mesh(files[f], &m, small ? 1024 : (f == 2 ? 16384 : 8192), f < 2, NULL, 0);
+        test_mesh_free(&m);
+    }
+    /* a scene without triangles, and a bad accel value */
+    rp_device *dev = rp_device_new(NULL);
+    rp_scene *s = rp_scene_new(dev, &(rp_scene_desc){.accel = RP_ACCEL_KDTREE});
+    CHECK(s && rp_scene_commit(s) == RP_ERROR_NONE);
+    rp_rayhit rh = {.ray = {.dir_x = 1.0f, .tfar = INFINITY, .mask = ~0u}};
+    rh.hit.geom_id = RP_INVALID_ID;
+    rp_intersect1(s, &rh);
+    CHECK(rh.hit.geom_id == RP_INVALID_ID);
+    rp_scene_release(s);
+    CHECK(rp_scene_new(dev, &(rp_scene_desc){.accel = (rp_accel_type)RP_ACCEL_COUNT}) == NULL);
+    CHECK(rp_device_get_error(dev) == RP_ERROR_INVALID_ARGUMENT);
+    CHECK(rp_accel_name(RP_ACCEL_BIH) && strcmp(rp_accel_name(RP_ACCEL_BIH), "bih") == 0);
+    rp_device_release(dev);
+    return RP_TEST_END();
+}

@@ -1,0 +1,116 @@
+// rp-test: labels=bench timeout=300
+/* `--accel` in raypack render, info and bench, and `raypack bench --accel-grid` on a tiny scene
+ * (so it cannot rot): exit statuses, the table's check line, the JSON's keys, and renders that are
+ * byte for byte the same file whatever the structure. Speed is not checked: tests do not time. */
+#include <limits.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "raypack.h"
+#include "rp_test.h"
+
+static char exe[1024];
+static char output[65536];
+
+static int run(const char *args) {
+    char cmd[1024 + 4096 + 16];
+    snprintf(cmd, sizeof cmd, "'%s' %s 2>&1", exe, args);
+    FILE *p = popen(cmd, "r");
+    if (!p) return -1;
+    size_t n = fread(output, 1, sizeof output - 1, p);
+    output[n] = '\0';
+    int st = pclose(p);
+    return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+}
+
+#define EXPECT(args, status, text)                                                                          \
+    do {                                                                                                    \
+        int rc_ = run(args);                                                                                \
+        CHECKF(rc_ == (status) && strstr(output, (text)) != NULL,                                           \
+               "raypack %s: exit %d (expected %d), output lacks '%s':\n%s", args, rc_, status, text, output); \
+    } while (0)
+
+static bool find_exe(void) {
+    char self[900];
+    ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+    if (n <= 0) return false;
+    self[n] = '\0';
+    char *slash = strrchr(self, '/');
+    if (!slash) return false;
+    *slash = '\0';
+    snprintf(exe, sizeof exe, "%s/../raypack", self);
+    return access(exe, X_OK) == 0;
+}
+
+static char *slurp(const char *path, size_t *size) {
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    char *b = malloc((size_t)n + 1);
+    *size = fread(b, 1, (size_t)n, f);
+    b[*size] = '\0';
+    fclose(f);
+    return b;
+}
+
+int main(void) {
+    if (!find_exe()) {
+        CHECK(!"raypack binary built");
+        return RP_TEST_END();
+    }
+    const char *dir = getenv("RP_TEST_TMP");
+    char tmp[900], args[4096], buf[512];
+    snprintf(tmp, sizeof tmp, "%s", dir ? dir : "/tmp/raypack_test_cli_accel");
+    mkdir(tmp, 0777);
+    const char *teapot = rp_test_scene("spd_teapot.nff.gz", buf, sizeof buf);
+    if (!teapot) {
+        CHECK(!"spd_teapot found");
+        return RP_TEST_END();
+    }
+    EXPECT("info --accel octree", 2, "expects bvh, kdtree or bih");
+    EXPECT("render --accel", 2, "--accel");
+    EXPECT("bench --accel-grid --grid", 2, "--accel-grid");
+    snprintf(args, sizeof args, "info '%s' --accel kdtree", teapot);
+    EXPECT(args, 0, "triangle references");
+    snprintf(args, sizeof args, "info '%s' --accel bih", teapot);
+    EXPECT(args, 0, "bih ");
+    /* the same image from every structure, byte for byte (Whitted: shadows and reflections too) */
+    size_t sizes[RP_ACCEL_COUNT];
+    char *png[RP_ACCEL_COUNT];
+    static const char *names[RP_ACCEL_COUNT] = {"bvh", "kdtree", "bih"};
+    for (int a = 0; a < RP_ACCEL_COUNT; a++) {
+        char path[1024];
+        snprintf(path, sizeof path, "%s/teapot_%s.png", tmp, names[a]);
+        snprintf(args, sizeof args, "render '%s' --accel %s --width 96 --height 72 -o '%s'", teapot, names[a], path);
+        EXPECT(args, 0, "");
+        png[a] = slurp(path, &sizes[a]);
+        CHECKF(png[a] && sizes[a] > 100, "%s renders", names[a]);
+    }
+    for (int a = 1; a < RP_ACCEL_COUNT; a++)
+        CHECKF(png[0] && png[a] && sizes[a] == sizes[0] && memcmp(png[a], png[0], sizes[0]) == 0,
+               "the %s image equals the bvh one", names[a]);
+    for (int a = 0; a < RP_ACCEL_COUNT; a++) free(png[a]);
+    /* the grid on a tiny image */
+    char json[1024];
+    snprintf(json, sizeof json, "%s/accel_grid.json", tmp);
+    snprintf(args, sizeof args, "bench '%s' --accel-grid --width 64 --height 64 --repeats 1 --warmup 0 --json '%s'",
+             teapot, json);
+    EXPECT(args, 0, "every structure and mode finds the BVH's single-ray hits");
+    CHECK(strstr(output, "16x16") && strstr(output, "kdtree") && strstr(output, "diffuse"));
+    size_t n;
+    char *j = slurp(json, &n);
+    CHECK(j != NULL);
+    if (j) {
+        for (int a = 0; a < RP_ACCEL_COUNT; a++) {
+            char key[64];
+            snprintf(key, sizeof key, "\"%s\": {\"build_ms\": ", names[a]);
+            CHECKF(strstr(j, key) != NULL, "JSON has %s", key);
+        }
+        CHECK(strstr(j, "\"simd16\": {\"mrays_median\": ") && strstr(j, "\"tri_refs\": ") && strstr(j, "\"bytes\": "));
+        free(j);
+    }
+    return RP_TEST_END();
+}

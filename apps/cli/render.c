@@ -305,7 +305,7 @@ static void json_string(FILE *f, const char *s) {
     fputc('"', f);
 }
 
-static const char *const KIND_NAMES[RP_RAY_KIND_COUNT] = {"primary", "shadow", "reflection", "refraction"};
+static const char *const KIND_NAMES[RP_RAY_KIND_COUNT] = {"primary", "shadow", "reflection", "refraction", "bounce"};
 
 /* Number of entries of a depth histogram up to its last nonzero one. */
 static int depth_used(const uint64_t *h) {

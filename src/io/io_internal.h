@@ -258,4 +258,8 @@ static inline const char *io_parse_int(const char *p, int64_t *out) {
     return p;
 }
 
+/* Writes a Radiance HDR image (image_hdr.c); channels 1 or 3. */
+bool io_image_write_hdr(const char *path, int width, int height, int channels, const float *pixels, char *err,
+                        size_t err_size);
+
 #endif

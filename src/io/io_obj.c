@@ -124,9 +124,10 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
         size_t kw = (size_t)(q - p);
         rp_material_data *m = &pm.m;
         float tmp;
-        if (kw == 2 && p[0] == 'K' && (p[1] == 'd' || p[1] == 's' || p[1] == 'e')) {
-            float *dst = p[1] == 'd' ? m->kd : p[1] == 's' ? m->ks : m->ke;
-            if (!mtl_color(&f, &q, dst, p[1] == 'd' ? "Kd" : p[1] == 's' ? "Ks" : "Ke")) return false;
+        if (kw == 2 && p[0] == 'K' && (p[1] == 'd' || p[1] == 's' || p[1] == 'e' || p[1] == 'a')) {
+            float *dst = p[1] == 'd' ? m->kd : p[1] == 's' ? m->ks : p[1] == 'e' ? m->ke : m->ka;
+            if (!mtl_color(&f, &q, dst, p[1] == 'd' ? "Kd" : p[1] == 's' ? "Ks" : p[1] == 'e' ? "Ke" : "Ka"))
+                return false;
         } else if (kw == 2 && p[0] == 'T' && p[1] == 'f') {
             if (!mtl_color(&f, &q, pm.tf, "Tf")) return false;
             pm.has_tf = true;
@@ -173,7 +174,7 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
             if (t == IO_NONE) return false;
             m->map_kd = (int32_t)t;
         }
-        /* Everything else (Ka, map_Ks, bump, PBR extensions...) has no field in rp_material_data. */
+        /* Everything else (map_Ks, bump, PBR extensions...) has no field in rp_material_data. */
     }
     if (!mtl_finish(ctx, &pm)) return io_error(ctx, f.shown, f.line, "out of memory");
     ctx->bytes += buf->size;

@@ -24,6 +24,7 @@ static void scene_free(rp_render_scene *s) {
     free(s->materials);
     free(s->lights);
     free(s->cones);
+    light_scene_free(s);
     free(s);
 }
 
@@ -140,6 +141,11 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
         if (isfinite(bv[k]) && fabsf(bv[k]) > m) m = fabsf(bv[k]);
     }
     s->scale = m;
+    if (!light_scene_init(s, &dd, err, err_size)) {
+        char msg[600];
+        snprintf(msg, sizeof msg, "%s", err && err[0] ? err : "out of memory");
+        return fail(s, err, err_size, msg);
+    }
     return s;
 }
 

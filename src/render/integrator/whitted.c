@@ -1,104 +1,11 @@
-/* The tile renderer and the integrators (eye light, Whitted, AOVs). Tiles go to the device's
- * threads. Whitted traces n x n packets breadth first per ray kind (Overbeck et al. 2008, sec. 5);
- * the reference tracer (packet < 0), eye light and the AOVs trace a tile's primary rays as one
- * coherent array and secondary rays one by one. A pixel's value depends only on the pixel, and both
- * Whitted tracers share the shading arithmetic, so images depend neither on the thread count nor on
- * the packet settings. */
-#include "render.h"
+/* Whitted ray tracing: point lights, hard shadows, mirror reflection and refraction. The reference
+ * tracer (one ray at a time, depth first) and the packet tracer (n x n packets, breadth first per ray
+ * kind, Overbeck et al. 2008, sec. 5) share the shading arithmetic, so their images are identical. */
+#include "../render.h"
 
-#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
-rp_render_desc rp_render_desc_defaults(const rp_render_desc *desc) {
-    rp_render_desc d;
-    memset(&d, 0, sizeof d);
-    if (desc) d = *desc;
-    if (d.width <= 0) d.width = 512;
-    if (d.height <= 0) d.height = 512;
-    if (d.spp <= 0) d.spp = 1;
-    if (d.max_depth == 0) d.max_depth = 5;
-    if (d.max_depth < 0) d.max_depth = 0;
-    if (d.tile_size <= 0) d.tile_size = 16;
-    if (d.ambient == 0.0f) d.ambient = 0.08f;
-    if (d.ambient < 0.0f) d.ambient = 0.0f;
-    if (d.packet == 0) d.packet = 16;
-    return d;
-}
-
-int rp_render_channels(const rp_render_desc *desc) {
-    if (desc && desc->integrator == RP_INTEGRATOR_AOV && desc->aov == RP_AOV_DEPTH) return 1;
-    return 3;
-}
-
-/* What one Whitted ray found: the radiance so far and what is still to be traced for it (shadow
- * rays to the lights, a reflection and a refraction ray with their multipliers). Shared by the
- * depth-first and the packet tracer, so that both do the same float operations in the same order. */
-typedef struct whitted_slot {
-    v3 color;               /* background on a miss; ke + ambient, then + direct, then + children */
-    v3 direct;              /* sum of the unoccluded lights, in light order */
-    v3 org, ns, ng, kd, dir; /* shading point (lifted off the surface) for the shadow rays */
-    const rp_material *m;
-    bool lit, highlight;    /* lit: the ray hit a surface, whose lights must be gathered */
-    bool has_r, has_t;      /* a reflection / refraction ray follows */
-    float w_r, w_t;         /* path weights of the children */
-    v3 mul_r, mul_t;        /* what the children's radiance is multiplied by */
-    v3 org_r, dir_r, org_t, dir_t;
-} whitted_slot;
-
-/* One depth of the packet tracer: the packet of rays at that depth and their slots. */
-typedef struct whitted_level {
-    rp_rayhit_n rh;
-    int32_t *valid;
-    float *weight;
-    whitted_slot *slots;
-    /* what auto learns about this level's packets (rp_auto_tally), per ray kind: which way pays
-     * differs by kind and by depth (primary rays, then the bounces); a frame's packets start afresh */
-    rp_auto_tally tally[RP_RAY_KIND_COUNT];
-} whitted_level;
-
-/* Per-thread state, padded so counters of different threads do not share a cache line. */
-typedef struct render_thread {
-    _Alignas(64) uint64_t rays[RP_RAY_KIND_COUNT];
-    rp_rayhit *rayhits; /* tile_size^2 primary rays */
-    float *accum;       /* tile_size^2 * 3 */
-    whitted_level **levels;  /* max_depth + 1, each made on first use */
-    rp_rayhit_n shadow;      /* the shadow packet and its per-ray light contributions */
-    int32_t *shadow_valid;
-    v3 *shadow_contrib;
-    rp_counters_n *work;     /* RP_RAY_KIND_COUNT, or NULL when work is not counted */
-} render_thread;
-
-typedef struct render_frame {
-    rp_render_scene *s;
-    rp_render_desc desc;
-    render_camera cam;
-    const rp_light_source *lights;
-    size_t light_count;
-    rp_light_source headlight;
-    v3 background;
-    int channels;
-    float *pixels;
-    uint32_t tiles_x, tiles_y;
-    uint32_t tile;             /* tile side in pixels (a multiple of the packet side) */
-    bool packets;              /* Whitted in n x n packets */
-    rp_traversal traversal[RP_RAY_KIND_COUNT];
-    render_thread *threads;
-    atomic_uint tiles_done;
-    atomic_uint_least64_t rays_done;
-    atomic_flag reporting;
-    atomic_bool failed;        /* a thread ran out of memory */
-} render_frame;
-
-static double now_ms(void) {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
-}
-
-/* Distance secondary rays start off the surface, along the geometric normal. */
-static float ray_offset(const rp_render_scene *s) { return 2e-5f * s->scale; }
 
 
 /* Shading of a Whitted hit without the rays it spawns: the local terms, the shading point the
@@ -183,16 +90,19 @@ static void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_h
  * of the material); false when the light cannot reach the point, so no ray is needed. */
 static bool whitted_light(const render_frame *f, const whitted_slot *o, const rp_light_source *light, rp_ray *sr,
                           v3 *contrib) {
-    v3 pos, intensity;
-    bool inverse_square;
+    v3 pos = v3_make(0, 0, 0), intensity = pos;
+    bool inverse_square = false;
     switch (light->type) {
     case RP_LIGHT_SOURCE_POINT:
         pos = v3_load(light->point.position);
         intensity = v3_load(light->point.intensity);
         inverse_square = light->point.inverse_square;
         break;
-    default:
-        return false;
+    case RP_LIGHT_SOURCE_SPOT:
+    case RP_LIGHT_SOURCE_DIRECTIONAL:
+    case RP_LIGHT_SOURCE_TRIANGLE:
+    case RP_LIGHT_SOURCE_ENVIRONMENT:
+        return false; /* Whitted sees the files' point lights only */
     }
     float eps = ray_offset(f->s);
     v3 to = v3_sub(pos, o->org);
@@ -219,7 +129,7 @@ static bool whitted_light(const render_frame *f, const whitted_slot *o, const rp
 static v3 whitted_trace(const render_frame *f, render_thread *th, v3 org, v3 dir, rp_ray_kind kind,
                         int depth, float weight);
 
-static v3 whitted_shade(const render_frame *f, render_thread *th, const rp_ray *ray, const rp_hit *hit,
+v3 whitted_shade(const render_frame *f, render_thread *th, const rp_ray *ray, const rp_hit *hit,
                         int depth, float weight) {
     whitted_slot o;
     whitted_surface(f, ray, hit, depth, weight, &o);
@@ -277,7 +187,7 @@ static whitted_level *packet_level(const render_frame *f, render_thread *th, int
 }
 
 /* Sets ray q of a packet (tnear 0, no hit yet). */
-static void packet_set_ray(rp_rayhit_n *p, uint32_t q, v3 org, v3 dir, float tfar) {
+void packet_set_ray(rp_rayhit_n *p, uint32_t q, v3 org, v3 dir, float tfar) {
     p->org_x[q] = org.x;
     p->org_y[q] = org.y;
     p->org_z[q] = org.z;
@@ -301,6 +211,7 @@ static rp_query_n_desc packet_query(const render_frame *f, render_thread *th, wh
     case RP_RAY_SHADOW: fk = RP_FRUSTUM_SHADOW; break;
     case RP_RAY_REFLECTION:
     case RP_RAY_REFRACTION: fk = RP_FRUSTUM_SECONDARY; break;
+    case RP_RAY_BOUNCE:
     case RP_RAY_KIND_COUNT: break;
     }
     q.frustum = f->desc.no_frustum ? RP_FRUSTUM_NONE : fk;
@@ -332,7 +243,10 @@ static void packet_shadows(const render_frame *f, render_thread *th, whitted_lev
         case RP_LIGHT_SOURCE_POINT:
             for (int k = 0; k < 3; k++) qd.point[k] = light->point.position[k];
             break;
-        default:
+        case RP_LIGHT_SOURCE_SPOT:
+        case RP_LIGHT_SOURCE_DIRECTIONAL:
+        case RP_LIGHT_SOURCE_TRIANGLE:
+        case RP_LIGHT_SOURCE_ENVIRONMENT:
             qd.frustum = RP_FRUSTUM_NONE;
             break;
         }
@@ -405,57 +319,7 @@ static bool packet_trace(const render_frame *f, render_thread *th, int level, rp
     return packet_children(f, th, level, RP_RAY_REFLECTION) && packet_children(f, th, level, RP_RAY_REFRACTION);
 }
 
-static v3 aov_shade(const render_frame *f, const rp_ray *ray, const rp_hit *hit) {
-    bool miss = hit->geom_id == RP_INVALID_ID;
-    switch (f->desc.aov) {
-    case RP_AOV_DEPTH:
-        return v3_make(miss ? INFINITY : ray->tfar, 0, 0);
-    case RP_AOV_PRIMID: {
-        if (miss) return v3_make(0, 0, 0);
-        uint32_t h = render_hash(render_hash(hit->geom_id + 1u) ^ hit->prim_id);
-        return v3_make((float)(h & 255u) / 255.0f, (float)((h >> 8) & 255u) / 255.0f,
-                       (float)((h >> 16) & 255u) / 255.0f);
-    }
-    case RP_AOV_NORMAL:
-    case RP_AOV_ALBEDO: {
-        if (miss) return v3_make(0, 0, 0);
-        render_surface sf;
-        scene_surface(f->s, ray, hit, &sf);
-        if (f->desc.aov == RP_AOV_NORMAL) return v3_madd(v3_make(0.5f, 0.5f, 0.5f), sf.ns_raw, 0.5f);
-        return material_albedo(f->s, &f->s->materials[sf.material], &sf);
-    }
-    }
-    return v3_make(0, 0, 0);
-}
-
-static v3 shade_primary(const render_frame *f, render_thread *th, const rp_rayhit *rh) {
-    switch (f->desc.integrator) {
-    case RP_INTEGRATOR_EYELIGHT: {
-        if (rh->hit.geom_id == RP_INVALID_ID) return v3_make(0, 0, 0);
-        v3 ng = v3_normalize(v3_make(rh->hit.Ng_x, rh->hit.Ng_y, rh->hit.Ng_z));
-        float c = fabsf(v3_dot(ng, v3_make(rh->ray.dir_x, rh->ray.dir_y, rh->ray.dir_z)));
-        if (!(c <= 1.0f)) c = c > 1.0f ? 1.0f : 0.0f; /* NaN from a zero-area triangle */
-        return v3_make(c, c, c);
-    }
-    case RP_INTEGRATOR_WHITTED:
-        return whitted_shade(f, th, &rh->ray, &rh->hit, 0, 1.0f);
-    case RP_INTEGRATOR_AOV:
-        return aov_shade(f, &rh->ray, &rh->hit);
-    }
-    return v3_make(0, 0, 0);
-}
-
-static void report_progress(render_frame *f, uint32_t done) {
-    if (!f->desc.progress) return;
-    /* Skip the report rather than wait when another thread is in the callback. */
-    if (atomic_flag_test_and_set_explicit(&f->reporting, memory_order_acquire)) return;
-    f->desc.progress(f->desc.progress_user, done, f->tiles_x * f->tiles_y,
-                     atomic_load_explicit(&f->rays_done, memory_order_relaxed));
-    atomic_flag_clear_explicit(&f->reporting, memory_order_release);
-}
-
-/* Whitted radiance of one n x n block of a tile for sample s, added to the tile's accumulator. */
-static bool render_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
+bool whitted_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
                          int s) {
     const rp_render_desc *d = &f->desc;
     uint32_t n = (uint32_t)d->packet;
@@ -466,7 +330,7 @@ static bool render_block(const render_frame *f, render_thread *th, int bx, int b
             uint32_t q = rp_packet_n_index(n, i, j);
             int x = bx + (int)i, y = by + (int)j;
             float ox = 0.5f, oy = 0.5f;
-            if (d->spp > 1) {
+            if (d->spp > 1 || d->sample_start > 0) {
                 ox = render_random((uint32_t)x, (uint32_t)y, (uint32_t)s, 0);
                 oy = render_random((uint32_t)x, (uint32_t)y, (uint32_t)s, 1);
             }
@@ -491,71 +355,8 @@ static bool render_block(const render_frame *f, render_thread *th, int bx, int b
     return true;
 }
 
-static void render_tile(void *user, uint32_t index, uint32_t thread) {
-    render_frame *f = user;
-    render_thread *th = &f->threads[thread];
-    const rp_render_desc *d = &f->desc;
-    if (atomic_load_explicit(&f->failed, memory_order_relaxed)) return;
-    int ts = (int)f->tile;
-    int x0 = (int)(index % f->tiles_x) * ts, y0 = (int)(index / f->tiles_x) * ts;
-    int x1 = x0 + ts < d->width ? x0 + ts : d->width, y1 = y0 + ts < d->height ? y0 + ts : d->height;
-    int tw = x1 - x0, n = tw * (y1 - y0);
-    int spp = d->integrator == RP_INTEGRATOR_AOV ? 1 : d->spp;
-    uint64_t rays_before = 0;
-    for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays_before += th->rays[k];
-    memset(th->accum, 0, (size_t)n * 3 * sizeof(float));
-    for (int s = 0; s < spp; s++) {
-        if (f->packets) {
-            for (int by = y0; by < y1; by += d->packet)
-                for (int bx = x0; bx < x1; bx += d->packet)
-                    if (!render_block(f, th, bx, by, x0, y0, tw, y1 - y0, s)) {
-                        atomic_store(&f->failed, true);
-                        return;
-                    }
-            continue;
-        }
-        for (int i = 0; i < n; i++) {
-            int x = x0 + i % tw, y = y0 + i / tw;
-            float ox = 0.5f, oy = 0.5f;
-            if (spp > 1) {
-                ox = render_random((uint32_t)x, (uint32_t)y, (uint32_t)s, 0);
-                oy = render_random((uint32_t)x, (uint32_t)y, (uint32_t)s, 1);
-            }
-            rp_rayhit *rh = &th->rayhits[i];
-            camera_ray(&f->cam, (float)x + ox, (float)y + oy, &rh->ray);
-            rh->ray.id = (uint32_t)i;
-            rh->hit.geom_id = RP_INVALID_ID;
-            rh->hit.prim_id = RP_INVALID_ID;
-            rh->hit.inst_id = RP_INVALID_ID;
-        }
-        rp_intersect_array(f->s->scene, th->rayhits, (size_t)n, RP_QUERY_COHERENT);
-        th->rays[RP_RAY_PRIMARY] += (uint64_t)n;
-        for (int i = 0; i < n; i++) {
-            v3 c = shade_primary(f, th, &th->rayhits[i]);
-            th->accum[3 * i + 0] += c.x;
-            th->accum[3 * i + 1] += c.y;
-            th->accum[3 * i + 2] += c.z;
-        }
-    }
-    float inv = 1.0f / (float)spp;
-    for (int i = 0; i < n; i++) {
-        int x = x0 + i % tw, y = y0 + i / tw;
-        float *out = f->pixels + ((size_t)y * (size_t)d->width + (size_t)x) * (size_t)f->channels;
-        if (f->channels == 1) {
-            out[0] = th->accum[3 * i];
-        } else {
-            for (int k = 0; k < 3; k++) out[k] = spp == 1 ? th->accum[3 * i + k] : th->accum[3 * i + k] * inv;
-        }
-    }
-    uint64_t rays_after = 0;
-    for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays_after += th->rays[k];
-    atomic_fetch_add_explicit(&f->rays_done, rays_after - rays_before, memory_order_relaxed);
-    uint32_t done = atomic_fetch_add_explicit(&f->tiles_done, 1u, memory_order_relaxed) + 1u;
-    report_progress(f, done);
-}
-
 /* Allocates what a thread needs beyond its tile buffers for packet tracing. */
-static bool thread_packets_init(const render_frame *f, render_thread *th) {
+bool whitted_thread_init(const render_frame *f, render_thread *th) {
     uint32_t n = (uint32_t)f->desc.packet, nn = n * n;
     th->levels = calloc((size_t)f->desc.max_depth + 1, sizeof *th->levels);
     th->shadow_valid = calloc(nn, sizeof *th->shadow_valid);
@@ -565,9 +366,7 @@ static bool thread_packets_init(const render_frame *f, render_thread *th) {
            rp_rayhit_n_alloc(f->s->device, n, &th->shadow);
 }
 
-static void thread_free(const render_frame *f, render_thread *th) {
-    free(th->rayhits);
-    free(th->accum);
+void whitted_thread_free(const render_frame *f, render_thread *th) {
     for (int l = 0; th->levels && l <= f->desc.max_depth; l++) {
         whitted_level *lv = th->levels[l];
         if (!lv) continue;
@@ -582,108 +381,4 @@ static void thread_free(const render_frame *f, render_thread *th) {
     free(th->shadow_valid);
     free(th->shadow_contrib);
     free(th->work);
-}
-
-/* Traversal per ray kind. AUTO lets the core choose per packet from its coherence. */
-static void choose_traversal(const rp_render_desc *d, rp_traversal out[RP_RAY_KIND_COUNT]) {
-    for (int k = 0; k < RP_RAY_KIND_COUNT; k++) out[k] = d->traversal;
-}
-
-bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels, rp_render_stats *stats) {
-    if (!scene || !pixels) return false;
-    double t0 = now_ms();
-    rp_render_desc dd = rp_render_desc_defaults(desc);
-    bool packets = dd.integrator == RP_INTEGRATOR_WHITTED && dd.packet > 0;
-    if (packets && dd.packet != 4 && dd.packet != 8 && dd.packet != 16 && dd.packet != 32) return false;
-    switch (dd.traversal) {
-    case RP_TRAVERSAL_AUTO:
-    case RP_TRAVERSAL_MASKED:
-    case RP_TRAVERSAL_RANGED:
-    case RP_TRAVERSAL_PARTITION:
-    case RP_TRAVERSAL_SPAN:
-    case RP_TRAVERSAL_SINGLE:
-    case RP_TRAVERSAL_SIMD:
-        break;
-    default:
-        return false;
-    }
-    render_frame *f = calloc(1, sizeof *f);
-    if (!f) return false;
-    f->s = scene;
-    f->desc = dd;
-    f->packets = packets;
-    choose_traversal(&dd, f->traversal);
-    f->channels = rp_render_channels(&f->desc);
-    f->pixels = pixels;
-    rp_camera cam = f->desc.camera ? *f->desc.camera : rp_render_scene_default_camera(scene);
-    camera_setup(&cam, f->desc.width, f->desc.height, &f->cam);
-    f->lights = scene->lights;
-    f->light_count = scene->light_count;
-    if (f->light_count == 0) {
-        /* A scene without lights is lit from just above the eye, so that Whitted still shows it
-         * with some shadows. */
-        float dist = v3_length(v3_sub(v3_load(cam.pinhole.look), f->cam.eye));
-        v3 pos = v3_madd(f->cam.eye, f->cam.u, 0.25f * dist);
-        /* Inside a building the raised light could end up in a wall or on the floor above: then
-         * it sits at the eye itself. */
-        rp_ray probe;
-        render_ray_init(&probe, f->cam.eye, f->cam.u, 0.25f * dist);
-        rp_occluded1(scene->scene, &probe);
-        if (probe.tfar < 0.0f) pos = f->cam.eye;
-        f->headlight.type = RP_LIGHT_SOURCE_POINT;
-        f->headlight.point = (rp_point_light){.intensity = {1, 1, 1}};
-        f->headlight.point.position[0] = pos.x;
-        f->headlight.point.position[1] = pos.y;
-        f->headlight.point.position[2] = pos.z;
-        f->lights = &f->headlight;
-        f->light_count = 1;
-    }
-    const rp_scene_data *d = scene->data;
-    f->background = d->has_background ? v3_load(d->background) : v3_make(0, 0, 0);
-    /* Packet blocks never straddle tiles: a tile is a whole number of packets. */
-    uint32_t ts = (uint32_t)f->desc.tile_size;
-    if (packets) {
-        uint32_t n = (uint32_t)f->desc.packet;
-        ts = (ts < n ? n : ts + n - 1) / n * n;
-    }
-    f->tile = ts;
-    f->tiles_x = ((uint32_t)f->desc.width + ts - 1) / ts;
-    f->tiles_y = ((uint32_t)f->desc.height + ts - 1) / ts;
-    atomic_init(&f->tiles_done, 0u);
-    atomic_init(&f->rays_done, 0u);
-    atomic_flag_clear(&f->reporting);
-    atomic_init(&f->failed, false);
-
-    int nthreads = rp_device_thread_count(scene->device);
-    if (nthreads < 1) nthreads = 1;
-    f->threads = aligned_alloc(64, (size_t)nthreads * sizeof *f->threads);
-    bool ok = f->threads != NULL;
-    if (ok) memset(f->threads, 0, (size_t)nthreads * sizeof *f->threads);
-    for (int i = 0; ok && i < nthreads; i++) {
-        size_t bytes = ((size_t)ts * ts * sizeof(rp_rayhit) + 63u) & ~(size_t)63u;
-        f->threads[i].rayhits = aligned_alloc(64, bytes);
-        f->threads[i].accum = malloc((size_t)ts * ts * 3 * sizeof(float));
-        ok = f->threads[i].rayhits && f->threads[i].accum;
-        if (ok && packets) ok = thread_packets_init(f, &f->threads[i]);
-    }
-    if (ok) {
-        rp_device_parallel_for(scene->device, f->tiles_x * f->tiles_y, render_tile, f);
-        ok = !atomic_load(&f->failed);
-        if (ok && f->desc.progress)
-            f->desc.progress(f->desc.progress_user, f->tiles_x * f->tiles_y, f->tiles_x * f->tiles_y,
-                             atomic_load(&f->rays_done));
-    }
-    if (stats) {
-        memset(stats, 0, sizeof *stats);
-        for (int i = 0; ok && i < nthreads; i++)
-            for (int k = 0; k < RP_RAY_KIND_COUNT; k++) {
-                stats->rays[k] += f->threads[i].rays[k];
-                if (f->threads[i].work) rp_counters_n_add(&stats->work[k], &f->threads[i].work[k]);
-            }
-        stats->render_ms = now_ms() - t0;
-    }
-    for (int i = 0; f->threads && i < nthreads; i++) thread_free(f, &f->threads[i]);
-    free(f->threads);
-    free(f);
-    return ok;
 }

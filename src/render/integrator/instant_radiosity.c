@@ -234,6 +234,15 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                             live++;
                         }
                     if (!live) continue;
+                    /* Lanes that are not live get a live lane's ray, so that nothing in the packet
+                     * depends on what the thread traced before (its stale lanes). */
+                    uint32_t first = 0;
+                    while (!pt->vpl_valid[first]) first++;
+                    rp_rayhit_n *vp = &pt->vpl_packet;
+                    for (uint32_t q = 0; q < (uint32_t)(P * P); q++)
+                        if (!pt->vpl_valid[q])
+                            packet_set_ray(vp, q, v3_make(vp->org_x[first], vp->org_y[first], vp->org_z[first]),
+                                           v3_make(vp->dir_x[first], vp->dir_y[first], vp->dir_z[first]), vp->tfar[first]);
                     th->rays[RP_RAY_SHADOW] += live;
                     rp_query_n_desc qd = pbr_query(f, th, RP_RAY_SHADOW);
                     qd.point[0] = vs[v].p.x;

@@ -96,6 +96,9 @@ void pbr_thread_free(const render_frame *f, render_thread *th) {
 }
 
 bool pbr_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1) {
+    /* What auto traversal learns starts afresh per tile, so that the way each packet is traced (and
+     * any difference between the ways at an edge) does not depend on which thread had which tiles. */
+    memset(th->pbr->tally, 0, sizeof th->pbr->tally);
     if (f->desc.integrator == RP_INTEGRATOR_IR) return ir_tile(f, th, x0, y0, x1, y1);
     return path_tile(f, th, x0, y0, x1, y1);
 }

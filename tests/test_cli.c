@@ -82,7 +82,9 @@ int main(void) {
     EXPECT("render --spp 0", 2, "--spp expects an integer");
     EXPECT("render --max-depth 1.5", 2, "--max-depth expects an integer");
     EXPECT("render --eye 1,2", 2, "--eye expects three numbers");
-    EXPECT("render --integrator path", 2, "--integrator expects eyelight or whitted");
+    EXPECT("render --integrator radiosity", 2, "--integrator expects whitted, eyelight, direct, path, ir or ao");
+    EXPECT("render --tonemap reinhard", 2, "--tonemap expects srgb or aces");
+    EXPECT("render --ir-filter 4", 2, "--ir-filter expects an odd side");
     EXPECT("render --aov colour", 2, "--aov expects depth, normal, primid or albedo");
     EXPECT("render --traversal fast", 2, "--traversal expects auto, masked, ranged, partition, span, single or simd");
     EXPECT("render --packet 12", 2, "--packet expects 4, 8, 16 or 32");
@@ -92,7 +94,7 @@ int main(void) {
     EXPECT("bench --isa 16", 2, "--isa expects auto, scalar, sse, avx2 or avx512");
     EXPECT("render --frobnicate", 2, "unknown option '--frobnicate'");
     EXPECT("render a.obj b.obj", 2, "expected one SCENE");
-    EXPECT("render -o out.jpg", 2, "-o expects a file ending in .png, .pfm or .ppm");
+    EXPECT("render -o out.jpg", 2, "-o expects a file ending in .png, .pfm, .ppm or .hdr");
     EXPECT("info --threads -1", 2, "--threads expects an integer");
     EXPECT("info --bogus", 2, "unknown option '--bogus'");
 

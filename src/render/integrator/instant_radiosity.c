@@ -133,23 +133,23 @@ bool ir_frame_init(render_frame *f) {
 }
 
 /* Contribution of VPL v at point x, before the shadow ray; false when there is none. */
-static bool vpl_contrib(const pbr_frame *pf, const ir_point *x, const ir_vpl *v, float eps, rp_ray *ray, v3 *c) {
-    v3 org = v3_madd(x->p, x->ng, eps);
-    v3 d = v3_sub(v->p, org);
+static inline bool vpl_contrib(const pbr_frame *pf, const ir_point *x, const ir_vpl *v, v3 *wi_out, float *dist_out,
+                               v3 *c) {
+    v3 d = v3_sub(v->p, x->org);
     float d2 = v3_dot(d, d);
     if (!(d2 > 0.0f)) return false;
     float dist = sqrtf(d2);
     v3 wi = v3_scale(d, 1.0f / dist);
     float cx = v3_dot(wi, x->ns);
     if (cx <= 0.0f || v3_dot(wi, x->ng) <= 0.0f) return false;
-    float cv = v3_is_zero(v->n) ? 0.25f : fmaxf(0.0f, -v3_dot(v->n, wi)); /* 1/(4 pi) = (1/4) / pi */
-    if (cv <= 0.0f) return false;
-    v3 t, b;
-    bsdf_frame(x->ns, &t, &b);
-    v3 fv = bsdf_eval(&x->bsdf, bsdf_to_local(x->wo_world, t, b, x->ns), bsdf_to_local(wi, t, b, x->ns));
-    *c = v3_scale(v3_mul(fv, v->power), cx * cv / (PI_F * fmaxf(d2, pf->clamp_d2)));
+    float cv = v3_is_zero(v->n) ? 0.25f : -v3_dot(v->n, wi); /* 1/(4 pi) = (1/4) / pi */
+    if (!(cv > 0.0f)) return false;
+    v3 fv = x->is_lambert ? x->lambert : bsdf_eval(&x->bsdf, x->wo, bsdf_to_local(wi, x->t, x->b, x->ns));
+    float g = d2 > pf->clamp_d2 ? d2 : pf->clamp_d2;
+    *c = v3_scale(v3_mul(fv, v->power), cx * cv / (PI_F * g));
     if (v3_is_zero(*c)) return false;
-    render_ray_init(ray, org, wi, dist * (1.0f - 1e-4f));
+    *wi_out = wi;
+    *dist_out = dist * (1.0f - 1e-4f);
     return true;
 }
 
@@ -159,6 +159,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
     const rp_render_scene *s = f->s;
     int N = pf->interleave, P = pf->side, T = N * P, tw = x1 - x0;
     float eps = ray_offset(s);
+    const uint32_t *lane = pt->lane;
     /* Primary hits at pixel centres, P x P packets of neighbouring pixels. */
     for (int by = 0; by < T; by += P)
         for (int bx = 0; bx < T; bx += P) {
@@ -199,10 +200,13 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                     scene_surface(s, &ray, &hit, &sf);
                     pf->emit[gi] = material_emission(s, sf.material, &sf);
                     pt_->bsdf = material_bsdf(s, &s->materials[sf.material], &sf);
-                    pt_->p = sf.p;
+                    pt_->org = v3_madd(sf.p, sf.ng, eps);
                     pt_->ng = sf.ng;
                     pt_->ns = sf.ns;
-                    pt_->wo_world = v3_neg(v3_make(ray.dir_x, ray.dir_y, ray.dir_z));
+                    bsdf_frame(sf.ns, &pt_->t, &pt_->b);
+                    pt_->wo = bsdf_to_local(v3_neg(v3_make(ray.dir_x, ray.dir_y, ray.dir_z)), pt_->t, pt_->b, sf.ns);
+                    pt_->is_lambert = pt_->bsdf.type == BSDF_LAMBERT;
+                    pt_->lambert = v3_scale(pt_->bsdf.kd, 1.0f / PI_F);
                     pt_->valid = !bsdf_is_delta(&pt_->bsdf);
                     pf->depth[gi] = ray.tfar;
                     pf->normal[gi] = sf.ns;
@@ -221,15 +225,15 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                     uint64_t live = 0;
                     for (int b = 0; b < P; b++)
                         for (int a = 0; a < P; a++) {
-                            uint32_t q = rp_packet_n_index((uint32_t)P, (uint32_t)a, (uint32_t)b);
+                            uint32_t q = lane[b * P + a];
                             int lx = kx + N * a, ly = ky + N * b;
                             pt->vpl_valid[q] = 0;
                             const ir_point *x = &pt->points[ly * T + lx];
                             if (lx >= tw || y0 + ly >= y1 || !x->valid) continue;
-                            rp_ray r;
-                            if (!vpl_contrib(pf, x, &vs[v], eps, &r, &pt->vpl_contrib[q])) continue;
-                            packet_set_ray(&pt->vpl_packet, q, v3_make(r.org_x, r.org_y, r.org_z),
-                                           v3_make(r.dir_x, r.dir_y, r.dir_z), r.tfar);
+                            v3 wi;
+                            float tfar;
+                            if (!vpl_contrib(pf, x, &vs[v], &wi, &tfar, &pt->vpl_contrib[q])) continue;
+                            packet_set_ray(&pt->vpl_packet, q, x->org, wi, tfar);
                             pt->vpl_valid[q] = -1;
                             live++;
                         }
@@ -252,7 +256,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                     rp_occluded_n(s->scene, &qd, &pt->vpl_packet);
                     for (int b = 0; b < P; b++)
                         for (int a = 0; a < P; a++) {
-                            uint32_t q = rp_packet_n_index((uint32_t)P, (uint32_t)a, (uint32_t)b);
+                            uint32_t q = lane[b * P + a];
                             if (!pt->vpl_valid[q] || pt->vpl_packet.tfar[q] < 0.0f) continue;
                             int li = (ky + N * b) * T + kx + N * a;
                             pt->ir_sum[li] = v3_add(pt->ir_sum[li], pt->vpl_contrib[q]);

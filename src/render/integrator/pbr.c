@@ -56,6 +56,8 @@ bool pbr_thread_init(const render_frame *f, render_thread *th) {
     size_t nn = (size_t)f->tile * f->tile;
     bool ir = f->desc.integrator == RP_INTEGRATOR_IR;
     uint32_t side = ir ? 8u : (uint32_t)f->desc.packet;
+    for (uint32_t j = 0; j < side; j++)
+        for (uint32_t i = 0; i < side; i++) pt->lane[j * side + i] = rp_packet_n_index(side, i, j);
     pt->prim_valid = calloc((size_t)side * side, sizeof *pt->prim_valid);
     pt->paths = calloc(nn, sizeof *pt->paths);
     pt->bounce = aligned_alloc(64, (nn * sizeof *pt->bounce + 63u) & ~(size_t)63u);

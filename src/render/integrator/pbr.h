@@ -22,8 +22,12 @@ typedef struct ir_vpl {
 
 /* What instant radiosity keeps of a primary hit. */
 typedef struct ir_point {
-    v3 p, ng, ns, wo_world;
+    v3 org;           /* the hit point lifted off the surface, where shadow rays start */
+    v3 ng, ns, t, b;  /* t, b, ns: the shading frame */
+    v3 wo;            /* towards the eye, in the shading frame */
+    v3 lambert;       /* kd / pi when the BSDF is Lambert (the common case, no eval needed) */
     render_bsdf bsdf;
+    bool is_lambert;
     bool valid;       /* a non-delta surface was hit */
 } ir_point;
 
@@ -41,6 +45,7 @@ typedef struct pbr_thread {
     rp_rayhit_n vpl_packet; /* a set's shadow rays towards one VPL */
     int32_t *vpl_valid;
     v3 *vpl_contrib;
+    uint32_t lane[32 * 32]; /* rp_packet_n_index of (i, j) at j * side + i */
 } pbr_thread;
 
 typedef struct pbr_frame {

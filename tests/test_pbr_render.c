@@ -225,6 +225,20 @@ int main(void) {
         }
         float *img[1] = {ref[0]};
         free(ref[1]);
+        /* Eye light through n x n packets gives the array tracer's image (1 and 3 samples). */
+        {
+            rp_render_scene *es = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
+            for (int spp_e = 1; es && spp_e <= 3; spp_e += 2) {
+                rp_render_desc rd = {.width = 50, .height = 38, .spp = spp_e, .integrator = RP_INTEGRATOR_EYELIGHT};
+                float *a = render(es, &rd);
+                rd.packet = -1;
+                float *b = render(es, &rd);
+                CHECKF(a && b && memcmp(a, b, 50 * 38 * 3 * sizeof(float)) == 0, "eye light: packets differ from the array tracer");
+                free(a);
+                free(b);
+            }
+            rp_render_scene_release(es);
+        }
         /* Frames: samples [0, 4) in one frame equal frames [0, 2) and [2, 4) averaged. */
         rp_render_scene *s = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
         {

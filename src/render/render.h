@@ -342,6 +342,10 @@ bool whitted_block(const render_frame *f, render_thread *th, int bx, int by, int
                    int s);
 bool whitted_thread_init(const render_frame *f, render_thread *th);
 void whitted_thread_free(const render_frame *f, render_thread *th);
+/* Level `level` of the thread's packet stack, made on first use; NULL when out of memory. */
+whitted_level *whitted_packet_level(const render_frame *f, render_thread *th, int level);
+/* The query of a packet of that level and ray kind (traversal, frustum, counters, auto's tally). */
+rp_query_n_desc whitted_packet_query(const render_frame *f, render_thread *th, whitted_level *lv, rp_ray_kind kind);
 /* Sets ray q of a packet (tnear 0, no hit yet). */
 void packet_set_ray(rp_rayhit_n *p, uint32_t q, v3 org, v3 dir, float tfar);
 
@@ -359,6 +363,10 @@ uint32_t pbr_tile_side(const rp_render_desc *d);
 
 /* Eye light and the debug AOVs of a primary hit (integrator/aov.c). */
 v3 eyelight_shade(const rp_rayhit *rh);
+/* Eye light of one n x n block of a tile for sample s, its primary rays one packet (rp_intersect_n),
+ * added to the tile's accumulator; the same image as the array tracer's. */
+bool eyelight_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
+                    int s);
 v3 aov_shade(const render_frame *f, const rp_ray *ray, const rp_hit *hit);
 
 #endif

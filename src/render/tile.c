@@ -70,7 +70,9 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
         if (f->packets) {
             for (int by = y0; by < y1; by += d->packet)
                 for (int bx = x0; bx < x1; bx += d->packet)
-                    if (!whitted_block(f, th, bx, by, x0, y0, tw, y1 - y0, d->sample_start + s)) {
+                    if (!(d->integrator == RP_INTEGRATOR_EYELIGHT
+                              ? eyelight_block(f, th, bx, by, x0, y0, tw, y1 - y0, d->sample_start + s)
+                              : whitted_block(f, th, bx, by, x0, y0, tw, y1 - y0, d->sample_start + s))) {
                         atomic_store(&f->failed, true);
                         return;
                     }
@@ -133,7 +135,7 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     if (pbr && dd.packet < 0) dd.packet = 16; /* the physically based integrators always trace packets */
     if (dd.integrator == RP_INTEGRATOR_DIRECT) dd.max_depth = 1;
     if (dd.integrator == RP_INTEGRATOR_AO && !(dd.ao_distance > 0.0f)) dd.ao_distance = 0.1f * scene->radius;
-    bool packets = dd.integrator == RP_INTEGRATOR_WHITTED && dd.packet > 0;
+    bool packets = (dd.integrator == RP_INTEGRATOR_WHITTED || dd.integrator == RP_INTEGRATOR_EYELIGHT) && dd.packet > 0;
     if ((packets || pbr) && dd.packet != 4 && dd.packet != 8 && dd.packet != 16 && dd.packet != 32) return false;
     switch (dd.traversal) {
     case RP_TRAVERSAL_AUTO:

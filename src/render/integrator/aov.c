@@ -31,3 +31,49 @@ v3 eyelight_shade(const rp_rayhit *rh) {
     if (!(c <= 1.0f)) c = c > 1.0f ? 1.0f : 0.0f; /* NaN from a zero-area triangle */
     return v3_make(c, c, c);
 }
+
+bool eyelight_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
+                    int s) {
+    const rp_render_desc *d = &f->desc;
+    uint32_t n = (uint32_t)d->packet;
+    whitted_level *lv = whitted_packet_level(f, th, 0);
+    if (!lv) return false;
+    bool jitter = d->spp > 1 || d->sample_start > 0;
+    uint64_t live = 0;
+    for (uint32_t j = 0; j < n; j++)
+        for (uint32_t i = 0; i < n; i++) {
+            uint32_t q = rp_packet_n_index(n, i, j);
+            int x = bx + (int)i, y = by + (int)j;
+            float ox = jitter ? render_random((uint32_t)x, (uint32_t)y, (uint32_t)s, 0) : 0.5f;
+            float oy = jitter ? render_random((uint32_t)x, (uint32_t)y, (uint32_t)s, 1) : 0.5f;
+            rp_ray r;
+            camera_ray(&f->cam, (float)x + ox, (float)y + oy, &r);
+            packet_set_ray(&lv->rh, q, v3_make(r.org_x, r.org_y, r.org_z), v3_make(r.dir_x, r.dir_y, r.dir_z), r.tfar);
+            lv->valid[q] = x < x0 + tw && y < y0 + tile_h ? -1 : 0;
+            live += lv->valid[q] != 0;
+        }
+    lv->rh.valid = lv->valid;
+    rp_query_n_desc qd = whitted_packet_query(f, th, lv, RP_RAY_PRIMARY);
+    rp_intersect_n(f->s->scene, &qd, &lv->rh);
+    th->rays[RP_RAY_PRIMARY] += live;
+    const rp_rayhit_n *p = &lv->rh;
+    for (uint32_t j = 0; j < n; j++)
+        for (uint32_t i = 0; i < n; i++) {
+            uint32_t q = rp_packet_n_index(n, i, j);
+            if (!lv->valid[q]) continue;
+            rp_rayhit rh;
+            rh.ray.dir_x = p->dir_x[q];
+            rh.ray.dir_y = p->dir_y[q];
+            rh.ray.dir_z = p->dir_z[q];
+            rh.hit.geom_id = p->geom_id[q];
+            rh.hit.Ng_x = p->Ng_x[q];
+            rh.hit.Ng_y = p->Ng_y[q];
+            rh.hit.Ng_z = p->Ng_z[q];
+            v3 c = eyelight_shade(&rh);
+            int k = (by + (int)j - y0) * tw + (bx + (int)i - x0);
+            th->accum[3 * k + 0] += c.x;
+            th->accum[3 * k + 1] += c.y;
+            th->accum[3 * k + 2] += c.z;
+        }
+    return true;
+}

@@ -166,7 +166,7 @@ static v3 whitted_trace(const render_frame *f, render_thread *th, v3 org, v3 dir
 /* ---- the packet tracer: n x n packets, breadth first per ray kind ---- */
 
 /* Level `level` of the thread's packet stack, made on first use; NULL when out of memory. */
-static whitted_level *packet_level(const render_frame *f, render_thread *th, int level) {
+whitted_level *whitted_packet_level(const render_frame *f, render_thread *th, int level) {
     if (th->levels[level]) return th->levels[level];
     uint32_t n = (uint32_t)f->desc.packet, nn = n * n;
     whitted_level *lv = calloc(1, sizeof *lv);
@@ -201,7 +201,7 @@ void packet_set_ray(rp_rayhit_n *p, uint32_t q, v3 org, v3 dir, float tfar) {
     p->inst_id[q] = RP_INVALID_ID;
 }
 
-static rp_query_n_desc packet_query(const render_frame *f, render_thread *th, whitted_level *lv, rp_ray_kind kind) {
+rp_query_n_desc whitted_packet_query(const render_frame *f, render_thread *th, whitted_level *lv, rp_ray_kind kind) {
     rp_query_n_desc q = {.traversal = f->traversal[kind],
                          .counters = th->work ? &th->work[kind] : NULL,
                          .tally = &lv->tally[kind]};
@@ -238,7 +238,7 @@ static void packet_shadows(const render_frame *f, render_thread *th, whitted_lev
         }
         if (!live) continue;
         th->rays[RP_RAY_SHADOW] += live;
-        rp_query_n_desc qd = packet_query(f, th, lv, RP_RAY_SHADOW);
+        rp_query_n_desc qd = whitted_packet_query(f, th, lv, RP_RAY_SHADOW);
         switch (light->type) {
         case RP_LIGHT_SOURCE_POINT:
             for (int k = 0; k < 3; k++) qd.point[k] = light->point.position[k];
@@ -269,7 +269,7 @@ static bool packet_children(const render_frame *f, render_thread *th, int level,
     for (uint32_t q = 0; q < nn && !any; q++)
         any = lv->valid[q] && (refl ? lv->slots[q].has_r : lv->slots[q].has_t);
     if (!any) return true;
-    whitted_level *down = packet_level(f, th, level + 1);
+    whitted_level *down = whitted_packet_level(f, th, level + 1);
     if (!down) return false;
     for (uint32_t q = 0; q < nn; q++) {
         const whitted_slot *o = &lv->slots[q];
@@ -299,7 +299,7 @@ static bool packet_trace(const render_frame *f, render_thread *th, int level, rp
     for (uint32_t q = 0; q < nn; q++) live += lv->valid[q] != 0;
     th->rays[kind] += live;
     p->valid = lv->valid;
-    rp_query_n_desc qd = packet_query(f, th, lv, kind);
+    rp_query_n_desc qd = whitted_packet_query(f, th, lv, kind);
     rp_intersect_n(f->s->scene, &qd, p);
     for (uint32_t q = 0; q < nn; q++) {
         if (!lv->valid[q]) continue;
@@ -323,7 +323,7 @@ bool whitted_block(const render_frame *f, render_thread *th, int bx, int by, int
                          int s) {
     const rp_render_desc *d = &f->desc;
     uint32_t n = (uint32_t)d->packet;
-    whitted_level *lv = packet_level(f, th, 0);
+    whitted_level *lv = whitted_packet_level(f, th, 0);
     if (!lv) return false;
     for (uint32_t j = 0; j < n; j++)
         for (uint32_t i = 0; i < n; i++) {

@@ -1,6 +1,6 @@
 # The two commands of the README: `make demo` and `make test`. Both install what they need first.
 JOBS ?= $(shell nproc)
-DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev
+DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev libopenexr-dev
 SUDO := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 
 .PHONY: all deps release asan demo test test-release test-asan bench clean

@@ -125,7 +125,8 @@ RP_API void rp_scene_data_free(rp_scene_data *scene);
 
 /* Writes an image; the format follows the extension: .png and .ppm (8-bit, linear values clamped
  * to [0,1] and sRGB-encoded), .pfm (32-bit float, linear, standard PFM: rows bottom-up, negative
- * scale = little endian), .hdr (Radiance RGBE, linear). channels is 1 or 3; pixels are row-major, top row first.
+ * scale = little endian), .hdr (Radiance RGBE, linear), .exr
+ * (OpenEXR float, linear). channels is 1 or 3; pixels are row-major, top row first.
  * Returns false and writes "path: error: message" into err on failure. */
 RP_API bool rp_image_write(const char *path, int width, int height, int channels, const float *pixels,
                            char *err, size_t err_size);

@@ -94,7 +94,7 @@ int main(void) {
     EXPECT("bench --isa 16", 2, "--isa expects auto, scalar, sse, avx2 or avx512");
     EXPECT("render --frobnicate", 2, "unknown option '--frobnicate'");
     EXPECT("render a.obj b.obj", 2, "expected one SCENE");
-    EXPECT("render -o out.jpg", 2, "-o expects a file ending in .png, .pfm, .ppm or .hdr");
+    EXPECT("render -o out.jpg", 2, "-o expects a file ending in .png, .pfm, .ppm, .hdr or .exr");
     EXPECT("info --threads -1", 2, "--threads expects an integer");
     EXPECT("info --bogus", 2, "unknown option '--bogus'");
 

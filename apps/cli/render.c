@@ -25,7 +25,7 @@ static void render_usage(FILE *out) {
             "\n"
             "options:\n"
             "  -o, --output FILE      image to write; the format follows the extension:\n"
-            "                         .png, .ppm (8-bit: exposure, tone map, sRGB), .pfm or .hdr\n"
+            "                         .png, .ppm (8-bit: exposure, tone map, sRGB), .pfm, .hdr or .exr\n"
             "                         (float, linear radiance as is) [raypack.png]\n"
             "  --width W, --height H  image size in pixels, 1..16384 [the scene's, else 512x512]\n"
             "  --spp N                samples per pixel, jittered deterministically when N > 1 [1];\n"
@@ -287,8 +287,9 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
     }
     const char *dot = strrchr(o->output, '.');
     if (!dot || (strcasecmp(dot, ".png") != 0 && strcasecmp(dot, ".pfm") != 0 && strcasecmp(dot, ".ppm") != 0 &&
-                 strcasecmp(dot, ".hdr") != 0)) {
-        fprintf(stderr, "raypack render: -o expects a file ending in .png, .pfm, .ppm or .hdr, got '%s'\n", o->output);
+                 strcasecmp(dot, ".hdr") != 0 && strcasecmp(dot, ".exr") != 0)) {
+        fprintf(stderr, "raypack render: -o expects a file ending in .png, .pfm, .ppm, .hdr or .exr, got '%s'\n",
+                o->output);
         return CLI_EXIT_USAGE;
     }
     return CLI_EXIT_OK;

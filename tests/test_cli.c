@@ -214,5 +214,27 @@ int main(void) {
                  cornell, tmp);
         EXPECT(args, 0, "primary 1024");
     }
+    char original[600];
+    if (rp_test_scene("cornell_original/CornellBox-Original.obj", original, sizeof original)) {
+        /* the physically based integrators end to end: a float image and its denoiser AOVs, and
+         * progressive frames by time */
+        snprintf(args, sizeof args, "render '%s' --width 24 --height 24 --integrator path --spp 2 --aovs "
+                 "--threads 2 -o '%s/pt.pfm'", original, tmp);
+        EXPECT(args, 0, "bounce");
+        const char *suffix[3] = {"pt.pfm", "pt.albedo.pfm", "pt.normal.pfm"};
+        for (int k = 0; k < 3; k++) {
+            char p[1200], why[256];
+            snprintf(p, sizeof p, "%s/%s", tmp, suffix[k]);
+            int pw = 0, ph = 0, pc = 0;
+            float *img = rp_image_read_pfm(p, &pw, &ph, &pc, why, sizeof why);
+            CHECKF(img && pw == 24 && ph == 24 && pc == 3, "%s: %s", p, img ? "wrong size" : why);
+            free(img);
+        }
+        snprintf(args, sizeof args, "render '%s' --width 16 --height 16 --integrator ir --time 0.3 --threads 2 "
+                 "-o '%s/ir.png'", original, tmp);
+        EXPECT(args, 0, "frames");
+        snprintf(args, sizeof args, "render --integrator path --width 16 --height 16 -o '%s/room.png'", tmp);
+        EXPECT(args, 0, "scene");
+    }
     return RP_TEST_END();
 }

@@ -49,6 +49,8 @@ static void render_usage(FILE *out) {
             "  --ir-clamp C           ir: geometry term distance at least C x the scene's bounding\n"
             "                         radius; negative: no clamping [0.02]\n"
             "  --ao-distance D        ao: occlusion ray length [0.1 x the bounding radius]\n"
+            "  --aovs                 also write the albedo and normal AOVs (for denoisers) beside\n"
+            "                         the image: NAME.albedo.EXT and NAME.normal.EXT\n"
             "  --aov NAME             debug output instead of shading: depth (PFM: distance along\n"
             "                         the primary ray, +inf on a miss), normal, primid or albedo\n"
             "  --threads N            worker threads, 1..%d; 0 for all hardware threads [0]\n"
@@ -94,6 +96,7 @@ typedef struct render_options {
     bool has_env_scale;
     float env_scale[3];
     int ir_interleave, ir_vpls, ir_filter;
+    bool aovs;
     rp_traversal traversal;
     const char *traversal_name;
     int packet;
@@ -201,6 +204,8 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
         } else if (strcmp(a, "--ao-distance") == 0) {
             VALUE();
             if (!cli_parse_float(CMD, a, v, 0.0, 1e30, true, &o->ao_distance)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--aovs") == 0) {
+            o->aovs = true;
         } else if (strcmp(a, "--aov") == 0) {
             VALUE();
             static const struct { const char *name; rp_aov aov; } aovs[] = {
@@ -611,6 +616,26 @@ int cli_render(int argc, char **argv) {
     if (!rp_image_write(o.output, w, h, channels, pixels, err, sizeof err)) {
         fprintf(stderr, "raypack render: %s\n", err);
         goto done;
+    }
+
+    if (o.aovs && !o.use_aov) {
+        /* The denoiser's guides: albedo and normal of the primary hits, written as the image is. */
+        static const struct { rp_aov aov; const char *name; } guides[] = {{RP_AOV_ALBEDO, "albedo"},
+                                                                          {RP_AOV_NORMAL, "normal"}};
+        for (size_t g = 0; g < 2; g++) {
+            rp_render_desc ad = desc;
+            ad.integrator = RP_INTEGRATOR_AOV;
+            ad.aov = guides[g].aov;
+            ad.progress = NULL;
+            ad.sample_start = 0;
+            char name[4096];
+            snprintf(name, sizeof name, "%.*s.%s%s", (int)(dot - o.output), o.output, guides[g].name, dot);
+            if (!rp_render(scene, &ad, pixels, NULL) ||
+                !rp_image_write(name, w, h, 3, pixels, err, sizeof err)) {
+                fprintf(stderr, "raypack render: %s\n", err[0] ? err : "rendering an AOV failed");
+                goto done;
+            }
+        }
     }
 
     uint64_t total = 0;

@@ -16,7 +16,8 @@
  * of the neighbours and so smooths the interleaving's structured noise without blurring across
  * edges. Primary rays go through pixel centres (the filter needs one surface per pixel), so IR
  * images are not antialiased. Transport: VPLs are deposited on diffuse (Lambert and plastic base)
- * surfaces; mirrors and glass neither receive VPLs nor gather them (they show their emission only). */
+ * surfaces; mirrors and glass do not receive VPLs, and a pixel that sees one follows its delta
+ * chain (one lobe per bounce, up to max_depth) to the surface that gathers. */
 #include "pbr.h"
 
 #include <stdlib.h>
@@ -144,7 +145,8 @@ static inline bool vpl_contrib(const pbr_frame *pf, const ir_point *x, const ir_
     if (cx <= 0.0f || v3_dot(wi, x->ng) <= 0.0f) return false;
     float cv = v3_is_zero(v->n) ? 0.25f : -v3_dot(v->n, wi); /* 1/(4 pi) = (1/4) / pi */
     if (!(cv > 0.0f)) return false;
-    v3 fv = x->is_lambert ? x->lambert : bsdf_eval(&x->bsdf, x->wo, bsdf_to_local(wi, x->t, x->b, x->ns));
+    v3 fv = x->is_lambert ? x->lambert
+                          : v3_mul(x->beta, bsdf_eval(&x->bsdf, x->wo, bsdf_to_local(wi, x->t, x->b, x->ns)));
     float g = d2 > pf->clamp_d2 ? d2 : pf->clamp_d2;
     *c = v3_scale(v3_mul(fv, v->power), cx * cv / (PI_F * g));
     if (v3_is_zero(*c)) return false;
@@ -198,19 +200,55 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                                   .inst_id = p->inst_id[q]};
                     render_surface sf;
                     scene_surface(s, &ray, &hit, &sf);
-                    pf->emit[gi] = material_emission(s, sf.material, &sf);
-                    pt_->bsdf = material_bsdf(s, &s->materials[sf.material], &sf);
+                    v3 emit = material_emission(s, sf.material, &sf), beta = v3_make(1, 1, 1);
+                    render_bsdf bsdf = material_bsdf(s, &s->materials[sf.material], &sf);
+                    float depth = ray.tfar;
+                    bool hit_surface = true;
+                    /* Mirrors and glass: follow the delta chain (one lobe per bounce, chosen from the
+                     * pixel's numbers) to the diffuse surface that gathers the VPLs. */
+                    render_sampler rng = sampler_start((uint32_t)(x0 + lx), (uint32_t)(y0 + ly), 0);
+                    for (int k = 0; bsdf_is_delta(&bsdf) && k < f->desc.max_depth; k++) {
+                        v3 t, b;
+                        bsdf_frame(sf.ns, &t, &b);
+                        v3 dir = v3_make(ray.dir_x, ray.dir_y, ray.dir_z);
+                        v3 wo = bsdf_to_local(v3_neg(dir), t, b, sf.ns);
+                        float u[3] = {sampler_1d(&rng), sampler_1d(&rng), sampler_1d(&rng)};
+                        bsdf_sample bs;
+                        if (!bsdf_sample_dir(&bsdf, wo, u, &bs) || !(bs.pdf > 0.0f)) {
+                            hit_surface = false;
+                            break;
+                        }
+                        beta = v3_mul(beta, v3_scale(bs.f, fabsf(bs.wi.z) / bs.pdf));
+                        v3 wi = bsdf_to_world(bs.wi, t, b, sf.ns);
+                        rp_rayhit rh;
+                        render_ray_init(&rh.ray, v3_madd(sf.p, sf.ng, bs.wi.z < 0.0f ? -eps : eps), wi, INFINITY);
+                        rh.hit.geom_id = rh.hit.prim_id = rh.hit.inst_id = RP_INVALID_ID;
+                        rp_intersect1(s->scene, &rh);
+                        th->rays[bs.wi.z < 0.0f ? RP_RAY_REFRACTION : RP_RAY_REFLECTION]++;
+                        if (rh.hit.geom_id == RP_INVALID_ID) {
+                            hit_surface = false;
+                            break;
+                        }
+                        ray = rh.ray;
+                        depth += rh.ray.tfar;
+                        scene_surface(s, &rh.ray, &rh.hit, &sf);
+                        emit = v3_add(emit, v3_mul(beta, material_emission(s, sf.material, &sf)));
+                        bsdf = material_bsdf(s, &s->materials[sf.material], &sf);
+                    }
+                    pf->emit[gi] = emit;
+                    pt_->bsdf = bsdf;
                     pt_->org = v3_madd(sf.p, sf.ng, eps);
                     pt_->ng = sf.ng;
                     pt_->ns = sf.ns;
                     bsdf_frame(sf.ns, &pt_->t, &pt_->b);
                     pt_->wo = bsdf_to_local(v3_neg(v3_make(ray.dir_x, ray.dir_y, ray.dir_z)), pt_->t, pt_->b, sf.ns);
-                    pt_->is_lambert = pt_->bsdf.type == BSDF_LAMBERT;
-                    pt_->lambert = v3_scale(pt_->bsdf.kd, 1.0f / PI_F);
-                    pt_->valid = !bsdf_is_delta(&pt_->bsdf);
-                    pf->depth[gi] = ray.tfar;
+                    pt_->is_lambert = bsdf.type == BSDF_LAMBERT;
+                    pt_->beta = beta;
+                    pt_->lambert = v3_mul(beta, v3_scale(bsdf.kd, 1.0f / PI_F));
+                    pt_->valid = hit_surface && !bsdf_is_delta(&bsdf);
+                    pf->depth[gi] = depth;
                     pf->normal[gi] = sf.ns;
-                    pf->albedo[gi] = diffuse_albedo(&pt_->bsdf);
+                    pf->albedo[gi] = v3_mul(beta, diffuse_albedo(&bsdf));
                     pf->valid[gi] = pt_->valid ? 1 : 0;
                 }
         }

@@ -25,7 +25,8 @@ typedef struct ir_point {
     v3 org;           /* the hit point lifted off the surface, where shadow rays start */
     v3 ng, ns, t, b;  /* t, b, ns: the shading frame */
     v3 wo;            /* towards the eye, in the shading frame */
-    v3 lambert;       /* kd / pi when the BSDF is Lambert (the common case, no eval needed) */
+    v3 beta;          /* throughput of the delta chain from the eye to here (1 without one) */
+    v3 lambert;       /* beta kd / pi when the BSDF is Lambert (the common case, no eval needed) */
     render_bsdf bsdf;
     bool is_lambert;
     bool valid;       /* a non-delta surface was hit */

@@ -233,6 +233,9 @@ int main(void) {
         snprintf(args, sizeof args, "render '%s' --width 16 --height 16 --integrator ir --time 0.3 --threads 2 "
                  "-o '%s/ir.png'", original, tmp);
         EXPECT(args, 0, "frames");
+        snprintf(args, sizeof args, "bench --render '%s' --frames 1 --width 16 --height 16 --threads 2", original);
+        EXPECT(args, 0, "ir ");
+        EXPECT("bench --render", 2, "expected at least one SCENE");
         snprintf(args, sizeof args, "render --integrator path --width 16 --height 16 -o '%s/room.png'", tmp);
         EXPECT(args, 0, "scene");
     }

@@ -42,4 +42,7 @@ void cli_json_traversal(FILE *f, const rp_counters_n *c);
 /* Largest thread count accepted by --threads. */
 #define CLI_MAX_THREADS 1024
 
+/* `raypack bench --render`: frame times of the integrators (bench_render.c); argv[0] is "--render". */
+int cli_bench_render(int argc, char **argv);
+
 #endif

@@ -197,6 +197,49 @@ int main(void) {
         rp_render_scene_release(s);
         rp_scene_data_free(&d);
     }
+    /* The environment map (studio_small_03): its sampling density integrates to 1 over the sphere,
+     * each sample's pdf and radiance are what light_env_pdf and light_env_radiance say of its
+     * direction, and the sampled estimate of the mean radiance matches a uniform one. */
+    char envp[512];
+    if (rp_test_scene("env/studio_small_03_1k.hdr", envp, sizeof envp)) {
+        rp_scene_data d;
+        make_sphere(&d, 1.0f, 8, 16, false);
+        rp_render_scene_desc sd = {.environment = envp};
+        rp_render_scene *s = rp_render_scene_new(dev, &d, &sd, err, sizeof err);
+        CHECKF(s != NULL, "environment: %s", err);
+        if (s) {
+            const rp_light_source *env = &s->pb_lights[s->env_light];
+            int n = small ? 20000 : 200000, bad = 0;
+            double integral = 0.0, exact = 0.0, imp = 0.0;
+            /* The density and the mean radiance integrated over a grid twice as fine as the map. */
+            int gw = 2 * s->env.width, gh = 2 * s->env.height;
+            for (int y = 0; y < gh; y++) {
+                double th0 = PI_D * y / gh, th1 = PI_D * (y + 1) / gh, th = 0.5 * (th0 + th1);
+                double dw = (cos(th0) - cos(th1)) * 2.0 * PI_D / gw;
+                for (int x = 0; x < gw; x++) {
+                    double ph = 2.0 * PI_D * ((x + 0.5) / gw - 0.5);
+                    v3 w = v3_make((float)(sin(th) * sin(ph)), (float)cos(th), (float)(-sin(th) * cos(ph)));
+                    integral += light_env_pdf(s, w) * dw;
+                    exact += light_env_radiance(s, w).y * dw / (4.0 * PI_D);
+                }
+            }
+            for (int i = 0; i < n; i++) {
+                render_sampler r = sampler_start((uint32_t)i, 3, 9);
+                light_sample ls;
+                if (!light_sample_li(s, env, v3_make(0, 0, 0), sampler_1d(&r), sampler_1d(&r), &ls)) continue;
+                float pd = light_env_pdf(s, ls.wi);
+                v3 le = light_env_radiance(s, ls.wi);
+                if (fabsf(pd - ls.pdf) > 1e-3f * ls.pdf || fabsf(le.y - ls.L.y) > 1e-4f * fmaxf(1.0f, le.y)) bad++;
+                imp += ls.L.y / (ls.pdf * 4.0 * PI_D) / n;
+            }
+            double uni = exact;
+            CHECKF(fabs(integral - 1.0) < 0.02, "environment pdf integrates to %.4f", integral);
+            CHECKF(bad < n / 1000, "%d environment samples disagree with pdf()/radiance() of their direction", bad);
+            CHECKF(fabs(imp / uni - 1.0) < 0.02, "environment mean radiance: importance sampled %.5f, integrated %.5f", imp, uni);
+        }
+        rp_render_scene_release(s);
+        rp_scene_data_free(&d);
+    }
     /* cornell_original: thread counts, frames, and path tracing against instant radiosity. */
     char path[512];
     if (rp_test_scene("cornell_original/CornellBox-Original.obj", path, sizeof path)) {

@@ -126,11 +126,18 @@ int main(void) {
         plas[k] = (render_bsdf){.type = BSDF_PLASTIC, .kd = {0.6f, 0.6f, 0.6f}, .ks = {0.3f, 0.3f, 0.3f},
                                 .alpha = alphas[k]};
     }
-    const render_bsdf *all[7] = {&lambert, &cond[0], &cond[1], &cond[2], &plas[0], &plas[1], &plas[2]};
-    const char *names[7] = {"lambert", "conductor a=0.15", "conductor a=0.35", "conductor a=0.7",
-                            "plastic a=0.15", "plastic a=0.35", "plastic a=0.7"};
+    render_bsdf glass[3] = {
+        {.type = BSDF_DIELECTRIC, .kt = {1, 1, 1}, .ior = 1.5f, .alpha = 0.3f, .entering = true},
+        {.type = BSDF_DIELECTRIC, .kt = {1, 1, 1}, .ior = 1.5f, .alpha = 0.6f, .entering = true},
+        {.type = BSDF_DIELECTRIC, .kt = {1, 1, 1}, .ior = 1.33f, .alpha = 0.4f, .entering = false},
+    };
+    const render_bsdf *all[10] = {&lambert, &cond[0], &cond[1], &cond[2], &plas[0], &plas[1], &plas[2],
+                                  &glass[0], &glass[1], &glass[2]};
+    const char *names[10] = {"lambert", "conductor a=0.15", "conductor a=0.35", "conductor a=0.7",
+                             "plastic a=0.15", "plastic a=0.35", "plastic a=0.7",
+                             "rough glass a=0.3", "rough glass a=0.6", "rough glass, inside, a=0.4"};
     float thetas[3] = {0.2f, 0.9f, 1.4f};
-    for (int i = 0; i < 7; i++)
+    for (int i = 0; i < 10; i++)
         for (int t = 0; t < 3; t++) {
             v3 wo = dir_of(thetas[t], 0.7);
             int mismatch = 0;
@@ -169,6 +176,22 @@ int main(void) {
             CHECKF(a <= 1.0 + 1e-3, "white BSDF %d, theta_o %.1f: albedo %.5f > 1", i, thetas[t], a);
             if (i == 0) CHECKF(fabs(a - 1.0) < 1e-3, "Lambert albedo %.5f != 1", a);
         }
+    /* Rough glass reflects and transmits at most what arrives (its radiance scaling 1/eta^2 undone). */
+    for (int t = 0; t < 3; t++) {
+        const render_bsdf *g = &glass[0];
+        v3 wo = dir_of(thetas[t], 0.3);
+        enum { NT = 600, NP = 300 };
+        double sum = 0.0;
+        for (int i = 0; i < NT; i++)
+            for (int j = 0; j < NP; j++) {
+                double ct = -1.0 + 2.0 * (i + 0.5) / NT, ph = (j + 0.5) * 2 * M_PI / NP;
+                v3 f = bsdf_eval(g, wo, dir_of(acos(ct), ph));
+                sum += f.x * fabs(ct) * (ct < 0 ? 1.5 * 1.5 : 1.0);
+            }
+        double a = sum * 4 * M_PI / (NT * NP);
+        CHECKF(a <= 1.0 + 1e-3, "rough glass, theta_o %.1f: albedo %.5f > 1", thetas[t], a);
+        CHECKF(a > 0.8, "rough glass, theta_o %.1f: albedo %.5f (energy lost?)", thetas[t], a);
+    }
     /* Delta lobes: a smooth dielectric reflects F and transmits 1 - F (times the radiance scale). */
     {
         render_bsdf g = {.type = BSDF_DIELECTRIC, .kt = {1, 1, 1}, .ior = 1.5f, .entering = true};

@@ -1,6 +1,6 @@
 /* BSDFs with eval, sample and pdf (pbrt-v4's interface, in C): Lambert, conductor (complex-IOR
  * Fresnel; GGX microfacets with visible-normal sampling, or a mirror), dielectric (Fresnel
- * reflection and refraction) and plastic. All work in the local shading frame (z = normal), wo and
+ * reflection and refraction; GGX rough transmission after pbrt-v4's DielectricBxDF) and plastic. All work in the local shading frame (z = normal), wo and
  * wi unit and pointing away from the surface. Delta lobes are never returned by eval or pdf; their
  * sample gives f with f cos / pdf equal to the lobe's weight, as pbrt does. */
 #include "render.h"
@@ -144,6 +144,71 @@ static float ggx_reflection_pdf(float alpha, v3 wo, v3 wi) {
     return ggx_pdf_wm(alpha, wo, wm) / (4.0f * fabsf(v3_dot(wo, wm)));
 }
 
+/* ---- rough dielectric (pbrt-v4's DielectricBxDF with GGX), wo.z > 0, eta = n_other / n_this ---- */
+
+/* The generalized half vector of (wo, wi) facing +z, its relative eta, or false when the pair has no
+ * microfacet that can connect them. */
+static bool rough_dielectric_wm(v3 wo, v3 wi, float eta, v3 *wm, float *etap) {
+    float co = wo.z, ci = wi.z;
+    if (co == 0.0f || ci == 0.0f) return false;
+    bool refl = ci * co > 0.0f;
+    *etap = refl ? 1.0f : eta;
+    v3 m = v3_add(v3_scale(wi, *etap), wo);
+    if (v3_dot(m, m) == 0.0f) return false;
+    m = v3_normalize(m);
+    if (m.z < 0.0f) m = v3_neg(m);
+    if (v3_dot(m, wi) * ci < 0.0f || v3_dot(m, wo) * co < 0.0f) return false;
+    *wm = m;
+    return true;
+}
+
+static v3 rough_dielectric_eval(const render_bsdf *b, v3 wo, v3 wi) {
+    float eta = b->entering ? b->ior : 1.0f / b->ior, etap;
+    v3 wm;
+    if (wo.z <= 0.0f || !rough_dielectric_wm(wo, wi, eta, &wm, &etap)) return v3_make(0, 0, 0);
+    float fr = fresnel_dielectric(v3_dot(wo, wm), eta);
+    float d = ggx_d(b->alpha, wm), g = ggx_g(b->alpha, wo, wi);
+    if (wi.z > 0.0f) {
+        float v = d * g * fr / fabsf(4.0f * wi.z * wo.z);
+        return v3_make(v, v, v);
+    }
+    float denom = v3_dot(wi, wm) + v3_dot(wo, wm) / etap;
+    denom = denom * denom * wi.z * wo.z;
+    float v = d * (1.0f - fr) * g * fabsf(v3_dot(wi, wm) * v3_dot(wo, wm) / denom);
+    return v3_scale(b->kt, v / (etap * etap)); /* radiance: 1 / eta^2 */
+}
+
+static float rough_dielectric_pdf(const render_bsdf *b, v3 wo, v3 wi) {
+    float eta = b->entering ? b->ior : 1.0f / b->ior, etap;
+    v3 wm;
+    if (wo.z <= 0.0f || !rough_dielectric_wm(wo, wi, eta, &wm, &etap)) return 0.0f;
+    float fr = fresnel_dielectric(v3_dot(wo, wm), eta);
+    float pv = ggx_pdf_wm(b->alpha, wo, wm);
+    if (wi.z > 0.0f) return pv / (4.0f * fabsf(v3_dot(wo, wm))) * fr;
+    float denom = v3_dot(wi, wm) + v3_dot(wo, wm) / etap;
+    return pv * fabsf(v3_dot(wi, wm)) / (denom * denom) * (1.0f - fr);
+}
+
+static bool rough_dielectric_sample(const render_bsdf *b, v3 wo, const float u[3], bsdf_sample *out) {
+    float eta = b->entering ? b->ior : 1.0f / b->ior;
+    v3 wm = ggx_sample_wm(b->alpha, wo, u[1], u[2]);
+    float c = v3_dot(wo, wm);
+    float fr = fresnel_dielectric(c, eta);
+    if (u[0] < fr) {
+        out->wi = reflect(wo, wm);
+        if (out->wi.z <= 0.0f) return false;
+    } else {
+        float sin2_t = fmaxf(0.0f, 1.0f - c * c) / (eta * eta);
+        if (sin2_t >= 1.0f) return false;
+        float cos_t = sqrtf(1.0f - sin2_t);
+        out->wi = v3_add(v3_scale(wo, -1.0f / eta), v3_scale(wm, c / eta - cos_t));
+        if (out->wi.z >= 0.0f) return false;
+    }
+    out->f = rough_dielectric_eval(b, wo, out->wi);
+    out->pdf = rough_dielectric_pdf(b, wo, out->wi);
+    return out->pdf > 0.0f;
+}
+
 bool bsdf_is_delta(const render_bsdf *b) {
     switch (b->type) {
     case BSDF_LAMBERT:
@@ -169,7 +234,7 @@ v3 bsdf_eval(const render_bsdf *b, v3 wo, v3 wi) {
         return v3_mul(fr, ggx_reflection_eval(b->alpha, wo, wi));
     }
     case BSDF_DIELECTRIC:
-        return zero; /* smooth only: every lobe is a delta */
+        return b->alpha == 0.0f ? zero : rough_dielectric_eval(b, wo, wi);
     case BSDF_PLASTIC: {
         if (!reflect_side) return zero;
         v3 f = plastic_diffuse(b);
@@ -181,6 +246,7 @@ v3 bsdf_eval(const render_bsdf *b, v3 wo, v3 wi) {
 }
 
 float bsdf_pdf(const render_bsdf *b, v3 wo, v3 wi) {
+    if (b->type == BSDF_DIELECTRIC) return b->alpha == 0.0f ? 0.0f : rough_dielectric_pdf(b, wo, wi);
     bool reflect_side = wo.z > 0.0f && wi.z > 0.0f;
     if (!reflect_side) return 0.0f;
     switch (b->type) {
@@ -230,6 +296,7 @@ bool bsdf_sample_dir(const render_bsdf *b, v3 wo, const float u[3], bsdf_sample 
     case BSDF_DIELECTRIC: {
         /* wo is on the side the ray came from (z > 0); eta is the other side's index over this one's. */
         if (wo.z <= 0.0f) return false;
+        if (b->alpha > 0.0f) return rough_dielectric_sample(b, wo, u, out);
         float eta = b->entering ? b->ior : 1.0f / b->ior;
         float fr = fresnel_dielectric(wo.z, eta);
         out->delta = true;

@@ -187,7 +187,7 @@ typedef enum bsdf_type {
     BSDF_LAMBERT = 0,    /* kd / pi */
     BSDF_CONDUCTOR = 1,  /* Fresnel with complex IOR (eta, k); GGX with alpha, a mirror at alpha 0 */
     BSDF_DIELECTRIC = 2, /* Fresnel reflection and refraction (ior, kt tints the transmission); GGX
-                          * with alpha, smooth at alpha 0 */
+                          * microfacets with alpha (reflection and transmission), smooth at alpha 0 */
     BSDF_PLASTIC = 3     /* diffuse kd (1 - max ks) / pi under a ks-weighted GGX coat (a mirror at
                           * alpha 0) */
 } bsdf_type;

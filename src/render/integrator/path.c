@@ -79,9 +79,12 @@ static bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, 
         float pmf;
         uint32_t li = light_pick(&s->light_pick, sampler_at(&st->rng, base), &pmf);
         light_sample ls;
+        /* Transmitting BSDFs see lights behind the surface too: their shadow rays start below it. */
+        bool transmits = bsdf.type == BSDF_DIELECTRIC;
         if (light_sample_li(s, &s->pb_lights[li], above, sampler_at(&st->rng, base + 1), sampler_at(&st->rng, base + 2),
                             &ls) &&
-            v3_dot(ls.wi, sf.ng) > 0.0f) {
+            (v3_dot(ls.wi, sf.ng) > 0.0f || transmits)) {
+            v3 from = v3_dot(ls.wi, sf.ng) > 0.0f ? above : v3_madd(sf.p, sf.ng, -eps);
             v3 wl = bsdf_to_local(ls.wi, t, b, sf.ns);
             v3 fv = v3_scale(bsdf_eval(&bsdf, wo, wl), fabsf(wl.z));
             if (!v3_is_zero(fv) && ls.pdf > 0.0f) {
@@ -91,7 +94,7 @@ static bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, 
                 if (max3(c) > 0.0f) {
                     uint32_t k = (*nshadow)++;
                     float tfar = isfinite(ls.dist) ? ls.dist * (1.0f - 1e-4f) - eps : INFINITY;
-                    render_ray_init(&pt->shadow[k], above, ls.wi, tfar);
+                    render_ray_init(&pt->shadow[k], from, ls.wi, tfar);
                     pt->shadow_L[k] = c;
                     pt->shadow_pixel[k] = st->pixel;
                 }

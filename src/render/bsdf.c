@@ -5,7 +5,6 @@
  * sample gives f with f cos / pdf equal to the lobe's weight, as pbrt does. */
 #include "render.h"
 
-#include <complex.h>
 
 #define PI_F 3.14159265358979323846f
 
@@ -80,16 +79,38 @@ static v3 reflect(v3 wo, v3 n) { return v3_sub(v3_scale(n, 2.0f * v3_dot(wo, n))
 
 /* ---- Fresnel ---- */
 
+/* Complex numbers as pairs: C99's complex division and cabsf go through the slow, Annex G-exact
+ * library paths (__divsc3, hypotf), which the Fresnel term does not need. */
+typedef struct cpx {
+    float re, im;
+} cpx;
+static cpx c_make(float re, float im) { return (cpx){re, im}; }
+static cpx c_add(cpx a, cpx b) { return c_make(a.re + b.re, a.im + b.im); }
+static cpx c_sub(cpx a, cpx b) { return c_make(a.re - b.re, a.im - b.im); }
+static cpx c_mul(cpx a, cpx b) { return c_make(a.re * b.re - a.im * b.im, a.re * b.im + a.im * b.re); }
+static cpx c_div(cpx a, cpx b) {
+    float d = b.re * b.re + b.im * b.im;
+    return c_make((a.re * b.re + a.im * b.im) / d, (a.im * b.re - a.re * b.im) / d);
+}
+static float c_norm(cpx a) { return a.re * a.re + a.im * a.im; }
+static cpx c_sqrt(cpx a) {
+    /* principal root */
+    float n = sqrtf(sqrtf(c_norm(a)));
+    if (n == 0.0f) return c_make(0, 0);
+    float t = 0.5f * atan2f(a.im, a.re);
+    return c_make(n * cosf(t), n * sinf(t));
+}
+
 static float fresnel_complex1(float cos_i, float eta, float k) {
     cos_i = fminf(fmaxf(cos_i, 0.0f), 1.0f);
-    float complex e = eta + k * I;
+    cpx e = c_make(eta, k), ci = c_make(cos_i, 0.0f);
     float sin2_i = 1.0f - cos_i * cos_i;
-    float complex sin2_t = sin2_i / (e * e);
-    float complex cos_t = csqrtf(1.0f - sin2_t);
-    float complex r_parl = (e * cos_i - cos_t) / (e * cos_i + cos_t);
-    float complex r_perp = (cos_i - e * cos_t) / (cos_i + e * cos_t);
-    float a = cabsf(r_parl), b = cabsf(r_perp);
-    return 0.5f * (a * a + b * b);
+    cpx sin2_t = c_div(c_make(sin2_i, 0.0f), c_mul(e, e));
+    cpx cos_t = c_sqrt(c_sub(c_make(1.0f, 0.0f), sin2_t));
+    cpx ec = c_mul(e, ci), ect = c_mul(e, cos_t);
+    float r_parl = c_norm(c_div(c_sub(ec, cos_t), c_add(ec, cos_t)));
+    float r_perp = c_norm(c_div(c_sub(ci, ect), c_add(ci, ect)));
+    return 0.5f * (r_parl + r_perp);
 }
 
 v3 bsdf_fresnel_conductor(float cos_i, v3 eta, v3 k) {

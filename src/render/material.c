@@ -43,10 +43,13 @@ v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]
     float x0f = floorf(x), y0f = floorf(y);
     float ax = x - x0f, ay = y - y0f;
     int x0 = (int)x0f, y0 = (int)y0f;
-    int xs[2] = {x0, x0 + 1}, ys[2] = {y0, y0 + 1};
+    /* x0 is in [-1, width - 1] and y0 in [-1, height - 1] (fu, fv in [0, 1)): repeat wrapping is
+     * one step either way, no division (the same texels as the modulo wrap). */
+    int xs[2] = {x0 < 0 ? x0 + t->width : x0, x0 + 1 >= t->width ? x0 + 1 - t->width : x0 + 1};
+    int ys[2] = {y0 < 0 ? y0 + t->height : y0, y0 + 1 >= t->height ? y0 + 1 - t->height : y0 + 1};
     for (int i = 0; i < 2; i++) {
-        xs[i] = ((xs[i] % t->width) + t->width) % t->width;
-        ys[i] = ((ys[i] % t->height) + t->height) % t->height;
+        if (xs[i] < 0 || xs[i] >= t->width) xs[i] = ((xs[i] % t->width) + t->width) % t->width;
+        if (ys[i] < 0 || ys[i] >= t->height) ys[i] = ((ys[i] % t->height) + t->height) % t->height;
     }
     float w[4] = {(1 - ax) * (1 - ay), ax * (1 - ay), (1 - ax) * ay, ax * ay};
     float c[3] = {0, 0, 0};

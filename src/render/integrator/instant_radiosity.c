@@ -17,7 +17,9 @@
  * edges. Primary rays go through pixel centres (the filter needs one surface per pixel), so IR
  * images are not antialiased. Transport: VPLs are deposited on diffuse (Lambert and plastic base)
  * surfaces; mirrors and glass do not receive VPLs, and a pixel that sees one follows its delta
- * chain (one lobe per bounce, up to max_depth) to the surface that gathers. */
+ * chain (one lobe per bounce, up to max_depth) to the surface that gathers. The environment and
+ * directional lights give infinite VPLs (a direction and its radiance over its density) and light
+ * paths that enter from a disk of the scene's bounding radius. */
 #include "pbr.h"
 
 #include <stdlib.h>
@@ -53,11 +55,28 @@ static void ir_set(const render_frame *f, uint32_t sample, uint32_t set, ir_vpl 
         float pmf;
         uint32_t li = light_pick(&s->light_pick, sampler_1d(&rng), &pmf);
         float u[4] = {sampler_1d(&rng), sampler_1d(&rng), sampler_1d(&rng), sampler_1d(&rng)};
-        v3 p, n, dir, power;
-        if (!light_sample_le(s, &s->pb_lights[li], u, &p, &n, &dir, &power)) continue;
-        power = v3_scale(power, 1.0f / pmf);
-        out[count++] = (ir_vpl){.p = p, .n = n, .power = power};
-        v3 org = v3_is_zero(n) ? p : v3_madd(p, n, eps);
+        const rp_light_source *l = &s->pb_lights[li];
+        v3 p, n, dir, power, org;
+        if (l->type == RP_LIGHT_SOURCE_ENVIRONMENT || l->type == RP_LIGHT_SOURCE_DIRECTIONAL) {
+            /* Light from infinity: an infinite VPL for the direct term, and a light path entering
+             * the scene from a disk of its bounding radius facing that direction. */
+            light_sample ls;
+            if (!light_sample_li(s, l, s->center, u[0], u[1], &ls) || !(ls.pdf > 0.0f)) continue;
+            power = v3_scale(ls.L, 1.0f / (ls.pdf * pmf));
+            out[count++] = (ir_vpl){.p = ls.wi, .power = power, .infinite = true};
+            v3 t, b;
+            bsdf_frame(ls.wi, &t, &b);
+            float r = s->radius * sqrtf(u[2]), phi = 6.28318530718f * u[3];
+            org = v3_add(v3_madd(s->center, ls.wi, 2.0f * s->radius),
+                         v3_add(v3_scale(t, r * cosf(phi)), v3_scale(b, r * sinf(phi))));
+            dir = v3_neg(ls.wi);
+            power = v3_scale(power, PI_F * s->radius * s->radius);
+        } else {
+            if (!light_sample_le(s, l, u, &p, &n, &dir, &power)) continue;
+            power = v3_scale(power, 1.0f / pmf);
+            out[count++] = (ir_vpl){.p = p, .n = n, .power = power};
+            org = v3_is_zero(n) ? p : v3_madd(p, n, eps);
+        }
         for (int bounce = 0; bounce < depth && count < V; bounce++) {
             rp_rayhit rh;
             render_ray_init(&rh.ray, org, dir, INFINITY);
@@ -136,22 +155,28 @@ bool ir_frame_init(render_frame *f) {
 /* Contribution of VPL v at point x, before the shadow ray; false when there is none. */
 static inline bool vpl_contrib(const pbr_frame *pf, const ir_point *x, const ir_vpl *v, v3 *wi_out, float *dist_out,
                                v3 *c) {
-    v3 d = v3_sub(v->p, x->org);
-    float d2 = v3_dot(d, d);
-    if (!(d2 > 0.0f)) return false;
-    float dist = sqrtf(d2);
-    v3 wi = v3_scale(d, 1.0f / dist);
+    v3 wi;
+    float d2 = 1.0f, dist = INFINITY, cv = PI_F; /* an infinite VPL: no distance, no 1/pi */
+    if (v->infinite) {
+        wi = v->p;
+    } else {
+        v3 d = v3_sub(v->p, x->org);
+        d2 = v3_dot(d, d);
+        if (!(d2 > 0.0f)) return false;
+        dist = sqrtf(d2);
+        wi = v3_scale(d, 1.0f / dist);
+    }
     float cx = v3_dot(wi, x->ns);
     if (cx <= 0.0f || v3_dot(wi, x->ng) <= 0.0f) return false;
-    float cv = v3_is_zero(v->n) ? 0.25f : -v3_dot(v->n, wi); /* 1/(4 pi) = (1/4) / pi */
+    if (!v->infinite) cv = v3_is_zero(v->n) ? 0.25f : -v3_dot(v->n, wi); /* 1/(4 pi) = (1/4) / pi */
     if (!(cv > 0.0f)) return false;
     v3 fv = x->is_lambert ? x->lambert
                           : v3_mul(x->beta, bsdf_eval(&x->bsdf, x->wo, bsdf_to_local(wi, x->t, x->b, x->ns)));
-    float g = d2 > pf->clamp_d2 ? d2 : pf->clamp_d2;
+    float g = v->infinite ? 1.0f : (d2 > pf->clamp_d2 ? d2 : pf->clamp_d2);
     *c = v3_scale(v3_mul(fv, v->power), cx * cv / (PI_F * g));
     if (v3_is_zero(*c)) return false;
     *wi_out = wi;
-    *dist_out = dist * (1.0f - 1e-4f);
+    *dist_out = v->infinite ? INFINITY : dist * (1.0f - 1e-4f);
     return true;
 }
 
@@ -191,7 +216,10 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                     size_t gi = (size_t)(y0 + ly) * (size_t)f->desc.width + (size_t)(x0 + lx);
                     pf->valid[gi] = 0;
                     pf->emit[gi] = v3_make(0, 0, 0);
-                    if (p->geom_id[q] == RP_INVALID_ID) continue;
+                    if (p->geom_id[q] == RP_INVALID_ID) {
+                        pf->emit[gi] = light_env_radiance(s, v3_make(p->dir_x[q], p->dir_y[q], p->dir_z[q]));
+                        continue;
+                    }
                     rp_ray ray;
                     render_ray_init(&ray, v3_make(p->org_x[q], p->org_y[q], p->org_z[q]),
                                     v3_make(p->dir_x[q], p->dir_y[q], p->dir_z[q]), p->tfar[q]);
@@ -226,6 +254,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                         rp_intersect1(s->scene, &rh);
                         th->rays[bs.wi.z < 0.0f ? RP_RAY_REFRACTION : RP_RAY_REFLECTION]++;
                         if (rh.hit.geom_id == RP_INVALID_ID) {
+                            emit = v3_add(emit, v3_mul(beta, light_env_radiance(s, wi)));
                             hit_surface = false;
                             break;
                         }
@@ -287,6 +316,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                                            v3_make(vp->dir_x[first], vp->dir_y[first], vp->dir_z[first]), vp->tfar[first]);
                     th->rays[RP_RAY_SHADOW] += live;
                     rp_query_n_desc qd = pbr_query(f, th, RP_RAY_SHADOW);
+                    if (vs[v].infinite) qd.frustum = RP_FRUSTUM_NONE; /* parallel rays: no common point */
                     qd.point[0] = vs[v].p.x;
                     qd.point[1] = vs[v].p.y;
                     qd.point[2] = vs[v].p.z;

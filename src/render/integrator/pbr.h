@@ -15,9 +15,12 @@ typedef struct pbr_path {
     render_sampler rng;
 } pbr_path;
 
-/* A virtual point light: intensity towards w is power cos(n, w) / pi, or power / (4 pi) when n is 0. */
+/* A virtual point light: intensity towards w is power cos(n, w) / pi, or power / (4 pi) when n is 0.
+ * An infinite one (from the environment or a directional light) is radiance from direction p
+ * over its density: a shading point gathers f cos power from it. */
 typedef struct ir_vpl {
     v3 p, n, power;
+    bool infinite;
 } ir_vpl;
 
 /* What instant radiosity keeps of a primary hit. */

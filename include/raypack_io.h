@@ -40,6 +40,8 @@ typedef struct rp_material_data {
     int32_t illum;      /* MTL illum model; -1 for NFF/AFF/PLY */
     int32_t map_kd;     /* index into textures of the diffuse texture, or -1 */
     float ka[3];        /* ambient (MTL Ka); Ka above 1 is emission by tinyobjloader's convention */
+    int32_t map_roughness; /* 1 + index into textures of a roughness map (MTL map_Pr), 0 if none */
+    int32_t map_normal;    /* 1 + index into textures of a tangent-space normal map (MTL norm), 0 if none */
 } rp_material_data;
 
 /* Image texture, decoded to 8-bit RGB (sRGB encoded, as stored in the file). */

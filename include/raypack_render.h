@@ -68,6 +68,8 @@ typedef struct rp_material {
     float ks[3];
     float ns;
     float ke[3];
+    int32_t roughness_texture; /* physically based: roughness map (its red channel, linear), or -1 */
+    int32_t normal_texture;    /* physically based: tangent-space normal map, or -1 */
     union {
         rp_mirror_params mirror;
         rp_dielectric_params dielectric;

@@ -200,6 +200,70 @@ int main(void) {
         rp_render_scene_release(s);
         rp_scene_data_free(&d);
     }
+    /* Texture maps from an MTL file: map_Pr (roughness) sets a plastic's GGX alpha = r^2, norm (a
+     * tangent-space normal map) tilts the shading normal along dp/du. */
+    {
+        const char *tmp = getenv("RP_TEST_TMP");
+        char dirp[400], file[600], cmd[700];
+        snprintf(dirp, sizeof dirp, "%s", tmp ? tmp : "/tmp/rp_test_pbr_maps");
+        snprintf(cmd, sizeof cmd, "mkdir -p '%s'", dirp);
+        CHECK(system(cmd) == 0);
+        /* 1x1 PPMs: normal (0.6, 0, 0.8) -> bytes 204 128 230; roughness 128 -> r = 0.502 */
+        const unsigned char nrm[3] = {204, 128, 230}, rough[3] = {128, 128, 128};
+        const char *names[2] = {"n.ppm", "r.ppm"};
+        const unsigned char *px[2] = {nrm, rough};
+        for (int i = 0; i < 2; i++) {
+            snprintf(file, sizeof file, "%s/%s", dirp, names[i]);
+            FILE *fp = fopen(file, "wb");
+            CHECK(fp != NULL);
+            if (!fp) continue;
+            fprintf(fp, "P6\n1 1\n255\n");
+            fwrite(px[i], 1, 3, fp);
+            fclose(fp);
+        }
+        snprintf(file, sizeof file, "%s/maps.mtl", dirp);
+        FILE *fm = fopen(file, "w");
+        if (fm) {
+            fprintf(fm, "newmtl m\nKd 0.5 0.5 0.5\nKs 0.2 0.2 0.2\nNs 10\nmap_Pr r.ppm\nnorm n.ppm\n");
+            fclose(fm);
+        }
+        snprintf(file, sizeof file, "%s/maps.obj", dirp);
+        FILE *fo = fopen(file, "w");
+        if (fo) {
+            /* a unit quad in z = 0 facing +z, u along +x */
+            fprintf(fo, "mtllib maps.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                        "usemtl m\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
+            fclose(fo);
+        }
+        rp_scene_data d;
+        bool loaded = rp_scene_data_load(file, &d, err, sizeof err);
+        CHECKF(loaded, "maps.obj: %s", err);
+        if (loaded) {
+            CHECKF(d.materials[0].map_normal > 0 && d.materials[0].map_roughness > 0, "norm / map_Pr not parsed");
+            rp_render_scene *s = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
+            CHECKF(s != NULL, "%s", err);
+            if (s) {
+                rp_rayhit rh;
+                render_ray_init(&rh.ray, v3_make(0.3f, 0.6f, 2.0f), v3_make(0, 0, -1), INFINITY);
+                rh.hit.geom_id = rh.hit.prim_id = rh.hit.inst_id = RP_INVALID_ID;
+                rp_intersect1(s->scene, &rh);
+                CHECK(rh.hit.geom_id != RP_INVALID_ID);
+                render_surface sf;
+                scene_surface(s, &rh.ray, &rh.hit, &sf);
+                const rp_material *m = &s->materials[sf.material];
+                material_normal_map(s, m, &sf);
+                /* bytes 204/128/230 decode to (0.6, 0.004, 0.804) in tangent space: t = +x, b = n x t = +y */
+                CHECKF(fabsf(sf.ns.x - 0.6f) < 0.01f && fabsf(sf.ns.z - 0.8f) < 0.01f && fabsf(sf.ns.y) < 0.02f,
+                       "normal map: shading normal %g %g %g, want 0.6 0 0.8", sf.ns.x, sf.ns.y, sf.ns.z);
+                render_bsdf b = material_bsdf(s, m, &sf);
+                float r = 128.0f / 255.0f;
+                CHECKF(b.type == BSDF_PLASTIC && fabsf(b.alpha - r * r) < 1e-4f, "roughness map: alpha %g, want %g",
+                       b.alpha, r * r);
+            }
+            rp_render_scene_release(s);
+            rp_scene_data_free(&d);
+        }
+    }
     /* The environment map (studio_small_03): its sampling density integrates to 1 over the sphere,
      * each sample's pdf and radiance are what light_env_pdf and light_env_radiance say of its
      * direction, and the sampled estimate of the mean radiance matches a uniform one. */

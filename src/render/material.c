@@ -16,6 +16,8 @@ rp_material rp_material_from_data(const rp_material_data *d) {
     memcpy(m.ke, d->ke, sizeof m.ke);
     m.ns = d->ns > 0.0f ? d->ns : 1.0f;
     m.texture = d->map_kd;
+    m.roughness_texture = d->map_roughness - 1;
+    m.normal_texture = d->map_normal - 1;
     if (any_positive(d->kt)) {
         m.type = RP_MATERIAL_DIELECTRIC;
         memcpy(m.dielectric.kt, d->kt, sizeof m.dielectric.kt);
@@ -31,7 +33,8 @@ rp_material rp_material_from_data(const rp_material_data *d) {
     return m;
 }
 
-v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]) {
+/* Bilinear lookup with repeat wrapping; srgb: the bytes are sRGB-encoded colours, else linear data. */
+static v3 texture_lookup(const rp_render_scene *s, int32_t texture, const float uv[2], bool srgb) {
     if (texture < 0 || (size_t)texture >= s->data->texture_count) return v3_make(1, 1, 1);
     const rp_texture_data *t = &s->data->textures[texture];
     if (!t->rgb || t->width <= 0 || t->height <= 0) return v3_make(1, 1, 1);
@@ -55,9 +58,13 @@ v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]
     float c[3] = {0, 0, 0};
     for (int j = 0; j < 4; j++) {
         const uint8_t *px = t->rgb + ((size_t)ys[j >> 1] * (size_t)t->width + (size_t)xs[j & 1]) * 3;
-        for (int k = 0; k < 3; k++) c[k] += w[j] * s->srgb_to_linear[px[k]];
+        for (int k = 0; k < 3; k++) c[k] += w[j] * (srgb ? s->srgb_to_linear[px[k]] : (float)px[k] * (1.0f / 255.0f));
     }
     return v3_make(c[0], c[1], c[2]);
+}
+
+v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]) {
+    return texture_lookup(s, texture, uv, true);
 }
 
 v3 material_albedo(const rp_render_scene *s, const rp_material *m, const render_surface *surf) {
@@ -110,6 +117,11 @@ render_bsdf material_bsdf(const rp_render_scene *s, const rp_material *m, const 
         b.type = BSDF_PLASTIC;
         b.ks = clamp3(v3_load(m->ks));
         b.alpha = sqrtf(2.0f / (fmaxf(m->ns, 0.0f) + 2.0f));
+        if (m->roughness_texture >= 0 && surf->has_uv) {
+            /* a roughness map holds perceptual roughness r (linear); alpha = r^2, at least 1e-3 */
+            float r = material_texture_linear(s, m->roughness_texture, surf->uv).x;
+            b.alpha = fmaxf(1e-3f, r * r);
+        }
         break;
     case RP_MATERIAL_MIRROR: {
         v3 kr = clamp3(v3_load(m->mirror.kr));
@@ -146,4 +158,22 @@ v3 material_ke(const rp_render_scene *s, uint32_t material) {
 v3 material_emission(const rp_render_scene *s, uint32_t material, const render_surface *surf) {
     if (!surf->entering) return v3_make(0, 0, 0);
     return material_ke(s, material);
+}
+
+v3 material_texture_linear(const rp_render_scene *s, int32_t texture, const float uv[2]) {
+    return texture_lookup(s, texture, uv, false);
+}
+
+void material_normal_map(const rp_render_scene *s, const rp_material *m, render_surface *surf) {
+    if (m->normal_texture < 0 || !surf->has_uv || v3_is_zero(surf->dpdu)) return;
+    v3 c = material_texture_linear(s, m->normal_texture, surf->uv);
+    v3 n = surf->ns;
+    v3 t = v3_sub(surf->dpdu, v3_scale(n, v3_dot(n, surf->dpdu)));
+    if (!(v3_dot(t, t) > 0.0f)) return;
+    t = v3_normalize(t);
+    v3 b = v3_cross(n, t);
+    v3 p = v3_add(v3_add(v3_scale(t, 2.0f * c.x - 1.0f), v3_scale(b, 2.0f * c.y - 1.0f)), v3_scale(n, 2.0f * c.z - 1.0f));
+    p = v3_normalize(p);
+    /* keep it on the side the ray came from, as scene_surface's normals are */
+    if (v3_dot(p, surf->ng) > 0.0f) surf->ns = p;
 }

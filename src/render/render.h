@@ -106,6 +106,8 @@ typedef struct render_surface {
     bool has_uv;
     bool entering; /* the ray hit the front side (outside) of the surface */
     uint32_t material;
+    v3 dpdu;     /* triangles with texture coordinates: the position's derivative along u (for
+                  * tangent-space normal maps), else 0 */
 } render_surface;
 
 /* Cone user geometry callbacks (cone.c). */
@@ -232,6 +234,10 @@ v3 bsdf_cosine_hemisphere(float u0, float u1);
 
 /* The BSDF of a material at a surface point (material.c). */
 render_bsdf material_bsdf(const rp_render_scene *s, const rp_material *m, const render_surface *surf);
+/* A data texture (roughness, normals) at uv, linear as stored (no sRGB decoding) (material.c). */
+v3 material_texture_linear(const rp_render_scene *s, int32_t texture, const float uv[2]);
+/* Replaces surf->ns by the material's tangent-space normal map, where it has one (material.c). */
+void material_normal_map(const rp_render_scene *s, const rp_material *m, render_surface *surf);
 /* Emitted radiance of a material towards the side the surface was hit from (material.c). */
 v3 material_emission(const rp_render_scene *s, uint32_t material, const render_surface *surf);
 /* Emitted radiance of material i on its front side, whatever the side it is seen from. */

@@ -183,6 +183,7 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
     v3 ns = v3_make(0, 0, 0);
     out->has_uv = false;
     out->uv[0] = out->uv[1] = 0.0f;
+    out->dpdu = v3_make(0, 0, 0);
     out->material = 0;
     uint32_t prim = hit->prim_id;
     if (hit->geom_id == s->geom_ids[RENDER_GEOM_TRIANGLES] && prim < d->triangle_count) {
@@ -199,6 +200,13 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
             out->uv[0] = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
             out->uv[1] = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
             out->has_uv = true;
+            /* dp/du from the triangle's edges and their uv differences (pbrt's Triangle) */
+            v3 p0 = corner3(d->positions, d->indices, prim, 0), p1 = corner3(d->positions, d->indices, prim, 1),
+               p2 = corner3(d->positions, d->indices, prim, 2);
+            float du02 = t0[0] - t2[0], du12 = t1[0] - t2[0], dv02 = t0[1] - t2[1], dv12 = t1[1] - t2[1];
+            float det = du02 * dv12 - dv02 * du12;
+            if (fabsf(det) > 1e-12f)
+                out->dpdu = v3_scale(v3_sub(v3_scale(v3_sub(p0, p2), dv12), v3_scale(v3_sub(p1, p2), dv02)), 1.0f / det);
         }
         if (d->tri_materials) out->material = d->tri_materials[prim];
     } else if (hit->geom_id == s->geom_ids[RENDER_GEOM_SPHERES] && prim < d->sphere_count) {

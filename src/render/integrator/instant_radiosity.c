@@ -228,6 +228,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                                   .inst_id = p->inst_id[q]};
                     render_surface sf;
                     scene_surface(s, &ray, &hit, &sf);
+                    material_normal_map(s, &s->materials[sf.material], &sf);
                     v3 emit = material_emission(s, sf.material, &sf), beta = v3_make(1, 1, 1);
                     render_bsdf bsdf = material_bsdf(s, &s->materials[sf.material], &sf);
                     float depth = ray.tfar;
@@ -261,6 +262,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                         ray = rh.ray;
                         depth += rh.ray.tfar;
                         scene_surface(s, &rh.ray, &rh.hit, &sf);
+                        material_normal_map(s, &s->materials[sf.material], &sf);
                         emit = v3_add(emit, v3_mul(beta, material_emission(s, sf.material, &sf)));
                         bsdf = material_bsdf(s, &s->materials[sf.material], &sf);
                     }

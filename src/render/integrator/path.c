@@ -57,6 +57,7 @@ static bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, 
         return false;
     }
     const rp_material *m = &s->materials[sf.material];
+    material_normal_map(s, m, &sf);
     v3 le = material_emission(s, sf.material, &sf);
     if (!v3_is_zero(le)) {
         float w = 1.0f;

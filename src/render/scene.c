@@ -99,7 +99,8 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
     if (!s->materials) return fail(s, err, err_size, "out of memory");
     for (size_t i = 0; i < data->material_count; i++) s->materials[i] = rp_material_from_data(&data->materials[i]);
     if (data->material_count == 0) {
-        s->materials[0] = (rp_material){.type = RP_MATERIAL_DIFFUSE, .kd = {0.8f, 0.8f, 0.8f}, .texture = -1};
+        s->materials[0] = (rp_material){.type = RP_MATERIAL_DIFFUSE, .kd = {0.8f, 0.8f, 0.8f}, .texture = -1,
+                                        .roughness_texture = -1, .normal_texture = -1};
     }
 
     s->light_count = data->light_count;

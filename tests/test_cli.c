@@ -84,6 +84,7 @@ int main(void) {
     EXPECT("render --eye 1,2", 2, "--eye expects three numbers");
     EXPECT("render --integrator radiosity", 2, "--integrator expects whitted, eyelight, direct, path, ir or ao");
     EXPECT("render --tonemap reinhard", 2, "--tonemap expects srgb or aces");
+    EXPECT("render --integrator path --env /nonexistent/env.hdr", 1, "env.hdr: error: cannot read a Radiance HDR image");
     EXPECT("render --ir-filter 4", 2, "--ir-filter expects an odd side");
     EXPECT("render --aov colour", 2, "--aov expects depth, normal, primid or albedo");
     EXPECT("render --traversal fast", 2, "--traversal expects auto, masked, ranged, partition, span, single or simd");

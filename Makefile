@@ -3,7 +3,8 @@ JOBS ?= $(shell nproc)
 DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev \
         libassimp-dev libdeflate-dev python3-dev python3-cffi python3-numpy python3-pytest python3-pip python3-setuptools \
         openmpi-bin libopenmpi-dev \
-        libsdl2-dev xvfb xauth
+        libsdl2-dev xvfb xauth \
+        libopenexr-dev
 SUDO := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 
 .PHONY: all deps release asan demo test test-release test-asan bench install clean

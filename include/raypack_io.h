@@ -42,6 +42,9 @@ typedef struct rp_material_data {
     float ior;          /* index of refraction (MTL Ni, NFF index_of_refraction); 1 if absent */
     int32_t illum;      /* MTL illum model; -1 for NFF/AFF/PLY */
     int32_t map_kd;     /* index into textures of the diffuse texture, or -1 */
+    float ka[3];        /* ambient (MTL Ka); Ka above 1 is emission by tinyobjloader's convention */
+    int32_t map_roughness; /* 1 + index into textures of a roughness map (MTL map_Pr), 0 if none */
+    int32_t map_normal;    /* 1 + index into textures of a tangent-space normal map (MTL norm), 0 if none */
 } rp_material_data;
 
 /* Image texture, decoded to 8-bit RGB (sRGB encoded, as stored in the file). */
@@ -127,10 +130,13 @@ RP_API void rp_scene_data_free(rp_scene_data *scene);
 
 /* Writes an image; the format follows the extension: .png and .ppm (8-bit, linear values clamped
  * to [0,1] and sRGB-encoded), .pfm (32-bit float, linear, standard PFM: rows bottom-up, negative
- * scale = little endian). channels is 1 or 3; pixels are row-major, top row first.
+ * scale = little endian), .hdr (Radiance RGBE, linear), .exr
+ * (OpenEXR float, linear). channels is 1 or 3; pixels are row-major, top row first.
  * Returns false and writes "path: error: message" into err on failure. */
 RP_API bool rp_image_write(const char *path, int width, int height, int channels, const float *pixels,
                            char *err, size_t err_size);
+/* Reads a Radiance .hdr image into a malloc'ed RGB float array, top row first (caller frees). */
+RP_API float *rp_image_read_hdr(const char *path, int *width, int *height, char *err, size_t err_size);
 /* Reads a PFM (1 or 3 channels) into a malloc'ed float array, top row first (caller frees). */
 RP_API float *rp_image_read_pfm(const char *path, int *width, int *height, int *channels, char *err,
                                 size_t err_size);

@@ -68,6 +68,8 @@ typedef struct rp_material {
     float ks[3];
     float ns;
     float ke[3];
+    int32_t roughness_texture; /* physically based: roughness map (its red channel, linear), or -1 */
+    int32_t normal_texture;    /* physically based: tangent-space normal map, or -1 */
     union {
         rp_mirror_params mirror;
         rp_dielectric_params dielectric;
@@ -79,7 +81,18 @@ RP_API rp_material rp_material_from_data(const rp_material_data *data);
 
 /* ---- lights ----------------------------------------------------------------------------------- */
 
-typedef enum rp_light_source_type { RP_LIGHT_SOURCE_POINT = 0 } rp_light_source_type;
+/* Lights. Radiometric units are the scene's: a point or spot light's intensity is radiant
+ * intensity (radiance times area per steradian), an area triangle's and the environment's values are
+ * radiance, a directional light's is irradiance on a surface facing it. The physically based
+ * integrators apply the inverse square law to point and spot lights (Whitted keeps the NFF
+ * convention, inverse_square false, of the scene files). */
+typedef enum rp_light_source_type {
+    RP_LIGHT_SOURCE_POINT = 0,
+    RP_LIGHT_SOURCE_SPOT = 1,
+    RP_LIGHT_SOURCE_DIRECTIONAL = 2,
+    RP_LIGHT_SOURCE_TRIANGLE = 3,   /* an emissive triangle of the mesh (MTL Ke), one sided */
+    RP_LIGHT_SOURCE_ENVIRONMENT = 4 /* radiance from every direction: a lat-long map or a constant */
+} rp_light_source_type;
 
 typedef struct rp_point_light {
     float position[3];
@@ -87,10 +100,36 @@ typedef struct rp_point_light {
     bool inverse_square; /* false: no distance falloff (the NFF convention of the scene files) */
 } rp_point_light;
 
+typedef struct rp_spot_light {
+    float position[3], direction[3]; /* direction: unit, where the cone points */
+    float intensity[3];              /* on the axis */
+    float cos_inner, cos_outer;      /* full intensity inside cos_inner, none outside cos_outer */
+} rp_spot_light;
+
+typedef struct rp_directional_light {
+    float direction[3];  /* unit, the direction the light travels */
+    float irradiance[3];
+} rp_directional_light;
+
+typedef struct rp_triangle_light {
+    float p[3][3];       /* corners; the emitting side is that of (p1 - p0) x (p2 - p0) */
+    float radiance[3];
+    uint32_t prim;       /* the mesh triangle it is */
+} rp_triangle_light;
+
+typedef struct rp_environment_light {
+    float scale[3];      /* radiance multiplier (the radiance itself without a map) */
+    bool has_map;        /* the render scene's environment map (rp_render_scene_desc.environment) */
+} rp_environment_light;
+
 typedef struct rp_light_source {
     rp_light_source_type type;
     union {
         rp_point_light point;
+        rp_spot_light spot;
+        rp_directional_light directional;
+        rp_triangle_light triangle;
+        rp_environment_light environment;
     };
 } rp_light_source;
 
@@ -100,6 +139,11 @@ typedef struct rp_render_scene rp_render_scene;
 
 typedef struct rp_render_scene_desc {
     rp_scene_desc accel;  /* acceleration structure settings of the core scene */
+    /* Environment of the physically based integrators: a lat-long Radiance .hdr (+y up, u = 0.5 at
+     * -z; the radiance arriving from each direction) times environment_scale, or, without a file,
+     * the constant radiance environment_scale (all 0: no environment). */
+    const char *environment;
+    float environment_scale[3];
 } rp_render_scene_desc;
 
 /* Returns the defaults for every zero field of desc (NULL gives all defaults). */
@@ -115,6 +159,9 @@ RP_API void rp_render_scene_release(rp_render_scene *scene);
 RP_API rp_scene *rp_render_scene_core(rp_render_scene *scene);
 /* The scene file's camera, or one that frames the scene's bounds when the file had none. */
 RP_API rp_camera rp_render_scene_default_camera(rp_render_scene *scene);
+/* The physically based lights of the scene (area triangles, point, spot, directional,
+ * environment; valid while the render scene lives) and their count. */
+RP_API const rp_light_source *rp_render_scene_lights(const rp_render_scene *scene, size_t *count);
 /* The renderer's material of index i (i < material count of the data). */
 RP_API const rp_material *rp_render_scene_material(const rp_render_scene *scene, size_t i);
 
@@ -123,8 +170,25 @@ RP_API const rp_material *rp_render_scene_material(const rp_render_scene *scene,
 typedef enum rp_integrator_type {
     RP_INTEGRATOR_WHITTED = 0,  /* point lights, hard shadows, mirror reflection, refraction */
     RP_INTEGRATOR_EYELIGHT = 1, /* primary rays only: |cos| between geometric normal and ray */
-    RP_INTEGRATOR_AOV = 2       /* one debug output of the primary hit, see rp_aov */
+    RP_INTEGRATOR_AOV = 2,      /* one debug output of the primary hit, see rp_aov */
+    RP_INTEGRATOR_DIRECT = 3,   /* direct lighting: light and BSDF sampling with MIS */
+    RP_INTEGRATOR_PATH = 4,     /* path tracing: NEE, MIS (power heuristic), Russian roulette */
+    RP_INTEGRATOR_IR = 5,       /* instant radiosity, interleaved sampling, discontinuity buffer */
+    RP_INTEGRATOR_AO = 6        /* ambient occlusion: the unoccluded fraction of the hemisphere */
 } rp_integrator_type;
+
+/* Instant radiosity (Keller 1997; Wald et al. 2002, interleaved sampling and the discontinuity
+ * buffer). Every sample of a frame traces fresh VPLs: interleave^2 sets of vpls each; pixel (x, y)
+ * sees set (x mod N) + N (y mod N). */
+typedef struct rp_ir_desc {
+    int interleave;   /* N of N x N interleaved sampling; 0: 5 */
+    int vpls;         /* VPLs per set (= per pixel and sample); 0: 16 */
+    int filter;       /* discontinuity buffer side (odd); 0: 3, 1 or negative: no filter */
+    float clamp;      /* the geometry term's distance is at least clamp times the scene's bounding
+                       * radius (cos cos / max(d, c)^2, which bounds the spikes near a VPL); 0:
+                       * 0.02; negative: no clamping (unbiased) */
+    int depth;        /* bounces of the light paths; 0: max_depth */
+} rp_ir_desc;
 
 typedef enum rp_aov {
     RP_AOV_DEPTH = 0,  /* 1 channel: distance along the normalized primary ray, +inf on a miss */
@@ -138,7 +202,8 @@ typedef enum rp_ray_kind {
     RP_RAY_SHADOW = 1,
     RP_RAY_REFLECTION = 2,
     RP_RAY_REFRACTION = 3,
-    RP_RAY_KIND_COUNT = 4
+    RP_RAY_BOUNCE = 4,    /* path tracing's diffuse and glossy bounces, and VPL paths */
+    RP_RAY_KIND_COUNT = 5
 } rp_ray_kind;
 
 /* Called while a frame renders, never by two threads at once; rays counts all kinds so far. */
@@ -151,7 +216,10 @@ typedef struct rp_render_desc {
                                  * are jittered from (pixel, sample index) */
     rp_integrator_type integrator;
     rp_aov aov;                 /* with RP_INTEGRATOR_AOV; AOVs trace the pixel centre only */
-    int max_depth;              /* Whitted: reflection/refraction bounces; 0: 5, negative: none */
+    int max_depth;              /* Whitted: reflection/refraction bounces; path: bounces; 0: 5,
+                                 * negative: none */
+    rp_ir_desc ir;              /* with RP_INTEGRATOR_IR */
+    float ao_distance;          /* ambient occlusion ray length; 0: 0.1 of the bounding radius */
     const rp_camera *camera;    /* NULL: rp_render_scene_default_camera */
     int tile_size;              /* 0: 16 */
     float ambient;              /* Whitted ambient term relative to kd; 0: 0.08, negative: none */
@@ -182,9 +250,20 @@ RP_API int rp_render_channels(const rp_render_desc *desc);
 /* Renders a frame into pixels (width * height * rp_render_channels floats, linear, top row first)
  * on the device's threads; with desc.region only the pixels inside it are written, each exactly as
  * the whole frame would have it. stats may be NULL. Returns false on bad arguments (a packet size
- * other than 4, 8, 16 or 32, a region not inside the image) or out of memory. */
+ * other than 4, 8, 16 or 32, a region not inside the image, a region with instant radiosity) or out of memory. */
 RP_API bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels,
                       rp_render_stats *stats);
+
+/* ---- film --------------------------------------------------------------------------------------- */
+
+typedef enum rp_tonemap {
+    RP_TONEMAP_SRGB = 0, /* linear values clamped to [0, 1] (the image writer then encodes sRGB) */
+    RP_TONEMAP_ACES = 1  /* the ACES filmic curve (Narkowicz's fit), then sRGB */
+} rp_tonemap;
+
+/* Scales count pixels of channels floats by 2^exposure and applies the tone curve, in place, for an
+ * 8-bit image. Radiance stays linear in PFM, HDR and EXR files: do not call it for those. */
+RP_API void rp_film_tonemap(float *pixels, size_t count, int channels, float exposure, rp_tonemap tonemap);
 
 /* ---- built-in scene --------------------------------------------------------------------------- */
 

@@ -82,7 +82,10 @@ int main(void) {
     EXPECT("render --spp 0", 2, "--spp expects an integer");
     EXPECT("render --max-depth 1.5", 2, "--max-depth expects an integer");
     EXPECT("render --eye 1,2", 2, "--eye expects three numbers");
-    EXPECT("render --integrator path", 2, "--integrator expects eyelight or whitted");
+    EXPECT("render --integrator radiosity", 2, "--integrator expects whitted, eyelight, direct, path, ir or ao");
+    EXPECT("render --tonemap reinhard", 2, "--tonemap expects srgb or aces");
+    EXPECT("render --integrator path --env /nonexistent/env.hdr", 1, "env.hdr: error: cannot read a Radiance HDR image");
+    EXPECT("render --ir-filter 4", 2, "--ir-filter expects an odd side");
     EXPECT("render --aov colour", 2, "--aov expects depth, normal, primid or albedo");
     EXPECT("render --traversal fast", 2, "--traversal expects auto, masked, ranged, partition, span, single, simd or mlrt");
     EXPECT("render --packet 12", 2, "--packet expects 4, 8, 16 or 32");
@@ -92,7 +95,7 @@ int main(void) {
     EXPECT("bench --isa 16", 2, "--isa expects auto, scalar, sse, avx2 or avx512");
     EXPECT("render --frobnicate", 2, "unknown option '--frobnicate'");
     EXPECT("render a.obj b.obj", 2, "expected one SCENE");
-    EXPECT("render -o out.jpg", 2, "-o expects a file ending in .png, .pfm or .ppm");
+    EXPECT("render -o out.jpg", 2, "-o expects a file ending in .png, .pfm, .ppm, .hdr or .exr");
     EXPECT("info --threads -1", 2, "--threads expects an integer");
     EXPECT("info --bogus", 2, "unknown option '--bogus'");
 
@@ -211,6 +214,31 @@ int main(void) {
                  "--fov 39 --threads 2 -o '%s/cornell.png'",
                  cornell, tmp);
         EXPECT(args, 0, "primary 1024");
+    }
+    char original[600];
+    if (rp_test_scene("cornell_original/CornellBox-Original.obj", original, sizeof original)) {
+        /* the physically based integrators end to end: a float image and its denoiser AOVs, and
+         * progressive frames by time */
+        snprintf(args, sizeof args, "render '%s' --width 24 --height 24 --integrator path --spp 2 --aovs "
+                 "--threads 2 -o '%s/pt.pfm'", original, tmp);
+        EXPECT(args, 0, "bounce");
+        const char *suffix[3] = {"pt.pfm", "pt.albedo.pfm", "pt.normal.pfm"};
+        for (int k = 0; k < 3; k++) {
+            char p[1200], why[256];
+            snprintf(p, sizeof p, "%s/%s", tmp, suffix[k]);
+            int pw = 0, ph = 0, pc = 0;
+            float *img = rp_image_read_pfm(p, &pw, &ph, &pc, why, sizeof why);
+            CHECKF(img && pw == 24 && ph == 24 && pc == 3, "%s: %s", p, img ? "wrong size" : why);
+            free(img);
+        }
+        snprintf(args, sizeof args, "render '%s' --width 16 --height 16 --integrator ir --time 0.3 --threads 2 "
+                 "-o '%s/ir.png'", original, tmp);
+        EXPECT(args, 0, "frames");
+        snprintf(args, sizeof args, "bench --render '%s' --frames 1 --width 16 --height 16 --threads 2", original);
+        EXPECT(args, 0, "ir ");
+        EXPECT("bench --render", 2, "expected at least one SCENE");
+        snprintf(args, sizeof args, "render --integrator path --width 16 --height 16 -o '%s/room.png'", tmp);
+        EXPECT(args, 0, "scene");
     }
     return RP_TEST_END();
 }

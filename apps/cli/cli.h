@@ -53,6 +53,7 @@ typedef struct cli_render_setup {
     int width, height;          /* 0: from the scene (cli_render_size) */
     int spp, threads, isa;      /* spp 0: not given */
     rp_render_desc desc;        /* integrator, depth, packets, traversal, frusta; no size or camera */
+    rp_render_scene_desc scene_desc; /* --accel, --env, --env-scale */
     const char *integrator_name, *traversal_name;
     bool has_eye, has_look, has_up, has_fov;
     float eye[3], look[3], up[3], fov;
@@ -71,5 +72,8 @@ void cli_render_size(const cli_render_setup *setup, const rp_scene_data *data, i
 
 /* Largest thread count accepted by --threads. */
 #define CLI_MAX_THREADS 1024
+
+/* `raypack bench --render`: frame times of the integrators (bench_render.c); argv[0] is "--render". */
+int cli_bench_render(int argc, char **argv);
 
 #endif

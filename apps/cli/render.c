@@ -25,11 +25,32 @@ static void render_usage(FILE *out) {
             "\n"
             "options:\n"
             "  -o, --output FILE      image to write; the format follows the extension:\n"
-            "                         .png, .ppm (8-bit sRGB) or .pfm (float, linear) [raypack.png]\n"
+            "                         .png, .ppm (8-bit: exposure, tone map, sRGB), .pfm, .hdr or .exr\n"
+            "                         (float, linear radiance as is) [raypack.png]\n"
             "  --width W, --height H  image size in pixels, 1..16384 [the scene's, else 512x512]\n"
-            "  --spp N                samples per pixel, jittered deterministically when N > 1 [1]\n"
-            "  --integrator NAME      eyelight or whitted [whitted]\n"
-            "  --max-depth N          Whitted reflection/refraction depth, 0..64 [5]\n"
+            "  --spp N                samples per pixel, jittered deterministically when N > 1 [1];\n"
+            "                         with --time, per frame\n"
+            "  --time S               render frames of --spp samples each, accumulated, until S\n"
+            "                         seconds have passed (at least one frame)\n"
+            "  --integrator NAME      whitted (point lights, mirrors, glass), eyelight, direct\n"
+            "                         (direct lighting, MIS), path (path tracing: NEE, MIS,\n"
+            "                         Russian roulette), ir (instant radiosity) or ao (ambient\n"
+            "                         occlusion) [whitted]. direct, path and ir are physically\n"
+            "                         based: radiance in the scene's units, lit only by the scene's\n"
+            "                         emitters (MTL Ke; Ka > 1), point lights and --env\n"
+            "  --max-depth N          Whitted reflection/refraction depth; path: bounces, 0..64 [5]\n"
+            "  --env FILE.hdr         lat-long environment (+y up) for direct, path and ir\n"
+            "  --env-scale R,G,B      multiplies --env; without --env, a constant environment\n"
+            "  --exposure EV          PNG/PPM: multiply by 2^EV before the tone map [0]\n"
+            "  --tonemap NAME         PNG/PPM: srgb (clamp) or aces (filmic) [srgb]\n"
+            "  --ir-interleave N      ir: N x N interleaved VPL sets, 1..16 [5]\n"
+            "  --ir-vpls N            ir: VPLs per set (per pixel and sample), 1..4096 [16]\n"
+            "  --ir-filter N          ir: discontinuity buffer side (odd; 1: off) [3]\n"
+            "  --ir-clamp C           ir: geometry term distance at least C x the scene's bounding\n"
+            "                         radius; 0 or negative: no clamping (unbiased) [0.02]\n"
+            "  --ao-distance D        ao: occlusion ray length [0.1 x the bounding radius]\n"
+            "  --aovs                 also write the albedo and normal AOVs (for denoisers) beside\n"
+            "                         the image: NAME.albedo.EXT and NAME.normal.EXT\n"
             "  --aov NAME             debug output instead of shading: depth (PFM: distance along\n"
             "                         the primary ray, +inf on a miss), normal, primid or albedo\n"
             "  --threads N            worker threads, 1..%d; 0 for all hardware threads [0]\n"
@@ -43,7 +64,8 @@ static void render_usage(FILE *out) {
             "                         mlrt (multi-level: entry points found by the packets' and\n"
             "                         their quadrants' frusta, then span; needs --frustum on)\n"
             "                         [auto]; every choice gives the same image\n"
-            "  --packet N             Whitted traces packets of N x N rays, N = 4, 8, 16 or 32 [16]\n"
+            "  --packet N             Whitted traces packets of N x N rays, N = 4, 8, 16 or 32, and\n"
+            "                         every integrator its primary rays (ir: 8) [16]\n"
             "  --frustum on|off       cull with the packets' frusta [on]\n"
             "  --eye X,Y,Z  --look X,Y,Z  --up X,Y,Z  --fov DEG\n"
             "                         camera (pinhole; vertical fov in (0, 180)); each replaces that\n"
@@ -73,6 +95,13 @@ typedef struct render_options {
     bool has_eye, has_look, has_up, has_fov;
     float eye[3], look[3], up[3], fov;
     bool stats, quiet;
+    float time_s, exposure, ir_clamp, ao_distance;
+    rp_tonemap tonemap;
+    const char *env;
+    bool has_env_scale;
+    float env_scale[3];
+    int ir_interleave, ir_vpls, ir_filter;
+    bool aovs;
     rp_traversal traversal;
     const char *traversal_name;
     int packet;
@@ -126,15 +155,66 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
             if (!cli_parse_accel(CMD, a, v, &o->accel)) return CLI_EXIT_USAGE;
         } else if (strcmp(a, "--integrator") == 0) {
             VALUE();
-            if (strcmp(v, "eyelight") == 0) {
-                o->integrator = RP_INTEGRATOR_EYELIGHT;
-            } else if (strcmp(v, "whitted") == 0) {
-                o->integrator = RP_INTEGRATOR_WHITTED;
-            } else {
-                fprintf(stderr, "raypack render: --integrator expects eyelight or whitted, got '%s'\n", v);
+            static const struct { const char *name; rp_integrator_type type; } integrators[] = {
+                {"whitted", RP_INTEGRATOR_WHITTED}, {"eyelight", RP_INTEGRATOR_EYELIGHT},
+                {"direct", RP_INTEGRATOR_DIRECT},   {"path", RP_INTEGRATOR_PATH},
+                {"ir", RP_INTEGRATOR_IR},           {"ao", RP_INTEGRATOR_AO}};
+            bool found = false;
+            for (size_t k = 0; k < sizeof integrators / sizeof integrators[0]; k++)
+                if (strcmp(v, integrators[k].name) == 0) {
+                    o->integrator = integrators[k].type;
+                    found = true;
+                }
+            if (!found) {
+                fprintf(stderr, "raypack render: --integrator expects whitted, eyelight, direct, path, ir or ao, got "
+                                "'%s'\n", v);
                 return CLI_EXIT_USAGE;
             }
             o->integrator_name = v;
+        } else if (strcmp(a, "--time") == 0) {
+            VALUE();
+            if (!cli_parse_float(CMD, a, v, 0.0, 1e6, true, &o->time_s)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--exposure") == 0) {
+            VALUE();
+            if (!cli_parse_float(CMD, a, v, -64.0, 64.0, false, &o->exposure)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--tonemap") == 0) {
+            VALUE();
+            if (strcmp(v, "srgb") == 0) {
+                o->tonemap = RP_TONEMAP_SRGB;
+            } else if (strcmp(v, "aces") == 0) {
+                o->tonemap = RP_TONEMAP_ACES;
+            } else {
+                fprintf(stderr, "raypack render: --tonemap expects srgb or aces, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
+        } else if (strcmp(a, "--env") == 0) {
+            VALUE();
+            o->env = v;
+        } else if (strcmp(a, "--env-scale") == 0) {
+            VALUE();
+            if (!cli_parse_vec3(CMD, a, v, o->env_scale)) return CLI_EXIT_USAGE;
+            o->has_env_scale = true;
+        } else if (strcmp(a, "--ir-interleave") == 0) {
+            VALUE();
+            if (!cli_parse_int(CMD, a, v, 1, 16, &o->ir_interleave)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--ir-vpls") == 0) {
+            VALUE();
+            if (!cli_parse_int(CMD, a, v, 1, 4096, &o->ir_vpls)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--ir-filter") == 0) {
+            VALUE();
+            if (!cli_parse_int(CMD, a, v, 1, 31, &o->ir_filter) || o->ir_filter % 2 == 0) {
+                if (o->ir_filter % 2 == 0) fprintf(stderr, "raypack render: --ir-filter expects an odd side, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
+        } else if (strcmp(a, "--ir-clamp") == 0) {
+            VALUE();
+            if (!cli_parse_float(CMD, a, v, -1.0, 1.0, false, &o->ir_clamp)) return CLI_EXIT_USAGE;
+            if (o->ir_clamp == 0.0f) o->ir_clamp = -1.0f;
+        } else if (strcmp(a, "--ao-distance") == 0) {
+            VALUE();
+            if (!cli_parse_float(CMD, a, v, 0.0, 1e30, true, &o->ao_distance)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--aovs") == 0) {
+            o->aovs = true;
         } else if (strcmp(a, "--aov") == 0) {
             VALUE();
             static const struct { const char *name; rp_aov aov; } aovs[] = {
@@ -220,8 +300,10 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
 #undef VALUE
     }
     const char *dot = strrchr(o->output, '.');
-    if (!dot || (strcasecmp(dot, ".png") != 0 && strcasecmp(dot, ".pfm") != 0 && strcasecmp(dot, ".ppm") != 0)) {
-        fprintf(stderr, "raypack render: -o expects a file ending in .png, .pfm or .ppm, got '%s'\n", o->output);
+    if (!dot || (strcasecmp(dot, ".png") != 0 && strcasecmp(dot, ".pfm") != 0 && strcasecmp(dot, ".ppm") != 0 &&
+                 strcasecmp(dot, ".hdr") != 0 && strcasecmp(dot, ".exr") != 0)) {
+        fprintf(stderr, "raypack render: -o expects a file ending in .png, .pfm, .ppm, .hdr or .exr, got '%s'\n",
+                o->output);
         return CLI_EXIT_USAGE;
     }
     return CLI_EXIT_OK;
@@ -313,7 +395,7 @@ static void json_string(FILE *f, const char *s) {
     fputc('"', f);
 }
 
-static const char *const KIND_NAMES[RP_RAY_KIND_COUNT] = {"primary", "shadow", "reflection", "refraction"};
+static const char *const KIND_NAMES[RP_RAY_KIND_COUNT] = {"primary", "shadow", "reflection", "refraction", "bounce"};
 
 /* Number of entries of a depth histogram up to its last nonzero one. */
 static int depth_used(const uint64_t *h) {
@@ -459,13 +541,22 @@ int cli_render(int argc, char **argv) {
     if (!device) goto done;
     double t1 = cli_now_ms();
     char err[512] = "";
-    rp_render_scene_desc sdesc = {.accel = {.accel = o.accel}};
+    rp_render_scene_desc sdesc = {.accel = {.accel = o.accel}, .environment = o.env};
+    if (o.has_env_scale) memcpy(sdesc.environment_scale, o.env_scale, sizeof o.env_scale);
     scene = rp_render_scene_new(device, &data, &sdesc, err, sizeof err);
     if (!scene) {
         fprintf(stderr, "raypack render: %s\n", err);
         goto done;
     }
     double build_ms = cli_now_ms() - t1;
+    bool physical = !o.use_aov && (o.integrator == RP_INTEGRATOR_DIRECT || o.integrator == RP_INTEGRATOR_PATH ||
+                                   o.integrator == RP_INTEGRATOR_IR);
+    size_t pb_lights = 0;
+    rp_render_scene_lights(scene, &pb_lights);
+    if (physical && pb_lights == 0)
+        fprintf(stderr, "raypack render: warning: %s has no light (no emissive material, no point light; no --env): "
+                        "the physically based image is black, as no fallback light is added\n",
+                builtin ? "the built-in room" : o.scene);
     rp_scene_stats sst;
     rp_scene_get_stats(rp_render_scene_core(scene), &sst);
 
@@ -499,6 +590,8 @@ int cli_render(int argc, char **argv) {
         .packet = o.packet, .traversal = o.traversal, .no_frustum = o.no_frustum,
         /* counting costs a little, so only when it is reported */
         .count_work = o.stats || o.stats_json,
+        .ir = {.interleave = o.ir_interleave, .vpls = o.ir_vpls, .filter = o.ir_filter, .clamp = o.ir_clamp},
+        .ao_distance = o.ao_distance,
     };
     progress_state ps = {.start_ms = cli_now_ms(), .tty = isatty(2) != 0, .quiet = o.quiet, .last_quarter = 0};
     desc.progress = on_progress;
@@ -514,13 +607,63 @@ int cli_render(int argc, char **argv) {
         fprintf(stderr, "raypack render: rendering failed (out of memory?)\n");
         goto done;
     }
+    int frames = 1;
+    if (o.time_s > 0.0f && !o.use_aov) {
+        /* Progressive: frames of spp samples each, from where the last ended, averaged in linear float. */
+        size_t np = (size_t)w * (size_t)h * (size_t)channels;
+        float *frame = malloc(np * sizeof(float));
+        if (!frame) {
+            fprintf(stderr, "raypack render: out of memory for a %dx%d image\n", w, h);
+            goto done;
+        }
+        desc.progress = NULL;
+        double total_ms = rs.render_ms;
+        int per = o.spp ? o.spp : 1;
+        while (total_ms < (double)o.time_s * 1e3) {
+            desc.sample_start = frames * per;
+            rp_render_stats fs;
+            if (!rp_render(scene, &desc, frame, &fs)) {
+                free(frame);
+                fprintf(stderr, "raypack render: rendering failed (out of memory?)\n");
+                goto done;
+            }
+            frames++;
+            for (size_t i = 0; i < np; i++) pixels[i] += (frame[i] - pixels[i]) / (float)frames;
+            for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rs.rays[k] += fs.rays[k];
+            total_ms += fs.render_ms;
+        }
+        rs.render_ms = total_ms;
+        free(frame);
+    }
 
     /* Write. */
     const char *dot = strrchr(o.output, '.');
+    bool eight_bit = strcasecmp(dot, ".png") == 0 || strcasecmp(dot, ".ppm") == 0;
     if (channels == 1 && strcasecmp(dot, ".pfm") != 0) depth_to_grey(pixels, (size_t)w * (size_t)h);
+    else if (eight_bit && !o.use_aov) rp_film_tonemap(pixels, (size_t)w * (size_t)h, channels, o.exposure, o.tonemap);
     if (!rp_image_write(o.output, w, h, channels, pixels, err, sizeof err)) {
         fprintf(stderr, "raypack render: %s\n", err);
         goto done;
+    }
+
+    if (o.aovs && !o.use_aov) {
+        /* The denoiser's guides: albedo and normal of the primary hits, written as the image is. */
+        static const struct { rp_aov aov; const char *name; } guides[] = {{RP_AOV_ALBEDO, "albedo"},
+                                                                          {RP_AOV_NORMAL, "normal"}};
+        for (size_t g = 0; g < 2; g++) {
+            rp_render_desc ad = desc;
+            ad.integrator = RP_INTEGRATOR_AOV;
+            ad.aov = guides[g].aov;
+            ad.progress = NULL;
+            ad.sample_start = 0;
+            char name[4096];
+            snprintf(name, sizeof name, "%.*s.%s%s", (int)(dot - o.output), o.output, guides[g].name, dot);
+            if (!rp_render(scene, &ad, pixels, NULL) ||
+                !rp_image_write(name, w, h, 3, pixels, err, sizeof err)) {
+                fprintf(stderr, "raypack render: %s\n", err[0] ? err : "rendering an AOV failed");
+                goto done;
+            }
+        }
     }
 
     uint64_t total = 0;
@@ -533,16 +676,17 @@ int cli_render(int argc, char **argv) {
     if (!o.quiet) {
         printf("scene    %s: %zu triangles, %zu spheres, %zu cones, %zu materials, %zu lights\n", scene_name,
                data.triangle_count, data.sphere_count, data.cone_count, data.material_count, data.light_count);
-        printf("image    %s: %dx%d, %d spp, %s", o.output, w, h, o.use_aov ? 1 : (o.spp ? o.spp : 1), mode);
+        printf("image    %s: %dx%d, %d spp, %s", o.output, w, h, o.use_aov ? 1 : (o.spp ? o.spp : 1) * frames, mode);
+        if (frames > 1) printf(" (%d frames, %.1f ms a frame)", frames, rs.render_ms / frames);
         if (packets)
             printf(" (max depth %d, %dx%d packets, %s traversal, frusta %s)", o.max_depth < 0 ? 5 : o.max_depth,
                    o.packet, o.packet, o.traversal_name, o.no_frustum ? "off" : "on");
         printf(", %d threads, %s kernels\n", threads, cli_isa_name(rp_device_isa(device)));
         printf("time     load %.1f ms, build %.1f ms, render %.1f ms\n", load_ms, build_ms, rs.render_ms);
-        printf("rays     primary %llu, shadow %llu, reflection %llu, refraction %llu, total %llu\n",
+        printf("rays     primary %llu, shadow %llu, reflection %llu, refraction %llu, bounce %llu, total %llu\n",
                (unsigned long long)rs.rays[RP_RAY_PRIMARY], (unsigned long long)rs.rays[RP_RAY_SHADOW],
                (unsigned long long)rs.rays[RP_RAY_REFLECTION], (unsigned long long)rs.rays[RP_RAY_REFRACTION],
-               (unsigned long long)total);
+               (unsigned long long)rs.rays[RP_RAY_BOUNCE], (unsigned long long)total);
         printf("speed    %.2f Mrays/s\n", mrays);
         if (o.stats) {
             printf("bvh      %llu binary nodes, %llu wide nodes (width %u), %llu leaves, depth %u, SAH cost %.2f, "
@@ -570,10 +714,11 @@ int cli_render(int argc, char **argv) {
         fprintf(f, "  \"load_ms\": %.3f,\n  \"build_ms\": %.3f,\n  \"render_ms\": %.3f,\n", load_ms, build_ms,
                 rs.render_ms);
         fprintf(f, "  \"rays\": {\"primary\": %llu, \"shadow\": %llu, \"reflection\": %llu, \"refraction\": %llu, "
-                   "\"total\": %llu},\n",
+                   "\"bounce\": %llu, \"total\": %llu},\n",
                 (unsigned long long)rs.rays[RP_RAY_PRIMARY], (unsigned long long)rs.rays[RP_RAY_SHADOW],
                 (unsigned long long)rs.rays[RP_RAY_REFLECTION], (unsigned long long)rs.rays[RP_RAY_REFRACTION],
-                (unsigned long long)total);
+                (unsigned long long)rs.rays[RP_RAY_BOUNCE], (unsigned long long)total);
+        fprintf(f, "  \"frames\": %d,\n  \"frame_ms\": %.3f,\n", frames, rs.render_ms / frames);
         fprintf(f, "  \"mrays_per_s\": %.3f,\n", mrays);
         if (packets) {
             fprintf(f, "  \"packet\": %d,\n  \"traversal\": \"%s\",\n  \"frustum\": %s,\n", o.packet, o.traversal_name,
@@ -619,7 +764,11 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
         .spp = o.spp, .integrator = o.use_aov ? RP_INTEGRATOR_AOV : o.integrator, .aov = o.aov,
         .max_depth = o.max_depth < 0 ? 0 : (o.max_depth == 0 ? -1 : o.max_depth),
         .packet = o.packet, .traversal = o.traversal, .no_frustum = o.no_frustum,
+        .ir = {.interleave = o.ir_interleave, .vpls = o.ir_vpls, .filter = o.ir_filter, .clamp = o.ir_clamp},
+        .ao_distance = o.ao_distance,
     };
+    out->scene_desc = (rp_render_scene_desc){.accel = {.accel = o.accel}, .environment = o.env};
+    if (o.has_env_scale) memcpy(out->scene_desc.environment_scale, o.env_scale, sizeof o.env_scale);
     out->integrator_name = o.use_aov ? o.aov_name : o.integrator_name;
     out->traversal_name = o.traversal_name;
     out->has_eye = o.has_eye;

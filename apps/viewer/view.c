@@ -164,6 +164,10 @@ static const char *integrator_name(int t) {
     case RP_INTEGRATOR_WHITTED: return "whitted";
     case RP_INTEGRATOR_EYELIGHT: return "eyelight";
     case RP_INTEGRATOR_AOV: return "aov";
+    case RP_INTEGRATOR_DIRECT: return "direct";
+    case RP_INTEGRATOR_PATH: return "path";
+    case RP_INTEGRATOR_IR: return "ir";
+    case RP_INTEGRATOR_AO: return "ao";
     }
     return NULL;
 }
@@ -743,7 +747,7 @@ static bool viewer_init(viewer *v) {
     v->dev = cli_device_new(CMD, v->setup.threads, v->setup.isa);
     if (!v->dev) return false;
     char err[512] = "";
-    v->scene = rp_render_scene_new(v->dev, &v->data, NULL, err, sizeof err);
+    v->scene = rp_render_scene_new(v->dev, &v->data, &v->setup.scene_desc, err, sizeof err);
     if (!v->scene) {
         fprintf(stderr, "raypack view: %s\n", err);
         return false;

@@ -1,4 +1,5 @@
 /* Image files: PNG (stb_image_write), PPM and PFM written by hand, PFM read back. */
+#include "io_internal.h"
 #include "raypack_io.h"
 
 #include <errno.h>
@@ -23,7 +24,7 @@
 /* stb declares static functions this file does not use; GCC reports them at the end of the file. */
 #pragma GCC diagnostic ignored "-Wunused-function"
 
-typedef enum image_format { IMAGE_PNG, IMAGE_PPM, IMAGE_PFM, IMAGE_UNKNOWN } image_format;
+typedef enum image_format { IMAGE_PNG, IMAGE_PPM, IMAGE_PFM, IMAGE_HDR, IMAGE_EXR, IMAGE_UNKNOWN } image_format;
 
 static void set_err(char *err, size_t err_size, const char *path, const char *fmt, ...) {
     if (!err || err_size == 0) return;
@@ -41,6 +42,8 @@ static image_format format_of(const char *path) {
     if (strcasecmp(dot, ".png") == 0) return IMAGE_PNG;
     if (strcasecmp(dot, ".ppm") == 0) return IMAGE_PPM;
     if (strcasecmp(dot, ".pfm") == 0) return IMAGE_PFM;
+    if (strcasecmp(dot, ".hdr") == 0) return IMAGE_HDR;
+    if (strcasecmp(dot, ".exr") == 0) return IMAGE_EXR;
     return IMAGE_UNKNOWN;
 }
 
@@ -171,10 +174,14 @@ bool rp_image_write(const char *path, int width, int height, int channels, const
         free(buf);
         return ok;
     }
+    case IMAGE_HDR:
+        return io_image_write_hdr(path, width, height, channels, pixels, err, err_size);
+    case IMAGE_EXR:
+        return io_image_write_exr(path, width, height, channels, pixels, err, err_size);
     case IMAGE_UNKNOWN:
         break;
     }
-    set_err(err, err_size, path, "unknown image format (expected .png, .ppm or .pfm)");
+    set_err(err, err_size, path, "unknown image format (expected .png, .ppm, .pfm, .hdr or .exr)");
     return false;
 }
 

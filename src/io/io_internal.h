@@ -268,4 +268,11 @@ static inline const char *io_parse_int(const char *p, int64_t *out) {
     return p;
 }
 
+/* Writes an OpenEXR image of float channels (image_exr.c); channels 1 or 3. */
+bool io_image_write_exr(const char *path, int width, int height, int channels, const float *pixels, char *err,
+                        size_t err_size);
+/* Writes a Radiance HDR image (image_hdr.c); channels 1 or 3. */
+bool io_image_write_hdr(const char *path, int width, int height, int channels, const float *pixels, char *err,
+                        size_t err_size);
+
 #endif

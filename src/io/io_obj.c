@@ -124,9 +124,10 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
         size_t kw = (size_t)(q - p);
         rp_material_data *m = &pm.m;
         float tmp;
-        if (kw == 2 && p[0] == 'K' && (p[1] == 'd' || p[1] == 's' || p[1] == 'e')) {
-            float *dst = p[1] == 'd' ? m->kd : p[1] == 's' ? m->ks : m->ke;
-            if (!mtl_color(&f, &q, dst, p[1] == 'd' ? "Kd" : p[1] == 's' ? "Ks" : "Ke")) return false;
+        if (kw == 2 && p[0] == 'K' && (p[1] == 'd' || p[1] == 's' || p[1] == 'e' || p[1] == 'a')) {
+            float *dst = p[1] == 'd' ? m->kd : p[1] == 's' ? m->ks : p[1] == 'e' ? m->ke : m->ka;
+            if (!mtl_color(&f, &q, dst, p[1] == 'd' ? "Kd" : p[1] == 's' ? "Ks" : p[1] == 'e' ? "Ke" : "Ka"))
+                return false;
         } else if (kw == 2 && p[0] == 'T' && p[1] == 'f') {
             if (!mtl_color(&f, &q, pm.tf, "Tf")) return false;
             pm.has_tf = true;
@@ -145,7 +146,8 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
             if (!r || !is_delim(*r) || il < 0 || il > 10)
                 return io_error(ctx, f.shown, f.line, "illum: expected an integer 0-10");
             m->illum = (int32_t)il;
-        } else if (kw == 6 && strncmp(p, "map_Kd", 6) == 0) {
+        } else if ((kw == 6 && strncmp(p, "map_Kd", 6) == 0) || (kw == 6 && strncmp(p, "map_Pr", 6) == 0) ||
+                   (kw == 4 && strncmp(p, "norm", 4) == 0)) {
             /* Options (-s 1 1 1, -clamp on, ...) come before the file name; the name is the rest. */
             const char *r = skip_blank(q);
             while (*r == '-') {
@@ -165,15 +167,17 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
             }
             char name[IO_PATH_MAX], full[IO_PATH_MAX];
             rest_of_line(r, name, sizeof name);
-            if (!name[0]) return io_error(ctx, f.shown, f.line, "map_Kd without a file name");
+            if (!name[0]) return io_error(ctx, f.shown, f.line, "%.*s without a file name", (int)kw, p);
             for (char *c = name; *c; c++)
                 if (*c == '\\') *c = '/';
             vfs_join(&ctx->vfs, path, name, full, sizeof full);
             uint32_t t = tex_load(ctx, full, name, f.shown, f.line);
             if (t == IO_NONE) return false;
-            m->map_kd = (int32_t)t;
+            if (p[0] == 'n') m->map_normal = (int32_t)t + 1;           /* PBR extension: tangent-space normals */
+            else if (p[5] == 'r') m->map_roughness = (int32_t)t + 1;   /* PBR extension: roughness */
+            else m->map_kd = (int32_t)t;
         }
-        /* Everything else (Ka, map_Ks, bump, PBR extensions...) has no field in rp_material_data. */
+        /* Everything else (map_Ks, bump, PBR extensions...) has no field in rp_material_data. */
     }
     if (!mtl_finish(ctx, &pm)) return io_error(ctx, f.shown, f.line, "out of memory");
     ctx->bytes += buf->size;

@@ -2,6 +2,7 @@
 #include "render.h"
 
 #include <string.h>
+#include <math.h>
 
 static bool any_positive(const float c[3]) { return c[0] > 0.0f || c[1] > 0.0f || c[2] > 0.0f; }
 
@@ -15,6 +16,8 @@ rp_material rp_material_from_data(const rp_material_data *d) {
     memcpy(m.ke, d->ke, sizeof m.ke);
     m.ns = d->ns > 0.0f ? d->ns : 1.0f;
     m.texture = d->map_kd;
+    m.roughness_texture = d->map_roughness - 1;
+    m.normal_texture = d->map_normal - 1;
     if (any_positive(d->kt)) {
         m.type = RP_MATERIAL_DIELECTRIC;
         memcpy(m.dielectric.kt, d->kt, sizeof m.dielectric.kt);
@@ -30,7 +33,8 @@ rp_material rp_material_from_data(const rp_material_data *d) {
     return m;
 }
 
-v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]) {
+/* Bilinear lookup with repeat wrapping; srgb: the bytes are sRGB-encoded colours, else linear data. */
+static v3 texture_lookup(const rp_render_scene *s, int32_t texture, const float uv[2], bool srgb) {
     if (texture < 0 || (size_t)texture >= s->data->texture_count) return v3_make(1, 1, 1);
     const rp_texture_data *t = &s->data->textures[texture];
     if (!t->rgb || t->width <= 0 || t->height <= 0) return v3_make(1, 1, 1);
@@ -42,18 +46,25 @@ v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]
     float x0f = floorf(x), y0f = floorf(y);
     float ax = x - x0f, ay = y - y0f;
     int x0 = (int)x0f, y0 = (int)y0f;
-    int xs[2] = {x0, x0 + 1}, ys[2] = {y0, y0 + 1};
+    /* x0 is in [-1, width - 1] and y0 in [-1, height - 1] (fu, fv in [0, 1)): repeat wrapping is
+     * one step either way, no division (the same texels as the modulo wrap). */
+    int xs[2] = {x0 < 0 ? x0 + t->width : x0, x0 + 1 >= t->width ? x0 + 1 - t->width : x0 + 1};
+    int ys[2] = {y0 < 0 ? y0 + t->height : y0, y0 + 1 >= t->height ? y0 + 1 - t->height : y0 + 1};
     for (int i = 0; i < 2; i++) {
-        xs[i] = ((xs[i] % t->width) + t->width) % t->width;
-        ys[i] = ((ys[i] % t->height) + t->height) % t->height;
+        if (xs[i] < 0 || xs[i] >= t->width) xs[i] = ((xs[i] % t->width) + t->width) % t->width;
+        if (ys[i] < 0 || ys[i] >= t->height) ys[i] = ((ys[i] % t->height) + t->height) % t->height;
     }
     float w[4] = {(1 - ax) * (1 - ay), ax * (1 - ay), (1 - ax) * ay, ax * ay};
     float c[3] = {0, 0, 0};
     for (int j = 0; j < 4; j++) {
         const uint8_t *px = t->rgb + ((size_t)ys[j >> 1] * (size_t)t->width + (size_t)xs[j & 1]) * 3;
-        for (int k = 0; k < 3; k++) c[k] += w[j] * s->srgb_to_linear[px[k]];
+        for (int k = 0; k < 3; k++) c[k] += w[j] * (srgb ? s->srgb_to_linear[px[k]] : (float)px[k] * (1.0f / 255.0f));
     }
     return v3_make(c[0], c[1], c[2]);
+}
+
+v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]) {
+    return texture_lookup(s, texture, uv, true);
 }
 
 v3 material_albedo(const rp_render_scene *s, const rp_material *m, const render_surface *surf) {
@@ -69,4 +80,100 @@ float material_fresnel(float cos_i, float eta) {
     float rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
     float rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
     return 0.5f * (rs * rs + rp * rp);
+}
+
+/* ---- physically based materials ----
+ *
+ * How the scene files' materials map onto the BSDFs (bsdf.c), for the physically based integrators
+ * (Whitted keeps its Phong shading):
+ *   - Kd alone (MTL illum 0-2 with Ks 0, NFF/AFF with Ks 0, the built-in room's walls): Lambert,
+ *     albedo Kd times map_Kd (sRGB decoded), each channel clamped to [0, 1].
+ *   - Kd with Ks > 0 and no mirror (MTL illum 2, NFF Phong highlights): plastic, a diffuse base
+ *     Kd (1 - max Ks) under a GGX coat weighted by Ks, roughness alpha = sqrt(2 / (Ns + 2)) (the
+ *     Blinn-Phong exponent's equivalent, Walter et al. 2007).
+ *   - a mirror (MTL illum 3/5/7 Ks, NFF Ks with T 0): with Kd 0 a smooth conductor whose normal
+ *     reflectance is Kr (eta 1, k = 2 sqrt(Kr / (1 - Kr))); with Kd > 0 a plastic with a smooth
+ *     coat of weight Kr over that diffuse base.
+ *   - transmission (MTL d < 1 / Tr > 0 / Tf with illum 4/6/7/9, NFF T > 0): a smooth dielectric of
+ *     index Ni (NFF index_of_refraction; 1.5 when absent), transmission tinted by Kt.
+ *   - emission: MTL Ke is the emitted radiance on the front side (that of the geometric normal,
+ *     counter-clockwise winding); a material with Ke 0 and Ka above 1 in some channel emits Ka
+ *     instead (the classic cornell_box's `Ka 20` light, tinyobjloader's and Mitsuba's importers'
+ *     convention); Ka at most 1 is an ambient colour and ignored, as there is no ambient term. */
+
+static float clamp01(float x) { return fminf(fmaxf(x, 0.0f), 1.0f); }
+static v3 clamp3(v3 c) { return v3_make(clamp01(c.x), clamp01(c.y), clamp01(c.z)); }
+
+render_bsdf material_bsdf(const rp_render_scene *s, const rp_material *m, const render_surface *surf) {
+    render_bsdf b;
+    memset(&b, 0, sizeof b);
+    b.kd = clamp3(material_albedo(s, m, surf));
+    b.entering = surf->entering;
+    switch (m->type) {
+    case RP_MATERIAL_DIFFUSE:
+        b.type = BSDF_LAMBERT;
+        break;
+    case RP_MATERIAL_PHONG:
+        b.type = BSDF_PLASTIC;
+        b.ks = clamp3(v3_load(m->ks));
+        b.alpha = sqrtf(2.0f / (fmaxf(m->ns, 0.0f) + 2.0f));
+        if (m->roughness_texture >= 0 && surf->has_uv) {
+            /* a roughness map holds perceptual roughness r (linear); alpha = r^2, at least 1e-3 */
+            float r = material_texture_linear(s, m->roughness_texture, surf->uv).x;
+            b.alpha = fmaxf(1e-3f, r * r);
+        }
+        break;
+    case RP_MATERIAL_MIRROR: {
+        v3 kr = clamp3(v3_load(m->mirror.kr));
+        if (v3_max_abs(b.kd) < 1e-6f) {
+            b.type = BSDF_CONDUCTOR;
+            b.eta = v3_make(1, 1, 1);
+            b.k = bsdf_conductor_k_from_reflectance(kr);
+            b.ks = v3_make(1, 1, 1);
+        } else {
+            b.type = BSDF_PLASTIC;
+            b.ks = kr;
+        }
+        break;
+    }
+    case RP_MATERIAL_DIELECTRIC:
+        b.type = BSDF_DIELECTRIC;
+        b.kt = clamp3(v3_load(m->dielectric.kt));
+        b.ior = m->dielectric.ior > 0.0f ? m->dielectric.ior : 1.5f;
+        break;
+    }
+    return b;
+}
+
+v3 material_ke(const rp_render_scene *s, uint32_t material) {
+    const rp_material *m = rp_render_scene_material(s, material);
+    v3 ke = v3_load(m->ke);
+    if (v3_is_zero(ke) && material < s->data->material_count) {
+        v3 ka = v3_load(s->data->materials[material].ka);
+        if (v3_max_abs(ka) > 1.0f) ke = ka;
+    }
+    return v3_make(fmaxf(ke.x, 0.0f), fmaxf(ke.y, 0.0f), fmaxf(ke.z, 0.0f));
+}
+
+v3 material_emission(const rp_render_scene *s, uint32_t material, const render_surface *surf) {
+    if (!surf->entering) return v3_make(0, 0, 0);
+    return material_ke(s, material);
+}
+
+v3 material_texture_linear(const rp_render_scene *s, int32_t texture, const float uv[2]) {
+    return texture_lookup(s, texture, uv, false);
+}
+
+void material_normal_map(const rp_render_scene *s, const rp_material *m, render_surface *surf) {
+    if (m->normal_texture < 0 || !surf->has_uv || v3_is_zero(surf->dpdu)) return;
+    v3 c = material_texture_linear(s, m->normal_texture, surf->uv);
+    v3 n = surf->ns;
+    v3 t = v3_sub(surf->dpdu, v3_scale(n, v3_dot(n, surf->dpdu)));
+    if (!(v3_dot(t, t) > 0.0f)) return;
+    t = v3_normalize(t);
+    v3 b = v3_cross(n, t);
+    v3 p = v3_add(v3_add(v3_scale(t, 2.0f * c.x - 1.0f), v3_scale(b, 2.0f * c.y - 1.0f)), v3_scale(n, 2.0f * c.z - 1.0f));
+    p = v3_normalize(p);
+    /* keep it on the side the ray came from, as scene_surface's normals are */
+    if (v3_dot(p, surf->ng) > 0.0f) surf->ns = p;
 }

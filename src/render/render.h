@@ -4,6 +4,7 @@
 #define RP_RENDER_INTERNAL_H
 
 #include <math.h>
+#include <stdatomic.h>
 #include <stdint.h>
 
 #include "raypack.h"
@@ -54,6 +55,24 @@ typedef enum render_geom_kind {
     RENDER_GEOM_CONES = 2
 } render_geom_kind;
 
+/* An environment map prepared for importance sampling: radiance per texel and the piecewise-constant
+ * distributions of rows (marginal) and of texels within a row (conditional), sin(theta) weighted. */
+typedef struct render_envmap {
+    int width, height;
+    float *rgb;          /* width * height * 3, top row (+y) first */
+    float *row_cdf;      /* height + 1 */
+    float *col_cdf;      /* height * (width + 1) */
+    float integral;
+} render_envmap;
+
+/* Alias table (Walker; Vose's construction) over the lights, by power. */
+typedef struct light_sampler {
+    float *prob;
+    uint32_t *alias;
+    float *pmf;
+    size_t count;
+} light_sampler;
+
 struct rp_render_scene {
     rp_device *device;
     rp_scene *scene;
@@ -66,6 +85,15 @@ struct rp_render_scene {
     rp_bounds bounds;
     float scale;                   /* largest absolute coordinate of the bounds, > 0 */
     float srgb_to_linear[256];
+    /* physically based lights (light.c) */
+    rp_light_source *pb_lights;
+    size_t pb_light_count;
+    light_sampler light_pick;
+    int32_t *tri_light;            /* triangle_count: index into pb_lights of an emissive one, or -1 */
+    render_envmap env;
+    int32_t env_light;             /* index into pb_lights, or -1 */
+    float radius;                  /* bounding sphere radius of the scene */
+    v3 center;
 };
 
 /* Result of turning a hit into a shading point. */
@@ -78,6 +106,8 @@ typedef struct render_surface {
     bool has_uv;
     bool entering; /* the ray hit the front side (outside) of the surface */
     uint32_t material;
+    v3 dpdu;     /* triangles with texture coordinates: the position's derivative along u (for
+                  * tangent-space normal maps), else 0 */
 } render_surface;
 
 /* Cone user geometry callbacks (cone.c). */
@@ -121,6 +151,10 @@ void camera_ray(const render_camera *c, float x, float y, rp_ray *ray);
 /* A camera framing the bounds of a committed scene (camera.c). */
 rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b);
 
+
+/* Distance secondary rays start off the surface, along the geometric normal. */
+static inline float ray_offset(const rp_render_scene *s) { return 2e-5f * s->scale; }
+
 /* Deterministic random number in [0,1) from (pixel x, pixel y, sample, dimension). */
 static inline uint32_t render_hash(uint32_t x) {
     x ^= x >> 16;
@@ -134,5 +168,223 @@ static inline float render_random(uint32_t px, uint32_t py, uint32_t sample, uin
     uint32_t h = render_hash(px ^ render_hash(py ^ render_hash(sample ^ render_hash(dim + 0x9e3779b9u))));
     return (float)(h >> 8) * (1.0f / 16777216.0f);
 }
+
+/* Where in pixel (x, y) sample `sample` (counted from the pixel's first sample, not the frame's)
+ * goes, for the Whitted, eye light and AOV cameras: sample 0 at the centre, the others jittered. So
+ * frames of samples [k, k+1) accumulated for k = 0..n-1 sum what one n-spp frame sums, in the same
+ * order (the viewer's progressive refinement), and a 1-spp frame is the pixel centre. */
+static inline void render_sample_offset(int x, int y, int sample, float *ox, float *oy) {
+    *ox = *oy = 0.5f;
+    if (sample == 0) return;
+    *ox = render_random((uint32_t)x, (uint32_t)y, (uint32_t)sample, 0);
+    *oy = render_random((uint32_t)x, (uint32_t)y, (uint32_t)sample, 1);
+}
+
+/* ---- sampler (sampler.c) ---- */
+
+/* The random numbers of one pixel sample: dimension d of sample `sample` of pixel (x, y) is a hashed
+ * PCG output of the four, so it depends on nothing else (thread, tile order, other pixels). */
+typedef struct render_sampler {
+    uint32_t key;  /* hash of (x, y, sample) */
+    uint32_t dim;  /* next dimension */
+} render_sampler;
+render_sampler sampler_start(uint32_t x, uint32_t y, uint32_t sample);
+/* The next dimension's number in [0, 1). */
+float sampler_1d(render_sampler *s);
+/* Dimension d's number without advancing. */
+float sampler_at(const render_sampler *s, uint32_t d);
+
+/* ---- BSDFs (bsdf.c), in a local frame whose z axis is the shading normal ---- */
+
+typedef enum bsdf_type {
+    BSDF_LAMBERT = 0,    /* kd / pi */
+    BSDF_CONDUCTOR = 1,  /* Fresnel with complex IOR (eta, k); GGX with alpha, a mirror at alpha 0 */
+    BSDF_DIELECTRIC = 2, /* Fresnel reflection and refraction (ior, kt tints the transmission); GGX
+                          * microfacets with alpha (reflection and transmission), smooth at alpha 0 */
+    BSDF_PLASTIC = 3     /* diffuse kd (1 - max ks) / pi under a ks-weighted GGX coat (a mirror at
+                          * alpha 0) */
+} bsdf_type;
+
+typedef struct render_bsdf {
+    bsdf_type type;
+    v3 kd, ks;           /* plastic's base and coat; conductor: ks multiplies the Fresnel term */
+    v3 eta, k;           /* conductor's complex index of refraction per channel */
+    v3 kt;               /* dielectric's transmission tint */
+    float ior;           /* dielectric: inside over outside */
+    float alpha;         /* GGX roughness (pbrt's alpha), 0: smooth */
+    bool entering;       /* dielectric: the ray comes from outside */
+} render_bsdf;
+
+typedef struct bsdf_sample {
+    v3 wi;
+    v3 f;         /* the BSDF value (delta lobes: the weight times cos / pdf, as pbrt does) */
+    float pdf;    /* solid angle; for delta lobes the discrete lobe probability */
+    bool delta;
+} bsdf_sample;
+
+/* f(wo, wi) for the non-delta lobes (wo, wi local, unit, pointing away from the surface). */
+v3 bsdf_eval(const render_bsdf *b, v3 wo, v3 wi);
+/* The solid angle density bsdf_sample picks wi with (non-delta lobes). */
+float bsdf_pdf(const render_bsdf *b, v3 wo, v3 wi);
+/* Samples wi from u (3 numbers); false when no direction results. */
+bool bsdf_sample_dir(const render_bsdf *b, v3 wo, const float u[3], bsdf_sample *out);
+/* True when every lobe is a delta (no light sampling pays). */
+bool bsdf_is_delta(const render_bsdf *b);
+/* Fresnel reflectance of a conductor, per channel, at cos_i > 0. */
+v3 bsdf_fresnel_conductor(float cos_i, v3 eta, v3 k);
+/* The conductor (eta = 1, k) whose normal-incidence reflectance is r (0 <= r < 1). */
+v3 bsdf_conductor_k_from_reflectance(v3 r);
+/* Orthonormal frame around n. */
+void bsdf_frame(v3 n, v3 *t, v3 *b);
+static inline v3 bsdf_to_local(v3 v, v3 t, v3 b, v3 n) { return v3_make(v3_dot(v, t), v3_dot(v, b), v3_dot(v, n)); }
+static inline v3 bsdf_to_world(v3 v, v3 t, v3 b, v3 n) {
+    return v3_add(v3_add(v3_scale(t, v.x), v3_scale(b, v.y)), v3_scale(n, v.z));
+}
+/* Cosine-weighted direction of the upper hemisphere (z up) from u in [0,1)^2. */
+v3 bsdf_cosine_hemisphere(float u0, float u1);
+
+/* The BSDF of a material at a surface point (material.c). */
+render_bsdf material_bsdf(const rp_render_scene *s, const rp_material *m, const render_surface *surf);
+/* A data texture (roughness, normals) at uv, linear as stored (no sRGB decoding) (material.c). */
+v3 material_texture_linear(const rp_render_scene *s, int32_t texture, const float uv[2]);
+/* Replaces surf->ns by the material's tangent-space normal map, where it has one (material.c). */
+void material_normal_map(const rp_render_scene *s, const rp_material *m, render_surface *surf);
+/* Emitted radiance of a material towards the side the surface was hit from (material.c). */
+v3 material_emission(const rp_render_scene *s, uint32_t material, const render_surface *surf);
+/* Emitted radiance of material i on its front side, whatever the side it is seen from. */
+v3 material_ke(const rp_render_scene *s, uint32_t material);
+
+/* ---- lights (light.c) ---- */
+
+typedef struct light_sample {
+    v3 wi;         /* unit, from the shading point to the light */
+    float dist;    /* to the light's point; INFINITY for directional and environment */
+    v3 L;          /* radiance (area, environment) or intensity / d^2 (point, spot), irradiance
+                    * (directional) arriving along -wi */
+    float pdf;     /* solid angle density of wi given this light; 1 for delta lights */
+    bool delta;
+} light_sample;
+
+/* Builds the scene's physically based light list (area triangles from emissive materials, the
+ * file's point lights, the environment) and the light sampler; false when out of memory or when the
+ * environment file cannot be read (message in err). */
+bool light_scene_init(rp_render_scene *s, const rp_render_scene_desc *desc, char *err, size_t err_size);
+void light_scene_free(rp_render_scene *s);
+/* Picks a light index by power from u; *pmf is its probability. */
+uint32_t light_pick(const light_sampler *ls, float u, float *pmf);
+/* Samples light l as seen from p (u: 2 numbers); false when it sends nothing towards p. */
+bool light_sample_li(const rp_render_scene *s, const rp_light_source *l, v3 p, float u0, float u1,
+                     light_sample *out);
+/* Radiance of the environment along direction d (0 without one). */
+v3 light_env_radiance(const rp_render_scene *s, v3 d);
+/* Solid angle density the environment light samples direction d with. */
+float light_env_pdf(const rp_render_scene *s, v3 d);
+/* Solid angle density with which triangle light l is sampled from p towards its point q (normal
+ * ng, unit, any side). */
+float light_triangle_pdf(const rp_light_source *l, v3 p, v3 q, v3 ng);
+/* Emission sampling for VPLs: a point on light l, its normal (0 for point lights), and the power
+ * carried (flux over the densities of the point and of the direction sampled from it); u: 4 numbers.
+ * False when the light has no VPL sampling (environment, directional). */
+bool light_sample_le(const rp_render_scene *s, const rp_light_source *l, const float u[4], v3 *p, v3 *n, v3 *dir,
+                     v3 *power);
+
+/* ---- frame and thread state of the tile renderer (tile.c) ---- */
+
+/* What one Whitted ray found: the radiance so far and what is still to be traced for it (shadow
+ * rays to the lights, a reflection and a refraction ray with their multipliers). Shared by the
+ * depth-first and the packet tracer, so that both do the same float operations in the same order. */
+typedef struct whitted_slot {
+    v3 color;               /* background on a miss; ke + ambient, then + direct, then + children */
+    v3 direct;              /* sum of the unoccluded lights, in light order */
+    v3 org, ns, ng, kd, dir; /* shading point (lifted off the surface) for the shadow rays */
+    const rp_material *m;
+    bool lit, highlight;    /* lit: the ray hit a surface, whose lights must be gathered */
+    bool has_r, has_t;      /* a reflection / refraction ray follows */
+    float w_r, w_t;         /* path weights of the children */
+    v3 mul_r, mul_t;        /* what the children's radiance is multiplied by */
+    v3 org_r, dir_r, org_t, dir_t;
+} whitted_slot;
+
+/* One depth of the packet tracer: the packet of rays at that depth and their slots. */
+typedef struct whitted_level {
+    rp_rayhit_n rh;
+    int32_t *valid;
+    float *weight;
+    whitted_slot *slots;
+    /* what auto learns about this level's packets (rp_auto_tally), per ray kind: which way pays
+     * differs by kind and by depth (primary rays, then the bounces); a frame's packets start afresh */
+    rp_auto_tally tally[RP_RAY_KIND_COUNT];
+} whitted_level;
+
+/* Per-thread state, padded so counters of different threads do not share a cache line. */
+typedef struct render_thread {
+    _Alignas(64) uint64_t rays[RP_RAY_KIND_COUNT];
+    rp_rayhit *rayhits; /* tile_size^2 primary rays */
+    float *accum;       /* tile_size^2 * 3 */
+    whitted_level **levels;  /* max_depth + 1, each made on first use */
+    rp_rayhit_n shadow;      /* the shadow packet and its per-ray light contributions */
+    int32_t *shadow_valid;
+    v3 *shadow_contrib;
+    rp_counters_n *work;     /* RP_RAY_KIND_COUNT, or NULL when work is not counted */
+    struct pbr_thread *pbr;  /* the physically based integrators' buffers (integrator/pbr.c) */
+} render_thread;
+
+typedef struct render_frame {
+    rp_render_scene *s;
+    rp_render_desc desc;
+    render_camera cam;
+    const rp_light_source *lights;
+    size_t light_count;
+    rp_light_source headlight;
+    v3 background;
+    int channels;
+    float *pixels;
+    uint32_t tiles_x, tiles_y;
+    int rx0, ry0, rx1, ry1;    /* the region rendered (desc.region, or the whole image); tiles start at its corner */
+    uint32_t tile;             /* tile side in pixels (a multiple of the packet side) */
+    bool packets;              /* Whitted in n x n packets */
+    rp_traversal traversal[RP_RAY_KIND_COUNT];
+    render_thread *threads;
+    atomic_uint tiles_done;
+    atomic_uint_least64_t rays_done;
+    atomic_flag reporting;
+    atomic_bool failed;        /* a thread ran out of memory */
+    struct pbr_frame *pbr;     /* per-frame state of the physically based integrators */
+} render_frame;
+
+/* Whitted (integrator/whitted.c). */
+v3 whitted_shade(const render_frame *f, render_thread *th, const rp_ray *ray, const rp_hit *hit, int depth,
+                 float weight);
+/* Whitted radiance of one n x n block of a tile for sample s, added to the tile's accumulator. */
+bool whitted_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
+                   int s);
+bool whitted_thread_init(const render_frame *f, render_thread *th);
+void whitted_thread_free(const render_frame *f, render_thread *th);
+/* Level `level` of the thread's packet stack, made on first use; NULL when out of memory. */
+whitted_level *whitted_packet_level(const render_frame *f, render_thread *th, int level);
+/* The query of a packet of that level and ray kind (traversal, frustum, counters, auto's tally). */
+rp_query_n_desc whitted_packet_query(const render_frame *f, render_thread *th, whitted_level *lv, rp_ray_kind kind);
+/* Sets ray q of a packet (tnear 0, no hit yet). */
+void packet_set_ray(rp_rayhit_n *p, uint32_t q, v3 org, v3 dir, float tfar);
+
+/* The physically based integrators (integrator/pbr.c, path.c, instant_radiosity.c). */
+bool pbr_frame_init(render_frame *f);
+void pbr_frame_free(render_frame *f);
+bool pbr_thread_init(const render_frame *f, render_thread *th);
+void pbr_thread_free(const render_frame *f, render_thread *th);
+/* Renders the tile's samples; the mean radiance per pixel goes into th->accum (3 floats a pixel). */
+bool pbr_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1);
+/* After every tile: instant radiosity's discontinuity buffer writes the frame's pixels. */
+void pbr_frame_finish(render_frame *f);
+/* Tile side the integrator wants (a multiple of its packet side), from the desc's tile size. */
+uint32_t pbr_tile_side(const rp_render_desc *d);
+
+/* Eye light and the debug AOVs of a primary hit (integrator/aov.c). */
+v3 eyelight_shade(const rp_rayhit *rh);
+/* Eye light of one n x n block of a tile for sample s, its primary rays one packet (rp_intersect_n),
+ * added to the tile's accumulator; the same image as the array tracer's. */
+bool eyelight_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
+                    int s);
+v3 aov_shade(const render_frame *f, const rp_ray *ray, const rp_hit *hit);
 
 #endif

@@ -24,6 +24,7 @@ static void scene_free(rp_render_scene *s) {
     free(s->materials);
     free(s->lights);
     free(s->cones);
+    light_scene_free(s);
     free(s);
 }
 
@@ -98,7 +99,8 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
     if (!s->materials) return fail(s, err, err_size, "out of memory");
     for (size_t i = 0; i < data->material_count; i++) s->materials[i] = rp_material_from_data(&data->materials[i]);
     if (data->material_count == 0) {
-        s->materials[0] = (rp_material){.type = RP_MATERIAL_DIFFUSE, .kd = {0.8f, 0.8f, 0.8f}, .texture = -1};
+        s->materials[0] = (rp_material){.type = RP_MATERIAL_DIFFUSE, .kd = {0.8f, 0.8f, 0.8f}, .texture = -1,
+                                        .roughness_texture = -1, .normal_texture = -1};
     }
 
     s->light_count = data->light_count;
@@ -140,6 +142,11 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
         if (isfinite(bv[k]) && fabsf(bv[k]) > m) m = fabsf(bv[k]);
     }
     s->scale = m;
+    if (!light_scene_init(s, &dd, err, err_size)) {
+        char msg[600];
+        snprintf(msg, sizeof msg, "%s", err && err[0] ? err : "out of memory");
+        return fail(s, err, err_size, msg);
+    }
     return s;
 }
 
@@ -177,6 +184,7 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
     v3 ns = v3_make(0, 0, 0);
     out->has_uv = false;
     out->uv[0] = out->uv[1] = 0.0f;
+    out->dpdu = v3_make(0, 0, 0);
     out->material = 0;
     uint32_t prim = hit->prim_id;
     if (hit->geom_id == s->geom_ids[RENDER_GEOM_TRIANGLES] && prim < d->triangle_count) {
@@ -193,6 +201,13 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
             out->uv[0] = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
             out->uv[1] = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
             out->has_uv = true;
+            /* dp/du from the triangle's edges and their uv differences (pbrt's Triangle) */
+            v3 p0 = corner3(d->positions, d->indices, prim, 0), p1 = corner3(d->positions, d->indices, prim, 1),
+               p2 = corner3(d->positions, d->indices, prim, 2);
+            float du02 = t0[0] - t2[0], du12 = t1[0] - t2[0], dv02 = t0[1] - t2[1], dv12 = t1[1] - t2[1];
+            float det = du02 * dv12 - dv02 * du12;
+            if (fabsf(det) > 1e-12f)
+                out->dpdu = v3_scale(v3_sub(v3_scale(v3_sub(p0, p2), dv12), v3_scale(v3_sub(p1, p2), dv02)), 1.0f / det);
         }
         if (d->tri_materials) out->material = d->tri_materials[prim];
     } else if (hit->geom_id == s->geom_ids[RENDER_GEOM_SPHERES] && prim < d->sphere_count) {

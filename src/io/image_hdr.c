@@ -1,0 +1,89 @@
+/* Radiance HDR (RGBE) images: read through stb_image (environment maps), written by hand (flat
+ * scanlines, which every reader accepts). */
+#include "io_internal.h"
+#include "raypack_io.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wconversion"
+#pragma GCC diagnostic ignored "-Wsign-conversion"
+#pragma GCC diagnostic ignored "-Wshadow"
+#pragma GCC diagnostic ignored "-Wmissing-prototypes"
+#pragma GCC diagnostic ignored "-Wstrict-prototypes"
+#pragma GCC diagnostic ignored "-Wswitch-enum"
+#pragma GCC diagnostic ignored "-Wimplicit-fallthrough"
+#pragma GCC diagnostic ignored "-Wdouble-promotion"
+#pragma GCC diagnostic ignored "-Wunused-function"
+#define STB_IMAGE_IMPLEMENTATION
+#define STB_IMAGE_STATIC
+#define STBI_ONLY_HDR
+#include <stb/stb_image.h>
+#pragma GCC diagnostic pop
+/* stb declares static functions this file does not use; GCC reports them at the end of the file. */
+#pragma GCC diagnostic ignored "-Wunused-function"
+
+float *rp_image_read_hdr(const char *path, int *width, int *height, char *err, size_t err_size) {
+    if (!path) path = "(null)";
+    int w = 0, h = 0, comp = 0;
+    float *px = stbi_loadf(path, &w, &h, &comp, 3);
+    if (!px) {
+        if (err && err_size) snprintf(err, err_size, "%s: error: cannot read a Radiance HDR image: %s", path,
+                                      errno ? strerror(errno) : stbi_failure_reason());
+        return NULL;
+    }
+    /* stb's buffer comes from its own malloc; hand the caller one that free() releases. */
+    size_t n = (size_t)w * (size_t)h * 3;
+    float *out = malloc(n * sizeof(float));
+    if (out) memcpy(out, px, n * sizeof(float));
+    stbi_image_free(px);
+    if (!out) {
+        if (err && err_size) snprintf(err, err_size, "%s: error: out of memory", path);
+        return NULL;
+    }
+    *width = w;
+    *height = h;
+    return out;
+}
+
+static void rgbe(const float *c, uint8_t out[4]) {
+    float m = fmaxf(c[0], fmaxf(c[1], c[2]));
+    if (!(m > 1e-32f)) {
+        memset(out, 0, 4);
+        return;
+    }
+    int e;
+    float f = frexpf(m, &e) * 256.0f / m;
+    for (int k = 0; k < 3; k++) out[k] = (uint8_t)fminf(255.0f, fmaxf(0.0f, c[k] * f));
+    out[3] = (uint8_t)(e + 128);
+}
+
+bool io_image_write_hdr(const char *path, int width, int height, int channels, const float *pixels, char *err,
+                        size_t err_size) {
+    size_t n = (size_t)width * (size_t)height;
+    uint8_t *buf = malloc(n * 4);
+    if (!buf) {
+        if (err && err_size) snprintf(err, err_size, "%s: error: out of memory", path);
+        return false;
+    }
+    for (size_t i = 0; i < n; i++) {
+        float c[3];
+        for (int k = 0; k < 3; k++) c[k] = pixels[i * (size_t)channels + (size_t)(channels == 1 ? 0 : k)];
+        for (int k = 0; k < 3; k++) if (!isfinite(c[k])) c[k] = 0.0f;
+        rgbe(c, buf + 4 * i);
+    }
+    FILE *f = fopen(path, "wb");
+    bool ok = f != NULL;
+    if (ok) {
+        ok = fprintf(f, "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y %d +X %d\n", height, width) > 0;
+        ok = ok && fwrite(buf, 4, n, f) == n;
+        ok = (fclose(f) == 0) && ok;
+    }
+    if (!ok && err && err_size) snprintf(err, err_size, "%s: error: write failed: %s", path, strerror(errno));
+    free(buf);
+    return ok;
+}

@@ -1,0 +1,389 @@
+/* Instant radiosity (Keller 1997) with interleaved sampling and the discontinuity buffer (Wald,
+ * Kollig, Benthin, Keller, Slusallek 2002; the survey's sec. 4.4). Every sample of a frame traces
+ * fresh light paths: N x N sets of VPLs, each from its own light paths. Pixel (x, y) gathers set
+ * (x mod N) + N (y mod N); a tile of (N n) x (N n) pixels thus holds n x n pixels of each set, and
+ * the shadow rays from those pixels to one VPL all meet at the VPL: they are traced as one coherent
+ * n x n packet with a point frustum (rp_occluded_n), the point of interleaving for a packet tracer.
+ *
+ * Clamping: a VPL's contribution f cos_x I(w) / d^2 is singular as d -> 0 (bright blotches near
+ * VPLs); the distance is taken as at least clamp times the scene's bounding radius
+ * (rp_ir_desc.clamp, default 0.02), which loses the energy of short transport paths (corners look
+ * darker than in a path traced image); clamp < 0 keeps the exact, unbiased but spiky estimate.
+ *
+ * Discontinuity buffer: the VPL sum of each pixel divided by its diffuse albedo (so textures stay
+ * sharp) is averaged over a filter x filter window, over the neighbours whose depth is within 5%
+ * and whose normal is within about 25 degrees of the pixel's; the window sees the different VPL sets
+ * of the neighbours and so smooths the interleaving's structured noise without blurring across
+ * edges. Primary rays go through pixel centres (the filter needs one surface per pixel), so IR
+ * images are not antialiased. Transport: VPLs are deposited on diffuse (Lambert and plastic base)
+ * surfaces; mirrors and glass do not receive VPLs, and a pixel that sees one follows its delta
+ * chain (one lobe per bounce, up to max_depth) to the surface that gathers. The environment and
+ * directional lights give infinite VPLs (a direction and its radiance over its density) and light
+ * paths that enter from a disk of the scene's bounding radius. */
+#include "pbr.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#define PI_F 3.14159265358979323846f
+
+static float max3(v3 c) { return fmaxf(c.x, fmaxf(c.y, c.z)); }
+
+/* The diffuse albedo of a BSDF, the part that reflects VPL light onwards. */
+static v3 diffuse_albedo(const render_bsdf *b) {
+    switch (b->type) {
+    case BSDF_LAMBERT: return b->kd;
+    case BSDF_PLASTIC: return v3_scale(b->kd, 1.0f - fminf(1.0f, max3(b->ks)));
+    case BSDF_CONDUCTOR:
+    case BSDF_DIELECTRIC: return v3_make(0, 0, 0);
+    }
+    return v3_make(0, 0, 0);
+}
+
+/* The VPLs of one set of one sample: light paths until the set is full. Random numbers come from
+ * (set, path, sample) so the VPLs depend on nothing else. */
+static void ir_set(const render_frame *f, uint32_t sample, uint32_t set, ir_vpl *out, uint64_t *rays) {
+    const pbr_frame *pf = f->pbr;
+    const rp_render_scene *s = f->s;
+    int V = pf->per_set, count = 0, paths = 0;
+    memset(out, 0, (size_t)V * sizeof *out);
+    int depth = f->desc.ir.depth > 0 ? f->desc.ir.depth : f->desc.max_depth;
+    float eps = ray_offset(s);
+    while (count < V && paths < 8 * V) {
+        render_sampler rng = sampler_start(0xFFFFFFF0u - set, (uint32_t)paths, sample);
+        paths++;
+        float pmf;
+        uint32_t li = light_pick(&s->light_pick, sampler_1d(&rng), &pmf);
+        float u[4] = {sampler_1d(&rng), sampler_1d(&rng), sampler_1d(&rng), sampler_1d(&rng)};
+        const rp_light_source *l = &s->pb_lights[li];
+        v3 p, n, dir, power, org;
+        if (l->type == RP_LIGHT_SOURCE_ENVIRONMENT || l->type == RP_LIGHT_SOURCE_DIRECTIONAL) {
+            /* Light from infinity: an infinite VPL for the direct term, and a light path entering
+             * the scene from a disk of its bounding radius facing that direction. */
+            light_sample ls;
+            if (!light_sample_li(s, l, s->center, u[0], u[1], &ls) || !(ls.pdf > 0.0f)) continue;
+            power = v3_scale(ls.L, 1.0f / (ls.pdf * pmf));
+            out[count++] = (ir_vpl){.p = ls.wi, .power = power, .infinite = true};
+            v3 t, b;
+            bsdf_frame(ls.wi, &t, &b);
+            float r = s->radius * sqrtf(u[2]), phi = 6.28318530718f * u[3];
+            org = v3_add(v3_madd(s->center, ls.wi, 2.0f * s->radius),
+                         v3_add(v3_scale(t, r * cosf(phi)), v3_scale(b, r * sinf(phi))));
+            dir = v3_neg(ls.wi);
+            power = v3_scale(power, PI_F * s->radius * s->radius);
+        } else {
+            if (!light_sample_le(s, l, u, &p, &n, &dir, &power)) continue;
+            power = v3_scale(power, 1.0f / pmf);
+            out[count++] = (ir_vpl){.p = p, .n = n, .power = power};
+            org = v3_is_zero(n) ? p : v3_madd(p, n, eps);
+        }
+        for (int bounce = 0; bounce < depth && count < V; bounce++) {
+            rp_rayhit rh;
+            render_ray_init(&rh.ray, org, dir, INFINITY);
+            rh.hit.geom_id = rh.hit.prim_id = rh.hit.inst_id = RP_INVALID_ID;
+            rp_intersect1(s->scene, &rh);
+            (*rays)++;
+            if (rh.hit.geom_id == RP_INVALID_ID) break;
+            render_surface sf;
+            scene_surface(s, &rh.ray, &rh.hit, &sf);
+            render_bsdf b = material_bsdf(s, &s->materials[sf.material], &sf);
+            v3 kd = diffuse_albedo(&b);
+            if (v3_is_zero(kd)) break;
+            power = v3_mul(power, kd);
+            out[count++] = (ir_vpl){.p = v3_madd(sf.p, sf.ng, eps), .n = sf.ns, .power = power};
+            float q = fminf(1.0f, max3(kd));
+            if (!(sampler_1d(&rng) < q)) break;
+            power = v3_scale(power, 1.0f / q);
+            v3 t, bb;
+            bsdf_frame(sf.ns, &t, &bb);
+            dir = bsdf_to_world(bsdf_cosine_hemisphere(sampler_1d(&rng), sampler_1d(&rng)), t, bb, sf.ns);
+            if (v3_dot(dir, sf.ng) <= 0.0f) break;
+            org = v3_madd(sf.p, sf.ng, eps);
+        }
+    }
+    float inv = paths ? 1.0f / (float)paths : 0.0f;
+    for (int i = 0; i < count; i++) out[i].power = v3_scale(out[i].power, inv);
+}
+
+typedef struct ir_set_job {
+    render_frame *f;
+    uint64_t *rays; /* per thread */
+} ir_set_job;
+
+static void ir_set_task(void *user, uint32_t index, uint32_t thread) {
+    ir_set_job *job = user;
+    const pbr_frame *pf = job->f->pbr;
+    uint32_t sample = index / (uint32_t)pf->sets, set = index % (uint32_t)pf->sets;
+    ir_set(job->f, (uint32_t)job->f->desc.sample_start + sample, set,
+           pf->vpls + (size_t)index * (size_t)pf->per_set, &job->rays[thread * 8]);
+}
+
+bool ir_frame_init(render_frame *f) {
+    pbr_frame *pf = f->pbr;
+    const rp_ir_desc *ir = &f->desc.ir;
+    pf->interleave = ir->interleave > 0 ? ir->interleave : 5;
+    pf->per_set = ir->vpls > 0 ? ir->vpls : 16;
+    pf->sets = pf->interleave * pf->interleave;
+    pf->side = 8;
+    float c = ir->clamp == 0.0f ? 0.02f : ir->clamp;
+    pf->clamp_d2 = c > 0.0f ? (c * f->s->radius) * (c * f->s->radius) : 0.0f;
+    size_t np = (size_t)f->desc.width * (size_t)f->desc.height;
+    size_t nv = (size_t)f->desc.spp * (size_t)pf->sets * (size_t)pf->per_set;
+    pf->vpls = malloc(nv * sizeof *pf->vpls);
+    pf->raw = calloc(np, sizeof *pf->raw);
+    pf->albedo = calloc(np, sizeof *pf->albedo);
+    pf->emit = calloc(np, sizeof *pf->emit);
+    pf->normal = calloc(np, sizeof *pf->normal);
+    pf->depth = calloc(np, sizeof *pf->depth);
+    pf->valid = calloc(np, 1);
+    if (!pf->vpls || !pf->raw || !pf->albedo || !pf->emit || !pf->normal || !pf->depth || !pf->valid) return false;
+    if (f->s->pb_light_count == 0) {
+        memset(pf->vpls, 0, nv * sizeof *pf->vpls);
+        return true;
+    }
+    int nthreads = rp_device_thread_count(f->s->device);
+    if (nthreads < 1) nthreads = 1;
+    uint64_t *rays = calloc((size_t)nthreads * 8, sizeof *rays);
+    if (!rays) return false;
+    ir_set_job job = {.f = f, .rays = rays};
+    rp_device_parallel_for(f->s->device, (uint32_t)(f->desc.spp * pf->sets), ir_set_task, &job);
+    for (int i = 0; i < nthreads; i++) f->threads[i].rays[RP_RAY_BOUNCE] += rays[i * 8];
+    free(rays);
+    return true;
+}
+
+/* Contribution of VPL v at point x, before the shadow ray; false when there is none. */
+static inline bool vpl_contrib(const pbr_frame *pf, const ir_point *x, const ir_vpl *v, v3 *wi_out, float *dist_out,
+                               v3 *c) {
+    v3 wi;
+    float d2 = 1.0f, dist = INFINITY, cv = PI_F; /* an infinite VPL: no distance, no 1/pi */
+    if (v->infinite) {
+        wi = v->p;
+    } else {
+        v3 d = v3_sub(v->p, x->org);
+        d2 = v3_dot(d, d);
+        if (!(d2 > 0.0f)) return false;
+        dist = sqrtf(d2);
+        wi = v3_scale(d, 1.0f / dist);
+    }
+    float cx = v3_dot(wi, x->ns);
+    if (cx <= 0.0f || v3_dot(wi, x->ng) <= 0.0f) return false;
+    if (!v->infinite) cv = v3_is_zero(v->n) ? 0.25f : -v3_dot(v->n, wi); /* 1/(4 pi) = (1/4) / pi */
+    if (!(cv > 0.0f)) return false;
+    v3 fv = x->is_lambert ? x->lambert
+                          : v3_mul(x->beta, bsdf_eval(&x->bsdf, x->wo, bsdf_to_local(wi, x->t, x->b, x->ns)));
+    float g = v->infinite ? 1.0f : (d2 > pf->clamp_d2 ? d2 : pf->clamp_d2);
+    *c = v3_scale(v3_mul(fv, v->power), cx * cv / (PI_F * g));
+    if (v3_is_zero(*c)) return false;
+    *wi_out = wi;
+    *dist_out = v->infinite ? INFINITY : dist * (1.0f - 1e-4f);
+    return true;
+}
+
+bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1) {
+    pbr_thread *pt = th->pbr;
+    pbr_frame *pf = f->pbr;
+    const rp_render_scene *s = f->s;
+    int N = pf->interleave, P = pf->side, T = N * P, tw = x1 - x0;
+    float eps = ray_offset(s);
+    const uint32_t *lane = pt->lane;
+    /* Primary hits at pixel centres, P x P packets of neighbouring pixels. */
+    for (int by = 0; by < T; by += P)
+        for (int bx = 0; bx < T; bx += P) {
+            for (int j = 0; j < P; j++)
+                for (int i = 0; i < P; i++) {
+                    uint32_t q = rp_packet_n_index((uint32_t)P, (uint32_t)i, (uint32_t)j);
+                    int x = x0 + bx + i, y = y0 + by + j;
+                    rp_ray r;
+                    camera_ray(&f->cam, (float)x + 0.5f, (float)y + 0.5f, &r);
+                    packet_set_ray(&pt->prim, q, v3_make(r.org_x, r.org_y, r.org_z), v3_make(r.dir_x, r.dir_y, r.dir_z),
+                                   r.tfar);
+                    pt->prim_valid[q] = x < x1 && y < y1 ? -1 : 0;
+                }
+            pt->prim.valid = pt->prim_valid;
+            rp_query_n_desc qd = pbr_query(f, th, RP_RAY_PRIMARY);
+            rp_intersect_n(s->scene, &qd, &pt->prim);
+            rp_rayhit_n *p = &pt->prim;
+            for (int j = 0; j < P; j++)
+                for (int i = 0; i < P; i++) {
+                    uint32_t q = rp_packet_n_index((uint32_t)P, (uint32_t)i, (uint32_t)j);
+                    int lx = bx + i, ly = by + j;
+                    ir_point *pt_ = &pt->points[ly * T + lx];
+                    pt_->valid = false;
+                    pt->ir_sum[ly * T + lx] = v3_make(0, 0, 0);
+                    if (!pt->prim_valid[q]) continue;
+                    th->rays[RP_RAY_PRIMARY]++;
+                    size_t gi = (size_t)(y0 + ly) * (size_t)f->desc.width + (size_t)(x0 + lx);
+                    pf->valid[gi] = 0;
+                    pf->emit[gi] = v3_make(0, 0, 0);
+                    if (p->geom_id[q] == RP_INVALID_ID) {
+                        pf->emit[gi] = light_env_radiance(s, v3_make(p->dir_x[q], p->dir_y[q], p->dir_z[q]));
+                        continue;
+                    }
+                    rp_ray ray;
+                    render_ray_init(&ray, v3_make(p->org_x[q], p->org_y[q], p->org_z[q]),
+                                    v3_make(p->dir_x[q], p->dir_y[q], p->dir_z[q]), p->tfar[q]);
+                    rp_hit hit = {.Ng_x = p->Ng_x[q], .Ng_y = p->Ng_y[q], .Ng_z = p->Ng_z[q], .u = p->u[q],
+                                  .v = p->v[q], .prim_id = p->prim_id[q], .geom_id = p->geom_id[q],
+                                  .inst_id = p->inst_id[q]};
+                    render_surface sf;
+                    scene_surface(s, &ray, &hit, &sf);
+                    material_normal_map(s, &s->materials[sf.material], &sf);
+                    v3 emit = material_emission(s, sf.material, &sf), beta = v3_make(1, 1, 1);
+                    render_bsdf bsdf = material_bsdf(s, &s->materials[sf.material], &sf);
+                    float depth = ray.tfar;
+                    bool hit_surface = true;
+                    /* Mirrors and glass: follow the delta chain (one lobe per bounce, chosen from the
+                     * pixel's numbers) to the diffuse surface that gathers the VPLs. */
+                    render_sampler rng = sampler_start((uint32_t)(x0 + lx), (uint32_t)(y0 + ly), 0);
+                    for (int k = 0; bsdf_is_delta(&bsdf) && k < f->desc.max_depth; k++) {
+                        v3 t, b;
+                        bsdf_frame(sf.ns, &t, &b);
+                        v3 dir = v3_make(ray.dir_x, ray.dir_y, ray.dir_z);
+                        v3 wo = bsdf_to_local(v3_neg(dir), t, b, sf.ns);
+                        float u[3] = {sampler_1d(&rng), sampler_1d(&rng), sampler_1d(&rng)};
+                        bsdf_sample bs;
+                        if (!bsdf_sample_dir(&bsdf, wo, u, &bs) || !(bs.pdf > 0.0f)) {
+                            hit_surface = false;
+                            break;
+                        }
+                        beta = v3_mul(beta, v3_scale(bs.f, fabsf(bs.wi.z) / bs.pdf));
+                        v3 wi = bsdf_to_world(bs.wi, t, b, sf.ns);
+                        rp_rayhit rh;
+                        render_ray_init(&rh.ray, v3_madd(sf.p, sf.ng, bs.wi.z < 0.0f ? -eps : eps), wi, INFINITY);
+                        rh.hit.geom_id = rh.hit.prim_id = rh.hit.inst_id = RP_INVALID_ID;
+                        rp_intersect1(s->scene, &rh);
+                        th->rays[bs.wi.z < 0.0f ? RP_RAY_REFRACTION : RP_RAY_REFLECTION]++;
+                        if (rh.hit.geom_id == RP_INVALID_ID) {
+                            emit = v3_add(emit, v3_mul(beta, light_env_radiance(s, wi)));
+                            hit_surface = false;
+                            break;
+                        }
+                        ray = rh.ray;
+                        depth += rh.ray.tfar;
+                        scene_surface(s, &rh.ray, &rh.hit, &sf);
+                        material_normal_map(s, &s->materials[sf.material], &sf);
+                        emit = v3_add(emit, v3_mul(beta, material_emission(s, sf.material, &sf)));
+                        bsdf = material_bsdf(s, &s->materials[sf.material], &sf);
+                    }
+                    pf->emit[gi] = emit;
+                    pt_->bsdf = bsdf;
+                    pt_->org = v3_madd(sf.p, sf.ng, eps);
+                    pt_->ng = sf.ng;
+                    pt_->ns = sf.ns;
+                    bsdf_frame(sf.ns, &pt_->t, &pt_->b);
+                    pt_->wo = bsdf_to_local(v3_neg(v3_make(ray.dir_x, ray.dir_y, ray.dir_z)), pt_->t, pt_->b, sf.ns);
+                    pt_->is_lambert = bsdf.type == BSDF_LAMBERT;
+                    pt_->beta = beta;
+                    pt_->lambert = v3_mul(beta, v3_scale(bsdf.kd, 1.0f / PI_F));
+                    pt_->valid = hit_surface && !bsdf_is_delta(&bsdf);
+                    pf->depth[gi] = depth;
+                    pf->normal[gi] = sf.ns;
+                    pf->albedo[gi] = v3_mul(beta, diffuse_albedo(&bsdf));
+                    pf->valid[gi] = pt_->valid ? 1 : 0;
+                }
+        }
+    /* Each set's pixels of the tile against each of its VPLs: one P x P shadow packet per VPL. */
+    for (int sample = 0; sample < f->desc.spp; sample++)
+        for (int ky = 0; ky < N; ky++)
+            for (int kx = 0; kx < N; kx++) {
+                int set = ((x0 + kx) % N) + N * ((y0 + ky) % N);
+                const ir_vpl *vs = pf->vpls + ((size_t)sample * (size_t)pf->sets + (size_t)set) * (size_t)pf->per_set;
+                for (int v = 0; v < pf->per_set; v++) {
+                    if (v3_is_zero(vs[v].power)) continue;
+                    uint64_t live = 0;
+                    for (int b = 0; b < P; b++)
+                        for (int a = 0; a < P; a++) {
+                            uint32_t q = lane[b * P + a];
+                            int lx = kx + N * a, ly = ky + N * b;
+                            pt->vpl_valid[q] = 0;
+                            const ir_point *x = &pt->points[ly * T + lx];
+                            if (lx >= tw || y0 + ly >= y1 || !x->valid) continue;
+                            v3 wi;
+                            float tfar;
+                            if (!vpl_contrib(pf, x, &vs[v], &wi, &tfar, &pt->vpl_contrib[q])) continue;
+                            packet_set_ray(&pt->vpl_packet, q, x->org, wi, tfar);
+                            pt->vpl_valid[q] = -1;
+                            live++;
+                        }
+                    if (!live) continue;
+                    /* Lanes that are not live get a live lane's ray, so that nothing in the packet
+                     * depends on what the thread traced before (its stale lanes). */
+                    uint32_t first = 0;
+                    while (!pt->vpl_valid[first]) first++;
+                    rp_rayhit_n *vp = &pt->vpl_packet;
+                    for (uint32_t q = 0; q < (uint32_t)(P * P); q++)
+                        if (!pt->vpl_valid[q])
+                            packet_set_ray(vp, q, v3_make(vp->org_x[first], vp->org_y[first], vp->org_z[first]),
+                                           v3_make(vp->dir_x[first], vp->dir_y[first], vp->dir_z[first]), vp->tfar[first]);
+                    th->rays[RP_RAY_SHADOW] += live;
+                    rp_query_n_desc qd = pbr_query(f, th, RP_RAY_SHADOW);
+                    if (vs[v].infinite) qd.frustum = RP_FRUSTUM_NONE; /* parallel rays: no common point */
+                    qd.point[0] = vs[v].p.x;
+                    qd.point[1] = vs[v].p.y;
+                    qd.point[2] = vs[v].p.z;
+                    pt->vpl_packet.valid = pt->vpl_valid;
+                    rp_occluded_n(s->scene, &qd, &pt->vpl_packet);
+                    for (int b = 0; b < P; b++)
+                        for (int a = 0; a < P; a++) {
+                            uint32_t q = lane[b * P + a];
+                            if (!pt->vpl_valid[q] || pt->vpl_packet.tfar[q] < 0.0f) continue;
+                            int li = (ky + N * b) * T + kx + N * a;
+                            pt->ir_sum[li] = v3_add(pt->ir_sum[li], pt->vpl_contrib[q]);
+                        }
+                }
+            }
+    /* The frame's buffers: the mean VPL sum over the albedo (or as is, where there is none). */
+    float inv = 1.0f / (float)f->desc.spp;
+    for (int ly = 0; ly < y1 - y0; ly++)
+        for (int lx = 0; lx < tw; lx++) {
+            size_t gi = (size_t)(y0 + ly) * (size_t)f->desc.width + (size_t)(x0 + lx);
+            v3 sum = v3_scale(pt->ir_sum[ly * T + lx], inv), a = pf->albedo[gi];
+            pf->raw[gi] = v3_make(a.x > 0.0f ? sum.x / a.x : sum.x, a.y > 0.0f ? sum.y / a.y : sum.y,
+                                  a.z > 0.0f ? sum.z / a.z : sum.z);
+        }
+    return true;
+}
+
+typedef struct ir_filter_job {
+    render_frame *f;
+} ir_filter_job;
+
+static void ir_filter_row(void *user, uint32_t y, uint32_t thread) {
+    (void)thread;
+    render_frame *f = ((ir_filter_job *)user)->f;
+    const pbr_frame *pf = f->pbr;
+    int W = f->desc.width, H = f->desc.height;
+    int r = f->desc.ir.filter == 0 ? 1 : (f->desc.ir.filter > 1 ? f->desc.ir.filter / 2 : 0);
+    for (int x = 0; x < W; x++) {
+        size_t gi = (size_t)y * (size_t)W + (size_t)x;
+        v3 out = pf->emit[gi];
+        if (pf->valid[gi]) {
+            v3 sum = v3_make(0, 0, 0);
+            float n = 0.0f, dc = pf->depth[gi];
+            v3 nc = pf->normal[gi];
+            for (int dy = -r; dy <= r; dy++)
+                for (int dx = -r; dx <= r; dx++) {
+                    int xx = x + dx, yy = (int)y + dy;
+                    if (xx < 0 || yy < 0 || xx >= W || yy >= H) continue;
+                    size_t gj = (size_t)yy * (size_t)W + (size_t)xx;
+                    if (!pf->valid[gj]) continue;
+                    if (fabsf(pf->depth[gj] - dc) > 0.05f * dc || v3_dot(pf->normal[gj], nc) < 0.9f) continue;
+                    sum = v3_add(sum, pf->raw[gj]);
+                    n += 1.0f;
+                }
+            v3 e = v3_scale(sum, 1.0f / n), a = pf->albedo[gi];
+            out = v3_add(out, v3_make(a.x > 0.0f ? e.x * a.x : e.x, a.y > 0.0f ? e.y * a.y : e.y,
+                                      a.z > 0.0f ? e.z * a.z : e.z));
+        }
+        float *px = f->pixels + gi * 3;
+        px[0] = out.x;
+        px[1] = out.y;
+        px[2] = out.z;
+    }
+}
+
+void ir_frame_finish(render_frame *f) {
+    ir_filter_job job = {.f = f};
+    rp_device_parallel_for(f->s->device, (uint32_t)f->desc.height, ir_filter_row, &job);
+}

@@ -1,0 +1,76 @@
+/* State shared by the physically based integrators (path.c, instant_radiosity.c, pbr.c). */
+#ifndef RP_RENDER_PBR_H
+#define RP_RENDER_PBR_H
+
+#include "../render.h"
+
+/* A path being traced: what the next hit's emission and lights are multiplied by. */
+typedef struct pbr_path {
+    v3 beta;          /* throughput */
+    v3 prev;          /* where the ray started (for the light pdf of an emitter hit) */
+    float pdf;        /* solid angle pdf of the BSDF sample that made the ray */
+    uint32_t pixel;   /* index in the tile */
+    int depth;        /* bounces so far */
+    bool specular;    /* the ray left a delta lobe (or the camera): emitters count in full */
+    render_sampler rng;
+} pbr_path;
+
+/* A virtual point light: intensity towards w is power cos(n, w) / pi, or power / (4 pi) when n is 0.
+ * An infinite one (from the environment or a directional light) is radiance from direction p
+ * over its density: a shading point gathers f cos power from it. */
+typedef struct ir_vpl {
+    v3 p, n, power;
+    bool infinite;
+} ir_vpl;
+
+/* What instant radiosity keeps of a primary hit. */
+typedef struct ir_point {
+    v3 org;           /* the hit point lifted off the surface, where shadow rays start */
+    v3 ng, ns, t, b;  /* t, b, ns: the shading frame */
+    v3 wo;            /* towards the eye, in the shading frame */
+    v3 beta;          /* throughput of the delta chain from the eye to here (1 without one) */
+    v3 lambert;       /* beta kd / pi when the BSDF is Lambert (the common case, no eval needed) */
+    render_bsdf bsdf;
+    bool is_lambert;
+    bool valid;       /* a non-delta surface was hit */
+} ir_point;
+
+typedef struct pbr_thread {
+    rp_rayhit_n prim;       /* the n x n primary packet */
+    int32_t *prim_valid;
+    rp_auto_tally tally[RP_RAY_KIND_COUNT];
+    pbr_path *paths;        /* tile^2 */
+    rp_rayhit *bounce;      /* tile^2 */
+    rp_ray *shadow;         /* tile^2 */
+    v3 *shadow_L;
+    uint32_t *shadow_pixel;
+    ir_point *points;       /* tile^2 */
+    v3 *ir_sum;             /* tile^2: sum of VPL contributions */
+    rp_rayhit_n vpl_packet; /* a set's shadow rays towards one VPL */
+    int32_t *vpl_valid;
+    v3 *vpl_contrib;
+    uint32_t lane[32 * 32]; /* rp_packet_n_index of (i, j) at j * side + i */
+} pbr_thread;
+
+typedef struct pbr_frame {
+    /* instant radiosity: the VPLs of every sample of the frame, [sample][set][vpl] */
+    ir_vpl *vpls;
+    int sets, per_set, interleave, side; /* side: rays per packet side of a set in a tile */
+    float clamp_d2;                      /* minimum squared distance of the geometry term */
+    /* full-frame buffers for the discontinuity buffer */
+    v3 *raw, *albedo, *emit, *normal;
+    float *depth;
+    uint8_t *valid;
+} pbr_frame;
+
+float pbr_mis(float a, float b);
+rp_query_n_desc pbr_query(const render_frame *f, render_thread *th, rp_ray_kind kind);
+
+/* path.c: path tracing, direct lighting and ambient occlusion of one tile (sums into th->accum). */
+bool path_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1);
+/* instant_radiosity.c */
+bool ir_frame_init(render_frame *f);
+bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1);
+void ir_frame_finish(render_frame *f);
+
+#endif

@@ -1,0 +1,381 @@
+/* Whitted ray tracing: point lights, hard shadows, mirror reflection and refraction. The reference
+ * tracer (one ray at a time, depth first) and the packet tracer (n x n packets, breadth first per ray
+ * kind, Overbeck et al. 2008, sec. 5) share the shading arithmetic, so their images are identical. */
+#include "../render.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+
+
+/* Shading of a Whitted hit without the rays it spawns: the local terms, the shading point the
+ * shadow rays start from, and the reflection and refraction rays with their weights. */
+static void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_hit *hit, int depth, float weight,
+                            whitted_slot *o) {
+    o->lit = o->has_r = o->has_t = false;
+    if (hit->geom_id == RP_INVALID_ID) {
+        o->color = f->background;
+        return;
+    }
+    const rp_render_scene *s = f->s;
+    render_surface sf;
+    scene_surface(s, ray, hit, &sf);
+    const rp_material *m = &s->materials[sf.material];
+    v3 dir = v3_make(ray->dir_x, ray->dir_y, ray->dir_z);
+    v3 kd = material_albedo(s, m, &sf);
+    o->color = v3_add(v3_load(m->ke), v3_scale(kd, f->desc.ambient));
+    bool more = depth < f->desc.max_depth;
+    float eps = ray_offset(s);
+    float cos_i = -v3_dot(dir, sf.ns);
+    if (cos_i < 0.0f) cos_i = 0.0f;
+    v3 refl = v3_normalize(v3_madd(dir, sf.ns, 2.0f * cos_i));
+    if (v3_dot(refl, sf.ng) <= 0.0f) refl = v3_normalize(v3_madd(dir, sf.ng, -2.0f * v3_dot(dir, sf.ng)));
+    v3 above = v3_madd(sf.p, sf.ng, eps);
+    o->lit = true;
+    o->direct = v3_make(0, 0, 0);
+    o->org = above;
+    o->ns = sf.ns;
+    o->ng = sf.ng;
+    o->kd = kd;
+    o->dir = dir;
+    o->m = m;
+    o->highlight = m->type != RP_MATERIAL_DIFFUSE;
+    switch (m->type) {
+    case RP_MATERIAL_DIFFUSE:
+    case RP_MATERIAL_PHONG:
+        break;
+    case RP_MATERIAL_MIRROR: {
+        v3 kr = v3_load(m->mirror.kr);
+        float w = weight * v3_max_abs(kr);
+        if (more && w > 1e-3f) {
+            o->has_r = true;
+            o->w_r = w;
+            o->mul_r = kr;
+            o->org_r = above;
+            o->dir_r = refl;
+        }
+        break;
+    }
+    case RP_MATERIAL_DIELECTRIC: {
+        if (!more) break;
+        float ior = m->dielectric.ior;
+        float eta = sf.entering ? 1.0f / ior : ior;
+        float fr = material_fresnel(cos_i, eta);
+        if (weight * fr > 1e-3f) {
+            o->has_r = true;
+            o->w_r = weight * fr;
+            o->mul_r = v3_make(fr, fr, fr); /* fr * c is c * fr: the product is exact either way */
+            o->org_r = above;
+            o->dir_r = refl;
+        }
+        v3 kt = v3_scale(v3_load(m->dielectric.kt), 1.0f - fr);
+        float wt = weight * v3_max_abs(kt);
+        if (fr < 1.0f && wt > 1e-3f) {
+            float cos_t = sqrtf(1.0f - eta * eta * (1.0f - cos_i * cos_i));
+            v3 t = v3_normalize(v3_madd(v3_scale(dir, eta), sf.ns, eta * cos_i - cos_t));
+            if (v3_dot(t, sf.ng) < 0.0f) {
+                o->has_t = true;
+                o->w_t = wt;
+                o->mul_t = kt;
+                o->org_t = v3_madd(sf.p, sf.ng, -eps);
+                o->dir_t = t;
+            }
+        }
+        break;
+    }
+    }
+}
+
+/* The shadow ray of a lit slot towards a light and the light it brings when unoccluded (Phong lobe
+ * of the material); false when the light cannot reach the point, so no ray is needed. */
+static bool whitted_light(const render_frame *f, const whitted_slot *o, const rp_light_source *light, rp_ray *sr,
+                          v3 *contrib) {
+    v3 pos = v3_make(0, 0, 0), intensity = pos;
+    bool inverse_square = false;
+    switch (light->type) {
+    case RP_LIGHT_SOURCE_POINT:
+        pos = v3_load(light->point.position);
+        intensity = v3_load(light->point.intensity);
+        inverse_square = light->point.inverse_square;
+        break;
+    case RP_LIGHT_SOURCE_SPOT:
+    case RP_LIGHT_SOURCE_DIRECTIONAL:
+    case RP_LIGHT_SOURCE_TRIANGLE:
+    case RP_LIGHT_SOURCE_ENVIRONMENT:
+        return false; /* Whitted sees the files' point lights only */
+    }
+    float eps = ray_offset(f->s);
+    v3 to = v3_sub(pos, o->org);
+    float dist = v3_length(to);
+    if (!(dist > eps)) return false;
+    v3 l = v3_scale(to, 1.0f / dist);
+    float cos_s = v3_dot(o->ns, l);
+    if (cos_s <= 0.0f || v3_dot(o->ng, l) <= 0.0f) return false;
+    render_ray_init(sr, o->org, l, dist * (1.0f - 1e-5f) - eps);
+    if (inverse_square) intensity = v3_scale(intensity, 1.0f / (dist * dist));
+    v3 term = v3_scale(o->kd, cos_s);
+    if (o->highlight) {
+        /* Phong: reflect the light direction about the shading normal, compare with the eye. */
+        v3 r = v3_sub(v3_scale(o->ns, 2.0f * cos_s), l);
+        float rv = -v3_dot(r, o->dir);
+        if (rv > 0.0f) term = v3_add(term, v3_scale(v3_load(o->m->ks), powf(rv, o->m->ns)));
+    }
+    *contrib = v3_mul(intensity, term);
+    return true;
+}
+
+/* ---- the reference tracer: one ray at a time, depth first ---- */
+
+static v3 whitted_trace(const render_frame *f, render_thread *th, v3 org, v3 dir, rp_ray_kind kind,
+                        int depth, float weight);
+
+v3 whitted_shade(const render_frame *f, render_thread *th, const rp_ray *ray, const rp_hit *hit,
+                        int depth, float weight) {
+    whitted_slot o;
+    whitted_surface(f, ray, hit, depth, weight, &o);
+    if (!o.lit) return o.color;
+    for (size_t i = 0; i < f->light_count; i++) {
+        rp_ray sr;
+        v3 contrib;
+        if (!whitted_light(f, &o, &f->lights[i], &sr, &contrib)) continue;
+        th->rays[RP_RAY_SHADOW]++;
+        rp_occluded1(f->s->scene, &sr);
+        if (sr.tfar < 0.0f) continue;
+        o.direct = v3_add(o.direct, contrib);
+    }
+    v3 c = v3_add(o.color, o.direct);
+    if (o.has_r)
+        c = v3_add(c, v3_mul(o.mul_r, whitted_trace(f, th, o.org_r, o.dir_r, RP_RAY_REFLECTION, depth + 1, o.w_r)));
+    if (o.has_t)
+        c = v3_add(c, v3_mul(o.mul_t, whitted_trace(f, th, o.org_t, o.dir_t, RP_RAY_REFRACTION, depth + 1, o.w_t)));
+    return c;
+}
+
+static v3 whitted_trace(const render_frame *f, render_thread *th, v3 org, v3 dir, rp_ray_kind kind,
+                        int depth, float weight) {
+    rp_rayhit rh;
+    render_ray_init(&rh.ray, org, dir, INFINITY);
+    rh.hit.geom_id = RP_INVALID_ID;
+    rh.hit.prim_id = RP_INVALID_ID;
+    rh.hit.inst_id = RP_INVALID_ID;
+    th->rays[kind]++;
+    rp_intersect1(f->s->scene, &rh);
+    return whitted_shade(f, th, &rh.ray, &rh.hit, depth, weight);
+}
+
+/* ---- the packet tracer: n x n packets, breadth first per ray kind ---- */
+
+/* Level `level` of the thread's packet stack, made on first use; NULL when out of memory. */
+whitted_level *whitted_packet_level(const render_frame *f, render_thread *th, int level) {
+    if (th->levels[level]) return th->levels[level];
+    uint32_t n = (uint32_t)f->desc.packet, nn = n * n;
+    whitted_level *lv = calloc(1, sizeof *lv);
+    if (!lv) return NULL;
+    lv->valid = calloc(nn, sizeof *lv->valid);
+    lv->weight = calloc(nn, sizeof *lv->weight);
+    lv->slots = calloc(nn, sizeof *lv->slots);
+    bool ok = lv->valid && lv->weight && lv->slots && rp_rayhit_n_alloc(f->s->device, n, &lv->rh);
+    if (!ok) {
+        free(lv->valid);
+        free(lv->weight);
+        free(lv->slots);
+        free(lv);
+        return NULL;
+    }
+    th->levels[level] = lv;
+    return lv;
+}
+
+/* Sets ray q of a packet (tnear 0, no hit yet). */
+void packet_set_ray(rp_rayhit_n *p, uint32_t q, v3 org, v3 dir, float tfar) {
+    p->org_x[q] = org.x;
+    p->org_y[q] = org.y;
+    p->org_z[q] = org.z;
+    p->tnear[q] = 0.0f;
+    p->dir_x[q] = dir.x;
+    p->dir_y[q] = dir.y;
+    p->dir_z[q] = dir.z;
+    p->tfar[q] = tfar;
+    p->geom_id[q] = RP_INVALID_ID;
+    p->prim_id[q] = RP_INVALID_ID;
+    p->inst_id[q] = RP_INVALID_ID;
+}
+
+rp_query_n_desc whitted_packet_query(const render_frame *f, render_thread *th, whitted_level *lv, rp_ray_kind kind) {
+    rp_query_n_desc q = {.traversal = f->traversal[kind],
+                         .counters = th->work ? &th->work[kind] : NULL,
+                         .tally = &lv->tally[kind]};
+    rp_frustum_kind fk = RP_FRUSTUM_NONE;
+    switch (kind) {
+    case RP_RAY_PRIMARY: fk = RP_FRUSTUM_PRIMARY; break;
+    case RP_RAY_SHADOW: fk = RP_FRUSTUM_SHADOW; break;
+    case RP_RAY_REFLECTION:
+    case RP_RAY_REFRACTION: fk = RP_FRUSTUM_SECONDARY; break;
+    case RP_RAY_BOUNCE:
+    case RP_RAY_KIND_COUNT: break;
+    }
+    q.frustum = f->desc.no_frustum ? RP_FRUSTUM_NONE : fk;
+    return q;
+}
+
+/* Gathers the lights of every lit slot of a level: one shadow packet per light, aimed at the light
+ * (slots that need no shadow ray are simply not live in it). */
+static void packet_shadows(const render_frame *f, render_thread *th, whitted_level *lv) {
+    uint32_t nn = (uint32_t)f->desc.packet * (uint32_t)f->desc.packet;
+    rp_rayhit_n *sp = &th->shadow;
+    for (size_t i = 0; i < f->light_count; i++) {
+        const rp_light_source *light = &f->lights[i];
+        uint64_t live = 0;
+        for (uint32_t q = 0; q < nn; q++) {
+            th->shadow_valid[q] = 0;
+            if (!lv->valid[q] || !lv->slots[q].lit) continue;
+            rp_ray sr;
+            if (!whitted_light(f, &lv->slots[q], light, &sr, &th->shadow_contrib[q])) continue;
+            packet_set_ray(sp, q, v3_make(sr.org_x, sr.org_y, sr.org_z), v3_make(sr.dir_x, sr.dir_y, sr.dir_z),
+                           sr.tfar);
+            th->shadow_valid[q] = -1;
+            live++;
+        }
+        if (!live) continue;
+        th->rays[RP_RAY_SHADOW] += live;
+        rp_query_n_desc qd = whitted_packet_query(f, th, lv, RP_RAY_SHADOW);
+        switch (light->type) {
+        case RP_LIGHT_SOURCE_POINT:
+            for (int k = 0; k < 3; k++) qd.point[k] = light->point.position[k];
+            break;
+        case RP_LIGHT_SOURCE_SPOT:
+        case RP_LIGHT_SOURCE_DIRECTIONAL:
+        case RP_LIGHT_SOURCE_TRIANGLE:
+        case RP_LIGHT_SOURCE_ENVIRONMENT:
+            qd.frustum = RP_FRUSTUM_NONE;
+            break;
+        }
+        sp->valid = th->shadow_valid;
+        rp_occluded_n(f->s->scene, &qd, sp);
+        for (uint32_t q = 0; q < nn; q++)
+            if (th->shadow_valid[q] && !(sp->tfar[q] < 0.0f))
+                lv->slots[q].direct = v3_add(lv->slots[q].direct, th->shadow_contrib[q]);
+    }
+}
+
+static bool packet_trace(const render_frame *f, render_thread *th, int level, rp_ray_kind kind);
+
+/* Traces the children of one kind (reflection or refraction) of a level as the packet one level
+ * down, and adds their radiance to their parents'. */
+static bool packet_children(const render_frame *f, render_thread *th, int level, rp_ray_kind kind) {
+    uint32_t nn = (uint32_t)f->desc.packet * (uint32_t)f->desc.packet;
+    whitted_level *lv = th->levels[level];
+    bool refl = kind == RP_RAY_REFLECTION, any = false;
+    for (uint32_t q = 0; q < nn && !any; q++)
+        any = lv->valid[q] && (refl ? lv->slots[q].has_r : lv->slots[q].has_t);
+    if (!any) return true;
+    whitted_level *down = whitted_packet_level(f, th, level + 1);
+    if (!down) return false;
+    for (uint32_t q = 0; q < nn; q++) {
+        const whitted_slot *o = &lv->slots[q];
+        bool live = lv->valid[q] && (refl ? o->has_r : o->has_t);
+        down->valid[q] = live ? -1 : 0;
+        if (!live) continue;
+        down->weight[q] = refl ? o->w_r : o->w_t;
+        packet_set_ray(&down->rh, q, refl ? o->org_r : o->org_t, refl ? o->dir_r : o->dir_t, INFINITY);
+    }
+    if (!packet_trace(f, th, level + 1, kind)) return false;
+    for (uint32_t q = 0; q < nn; q++) {
+        if (!down->valid[q]) continue;
+        whitted_slot *o = &lv->slots[q];
+        o->color = v3_add(o->color, v3_mul(refl ? o->mul_r : o->mul_t, down->slots[q].color));
+    }
+    return true;
+}
+
+/* Traces the packet of a level (its rays and valid mask set by the caller), gathers its lights,
+ * then its reflection and refraction packets: slots[q].color ends as rp_intersect1-by-ray Whitted
+ * would leave it. False when out of memory. */
+static bool packet_trace(const render_frame *f, render_thread *th, int level, rp_ray_kind kind) {
+    uint32_t nn = (uint32_t)f->desc.packet * (uint32_t)f->desc.packet;
+    whitted_level *lv = th->levels[level];
+    rp_rayhit_n *p = &lv->rh;
+    uint64_t live = 0;
+    for (uint32_t q = 0; q < nn; q++) live += lv->valid[q] != 0;
+    th->rays[kind] += live;
+    p->valid = lv->valid;
+    rp_query_n_desc qd = whitted_packet_query(f, th, lv, kind);
+    rp_intersect_n(f->s->scene, &qd, p);
+    for (uint32_t q = 0; q < nn; q++) {
+        if (!lv->valid[q]) continue;
+        rp_ray ray;
+        render_ray_init(&ray, v3_make(p->org_x[q], p->org_y[q], p->org_z[q]), v3_make(p->dir_x[q], p->dir_y[q], p->dir_z[q]),
+                 p->tfar[q]);
+        ray.tnear = p->tnear[q];
+        rp_hit hit = {.Ng_x = p->Ng_x[q], .Ng_y = p->Ng_y[q], .Ng_z = p->Ng_z[q], .u = p->u[q], .v = p->v[q],
+                      .prim_id = p->prim_id[q], .geom_id = p->geom_id[q], .inst_id = p->inst_id[q]};
+        whitted_surface(f, &ray, &hit, level, lv->weight[q], &lv->slots[q]);
+    }
+    packet_shadows(f, th, lv);
+    for (uint32_t q = 0; q < nn; q++) {
+        whitted_slot *o = &lv->slots[q];
+        if (lv->valid[q] && o->lit) o->color = v3_add(o->color, o->direct);
+    }
+    return packet_children(f, th, level, RP_RAY_REFLECTION) && packet_children(f, th, level, RP_RAY_REFRACTION);
+}
+
+bool whitted_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
+                         int s) {
+    const rp_render_desc *d = &f->desc;
+    uint32_t n = (uint32_t)d->packet;
+    whitted_level *lv = whitted_packet_level(f, th, 0);
+    if (!lv) return false;
+    for (uint32_t j = 0; j < n; j++)
+        for (uint32_t i = 0; i < n; i++) {
+            uint32_t q = rp_packet_n_index(n, i, j);
+            int x = bx + (int)i, y = by + (int)j;
+            float ox, oy;
+            render_sample_offset(x, y, s, &ox, &oy);
+            /* Rays past the image's edge are made too (the frustum code ignores them) but not live. */
+            rp_ray r;
+            camera_ray(&f->cam, (float)x + ox, (float)y + oy, &r);
+            packet_set_ray(&lv->rh, q, v3_make(r.org_x, r.org_y, r.org_z), v3_make(r.dir_x, r.dir_y, r.dir_z), r.tfar);
+            lv->valid[q] = x < x0 + tw && y < y0 + tile_h ? -1 : 0;
+            lv->weight[q] = 1.0f;
+        }
+    if (!packet_trace(f, th, 0, RP_RAY_PRIMARY)) return false;
+    for (uint32_t j = 0; j < n; j++)
+        for (uint32_t i = 0; i < n; i++) {
+            uint32_t q = rp_packet_n_index(n, i, j);
+            if (!lv->valid[q]) continue;
+            int k = (by + (int)j - y0) * tw + (bx + (int)i - x0);
+            v3 c = lv->slots[q].color;
+            th->accum[3 * k + 0] += c.x;
+            th->accum[3 * k + 1] += c.y;
+            th->accum[3 * k + 2] += c.z;
+        }
+    return true;
+}
+
+/* Allocates what a thread needs beyond its tile buffers for packet tracing. */
+bool whitted_thread_init(const render_frame *f, render_thread *th) {
+    uint32_t n = (uint32_t)f->desc.packet, nn = n * n;
+    th->levels = calloc((size_t)f->desc.max_depth + 1, sizeof *th->levels);
+    th->shadow_valid = calloc(nn, sizeof *th->shadow_valid);
+    th->shadow_contrib = calloc(nn, sizeof *th->shadow_contrib);
+    if (f->desc.count_work) th->work = calloc(RP_RAY_KIND_COUNT, sizeof *th->work);
+    return th->levels && th->shadow_valid && th->shadow_contrib && (!f->desc.count_work || th->work) &&
+           rp_rayhit_n_alloc(f->s->device, n, &th->shadow);
+}
+
+void whitted_thread_free(const render_frame *f, render_thread *th) {
+    for (int l = 0; th->levels && l <= f->desc.max_depth; l++) {
+        whitted_level *lv = th->levels[l];
+        if (!lv) continue;
+        rp_rayhit_n_free(f->s->device, &lv->rh);
+        free(lv->valid);
+        free(lv->weight);
+        free(lv->slots);
+        free(lv);
+    }
+    free(th->levels);
+    if (th->shadow.n) rp_rayhit_n_free(f->s->device, &th->shadow);
+    free(th->shadow_valid);
+    free(th->shadow_contrib);
+    free(th->work);
+}

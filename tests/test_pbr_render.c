@@ -1,0 +1,407 @@
+// rp-test: timeout=600
+/* Physically based integrators against answers known in closed form (pbrt-v4's and Mitsuba 3's
+ * tests): the white furnace (an albedo-1 diffuse sphere in a uniform environment of radiance 1 looks
+ * like radiance 1), the inside of a closed Kd 0.5 sphere lit by its own uniform emission 0.5 or by a
+ * point light of intensity pi r^2 at its centre (radiance 1 everywhere), a diffuse plane under a
+ * square area light (the form factor in closed form); images identical for 1, 2 and 3 threads and
+ * across frames split by sample_start; path tracing against instant radiosity without clamping on
+ * cornell_original. */
+#include "../src/render/render.h"
+#include "rp_test.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define PI_D 3.14159265358979323846
+
+/* A UV sphere of nt x np quads at the origin; inward: the triangles face the centre. */
+static void make_sphere(rp_scene_data *d, float r, int nt, int np, bool inward) {
+    memset(d, 0, sizeof *d);
+    d->vertex_count = (size_t)(nt + 1) * (size_t)np;
+    d->positions = calloc(d->vertex_count * 3, sizeof(float));
+    d->triangle_count = (size_t)nt * (size_t)np * 2;
+    d->indices = calloc(d->triangle_count * 3, sizeof(uint32_t));
+    d->tri_materials = calloc(d->triangle_count, sizeof(uint32_t));
+    for (int i = 0; i <= nt; i++)
+        for (int j = 0; j < np; j++) {
+            double th = PI_D * i / nt, ph = 2 * PI_D * j / np;
+            float *p = d->positions + 3 * ((size_t)i * (size_t)np + (size_t)j);
+            p[0] = (float)(r * sin(th) * cos(ph));
+            p[1] = (float)(r * cos(th));
+            p[2] = (float)(r * sin(th) * sin(ph));
+        }
+    size_t t = 0;
+    for (int i = 0; i < nt; i++)
+        for (int j = 0; j < np; j++) {
+            uint32_t a = (uint32_t)(i * np + j), b = (uint32_t)(i * np + (j + 1) % np), c = a + (uint32_t)np,
+                     e = b + (uint32_t)np;
+            uint32_t q[2][3] = {{a, b, c}, {b, e, c}};
+            for (int k = 0; k < 2; k++) {
+                uint32_t *o = d->indices + 3 * t++;
+                o[0] = q[k][0];
+                o[1] = inward ? q[k][2] : q[k][1];
+                o[2] = inward ? q[k][1] : q[k][2];
+            }
+        }
+    d->material_count = 1;
+    d->materials = calloc(1, sizeof *d->materials);
+    d->materials[0].map_kd = -1;
+    d->materials[0].ior = 1.0f;
+    d->materials[0].illum = -1;
+}
+
+static double mean_of(const float *px, int n, int channels) {
+    double s = 0.0;
+    for (int i = 0; i < n * channels; i++) s += px[i];
+    return s / (n * channels);
+}
+
+static float *render(rp_render_scene *s, const rp_render_desc *d) {
+    float *px = malloc((size_t)d->width * (size_t)d->height * 3 * sizeof(float));
+    if (!rp_render(s, d, px, NULL)) {
+        free(px);
+        return NULL;
+    }
+    return px;
+}
+
+/* Which way the sphere test faces, whether it is upside down: not at the poles, where the UV
+ * sphere's triangles are slivers. */
+static rp_camera cam_at(float ex, float ey, float ez, float lx, float ly, float lz, float fov) {
+    rp_camera c = {.type = RP_CAMERA_PINHOLE};
+    c.pinhole = (rp_pinhole_camera){.eye = {ex, ey, ez}, .look = {lx, ly, lz}, .up = {0, 1, 0}, .fov_deg = fov};
+    return c;
+}
+
+int main(void) {
+    bool small = rp_test_sanitized() != 0;
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
+    char err[512];
+    int spp = small ? 32 : 256;
+
+    /* White furnace: an albedo-1 sphere in a uniform environment of radiance 1. */
+    {
+        rp_scene_data d;
+        make_sphere(&d, 1.0f, 48, 96, false);
+        d.materials[0].kd[0] = d.materials[0].kd[1] = d.materials[0].kd[2] = 1.0f;
+        rp_render_scene_desc sd = {.environment_scale = {1, 1, 1}};
+        rp_render_scene *s = rp_render_scene_new(dev, &d, &sd, err, sizeof err);
+        CHECKF(s != NULL, "furnace scene: %s", err);
+        rp_camera cam = cam_at(0, 0, 4, 0, 0, 0, 20);
+        for (int k = 0; s && k < 3; k++) {
+            static const rp_integrator_type types[3] = {RP_INTEGRATOR_DIRECT, RP_INTEGRATOR_PATH, RP_INTEGRATOR_IR};
+            rp_render_desc rd = {.width = 24, .height = 24, .spp = k == 2 ? 16 : spp, .integrator = types[k],
+                                 .camera = &cam, .max_depth = 8,
+                                 .ir = {.interleave = 1, .vpls = small ? 64 : 256, .filter = 1}};
+            float *px = render(s, &rd);
+            CHECK(px != NULL);
+            if (!px) continue;
+            double m = mean_of(px, 24 * 24, 3), worst = 0.0;
+            for (int i = 0; i < 24 * 24 * 3; i++) worst = fmax(worst, fabs(px[i] - 1.0));
+            static const char *const names[3] = {"direct", "path", "instant radiosity"};
+            double tol = k == 2 ? (small ? 0.05 : 0.02) : 0.01;
+            CHECKF(fabs(m - 1.0) < tol, "furnace (%s): mean radiance %.5f, want 1 within %.0f%%", names[k], m, 100 * tol);
+            CHECKF(worst < 0.25, "furnace (%s): a pixel off by %.3f", names[k], worst);
+            free(px);
+        }
+        rp_render_scene_release(s);
+        rp_scene_data_free(&d);
+    }
+    /* Inside a closed Kd 0.5 sphere emitting 0.5 inwards: L = Le / (1 - kd) = 1. */
+    for (int variant = 0; variant < 2; variant++) {
+        rp_scene_data d;
+        make_sphere(&d, 1.0f, 64, 128, true);
+        for (int c = 0; c < 3; c++) d.materials[0].kd[c] = 0.5f;
+        if (variant == 0) {
+            for (int c = 0; c < 3; c++) d.materials[0].ke[c] = 0.5f;
+        } else {
+            /* a point light of intensity pi r^2 at the centre: E = pi, L = (kd E / pi) / (1 - kd) = 1 */
+            d.light_count = 1;
+            d.lights = calloc(1, sizeof *d.lights);
+            d.lights[0].type = RP_LIGHT_DATA_POINT;
+            for (int c = 0; c < 3; c++) d.lights[0].color[c] = (float)PI_D;
+        }
+        rp_render_scene *s = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
+        CHECKF(s != NULL, "sphere interior: %s", err);
+        rp_camera cam = cam_at(0, 0, 0, 1, 0.2f, 0.3f, 60);
+        rp_render_desc rd = {.width = 24, .height = 24, .spp = spp, .integrator = RP_INTEGRATOR_PATH,
+                             .camera = &cam, .max_depth = 24};
+        float *px = s ? render(s, &rd) : NULL;
+        CHECK(px != NULL);
+        if (px) {
+            double m = mean_of(px, 24 * 24, 3);
+            CHECKF(fabs(m - 1.0) < (small ? 0.05 : 0.01), "sphere interior (%s): mean radiance %.5f, want 1 within 1%%",
+                   variant ? "point light" : "area light", m);
+        }
+        free(px);
+        {
+            rp_render_desc ird = {.width = 24, .height = 24, .spp = 16, .integrator = RP_INTEGRATOR_IR, .camera = &cam,
+                                 .max_depth = 24, .ir = {.interleave = 1, .vpls = 256, .filter = 1, .clamp = -1.0f}};
+            float *q = s ? render(s, &ird) : NULL;
+            CHECKF(q && fabs(mean_of(q, 24 * 24, 3) - 1.0) < (small ? 0.1 : 0.02), "IR sphere interior (%s): %.5f, want 1",
+                   variant ? "point light" : "area light", q ? mean_of(q, 24 * 24, 3) : 0.0);
+            free(q);
+        }
+        rp_render_scene_release(s);
+        rp_scene_data_free(&d);
+    }
+    /* A diffuse plane (Kd 0.5, y = 0) under a one-sided square light of side 2a at height h: at the
+     * point below its centre E = pi Le F, F = 4 x the corner rectangle's form factor
+     * (1 / 2pi) (X/sqrt(1+X^2) atan(Y/sqrt(1+X^2)) + Y/sqrt(1+Y^2) atan(X/sqrt(1+Y^2))), X = Y = a/h. */
+    {
+        rp_scene_data d;
+        memset(&d, 0, sizeof d);
+        float a = 0.5f, h = 1.0f, big = 50.0f;
+        float pos[8][3] = {{-big, 0, -big}, {big, 0, -big}, {big, 0, big}, {-big, 0, big},
+                           {-a, h, -a},     {a, h, -a},     {a, h, a},     {-a, h, a}};
+        /* plane faces +y; the light faces -y */
+        uint32_t idx[12] = {0, 2, 1, 0, 3, 2, 4, 5, 6, 4, 6, 7};
+        uint32_t mats[4] = {0, 0, 1, 1};
+        d.vertex_count = 8;
+        d.positions = malloc(sizeof pos);
+        memcpy(d.positions, pos, sizeof pos);
+        d.triangle_count = 4;
+        d.indices = malloc(sizeof idx);
+        memcpy(d.indices, idx, sizeof idx);
+        d.tri_materials = malloc(sizeof mats);
+        memcpy(d.tri_materials, mats, sizeof mats);
+        d.material_count = 2;
+        d.materials = calloc(2, sizeof *d.materials);
+        for (int c = 0; c < 3; c++) {
+            d.materials[0].kd[c] = 0.5f;
+            d.materials[1].ke[c] = 2.0f;
+        }
+        d.materials[0].map_kd = d.materials[1].map_kd = -1;
+        rp_render_scene *s = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
+        CHECKF(s != NULL, "plane scene: %s", err);
+        double X = a / h, F1 = (X / sqrt(1 + X * X) * atan(X / sqrt(1 + X * X))) * 2 / (2 * PI_D);
+        double want = 0.5 / PI_D * PI_D * 2.0 * 4 * F1;
+        rp_camera cam = cam_at(3, 0.5f, 0, 0, 0, 0, 0.2f);
+        for (int k = 0; s && k < 2; k++) {
+            rp_render_desc rd = {.width = 8, .height = 8, .spp = spp * 2,
+                                 .integrator = k ? RP_INTEGRATOR_PATH : RP_INTEGRATOR_DIRECT, .camera = &cam};
+            float *px = render(s, &rd);
+            CHECK(px != NULL);
+            if (!px) continue;
+            double m = mean_of(px, 64, 3);
+            CHECKF(fabs(m / want - 1.0) < 0.01, "plane under a square light (%s): %.5f, analytic %.5f",
+                   k ? "path" : "direct", m, want);
+            free(px);
+        }
+        {
+            rp_render_desc rd = {.width = 8, .height = 8, .spp = 64, .integrator = RP_INTEGRATOR_IR, .camera = &cam,
+                                 .ir = {.interleave = 1, .vpls = 64, .filter = 1, .clamp = -1.0f}};
+            float *px = s ? render(s, &rd) : NULL;
+            CHECKF(px && fabs(mean_of(px, 64, 3) / want - 1.0) < 0.02, "IR plane %.5f, analytic %.5f",
+                   px ? mean_of(px, 64, 3) : 0.0, want);
+            free(px);
+        }
+        rp_render_scene_release(s);
+        rp_scene_data_free(&d);
+    }
+    /* Texture maps from an MTL file: map_Pr (roughness) sets a plastic's GGX alpha = r^2, norm (a
+     * tangent-space normal map) tilts the shading normal along dp/du. */
+    {
+        const char *tmp = getenv("RP_TEST_TMP");
+        char dirp[400], file[600], cmd[700];
+        snprintf(dirp, sizeof dirp, "%s", tmp ? tmp : "/tmp/rp_test_pbr_maps");
+        snprintf(cmd, sizeof cmd, "mkdir -p '%s'", dirp);
+        CHECK(system(cmd) == 0);
+        /* 1x1 PPMs: normal (0.6, 0, 0.8) -> bytes 204 128 230; roughness 128 -> r = 0.502 */
+        const unsigned char nrm[3] = {204, 128, 230}, rough[3] = {128, 128, 128};
+        const char *names[2] = {"n.ppm", "r.ppm"};
+        const unsigned char *px[2] = {nrm, rough};
+        for (int i = 0; i < 2; i++) {
+            snprintf(file, sizeof file, "%s/%s", dirp, names[i]);
+            FILE *fp = fopen(file, "wb");
+            CHECK(fp != NULL);
+            if (!fp) continue;
+            fprintf(fp, "P6\n1 1\n255\n");
+            fwrite(px[i], 1, 3, fp);
+            fclose(fp);
+        }
+        snprintf(file, sizeof file, "%s/maps.mtl", dirp);
+        FILE *fm = fopen(file, "w");
+        if (fm) {
+            fprintf(fm, "newmtl m\nKd 0.5 0.5 0.5\nKs 0.2 0.2 0.2\nNs 10\nmap_Pr r.ppm\nnorm n.ppm\n");
+            fclose(fm);
+        }
+        snprintf(file, sizeof file, "%s/maps.obj", dirp);
+        FILE *fo = fopen(file, "w");
+        if (fo) {
+            /* a unit quad in z = 0 facing +z, u along +x */
+            fprintf(fo, "mtllib maps.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                        "usemtl m\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n");
+            fclose(fo);
+        }
+        rp_scene_data d;
+        bool loaded = rp_scene_data_load(file, &d, err, sizeof err);
+        CHECKF(loaded, "maps.obj: %s", err);
+        if (loaded) {
+            CHECKF(d.materials[0].map_normal > 0 && d.materials[0].map_roughness > 0, "norm / map_Pr not parsed");
+            rp_render_scene *s = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
+            CHECKF(s != NULL, "%s", err);
+            if (s) {
+                rp_rayhit rh;
+                render_ray_init(&rh.ray, v3_make(0.3f, 0.6f, 2.0f), v3_make(0, 0, -1), INFINITY);
+                rh.hit.geom_id = rh.hit.prim_id = rh.hit.inst_id = RP_INVALID_ID;
+                rp_intersect1(s->scene, &rh);
+                CHECK(rh.hit.geom_id != RP_INVALID_ID);
+                render_surface sf;
+                scene_surface(s, &rh.ray, &rh.hit, &sf);
+                const rp_material *m = &s->materials[sf.material];
+                material_normal_map(s, m, &sf);
+                /* bytes 204/128/230 decode to (0.6, 0.004, 0.804) in tangent space: t = +x, b = n x t = +y */
+                CHECKF(fabsf(sf.ns.x - 0.6f) < 0.01f && fabsf(sf.ns.z - 0.8f) < 0.01f && fabsf(sf.ns.y) < 0.02f,
+                       "normal map: shading normal %g %g %g, want 0.6 0 0.8", sf.ns.x, sf.ns.y, sf.ns.z);
+                render_bsdf b = material_bsdf(s, m, &sf);
+                float r = 128.0f / 255.0f;
+                CHECKF(b.type == BSDF_PLASTIC && fabsf(b.alpha - r * r) < 1e-4f, "roughness map: alpha %g, want %g",
+                       b.alpha, r * r);
+            }
+            rp_render_scene_release(s);
+            rp_scene_data_free(&d);
+        }
+    }
+    /* The environment map (studio_small_03): its sampling density integrates to 1 over the sphere,
+     * each sample's pdf and radiance are what light_env_pdf and light_env_radiance say of its
+     * direction, and the sampled estimate of the mean radiance matches a uniform one. */
+    char envp[512];
+    if (rp_test_scene("env/studio_small_03_1k.hdr", envp, sizeof envp)) {
+        rp_scene_data d;
+        make_sphere(&d, 1.0f, 8, 16, false);
+        rp_render_scene_desc sd = {.environment = envp};
+        rp_render_scene *s = rp_render_scene_new(dev, &d, &sd, err, sizeof err);
+        CHECKF(s != NULL, "environment: %s", err);
+        if (s) {
+            const rp_light_source *env = &s->pb_lights[s->env_light];
+            int n = small ? 20000 : 200000, bad = 0;
+            double integral = 0.0, exact = 0.0, imp = 0.0;
+            /* The density and the mean radiance integrated over a grid twice as fine as the map. */
+            int gw = 2 * s->env.width, gh = 2 * s->env.height;
+            for (int y = 0; y < gh; y++) {
+                double th0 = PI_D * y / gh, th1 = PI_D * (y + 1) / gh, th = 0.5 * (th0 + th1);
+                double dw = (cos(th0) - cos(th1)) * 2.0 * PI_D / gw;
+                for (int x = 0; x < gw; x++) {
+                    double ph = 2.0 * PI_D * ((x + 0.5) / gw - 0.5);
+                    v3 w = v3_make((float)(sin(th) * sin(ph)), (float)cos(th), (float)(-sin(th) * cos(ph)));
+                    integral += light_env_pdf(s, w) * dw;
+                    exact += light_env_radiance(s, w).y * dw / (4.0 * PI_D);
+                }
+            }
+            for (int i = 0; i < n; i++) {
+                render_sampler r = sampler_start((uint32_t)i, 3, 9);
+                light_sample ls;
+                if (!light_sample_li(s, env, v3_make(0, 0, 0), sampler_1d(&r), sampler_1d(&r), &ls)) continue;
+                float pd = light_env_pdf(s, ls.wi);
+                v3 le = light_env_radiance(s, ls.wi);
+                if (fabsf(pd - ls.pdf) > 1e-3f * ls.pdf || fabsf(le.y - ls.L.y) > 1e-4f * fmaxf(1.0f, le.y)) bad++;
+                imp += ls.L.y / (ls.pdf * 4.0 * PI_D) / n;
+            }
+            double uni = exact;
+            CHECKF(fabs(integral - 1.0) < 0.02, "environment pdf integrates to %.4f", integral);
+            CHECKF(bad < n / 1000, "%d environment samples disagree with pdf()/radiance() of their direction", bad);
+            CHECKF(fabs(imp / uni - 1.0) < 0.02, "environment mean radiance: importance sampled %.5f, integrated %.5f", imp, uni);
+        }
+        rp_render_scene_release(s);
+        rp_scene_data_free(&d);
+    }
+    /* cornell_original: thread counts, frames, and path tracing against instant radiosity. */
+    char path[512];
+    if (rp_test_scene("cornell_original/CornellBox-Original.obj", path, sizeof path)) {
+        rp_scene_data d;
+        CHECK(rp_scene_data_load(path, &d, err, sizeof err));
+        int W = 48, H = 48;
+        float *ref[2] = {0}; /* path, IR with 1 thread */
+        for (int t = 1; t <= 3; t++) {
+            rp_device *dt = rp_device_new(&(rp_device_desc){.threads = t});
+            rp_render_scene *s = rp_render_scene_new(dt, &d, NULL, err, sizeof err);
+            for (int integ = 0; s && integ < 2; integ++) {
+                rp_render_desc rd = {.width = W, .height = H, .spp = 4,
+                                     .integrator = integ ? RP_INTEGRATOR_IR : RP_INTEGRATOR_PATH};
+                float *px = render(s, &rd);
+                CHECK(px != NULL);
+                if (t == 1) {
+                    ref[integ] = px;
+                    continue;
+                }
+                CHECKF(px && ref[integ] && memcmp(px, ref[integ], (size_t)W * H * 3 * sizeof(float)) == 0,
+                       "%s: %d threads differ from 1", integ ? "instant radiosity" : "path tracing", t);
+                free(px);
+            }
+            rp_render_scene_release(s);
+            rp_device_release(dt);
+        }
+        float *img[1] = {ref[0]};
+        free(ref[1]);
+        /* Eye light through n x n packets gives the array tracer's image (1 and 3 samples). */
+        {
+            rp_render_scene *es = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
+            for (int spp_e = 1; es && spp_e <= 3; spp_e += 2) {
+                rp_render_desc rd = {.width = 50, .height = 38, .spp = spp_e, .integrator = RP_INTEGRATOR_EYELIGHT};
+                float *a = render(es, &rd);
+                rd.packet = -1;
+                float *b = render(es, &rd);
+                CHECKF(a && b && memcmp(a, b, 50 * 38 * 3 * sizeof(float)) == 0, "eye light: packets differ from the array tracer");
+                free(a);
+                free(b);
+            }
+            rp_render_scene_release(es);
+        }
+        /* Frames: samples [0, 4) in one frame equal frames [0, 2) and [2, 4) averaged. */
+        rp_render_scene *s = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
+        {
+            rp_render_desc rd = {.width = W, .height = H, .spp = 2, .integrator = RP_INTEGRATOR_PATH};
+            float *a = render(s, &rd);
+            rd.sample_start = 2;
+            float *b = render(s, &rd);
+            double worst = 0.0;
+            for (int i = 0; a && b && img[0] && i < W * H * 3; i++)
+                worst = fmax(worst, fabs(0.5 * (a[i] + b[i]) - img[0][i]) / fmax(1e-3, img[0][i]));
+            CHECKF(a && b && worst < 1e-4, "frames split by sample_start: relative difference %.3g", worst);
+            CHECKF(a && b && memcmp(a, b, (size_t)W * H * 3 * sizeof(float)) != 0, "sample_start 2 repeats samples 0-1");
+            free(a);
+            free(b);
+        }
+        free(img[0]);
+        /* Path tracing and unclamped, unfiltered instant radiosity converge to the same image: the mean
+         * and each 8 x 8 block's mean agree within the stated errors (both truncated at 8 bounces). */
+        if (!small) {
+            int w = 64, hh = 64;
+            rp_render_desc pd = {.width = w, .height = hh, .spp = 256, .integrator = RP_INTEGRATOR_PATH, .max_depth = 8};
+            rp_render_desc id = {.width = w, .height = hh, .spp = 16, .integrator = RP_INTEGRATOR_IR, .max_depth = 8,
+                                 .ir = {.interleave = 1, .vpls = 256, .filter = 1, .clamp = -1.0f, .depth = 7}};
+            float *pt = render(s, &pd), *ir = render(s, &id);
+            CHECK(pt && ir);
+            if (pt && ir) {
+                double mp = mean_of(pt, w * hh, 3), mi = mean_of(ir, w * hh, 3), worst = 0.0;
+                for (int by = 0; by < hh; by += 8)
+                    for (int bx = 0; bx < w; bx += 8) {
+                        double sp = 0, si = 0;
+                        for (int y = by; y < by + 8; y++)
+                            for (int x = bx; x < bx + 8; x++)
+                                for (int c = 0; c < 3; c++) {
+                                    sp += pt[(y * w + x) * 3 + c];
+                                    si += ir[(y * w + x) * 3 + c];
+                                }
+                        if (sp > 0.05 * 64 * 3 * mp) worst = fmax(worst, fabs(si / sp - 1.0));
+                    }
+                printf("cornell_original: path mean %.4f, instant radiosity mean %.4f, worst 8x8 block %.3f\n", mp, mi,
+                       worst);
+                /* Stated error: unclamped IR has infinite variance near concave corners (1/d^2 of VPLs
+                 * beside the shading point), so at 4096 VPLs a pixel its typical estimate still lies
+                 * below the mean: measured -14% over the image, 28% in the worst block. The test
+                 * guards those figures (a broken VPL weight is off by factors). */
+                CHECKF(fabs(mi / mp - 1.0) < 0.20, "IR mean %.4f vs path %.4f: more than 20%% apart", mi, mp);
+                CHECKF(worst < 0.40, "an 8x8 block of IR is %.1f%% off the path traced one", 100 * worst);
+            }
+            free(pt);
+            free(ir);
+        }
+        rp_render_scene_release(s);
+        rp_scene_data_free(&d);
+    }
+    rp_device_release(dev);
+    return RP_TEST_END();
+}

@@ -39,6 +39,18 @@ const char *cli_isa_name(int isa);
 const char *cli_flag_value(const char *cmd, int argc, char **argv, int *i);
 /* Writes `"traversal": {"auto": n, ..., "simd": n}`, the packets of c per traversal algorithm. */
 void cli_json_traversal(FILE *f, const rp_counters_n *c);
+/* True when a and b name one file: the same (st_dev, st_ino) when both exist, else the same folder
+ * (after resolving links) and name. */
+bool cli_same_file(const char *a, const char *b);
+/* A file a command reads (input) or writes, and the flag that named it ("SCENE", "-o", ...). */
+typedef struct cli_path {
+    const char *flag;
+    const char *path; /* NULL: not given */
+    bool input;
+} cli_path;
+/* Usage check before any work: no output may be an input or another output; prints which flags
+ * collide and returns false. */
+bool cli_check_paths(const char *cmd, const cli_path *paths, int count);
 /* Largest thread count accepted by --threads. */
 #define CLI_MAX_THREADS 1024
 

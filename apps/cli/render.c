@@ -397,6 +397,8 @@ int cli_render(int argc, char **argv) {
         render_usage(stdout);
         return CLI_EXIT_OK;
     }
+    const cli_path paths[] = {{"SCENE", o.scene, true}, {"-o", o.output, false}, {"--stats-json", o.stats_json, false}};
+    if (!cli_check_paths(CMD, paths, (int)(sizeof paths / sizeof paths[0]))) return CLI_EXIT_USAGE;
     if (!output_writable(o.output)) return CLI_EXIT_FAILURE;
     if (o.stats_json && !output_writable(o.stats_json)) return CLI_EXIT_FAILURE;
 
@@ -526,11 +528,12 @@ int cli_render(int argc, char **argv) {
         }
     }
     if (o.stats_json) {
-        FILE *f = fopen(o.stats_json, "w");
-        if (!f) {
-            fprintf(stderr, "raypack render: cannot write %s: %s\n", o.stats_json, strerror(errno));
+        rp_atomic_file *af = rp_atomic_open(o.stats_json, err, sizeof err);
+        if (!af) {
+            fprintf(stderr, "raypack render: %s\n", err);
             goto done;
         }
+        FILE *f = rp_atomic_stream(af);
         fprintf(f, "{\n  \"scene\": ");
         json_string(f, builtin ? "" : o.scene);
         fprintf(f, ",\n  \"output\": ");
@@ -556,8 +559,8 @@ int cli_render(int argc, char **argv) {
                    "\"sah_cost\": %.4f, \"bytes\": %zu, \"build_ms\": %.3f}\n}\n",
                 (unsigned long long)sst.binary_nodes, (unsigned long long)sst.wide_nodes,
                 (unsigned long long)sst.leaves, sst.depth, sst.sah_cost, sst.bytes, sst.build_ms);
-        if (fclose(f) != 0) {
-            fprintf(stderr, "raypack render: cannot write %s: %s\n", o.stats_json, strerror(errno));
+        if (!rp_atomic_commit(af, err, sizeof err)) {
+            fprintf(stderr, "raypack render: %s\n", err);
             goto done;
         }
     }

@@ -2,10 +2,12 @@
 #include "cli.h"
 
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 
 double cli_now_ms(void) {
@@ -106,4 +108,45 @@ void cli_json_traversal(FILE *f, const rp_counters_n *c) {
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         fprintf(f, "%s\"%s\": %llu", i ? ", " : "", names[i], (unsigned long long)c->traversal[i]);
     fputc('}', f);
+}
+
+/* A path's folder resolved (symbolic links, "..") plus its last name, for paths that do not exist. */
+static bool canonical_missing(const char *path, char *out, size_t size) {
+    const char *slash = strrchr(path, '/');
+    char dir[PATH_MAX];
+    if (!slash) snprintf(dir, sizeof dir, ".");
+    else if (slash == path) snprintf(dir, sizeof dir, "/");
+    else snprintf(dir, sizeof dir, "%.*s", (int)(slash - path), path);
+    char real[PATH_MAX];
+    if (!realpath(dir, real)) return false;
+    int n = snprintf(out, size, "%s/%s", real, slash ? slash + 1 : path);
+    return n > 0 && (size_t)n < size;
+}
+
+bool cli_same_file(const char *a, const char *b) {
+    struct stat sa, sb;
+    bool ea = stat(a, &sa) == 0, eb = stat(b, &sb) == 0;
+    if (ea && eb) return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+    if (ea != eb) return false;
+    char ca[PATH_MAX + 256], cb[PATH_MAX + 256];
+    if (canonical_missing(a, ca, sizeof ca) && canonical_missing(b, cb, sizeof cb)) return strcmp(ca, cb) == 0;
+    return strcmp(a, b) == 0;
+}
+
+bool cli_check_paths(const char *cmd, const cli_path *paths, int count) {
+    for (int i = 0; i < count; i++) {
+        if (!paths[i].path || paths[i].input) continue;
+        for (int j = 0; j < count; j++) {
+            if (j == i || !paths[j].path || (!paths[j].input && j > i)) continue;
+            if (!cli_same_file(paths[i].path, paths[j].path)) continue;
+            if (paths[j].input)
+                fprintf(stderr, "raypack %s: %s %s is the input %s: it would be overwritten\n", cmd, paths[i].flag,
+                        paths[i].path, paths[j].flag);
+            else
+                fprintf(stderr, "raypack %s: %s %s and %s %s are the same file\n", cmd, paths[j].flag,
+                        paths[j].path, paths[i].flag, paths[i].path);
+            return false;
+        }
+    }
+    return true;
 }

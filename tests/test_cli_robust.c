@@ -122,6 +122,27 @@ static void test_failed_write_keeps_old(void) {
     CHECK(!file_is(json, "{\"previous\": 1}\n"));
 }
 
+/* A FIFO as the scene: read once as a stream (an open check before the load had blocked forever);
+ * a folder or a missing file: exit 1 with errno's text. */
+static void test_not_regular_scenes(void) {
+    char fifo[1200], scene[1200], prefix[4096], args[8192];
+    snprintf(scene, sizeof scene, "%s/tri.obj", tmp);
+    CHECK(write_text(scene, TRI_OBJ));
+    snprintf(fifo, sizeof fifo, "%s/fifo.obj", tmp);
+    unlink(fifo);
+    CHECK(mkfifo(fifo, 0600) == 0);
+    snprintf(prefix, sizeof prefix, "(timeout 20 cat '%s' > '%s' &);", scene, fifo);
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/fifo.ppm'", fifo, tmp);
+    EXPECT_P(prefix, args, 0, "1 triangles");
+    snprintf(args, sizeof args, "info '%s'", fifo);
+    EXPECT_P(prefix, args, 0, "1 triangles");
+    unlink(fifo);
+    snprintf(args, sizeof args, "render '%s' -o '%s/x.png'", tmp, tmp);
+    EXPECT(args, 1, strerror(EISDIR));
+    snprintf(args, sizeof args, "render '%s/missing.obj' -o '%s/x.png'", tmp, tmp);
+    EXPECT(args, 1, strerror(ENOENT));
+}
+
 int main(void) {
     if (!find_exe()) {
         fprintf(stderr, "raypack binary not found at %s\n", exe);
@@ -133,5 +154,6 @@ int main(void) {
     mkdir(tmp, 0777);
     test_same_paths();
     test_failed_write_keeps_old();
+    test_not_regular_scenes();
     return RP_TEST_END();
 }

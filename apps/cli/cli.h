@@ -51,6 +51,9 @@ typedef struct cli_path {
 /* Usage check before any work: no output may be an input or another output; prints which flags
  * collide and returns false. */
 bool cli_check_paths(const char *cmd, const cli_path *paths, int count);
+/* True when the scene file exists, is no folder and may be read; else prints why (errno's text). Never
+ * opens it (a FIFO is read once, by the loader). */
+bool cli_scene_readable(const char *cmd, const char *path);
 /* Largest thread count accepted by --threads. */
 #define CLI_MAX_THREADS 1024
 

@@ -413,12 +413,8 @@ int cli_render(int argc, char **argv) {
             return CLI_EXIT_FAILURE;
         }
     } else {
-        FILE *probe = fopen(o.scene, "rb");
-        if (!probe) {
-            fprintf(stderr, "raypack render: cannot open scene %s: %s\n", o.scene, strerror(errno));
-            return CLI_EXIT_FAILURE;
-        }
-        fclose(probe);
+        /* stat, not open: opening a FIFO here would block, and the loader reads it once as a stream */
+        if (!cli_scene_readable(CMD, o.scene)) return CLI_EXIT_FAILURE;
         char err[512] = "";
         if (!rp_scene_data_load(o.scene, &data, err, sizeof err)) {
             fprintf(stderr, "%s\n", err[0] ? err : "raypack render: cannot load the scene");

@@ -9,6 +9,7 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <time.h>
+#include <unistd.h>
 
 double cli_now_ms(void) {
     struct timespec ts;
@@ -149,4 +150,11 @@ bool cli_check_paths(const char *cmd, const cli_path *paths, int count) {
         }
     }
     return true;
+}
+
+bool cli_scene_readable(const char *cmd, const char *path) {
+    struct stat st;
+    int e = stat(path, &st) != 0 ? errno : S_ISDIR(st.st_mode) ? EISDIR : access(path, R_OK) != 0 ? errno : 0;
+    if (e) fprintf(stderr, "raypack %s: cannot open scene %s: %s\n", cmd, path, strerror(e));
+    return e == 0;
 }

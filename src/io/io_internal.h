@@ -69,6 +69,18 @@ typedef struct io_builder {
 
 /* ---- load context ----------------------------------------------------------------------------- */
 
+/* What a scene may cost before it is refused (hostile files: include bombs, gzip bombs). The
+ * defaults fit every shared scene many times over; environment variables raise them
+ * (RP_MAX_INCLUDES, RP_MAX_INCLUDE_BYTES, RP_MAX_FILE_BYTES; see README). */
+typedef struct io_limits {
+    uint64_t max_includes;      /* AFF/NFF `i` files parsed, all levels together */
+    uint64_t max_include_bytes; /* bytes of those files, after decompression */
+    uint64_t max_file_bytes;    /* one file after decompression */
+} io_limits;
+#define IO_DEFAULT_MAX_INCLUDES 4096u
+#define IO_DEFAULT_MAX_INCLUDE_BYTES (1ull << 30)
+#define IO_DEFAULT_MAX_FILE_BYTES (4ull << 30)
+
 typedef struct io_ctx {
     io_vfs vfs;
     io_builder b;
@@ -77,6 +89,9 @@ typedef struct io_ctx {
     bool failed;
     size_t bytes;  /* scene text parsed, after decompression */
     int depth;     /* include nesting */
+    io_limits limits;
+    uint64_t includes, include_bytes; /* spent so far, against the limits */
+    char why[256]; /* why the last vfs_read failed */
     uint32_t *scratch_u; /* per-polygon scratch, grown as needed */
     size_t scratch_u_cap;
     float *scratch_f;
@@ -94,7 +109,8 @@ float *io_scratch_f(io_ctx *ctx, size_t n);
 
 /* ---- files (io_vfs.c) ------------------------------------------------------------------------- */
 
-/* Reads `path` (on disk: gzip'd or plain; in an archive: an entry). Writes no error. */
+/* Reads `path` (on disk: gzip'd or plain, a regular file or a stream; in an archive: an entry).
+ * Writes no error; on failure ctx->why says why (errno's text, "corrupt gzip data", ...). */
 bool vfs_read(io_ctx *ctx, const char *path, io_buf *out);
 /* True when `path` can be read. */
 bool vfs_exists(io_ctx *ctx, const char *path);

@@ -353,6 +353,18 @@ static void move_out(io_builder *b, rp_scene_data *out) {
     memset(b, 0, sizeof *b);
 }
 
+/* A limit from the environment (a positive integer, k/M/G suffixes allowed), else its default. */
+static uint64_t env_limit(const char *name, uint64_t def) {
+    const char *v = getenv(name);
+    if (!v || !*v) return def;
+    char *end;
+    unsigned long long n = strtoull(v, &end, 10);
+    uint64_t scale = *end == 'k' || *end == 'K' ? 1ull << 10 : *end == 'M' ? 1ull << 20 : *end == 'G' ? 1ull << 30 : 1;
+    if (scale != 1) end++;
+    if (end == v || *end != '\0' || n == 0 || n > UINT64_MAX / scale) return def;
+    return (uint64_t)n * scale;
+}
+
 bool rp_scene_data_load(const char *path, rp_scene_data *out, char *err, size_t err_size) {
     double t0 = now_ms();
     if (err && err_size) err[0] = '\0';
@@ -363,6 +375,9 @@ bool rp_scene_data_load(const char *path, rp_scene_data *out, char *err, size_t 
     ctx.err = err;
     ctx.err_size = err_size;
     ctx.b.default_material = IO_NONE;
+    ctx.limits.max_includes = env_limit("RP_MAX_INCLUDES", IO_DEFAULT_MAX_INCLUDES);
+    ctx.limits.max_include_bytes = env_limit("RP_MAX_INCLUDE_BYTES", IO_DEFAULT_MAX_INCLUDE_BYTES);
+    ctx.limits.max_file_bytes = env_limit("RP_MAX_FILE_BYTES", IO_DEFAULT_MAX_FILE_BYTES);
     if (!path) return io_error(&ctx, "(null)", 0, "no path given");
     if (strlen(path) >= IO_PATH_MAX - 64) return io_error(&ctx, path, 0, "path too long");
 

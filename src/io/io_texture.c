@@ -105,7 +105,7 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
     if (!vfs_read(ctx, path, &buf)) {
         char shown[IO_PATH_MAX + 256];
         vfs_display(&ctx->vfs, path, shown, sizeof shown);
-        io_error(ctx, file, line, "cannot open texture '%s' (%s)", as_written, shown);
+        io_error(ctx, file, line, "cannot open texture '%s' (%s): %s", as_written, shown, ctx->why);
         return IO_NONE;
     }
     int32_t w = 0, h = 0;

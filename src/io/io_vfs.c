@@ -1,11 +1,24 @@
 /* Files for the loaders: whole files read into memory, gzip'd or not (zlib reads plain files
  * through the same calls), and tar archives (libarchive) whose entries then serve the includes and
  * textures of the scene inside them. */
+#include <errno.h>
+#include <fcntl.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <sys/stat.h>
+#include <unistd.h>
 #include <zlib.h>
 
 #include "io/io_internal.h"
+
+/* Records why a read failed (ctx->why, for the caller's message); returns false. */
+__attribute__((format(printf, 2, 3))) static bool vfs_fail(io_ctx *ctx, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(ctx->why, sizeof ctx->why, fmt, ap);
+    va_end(ap);
+    return false;
+}
 
 #if RP_IO_HAVE_ARCHIVE
 #include <archive.h>
@@ -17,55 +30,80 @@ void vfs_buf_free(io_buf *buf) {
     memset(buf, 0, sizeof *buf);
 }
 
-/* Size a gzip stream says it inflates to (ISIZE, the last 4 bytes, mod 2^32); 0 when not gzip. */
-static size_t gzip_size_hint(const char *path, size_t file_size) {
-    FILE *f = fopen(path, "rb");
-    if (!f) return 0;
-    unsigned char magic[2] = {0, 0}, tail[4];
-    size_t hint = 0;
-    if (fread(magic, 1, 2, f) == 2 && magic[0] == 0x1f && magic[1] == 0x8b && file_size >= 18 &&
-        fseek(f, -4, SEEK_END) == 0 && fread(tail, 1, 4, f) == 4)
-        hint = (size_t)tail[0] | (size_t)tail[1] << 8 | (size_t)tail[2] << 16 | (size_t)tail[3] << 24;
-    fclose(f);
-    return hint;
+/* zlib's message without the "<fd:3>: " that gzdopen's streams put in front. */
+static const char *zlib_reason(const char *msg) {
+    if (!msg || !msg[0]) return "zlib error";
+    const char *colon = msg[0] == '<' ? strstr(msg, ">: ") : NULL;
+    return colon ? colon + 3 : msg;
 }
 
-static bool disk_read(const char *path, io_buf *out) {
+/* Reads a file whole, inflating gzip as a stream: the size trailer of a gzip file is never trusted
+ * (an 18-byte file may claim 4 GiB), the buffer grows geometrically from the file's size and the
+ * inflated size is capped (ctx->limits.max_file_bytes). FIFOs and other streams are read the same
+ * way, opened once. */
+static bool disk_read(io_ctx *ctx, const char *path, io_buf *out) {
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return vfs_fail(ctx, "%s", strerror(errno));
     struct stat st;
-    if (stat(path, &st) != 0 || !S_ISREG(st.st_mode)) return false;
-    size_t file_size = (size_t)st.st_size;
-    size_t hint = gzip_size_hint(path, file_size);
-    size_t cap = (hint > file_size ? hint : file_size) + 1;
-    gzFile gz = gzopen(path, "rb");
-    if (!gz) return false;
+    if (fstat(fd, &st) != 0) {
+        int e = errno;
+        close(fd);
+        return vfs_fail(ctx, "%s", strerror(e));
+    }
+    if (S_ISDIR(st.st_mode)) {
+        close(fd);
+        return vfs_fail(ctx, "%s", strerror(EISDIR));
+    }
+    uint64_t limit = ctx->limits.max_file_bytes;
+    size_t cap = S_ISREG(st.st_mode) && st.st_size > 0 ? (size_t)st.st_size + 1 : 65536;
+    if (cap > limit + 1) cap = (size_t)limit + 1;
+    gzFile gz = gzdopen(fd, "rb");
+    if (!gz) {
+        close(fd);
+        return vfs_fail(ctx, "out of memory");
+    }
     gzbuffer(gz, 1u << 18);
     char *data = malloc(cap + 1);
     size_t size = 0;
-    bool ok = data != NULL;
+    bool ok = data != NULL, too_big = false;
+    if (!ok) vfs_fail(ctx, "out of memory");
     while (ok) {
         if (size == cap) {
-            if (cap > SIZE_MAX / 4) {
-                ok = false;
+            if (size > limit) {
+                too_big = true;
                 break;
             }
-            cap *= 2;
-            char *d = realloc(data, cap + 1);
+            size_t grown = cap <= SIZE_MAX / 4 ? cap * 2 : SIZE_MAX / 2;
+            if (grown > limit + 1) grown = (size_t)limit + 1;
+            char *d = realloc(data, grown + 1);
             if (!d) {
-                ok = false;
+                ok = vfs_fail(ctx, "out of memory after %zu bytes", size);
                 break;
             }
             data = d;
+            cap = grown;
         }
         size_t want = cap - size;
         if (want > (1u << 30)) want = 1u << 30;
         int got = gzread(gz, data + size, (unsigned)want);
-        if (got < 0) ok = false;
+        if (got < 0) {
+            int errnum = Z_OK;
+            const char *msg = gzerror(gz, &errnum);
+            ok = errnum == Z_ERRNO ? vfs_fail(ctx, "%s", strerror(errno))
+                                   : vfs_fail(ctx, "corrupt or truncated gzip data (%s)", zlib_reason(msg));
+        }
         if (got <= 0) break;
         size += (size_t)got;
     }
-    int errnum = Z_OK;
-    gzerror(gz, &errnum);
-    if (errnum != Z_OK && errnum != Z_STREAM_END) ok = false; /* truncated or corrupt gzip */
+    if (ok && too_big)
+        ok = vfs_fail(ctx, "more than %llu bytes (decompressed); RP_MAX_FILE_BYTES raises the limit",
+                      (unsigned long long)limit);
+    if (ok) {
+        int errnum = Z_OK;
+        const char *msg = gzerror(gz, &errnum);
+        if (errnum != Z_OK && errnum != Z_STREAM_END) /* truncated or corrupt gzip */
+            ok = vfs_fail(ctx, "corrupt or truncated gzip data (%s)", zlib_reason(msg));
+    }
     gzclose(gz);
     if (!ok) {
         free(data);
@@ -86,9 +124,10 @@ static const io_entry *vfs_find(const io_vfs *vfs, const char *path) {
 
 bool vfs_read(io_ctx *ctx, const char *path, io_buf *out) {
     memset(out, 0, sizeof *out);
-    if (!ctx->vfs.archive) return disk_read(path, out);
+    ctx->why[0] = '\0';
+    if (!ctx->vfs.archive) return disk_read(ctx, path, out);
     const io_entry *e = vfs_find(&ctx->vfs, path);
-    if (!e) return false;
+    if (!e) return vfs_fail(ctx, "no such file in the archive");
     out->data = e->data;
     out->size = e->size;
     out->owned = false;

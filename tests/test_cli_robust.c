@@ -143,6 +143,50 @@ static void test_not_regular_scenes(void) {
     EXPECT(args, 1, strerror(ENOENT));
 }
 
+/* Cameras raypack cannot form, sizes past the limits, scenes with nothing (valid) to hit. */
+static void test_cameras_and_sizes(void) {
+    char args[8192], path[1200];
+    EXPECT("render --eye 1,1,1 --look 1,1,1 --quiet", 2, "--eye and --look: the eye is the look-at point");
+    EXPECT("render --up 0,0,0 --quiet", 2, "--up 0,0,0 is not a direction");
+    EXPECT("render --eye 0,0,0 --look 0,0,-1 --up 0,0,2 --quiet", 2, "parallel to the view direction");
+    EXPECT("render --eye 0,nan,0 --quiet", 2, "--eye expects three numbers");
+    EXPECT("render --look inf,0,0 --quiet", 2, "--look expects three numbers");
+    /* checked before loading: the scene does not even exist */
+    EXPECT("render /nonexistent/x.obj --width 16384 --height 16384", 2, "too many pixels");
+    EXPECT("render /nonexistent/x.obj --width 16385", 2, "--width expects an integer in [1, 16384]");
+    EXPECT("render --help", 0, "at most 67108864");
+    /* what --help allows is accepted: 16384 x 4096 = 67108864 passes the size check (and fails
+     * only later, on the missing scene) */
+    EXPECT("render /nonexistent/x.obj --width 16384 --height 4096", 1, "cannot open scene");
+    /* from the scene file: file:line */
+    snprintf(path, sizeof path, "%s/same.nff", tmp);
+    CHECK(write_text(path, "v\nfrom 1 2 3\nat 1 2 3\nup 0 1 0\nangle 45\nhither 1\nresolution 8 8\n"
+                           "p 3\n0 0 0\n1 0 0\n0 1 0\n"));
+    snprintf(args, sizeof args, "render '%s' -o '%s/same.png' --quiet", path, tmp);
+    EXPECT(args, 1, "same.nff:3: error: viewpoint: 'from' and 'at' are the same point");
+    CHECK(write_text(path, "v\nfrom 0 0 5\nat 0 0 0\nup 0 0 -3\nangle 45\nhither 1\nresolution 8 8\n"
+                           "p 3\n0 0 0\n1 0 0\n0 1 0\n"));
+    EXPECT(args, 1, "same.nff:4: error: viewpoint: 'up' is parallel");
+    /* a flag that makes the scene's camera degenerate: --look onto the scene's eye */
+    CHECK(write_text(path, "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nhither 1\nresolution 8 8\n"
+                           "p 3\n0 0 0\n1 0 0\n0 1 0\n"));
+    snprintf(args, sizeof args, "render '%s' --look 0,0,5 -o '%s/same.png' --quiet", path, tmp);
+    EXPECT(args, 2, "--look with the scene's camera: the eye is the look-at point");
+    snprintf(args, sizeof args, "render '%s' --up 0,0,1 -o '%s/same.png' --quiet", path, tmp);
+    EXPECT(args, 2, "--up with the scene's camera: the up vector is parallel");
+    /* a transform (scale 1e30) that overflows to inf drops its primitives, with a warning; nothing else left:
+     * the nothing-to-hit warning as well */
+    snprintf(path, sizeof path, "%s/overflow.aff", tmp);
+    CHECK(write_text(path, "xs 1e30 1e30 1e30 0 1 0 0 0 0 0 {\np 3\n1e10 0 0\n0 1e10 0\n0 0 1e10\n}\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/overflow.png' --quiet", path, tmp);
+    EXPECT(args, 0, "warning: 1 primitives with NaN/Inf coordinates");
+    EXPECT(args, 0, "warning: the scene has nothing to hit");
+    snprintf(path, sizeof path, "%s/tri.obj", tmp);
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/fine.png' --quiet", path, tmp);
+    int rc = run_prefixed("", args);
+    CHECKF(rc == 0 && !strstr(output, "warning"), "a valid scene warned (exit %d):\n%s", rc, output);
+}
+
 int main(void) {
     if (!find_exe()) {
         fprintf(stderr, "raypack binary not found at %s\n", exe);
@@ -155,5 +199,6 @@ int main(void) {
     test_same_paths();
     test_failed_write_keeps_old();
     test_not_regular_scenes();
+    test_cameras_and_sizes();
     return RP_TEST_END();
 }

@@ -16,6 +16,8 @@
 #include "raypack_render.h"
 
 static const char *const CMD = "render";
+/* --width x --height at most: 8192 x 8192, or any shape of as many pixels (each side up to 16384) */
+#define RENDER_MAX_PIXELS 67108864
 
 static void render_usage(FILE *out) {
     fprintf(out,
@@ -26,7 +28,9 @@ static void render_usage(FILE *out) {
             "options:\n"
             "  -o, --output FILE      image to write; the format follows the extension:\n"
             "                         .png, .ppm (8-bit sRGB) or .pfm (float, linear) [raypack.png]\n"
-            "  --width W, --height H  image size in pixels, 1..16384 [the scene's, else 512x512]\n"
+            "  --width W, --height H  image size in pixels, 1..16384 each and at most 67108864\n"
+            "                         (8192x8192) in all [the scene's, else 512x512]; one of them\n"
+            "                         alone keeps the scene's aspect ratio\n"
             "  --spp N                samples per pixel, jittered deterministically when N > 1 [1]\n"
             "  --integrator NAME      eyelight or whitted [whitted]\n"
             "  --max-depth N          Whitted reflection/refraction depth, 0..64 [5]\n"
@@ -210,6 +214,31 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
             return CLI_EXIT_USAGE;
         }
 #undef VALUE
+    }
+    /* What the flags alone say is wrong is a usage error before the scene is loaded. */
+    if (o->width && o->height && (double)o->width * (double)o->height > RENDER_MAX_PIXELS) {
+        fprintf(stderr, "raypack render: --width %d --height %d is too many pixels (at most %d in all)\n", o->width,
+                o->height, RENDER_MAX_PIXELS);
+        return CLI_EXIT_USAGE;
+    }
+    if (o->has_eye && o->has_look) {
+        static const float any_up[3] = {0.0f, 1.0f, 0.0f}, other_up[3] = {1.0f, 0.0f, 0.0f};
+        const char *why = cli_camera_problem(o->eye, o->look, any_up);
+        if (why && cli_camera_problem(o->eye, o->look, other_up)) {
+            fprintf(stderr, "raypack render: --eye and --look: %s\n", why);
+            return CLI_EXIT_USAGE;
+        }
+    }
+    if (o->has_eye && o->has_look && o->has_up) {
+        const char *why = cli_camera_problem(o->eye, o->look, o->up);
+        if (why) {
+            fprintf(stderr, "raypack render: --eye, --look and --up: %s\n", why);
+            return CLI_EXIT_USAGE;
+        }
+    }
+    if (o->has_up && !(o->up[0] != 0.0f || o->up[1] != 0.0f || o->up[2] != 0.0f)) {
+        fprintf(stderr, "raypack render: --up 0,0,0 is not a direction\n");
+        return CLI_EXIT_USAGE;
     }
     const char *dot = strrchr(o->output, '.');
     if (!dot || (strcasecmp(dot, ".png") != 0 && strcasecmp(dot, ".pfm") != 0 && strcasecmp(dot, ".ppm") != 0)) {
@@ -455,11 +484,31 @@ int cli_render(int argc, char **argv) {
     } else if (!w) {
         w = (int)fmax(1.0, floor((double)h * sw / sh + 0.5));
     }
-    if ((double)w * (double)h > 16384.0 * 16384.0 / 4.0) {
-        fprintf(stderr, "raypack render: %dx%d is too many pixels (at most 67108864)\n", w, h);
+    if ((double)w * (double)h > RENDER_MAX_PIXELS || w > 16384 || h > 16384) {
+        fprintf(stderr, "raypack render: %dx%d (from the scene's aspect ratio) is too many pixels (at most %d in all, "
+                        "16384 a side)\n", w, h, RENDER_MAX_PIXELS);
         status = CLI_EXIT_USAGE;
         goto done;
     }
+    const char *cam_why = cam.type == RP_CAMERA_PINHOLE
+                              ? cli_camera_problem(cam.pinhole.eye, cam.pinhole.look, cam.pinhole.up) : NULL;
+    if (cam_why) {
+        /* name the flags that made it, else the scene's camera */
+        char from[64] = "";
+        if (o.has_eye) strcat(from, "--eye ");
+        if (o.has_look) strcat(from, "--look ");
+        if (o.has_up) strcat(from, "--up ");
+        if (from[0]) from[strlen(from) - 1] = '\0';
+        fprintf(stderr, "raypack render: %s%s: %s\n", from[0] ? from : "the scene's camera",
+                from[0] && !(o.has_eye && o.has_look && o.has_up) ? " with the scene's camera" : "", cam_why);
+        status = CLI_EXIT_USAGE;
+        goto done;
+    }
+    if (sst.rejected_prims)
+        fprintf(stderr, "raypack render: warning: %llu primitives with NaN/Inf coordinates (an overflowing "
+                        "transform?) left out\n", (unsigned long long)sst.rejected_prims);
+    if (sst.triangles + sst.spheres + sst.user_prims == 0)
+        fprintf(stderr, "raypack render: warning: the scene has nothing to hit; the image is its background\n");
 
     rp_render_desc desc = {
         .width = w, .height = h, .spp = o.spp, .integrator = o.use_aov ? RP_INTEGRATOR_AOV : o.integrator,

@@ -158,3 +158,20 @@ bool cli_scene_readable(const char *cmd, const char *path) {
     if (e) fprintf(stderr, "raypack %s: cannot open scene %s: %s\n", cmd, path, strerror(e));
     return e == 0;
 }
+
+const char *cli_camera_problem(const float eye[3], const float look[3], const float up[3]) {
+    /* in float, as the renderer forms the frame (DESIGN.md: f = normalize(look - eye), r = f x up) */
+    float d[3] = {look[0] - eye[0], look[1] - eye[1], look[2] - eye[2]};
+    for (int k = 0; k < 3; k++)
+        if (!isfinite(eye[k]) || !isfinite(look[k]) || !isfinite(up[k]) || !isfinite(d[k])) return "not finite";
+    double dd = (double)d[0] * d[0] + (double)d[1] * d[1] + (double)d[2] * d[2];
+    double uu = (double)up[0] * up[0] + (double)up[1] * up[1] + (double)up[2] * up[2];
+    if (!(dd > 0.0)) return "the eye is the look-at point (no view direction)";
+    if (!(uu > 0.0)) return "the up vector is zero";
+    double c[3] = {(double)d[1] * up[2] - (double)d[2] * up[1], (double)d[2] * up[0] - (double)d[0] * up[2],
+                   (double)d[0] * up[1] - (double)d[1] * up[0]};
+    double cc = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+    /* sin^2 of the angle between view and up under 1e-10: the image's right vector is noise */
+    if (!(cc > 1e-10 * dd * uu)) return "the up vector is parallel to the view direction";
+    return NULL;
+}

@@ -506,6 +506,7 @@ static bool nff_viewpoint(nff_file *f) {
     memset(cam, 0, sizeof *cam);
     float angle = 45.0f;
     unsigned seen = 0;
+    uint32_t line_at = f->line, line_up = f->line;
     for (;;) {
         nff_skip(f);
         const char *p = f->p;
@@ -518,10 +519,12 @@ static bool nff_viewpoint(nff_file *f) {
             seen |= 1;
         } else if (NFF_IS("at")) {
             f->p += n;
+            line_at = f->line;
             if (!nff_floats(f, cam->look, 3, "at")) return false;
             seen |= 2;
         } else if (NFF_IS("up")) {
             f->p += n;
+            line_up = f->line;
             if (!nff_floats(f, cam->up, 3, "up")) return false;
             seen |= 4;
         } else if (NFF_IS("angle")) {
@@ -546,6 +549,22 @@ static bool nff_viewpoint(nff_file *f) {
 #undef NFF_IS
     }
     if (seen != 15) return io_error(f->ctx, f->shown, f->line, "viewpoint needs from, at, up and angle");
+    /* A camera the renderer cannot form (DESIGN.md's frame from look - eye and up) is the file's
+     * error, at the line that made it so, not a uniform image. */
+    float d[3] = {cam->look[0] - cam->eye[0], cam->look[1] - cam->eye[1], cam->look[2] - cam->eye[2]};
+    double dd = 0.0, uu = 0.0, cc = 0.0;
+    for (int k = 0; k < 3; k++) {
+        if (!isfinite(d[k])) return io_error(f->ctx, f->shown, line_at, "viewpoint: 'at' - 'from' overflows");
+        dd += (double)d[k] * d[k];
+        uu += (double)cam->up[k] * cam->up[k];
+        int a = (k + 1) % 3, b = (k + 2) % 3;
+        double c = (double)d[a] * cam->up[b] - (double)d[b] * cam->up[a];
+        cc += c * c;
+    }
+    if (!(dd > 0.0)) return io_error(f->ctx, f->shown, line_at, "viewpoint: 'from' and 'at' are the same point");
+    if (!(uu > 0.0)) return io_error(f->ctx, f->shown, line_up, "viewpoint: 'up' is the zero vector");
+    if (!(cc > 1e-10 * dd * uu))
+        return io_error(f->ctx, f->shown, line_up, "viewpoint: 'up' is parallel to the view direction (from -> at)");
     if (!(angle > 0.0f && angle < 180.0f)) return io_error(f->ctx, f->shown, f->line, "view angle %g out of (0, 180)", (double)angle);
     /* NFF's angle spans the smaller image side: the vertical fov unless the image is portrait. */
     float fov = angle;

@@ -1,9 +1,9 @@
 # The two commands of the README: `make demo` and `make test`. Both install what they need first.
 JOBS ?= $(shell nproc)
-DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev
+DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev clang libclang-rt-14-dev
 SUDO := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 
-.PHONY: all deps release asan demo test test-release test-asan bench clean
+.PHONY: all deps release asan demo test test-release test-asan test-fuzz fuzz bench clean
 
 all: release
 
@@ -33,7 +33,17 @@ test-release: release
 test-asan: asan
 	ctest --preset asan -j $(JOBS)
 
-test: test-release test-asan
+# libFuzzer (clang) on every parser for FUZZ_SECONDS each, two at a time, after replaying the past
+# crash reproducers; prints executions per parser (tests/fuzz/run.sh). CI: 60 s each.
+FUZZ_SECONDS ?= 60
+fuzz: deps
+	cmake --preset fuzz >/dev/null
+	cmake --build --preset fuzz -j $(JOBS)
+	FUZZ_SECONDS=$(FUZZ_SECONDS) FUZZ_JOBS=$(JOBS) tests/fuzz/run.sh
+
+test-fuzz: fuzz
+
+test: test-release test-asan test-fuzz
 
 bench: release
 	./build/release/raypack bench

@@ -211,23 +211,26 @@ void vfs_extension(const char *path, char *ext, size_t size) {
 }
 
 #if !RP_IO_HAVE_ARCHIVE
-bool vfs_open_archive(io_ctx *ctx, const char *path) {
+bool vfs_open_archive(io_ctx *ctx, const char *path, const void *data, size_t size) {
+    (void)data, (void)size;
     return io_error(ctx, path, 0, "this build has no tar support (libarchive was not found)");
 }
 #else
-bool vfs_open_archive(io_ctx *ctx, const char *path) {
+bool vfs_open_archive(io_ctx *ctx, const char *path, const void *image, size_t image_size) {
     struct archive *a = archive_read_new();
     if (!a) return io_error(ctx, path, 0, "out of memory");
     archive_read_support_filter_all(a);
     archive_read_support_format_tar(a);
     archive_read_support_format_gnutar(a);
-    if (archive_read_open_filename(a, path, 1u << 16) != ARCHIVE_OK) {
+    int orc = image ? archive_read_open_memory(a, image, image_size) : archive_read_open_filename(a, path, 1u << 16);
+    if (orc != ARCHIVE_OK) {
         bool r = io_error(ctx, path, 0, "cannot open archive: %s", archive_error_string(a));
         archive_read_free(a);
         return r;
     }
     ctx->vfs.archive = path;
     size_t cap = 0;
+    uint64_t total = 0, limit = ctx->limits.max_file_bytes;
     struct archive_entry *entry;
     bool ok = true;
     int rc;
@@ -238,8 +241,10 @@ bool vfs_open_archive(io_ctx *ctx, const char *path) {
         char norm[IO_PATH_MAX];
         snprintf(norm, sizeof norm, "%s", name[0] == '/' ? name + 1 : name);
         normalize(norm);
+        /* The header's size is a hint, never an allocation: a 512-byte header may claim 8 GiB. */
         la_int64_t declared = archive_entry_size(entry);
-        size_t ecap = declared > 0 ? (size_t)declared : 4096, size = 0;
+        size_t ecap = declared > 0 && declared < (1 << 20) ? (size_t)declared : declared > 0 ? (size_t)1 << 20 : 4096;
+        size_t size = 0;
         char *data = malloc(ecap + 1);
         if (!data || !io_reserve((void **)&ctx->vfs.entries, &cap, ctx->vfs.entry_count + 1, sizeof(io_entry))) {
             free(data);
@@ -248,7 +253,7 @@ bool vfs_open_archive(io_ctx *ctx, const char *path) {
         }
         for (;;) {
             if (size == ecap) {
-                char *d = realloc(data, 2 * ecap + 1);
+                char *d = ecap <= SIZE_MAX / 4 ? realloc(data, 2 * ecap + 1) : NULL;
                 if (!d) {
                     ok = io_error(ctx, path, 0, "out of memory");
                     break;
@@ -263,8 +268,14 @@ bool vfs_open_archive(io_ctx *ctx, const char *path) {
             }
             if (got == 0) break;
             size += (size_t)got;
+            total += (uint64_t)got;
+            if (total > limit) {
+                ok = io_error(ctx, path, 0, "more than %llu bytes unpacked; RP_MAX_FILE_BYTES raises the limit",
+                              (unsigned long long)limit);
+                break;
+            }
         }
-        char *dup = strdup(norm);
+        char *dup = ok ? strdup(norm) : NULL;
         if (!ok || !dup) {
             free(data);
             free(dup);

@@ -3,7 +3,7 @@ JOBS ?= $(shell nproc)
 DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev clang libclang-rt-14-dev
 SUDO := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 
-.PHONY: all deps release asan demo test test-release test-asan test-fuzz fuzz bench clean
+.PHONY: all deps release asan tsan demo test test-release test-asan test-tsan test-fuzz fuzz bench clean
 
 all: release
 
@@ -43,7 +43,16 @@ fuzz: deps
 
 test-fuzz: fuzz
 
-test: test-release test-asan test-fuzz
+# ThreadSanitizer over the threaded tests (builds, renders, the CLI, bench; CMakePresets.json's
+# tsan test filter), clean: suppressions only for documented false positives (tests/tsan.supp).
+tsan: deps
+	cmake --preset tsan >/dev/null
+	cmake --build --preset tsan -j $(JOBS)
+
+test-tsan: tsan
+	ctest --preset tsan -j $(JOBS)
+
+test: test-release test-asan test-tsan test-fuzz
 
 bench: release
 	./build/release/raypack bench

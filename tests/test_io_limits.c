@@ -184,6 +184,34 @@ static void test_not_files(void) {
     chmod(at("noperm.obj"), 0644);
 }
 
+/* Textures whose headers lie: checked before stb_image allocates what they claim. */
+static void test_textures(void) {
+    write_text("tex.obj", "mtllib tex.mtl\nusemtl a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n"
+                          "f 1/1 2/2 3/3\n");
+    write_text("tex.mtl", "newmtl a\nmap_Kd t.png\n");
+    /* a PNG whose first chunk claims 2 GiB: stb_image grew its buffer to 1.6 GB for such a file */
+    static const unsigned char png[] = {0x89, 'P', 'N', 'G', 0x0d, 0x0a, 0x1a, 0x0a, 0, 0, 0, 13, 'I', 'H', 'D', 'R',
+                                        0, 0, 0, 3, 0, 0, 0, 2, 8, 2, 0, 0, 0, 0x12, 0x16, 0xf1, 0x4d,
+                                        0x7f, 0xff, 0xff, 0xff, 'I', 'D', 'A', 'T', 0, 0, 0, 0};
+    write_bytes("t.png", png, sizeof png);
+    expect_fail(at("tex.obj"), "tex.mtl", 2, "a chunk longer than the file");
+    /* a PNG claiming 10000 x 10000 pixels (300 MB of RGB, under stb_image's own 1 GiB limit) with
+     * nothing behind it */
+    unsigned char big[sizeof png];
+    memcpy(big, png, sizeof png);
+    big[16] = 0, big[17] = 0, big[18] = 0x27, big[19] = 0x10; /* width 10000 */
+    big[20] = 0, big[21] = 0, big[22] = 0x27, big[23] = 0x10; /* height 10000 */
+    big[33] = big[34] = big[35] = big[36] = 0; /* an empty IDAT */
+    write_bytes("t.png", big, sizeof big);
+    expect_fail(at("tex.obj"), "tex.mtl", 2, "RP_MAX_TEXTURE_PIXELS");
+    /* a JPEG whose Huffman table counts 16 x 255 codes (stb_image wrote past its 257 entries) */
+    unsigned char jpg[64] = {0xff, 0xd8, 0xff, 0xc4, 0x00, 0x13, 0x00};
+    for (int i = 0; i < 16; i++) jpg[7 + i] = 0xff;
+    jpg[23] = 0xff, jpg[24] = 0xd9;
+    write_bytes("t.png", jpg, 25);
+    expect_fail(at("tex.obj"), "tex.mtl", 2, "Huffman table");
+}
+
 int main(void) {
     const char *t = getenv("RP_TEST_TMP");
     snprintf(dir, sizeof dir, "%s", t ? t : "/tmp/raypack_test_io_limits");
@@ -192,5 +220,6 @@ int main(void) {
     test_ply_counts();
     test_gzip();
     test_not_files();
+    test_textures();
     return RP_TEST_END();
 }

@@ -201,7 +201,8 @@ static void test_textures(void) {
     memcpy(big, png, sizeof png);
     big[16] = 0, big[17] = 0, big[18] = 0x27, big[19] = 0x10; /* width 10000 */
     big[20] = 0, big[21] = 0, big[22] = 0x27, big[23] = 0x10; /* height 10000 */
-    big[33] = big[34] = big[35] = big[36] = 0; /* an empty IDAT */
+    big[33] = big[34] = big[35] = big[36] = 0;
+    memcpy(big + 37, "tEXt", 4); /* an empty text chunk instead of the IDAT */
     write_bytes("t.png", big, sizeof big);
     expect_fail(at("tex.obj"), "tex.mtl", 2, "RP_MAX_TEXTURE_PIXELS");
     /* a JPEG whose Huffman table counts 16 x 255 codes (stb_image wrote past its 257 entries) */

@@ -135,15 +135,20 @@ static bool jpeg_tables_ok(const uint8_t *d, size_t n) {
     return true;
 }
 
-/* True when every PNG chunk's declared length fits in the bytes that follow it: stb_image grows its
- * IDAT buffer to the declared length (up to 1 GiB) before reading, so a 200-byte file asked for
- * 1.6 GB. */
+/* True when every PNG chunk's declared length fits in the bytes that follow it (stb_image grows its
+ * IDAT buffer to the declared length, up to 1 GiB, before reading: a 200-byte file asked for
+ * 1.6 GB) and the first IDAT is not empty. */
 static bool png_chunks_ok(const uint8_t *d, size_t n) {
     size_t i = 8; /* after the signature */
+    bool data = false;
     while (i + 12 <= n) {
         uint32_t len = (uint32_t)d[i] << 24 | (uint32_t)d[i + 1] << 16 | (uint32_t)d[i + 2] << 8 | d[i + 3];
         if (len > n - i - 12) return false;
         if (memcmp(d + i + 4, "IEND", 4) == 0) return true;
+        if (memcmp(d + i + 4, "IDAT", 4) == 0) {
+            if (len == 0 && !data) return false; /* stb_image then reads into a NULL buffer (UB) */
+            data = true;
+        }
         i += 12 + (size_t)len;
     }
     return i == n; /* no IEND: stb decides on what is there */
@@ -176,7 +181,7 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
         if (jpeg && !jpeg_tables_ok(bytes, buf.size)) { /* before stb reads the header too */
             why = "corrupt JPEG (a Huffman table of more than 256 codes)";
         } else if (png && !png_chunks_ok(bytes, buf.size)) {
-            why = "corrupt or truncated PNG (a chunk longer than the file)";
+            why = "corrupt or truncated PNG (a chunk longer than the file, or an empty first IDAT)";
         } else if (!stbi_info_from_memory(bytes, (int)buf.size, &iw, &ih, &comp)) {
             why = stbi_failure_reason();
         } else if ((uint64_t)iw * (uint64_t)ih > ctx->limits.max_texture_pixels) {

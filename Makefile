@@ -1,13 +1,13 @@
 # The two commands of the README: `make demo` and `make test`. Both install what they need first.
 JOBS ?= $(shell nproc)
-DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev \
+DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev clang libclang-rt-14-dev \
         libassimp-dev libdeflate-dev python3-dev python3-cffi python3-numpy python3-pytest python3-pip python3-setuptools \
         openmpi-bin libopenmpi-dev \
         libsdl2-dev xvfb xauth \
         libopenexr-dev
 SUDO := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 
-.PHONY: all deps release asan demo test test-release test-asan bench install clean
+.PHONY: all deps release asan tsan demo test test-release test-asan test-tsan test-fuzz fuzz bench install clean
 
 all: release
 
@@ -37,7 +37,26 @@ test-release: release
 test-asan: asan
 	ctest --preset asan -j $(JOBS)
 
-test: test-release test-asan
+# libFuzzer (clang) on every parser for FUZZ_SECONDS each, two at a time, after replaying the past
+# crash reproducers; prints executions per parser (tests/fuzz/run.sh). CI: 60 s each.
+FUZZ_SECONDS ?= 60
+fuzz: deps
+	cmake --preset fuzz >/dev/null
+	cmake --build --preset fuzz -j $(JOBS)
+	FUZZ_SECONDS=$(FUZZ_SECONDS) FUZZ_JOBS=$(JOBS) tests/fuzz/run.sh
+
+test-fuzz: fuzz
+
+# ThreadSanitizer over the threaded tests (builds, renders, the CLI, bench; CMakePresets.json's
+# tsan test filter), clean: suppressions only for documented false positives (tests/tsan.supp).
+tsan: deps
+	cmake --preset tsan >/dev/null
+	cmake --build --preset tsan -j $(JOBS)
+
+test-tsan: tsan
+	ctest --preset tsan -j $(JOBS)
+
+test: test-release test-asan test-tsan test-fuzz
 
 bench: release
 	./build/release/raypack bench

@@ -301,7 +301,9 @@ typedef enum rp_query_flags {
 } rp_query_flags;
 
 /* Closest hit in [tnear, tfar): on a hit sets ray.tfar and hit, else leaves hit.geom_id alone
- * (set it to RP_INVALID_ID before the call). Rays with tnear > tfar are skipped. */
+ * (set it to RP_INVALID_ID before the call). Every query (1/4/8/16, _array, _n, occluded too)
+ * treats a ray with NaN or Inf in its origin or direction, a zero direction, NaN in tnear or
+ * tfar, tnear > tfar or tnear = +Inf as a miss: nothing of it is written. */
 RP_API void rp_intersect1(rp_scene *scene, rp_rayhit *rayhit);
 /* Any hit in [tnear, tfar): sets ray.tfar = -inf when occluded. */
 RP_API void rp_occluded1(rp_scene *scene, rp_ray *ray);

@@ -137,6 +137,28 @@ RP_API bool rp_image_write(const char *path, int width, int height, int channels
                            char *err, size_t err_size);
 /* Reads a Radiance .hdr image into a malloc'ed RGB float array, top row first (caller frees). */
 RP_API float *rp_image_read_hdr(const char *path, int *width, int *height, char *err, size_t err_size);
+/* Atomic output files. Every writer goes through these, so that a failed write (full disk, a
+ * file-size limit) leaves the previous file intact: the bytes go to a temporary file in the same
+ * folder, renamed over the destination only when all were written and flushed; on failure the
+ * temporary file is removed. A symbolic link at the destination is kept and its target replaced. */
+typedef struct rp_atomic_file rp_atomic_file;
+/* Opens a temporary file beside path; NULL and "path: error: why" in err when it cannot. */
+RP_API rp_atomic_file *rp_atomic_open(const char *path, char *err, size_t err_size);
+/* The temporary file's stdio stream (a FILE *, open for binary writing); valid until commit/abort. */
+RP_API void *rp_atomic_stream(rp_atomic_file *af);
+/* The temporary file's path (for writers that need a file name); valid until commit/abort. */
+RP_API const char *rp_atomic_temp_path(const rp_atomic_file *af);
+/* Marks the output failed (errnum: the errno to report, 0 for EIO): commit then discards it. */
+RP_API void rp_atomic_fail(rp_atomic_file *af, int errnum);
+/* Flushes, closes and renames into place, or removes the temporary file when any write failed
+ * (then false and the reason in err). Frees af either way. */
+RP_API bool rp_atomic_commit(rp_atomic_file *af, char *err, size_t err_size);
+/* Discards the temporary file without touching the destination; frees af. */
+RP_API void rp_atomic_abort(rp_atomic_file *af);
+/* The whole cycle: write(stream, user) fills the stream (a FILE *) and returns false on failure. */
+RP_API bool rp_atomic_write(const char *path, bool (*write)(void *stream, void *user), void *user, char *err,
+                            size_t err_size);
+
 /* Reads a PFM (1 or 3 channels) into a malloc'ed float array, top row first (caller frees). */
 RP_API float *rp_image_read_pfm(const char *path, int *width, int *height, int *channels, char *err,
                                 size_t err_size);

@@ -460,7 +460,8 @@ static void test_errors(void) {
     expect_error("e_range.ply", "e_range.ply", 13, "out of range");
     snprintf(text, sizeof text, "%s0 0 0\n1 0 0\n0 1 0\n", ply_head);
     write_text("e_count.ply", text); /* face missing: element count larger than the data */
-    expect_error("e_count.ply", "e_count.ply", 13, "end of file");
+    /* refused at the element's header line, before reading (or allocating for) the records */
+    expect_error("e_count.ply", "e_count.ply", 7, "more than the 0 bytes the file has left");
     snprintf(text, sizeof text, "%s0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1 2\n", ply_head);
     write_text("e_extra.ply", text); /* element count smaller than the data */
     expect_error("e_extra.ply", "e_extra.ply", 14, "after the last element");

@@ -1111,6 +1111,8 @@ static int parse_args(int argc, char **argv, bench_opts *o) {
         }
         if (!ok) return CLI_EXIT_USAGE;
     }
+    const cli_path paths[] = {{"SCENE", o->scene_path, true}, {"--json", o->json_path, false}};
+    if (!cli_check_paths(cmd, paths, 2)) return CLI_EXIT_USAGE;
     return CLI_EXIT_OK;
 }
 
@@ -1372,12 +1374,13 @@ static int bench_core(bench_ctx *ctx) {
         }
 
     if (ctx->opts.json_path) {
-        FILE *f = fopen(ctx->opts.json_path, "w");
-        if (!f) {
-            fprintf(stderr, "raypack bench: cannot write %s: %s\n", ctx->opts.json_path,
-                    strerror(errno));
+        char werr[512];
+        rp_atomic_file *af = rp_atomic_open(ctx->opts.json_path, werr, sizeof werr);
+        if (!af) {
+            fprintf(stderr, "raypack bench: %s\n", werr);
             return 1;
         }
+        FILE *f = rp_atomic_stream(af);
         fprintf(f, "{\"scene\": ");
         bench_json_string(f, ctx->scene_name);
         fprintf(f, ", \"triangles\": %zu, \"threads\": %d, \"width\": %d, \"height\": %d, "
@@ -1403,8 +1406,8 @@ static int bench_core(bench_ctx *ctx) {
             fprintf(f, "}}");
         }
         fprintf(f, "\n }\n}\n");
-        if (fclose(f) != 0) {
-            fprintf(stderr, "raypack bench: cannot write %s\n", ctx->opts.json_path);
+        if (!rp_atomic_commit(af, werr, sizeof werr)) {
+            fprintf(stderr, "raypack bench: %s\n", werr);
             return 1;
         }
     }

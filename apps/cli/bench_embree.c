@@ -3,6 +3,7 @@
  * Embree"). Compiled to nothing when CMake did not find Embree. */
 #include "bench.h"
 #include "cli.h"
+#include <raypack_io.h>
 
 #if defined(RP_HAVE_EMBREE)
 
@@ -369,11 +370,13 @@ static void write_stat(FILE *f, bench_stat s) {
 /* --json: the shape of the issue (scene, threads, build, rays.{primary,...}) plus detail. */
 static bool emb_write_json(const bench_ctx *ctx, const emb_build_result *b,
                            const emb_set_result *res) {
-    FILE *f = fopen(ctx->opts.json_path, "w");
-    if (!f) {
-        fprintf(stderr, "raypack bench: cannot write %s: %s\n", ctx->opts.json_path, strerror(errno));
+    char werr[512];
+    rp_atomic_file *af = rp_atomic_open(ctx->opts.json_path, werr, sizeof werr);
+    if (!af) {
+        fprintf(stderr, "raypack bench: %s\n", werr);
         return false;
     }
+    FILE *f = rp_atomic_stream(af);
     fprintf(f, "{\"scene\": ");
     bench_json_string(f, ctx->scene_name);
     fprintf(f, ", \"triangles\": %zu, \"threads\": %d, \"width\": %d, \"height\": %d, "
@@ -421,8 +424,8 @@ static bool emb_write_json(const bench_ctx *ctx, const emb_build_result *b,
                 r->rp_harness.median, r->emb_harness.median, tracing_ratio(r), ratio);
     }
     fprintf(f, "\n }\n}\n");
-    if (fclose(f) != 0) {
-        fprintf(stderr, "raypack bench: cannot write %s\n", ctx->opts.json_path);
+    if (!rp_atomic_commit(af, werr, sizeof werr)) {
+        fprintf(stderr, "raypack bench: %s\n", werr);
         return false;
     }
     return true;

@@ -7,6 +7,7 @@
  * them, then times each level; a recursion type's time is the sum of its levels' median times. */
 #include "bench.h"
 #include "cli.h"
+#include <raypack_io.h>
 
 #include <errno.h>
 #include <math.h>
@@ -377,11 +378,13 @@ static void grid_json_counters(FILE *f, const rp_counters_n *c) {
 /* --json: levels (per ray type: seconds, Mrays/s, counters), recursion types, table 2. */
 static bool grid_write_json(const grid_run *g) {
     const bench_ctx *ctx = g->ctx;
-    FILE *f = fopen(ctx->opts.json_path, "w");
-    if (!f) {
-        fprintf(stderr, "raypack bench: cannot write %s: %s\n", ctx->opts.json_path, strerror(errno));
+    char werr[512];
+    rp_atomic_file *af = rp_atomic_open(ctx->opts.json_path, werr, sizeof werr);
+    if (!af) {
+        fprintf(stderr, "raypack bench: %s\n", werr);
         return false;
     }
+    FILE *f = rp_atomic_stream(af);
     fprintf(f, "{\"scene\": ");
     bench_json_string(f, ctx->scene_name);
     fprintf(f, ", \"triangles\": %zu, \"threads\": %d, \"width\": %d, \"height\": %d, \"repeats\": %d, "
@@ -439,8 +442,8 @@ static bool grid_write_json(const grid_run *g) {
         fprintf(f, "}}");
     }
     fprintf(f, "\n }\n}\n");
-    if (fclose(f) != 0) {
-        fprintf(stderr, "raypack bench: cannot write %s\n", ctx->opts.json_path);
+    if (!rp_atomic_commit(af, werr, sizeof werr)) {
+        fprintf(stderr, "raypack bench: %s\n", werr);
         return false;
     }
     return true;

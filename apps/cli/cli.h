@@ -70,6 +70,24 @@ rp_camera cli_render_camera(const cli_render_setup *setup, rp_render_scene *scen
 /* The image size: --width/--height, the other from the scene's aspect, else the scene's, else 512. */
 void cli_render_size(const cli_render_setup *setup, const rp_scene_data *data, int *w, int *h);
 
+/* True when a and b name one file: the same (st_dev, st_ino) when both exist, else the same folder
+ * (after resolving links) and name. */
+bool cli_same_file(const char *a, const char *b);
+/* A file a command reads (input) or writes, and the flag that named it ("SCENE", "-o", ...). */
+typedef struct cli_path {
+    const char *flag;
+    const char *path; /* NULL: not given */
+    bool input;
+} cli_path;
+/* Usage check before any work: no output may be an input or another output; prints which flags
+ * collide and returns false. */
+bool cli_check_paths(const char *cmd, const cli_path *paths, int count);
+/* True when the scene file exists, is no folder and may be read; else prints why (errno's text). Never
+ * opens it (a FIFO is read once, by the loader). */
+bool cli_scene_readable(const char *cmd, const char *path);
+/* Why a pinhole camera cannot be formed from eye, look-at point and up (DESIGN.md's frame): NaN/Inf,
+ * eye == look, a zero up or one parallel to the view; NULL when it can. */
+const char *cli_camera_problem(const float eye[3], const float look[3], const float up[3]);
 /* Largest thread count accepted by --threads. */
 #define CLI_MAX_THREADS 1024
 

@@ -73,12 +73,8 @@ int cli_info(int argc, char **argv) {
             return CLI_EXIT_FAILURE;
         }
     } else {
-        FILE *probe = fopen(path, "rb");
-        if (!probe) {
-            fprintf(stderr, "raypack info: cannot open scene %s: %s\n", path, strerror(errno));
-            return CLI_EXIT_FAILURE;
-        }
-        fclose(probe);
+        /* stat, not open: opening a FIFO here would block, and the loader reads it once as a stream */
+        if (!cli_scene_readable("info", path)) return CLI_EXIT_FAILURE;
         char err[512] = "";
         if (!rp_scene_data_load(path, &d, err, sizeof err)) {
             fprintf(stderr, "%s\n", err[0] ? err : "raypack info: cannot load the scene");

@@ -16,6 +16,8 @@
 #include "raypack_render.h"
 
 static const char *const CMD = "render";
+/* --width x --height at most: 8192 x 8192, or any shape of as many pixels (each side up to 16384) */
+#define RENDER_MAX_PIXELS 67108864
 
 static void render_usage(FILE *out) {
     fprintf(out,
@@ -27,7 +29,9 @@ static void render_usage(FILE *out) {
             "  -o, --output FILE      image to write; the format follows the extension:\n"
             "                         .png, .ppm (8-bit: exposure, tone map, sRGB), .pfm, .hdr or .exr\n"
             "                         (float, linear radiance as is) [raypack.png]\n"
-            "  --width W, --height H  image size in pixels, 1..16384 [the scene's, else 512x512]\n"
+            "  --width W, --height H  image size in pixels, 1..16384 each and at most 67108864\n"
+            "                         (8192x8192) in all [the scene's, else 512x512]; one of them\n"
+            "                         alone keeps the scene's aspect ratio\n"
             "  --spp N                samples per pixel, jittered deterministically when N > 1 [1];\n"
             "                         with --time, per frame\n"
             "  --time S               render frames of --spp samples each, accumulated, until S\n"
@@ -299,6 +303,31 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
         }
 #undef VALUE
     }
+    /* What the flags alone say is wrong is a usage error before the scene is loaded. */
+    if (o->width && o->height && (double)o->width * (double)o->height > RENDER_MAX_PIXELS) {
+        fprintf(stderr, "raypack render: --width %d --height %d is too many pixels (at most %d in all)\n", o->width,
+                o->height, RENDER_MAX_PIXELS);
+        return CLI_EXIT_USAGE;
+    }
+    if (o->has_eye && o->has_look) {
+        static const float any_up[3] = {0.0f, 1.0f, 0.0f}, other_up[3] = {1.0f, 0.0f, 0.0f};
+        const char *why = cli_camera_problem(o->eye, o->look, any_up);
+        if (why && cli_camera_problem(o->eye, o->look, other_up)) {
+            fprintf(stderr, "raypack render: --eye and --look: %s\n", why);
+            return CLI_EXIT_USAGE;
+        }
+    }
+    if (o->has_eye && o->has_look && o->has_up) {
+        const char *why = cli_camera_problem(o->eye, o->look, o->up);
+        if (why) {
+            fprintf(stderr, "raypack render: --eye, --look and --up: %s\n", why);
+            return CLI_EXIT_USAGE;
+        }
+    }
+    if (o->has_up && !(o->up[0] != 0.0f || o->up[1] != 0.0f || o->up[2] != 0.0f)) {
+        fprintf(stderr, "raypack render: --up 0,0,0 is not a direction\n");
+        return CLI_EXIT_USAGE;
+    }
     const char *dot = strrchr(o->output, '.');
     if (!dot || (strcasecmp(dot, ".png") != 0 && strcasecmp(dot, ".pfm") != 0 && strcasecmp(dot, ".ppm") != 0 &&
                  strcasecmp(dot, ".hdr") != 0 && strcasecmp(dot, ".exr") != 0)) {
@@ -506,6 +535,19 @@ int cli_render(int argc, char **argv) {
         render_usage(stdout);
         return CLI_EXIT_OK;
     }
+    /* --aovs writes NAME.albedo.EXT and NAME.normal.EXT beside -o */
+    char guide_path[2][4096] = {"", ""};
+    const char *odot = strrchr(o.output, '.');
+    for (int g = 0; g < 2 && o.aovs && !o.use_aov && odot; g++)
+        snprintf(guide_path[g], sizeof guide_path[g], "%.*s.%s%s", (int)(odot - o.output), o.output,
+                 g ? "normal" : "albedo", odot);
+    const cli_path paths[] = {{"SCENE", o.scene, true},
+                              {"--env", o.env, true},
+                              {"-o", o.output, false},
+                              {"--stats-json", o.stats_json, false},
+                              {"--aovs (albedo)", guide_path[0][0] ? guide_path[0] : NULL, false},
+                              {"--aovs (normal)", guide_path[1][0] ? guide_path[1] : NULL, false}};
+    if (!cli_check_paths(CMD, paths, (int)(sizeof paths / sizeof paths[0]))) return CLI_EXIT_USAGE;
     if (!output_writable(o.output)) return CLI_EXIT_FAILURE;
     if (o.stats_json && !output_writable(o.stats_json)) return CLI_EXIT_FAILURE;
 
@@ -520,12 +562,8 @@ int cli_render(int argc, char **argv) {
             return CLI_EXIT_FAILURE;
         }
     } else {
-        FILE *probe = fopen(o.scene, "rb");
-        if (!probe) {
-            fprintf(stderr, "raypack render: cannot open scene %s: %s\n", o.scene, strerror(errno));
-            return CLI_EXIT_FAILURE;
-        }
-        fclose(probe);
+        /* stat, not open: opening a FIFO here would block, and the loader reads it once as a stream */
+        if (!cli_scene_readable(CMD, o.scene)) return CLI_EXIT_FAILURE;
         char err[512] = "";
         if (!rp_scene_data_load(o.scene, &data, err, sizeof err)) {
             fprintf(stderr, "%s\n", err[0] ? err : "raypack render: cannot load the scene");
@@ -576,11 +614,31 @@ int cli_render(int argc, char **argv) {
     } else if (!w) {
         w = (int)fmax(1.0, floor((double)h * sw / sh + 0.5));
     }
-    if ((double)w * (double)h > 16384.0 * 16384.0 / 4.0) {
-        fprintf(stderr, "raypack render: %dx%d is too many pixels (at most 67108864)\n", w, h);
+    if ((double)w * (double)h > RENDER_MAX_PIXELS || w > 16384 || h > 16384) {
+        fprintf(stderr, "raypack render: %dx%d (from the scene's aspect ratio) is too many pixels (at most %d in all, "
+                        "16384 a side)\n", w, h, RENDER_MAX_PIXELS);
         status = CLI_EXIT_USAGE;
         goto done;
     }
+    const char *cam_why = cam.type == RP_CAMERA_PINHOLE
+                              ? cli_camera_problem(cam.pinhole.eye, cam.pinhole.look, cam.pinhole.up) : NULL;
+    if (cam_why) {
+        /* name the flags that made it, else the scene's camera */
+        char from[64] = "";
+        if (o.has_eye) strcat(from, "--eye ");
+        if (o.has_look) strcat(from, "--look ");
+        if (o.has_up) strcat(from, "--up ");
+        if (from[0]) from[strlen(from) - 1] = '\0';
+        fprintf(stderr, "raypack render: %s%s: %s\n", from[0] ? from : "the scene's camera",
+                from[0] && !(o.has_eye && o.has_look && o.has_up) ? " with the scene's camera" : "", cam_why);
+        status = CLI_EXIT_USAGE;
+        goto done;
+    }
+    if (sst.rejected_prims)
+        fprintf(stderr, "raypack render: warning: %llu primitives with NaN/Inf coordinates (an overflowing "
+                        "transform?) left out\n", (unsigned long long)sst.rejected_prims);
+    if (sst.triangles + sst.spheres + sst.user_prims == 0)
+        fprintf(stderr, "raypack render: warning: the scene has nothing to hit; the image is its background\n");
 
     rp_render_desc desc = {
         .width = w, .height = h, .spp = o.spp, .integrator = o.use_aov ? RP_INTEGRATOR_AOV : o.integrator,
@@ -698,11 +756,12 @@ int cli_render(int argc, char **argv) {
         }
     }
     if (o.stats_json) {
-        FILE *f = fopen(o.stats_json, "w");
-        if (!f) {
-            fprintf(stderr, "raypack render: cannot write %s: %s\n", o.stats_json, strerror(errno));
+        rp_atomic_file *af = rp_atomic_open(o.stats_json, err, sizeof err);
+        if (!af) {
+            fprintf(stderr, "raypack render: %s\n", err);
             goto done;
         }
+        FILE *f = rp_atomic_stream(af);
         fprintf(f, "{\n  \"scene\": ");
         json_string(f, builtin ? "" : o.scene);
         fprintf(f, ",\n  \"output\": ");
@@ -729,8 +788,8 @@ int cli_render(int argc, char **argv) {
                    "\"sah_cost\": %.4f, \"bytes\": %zu, \"build_ms\": %.3f}\n}\n",
                 (unsigned long long)sst.binary_nodes, (unsigned long long)sst.wide_nodes,
                 (unsigned long long)sst.leaves, sst.depth, sst.sah_cost, sst.bytes, sst.build_ms);
-        if (fclose(f) != 0) {
-            fprintf(stderr, "raypack render: cannot write %s: %s\n", o.stats_json, strerror(errno));
+        if (!rp_atomic_commit(af, err, sizeof err)) {
+            fprintf(stderr, "raypack render: %s\n", err);
             goto done;
         }
     }

@@ -2,11 +2,14 @@
 #include "cli.h"
 
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
+#include <unistd.h>
 
 double cli_now_ms(void) {
     struct timespec ts;
@@ -116,4 +119,69 @@ void cli_json_traversal(FILE *f, const rp_counters_n *c) {
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         fprintf(f, "%s\"%s\": %llu", i ? ", " : "", names[i], (unsigned long long)c->traversal[i]);
     fputc('}', f);
+}
+
+/* A path's folder resolved (symbolic links, "..") plus its last name, for paths that do not exist. */
+static bool canonical_missing(const char *path, char *out, size_t size) {
+    const char *slash = strrchr(path, '/');
+    char dir[PATH_MAX];
+    if (!slash) snprintf(dir, sizeof dir, ".");
+    else if (slash == path) snprintf(dir, sizeof dir, "/");
+    else snprintf(dir, sizeof dir, "%.*s", (int)(slash - path), path);
+    char real[PATH_MAX];
+    if (!realpath(dir, real)) return false;
+    int n = snprintf(out, size, "%s/%s", real, slash ? slash + 1 : path);
+    return n > 0 && (size_t)n < size;
+}
+
+bool cli_same_file(const char *a, const char *b) {
+    struct stat sa, sb;
+    bool ea = stat(a, &sa) == 0, eb = stat(b, &sb) == 0;
+    if (ea && eb) return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+    if (ea != eb) return false;
+    char ca[PATH_MAX + 256], cb[PATH_MAX + 256];
+    if (canonical_missing(a, ca, sizeof ca) && canonical_missing(b, cb, sizeof cb)) return strcmp(ca, cb) == 0;
+    return strcmp(a, b) == 0;
+}
+
+bool cli_check_paths(const char *cmd, const cli_path *paths, int count) {
+    for (int i = 0; i < count; i++) {
+        if (!paths[i].path || paths[i].input) continue;
+        for (int j = 0; j < count; j++) {
+            if (j == i || !paths[j].path || (!paths[j].input && j > i)) continue;
+            if (!cli_same_file(paths[i].path, paths[j].path)) continue;
+            if (paths[j].input)
+                fprintf(stderr, "raypack %s: %s %s is the input %s: it would be overwritten\n", cmd, paths[i].flag,
+                        paths[i].path, paths[j].flag);
+            else
+                fprintf(stderr, "raypack %s: %s %s and %s %s are the same file\n", cmd, paths[j].flag,
+                        paths[j].path, paths[i].flag, paths[i].path);
+            return false;
+        }
+    }
+    return true;
+}
+
+bool cli_scene_readable(const char *cmd, const char *path) {
+    struct stat st;
+    int e = stat(path, &st) != 0 ? errno : S_ISDIR(st.st_mode) ? EISDIR : access(path, R_OK) != 0 ? errno : 0;
+    if (e) fprintf(stderr, "raypack %s: cannot open scene %s: %s\n", cmd, path, strerror(e));
+    return e == 0;
+}
+
+const char *cli_camera_problem(const float eye[3], const float look[3], const float up[3]) {
+    /* in float, as the renderer forms the frame (DESIGN.md: f = normalize(look - eye), r = f x up) */
+    float d[3] = {look[0] - eye[0], look[1] - eye[1], look[2] - eye[2]};
+    for (int k = 0; k < 3; k++)
+        if (!isfinite(eye[k]) || !isfinite(look[k]) || !isfinite(up[k]) || !isfinite(d[k])) return "not finite";
+    double dd = (double)d[0] * d[0] + (double)d[1] * d[1] + (double)d[2] * d[2];
+    double uu = (double)up[0] * up[0] + (double)up[1] * up[1] + (double)up[2] * up[2];
+    if (!(dd > 0.0)) return "the eye is the look-at point (no view direction)";
+    if (!(uu > 0.0)) return "the up vector is zero";
+    double c[3] = {(double)d[1] * up[2] - (double)d[2] * up[1], (double)d[2] * up[0] - (double)d[0] * up[2],
+                   (double)d[0] * up[1] - (double)d[1] * up[0]};
+    double cc = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+    /* sin^2 of the angle between view and up under 1e-10: the image's right vector is noise */
+    if (!(cc > 1e-10 * dd * uu)) return "the up vector is parallel to the view direction";
+    return NULL;
 }

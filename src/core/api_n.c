@@ -253,10 +253,34 @@ static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p
     if (t && r.cls != AUTO_COHERENT) tally_add(t, (int)r.cls, r.way, r.live, sys_ticks() - r.start);
 }
 
+/* Traces p with its unusable rays (ray_usable: NaN/Inf, zero directions, empty intervals) taken
+ * out of its valid mask, so they are misses and never reach the kernels or the frustum; a packet
+ * without such rays goes as it is. */
+static void trace_usable(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p, bool any) {
+    uint32_t count = p->n * p->n, bad = 0;
+    for (uint32_t i = 0; i < count; i++)
+        bad += (!p->valid || p->valid[i]) &&
+               !ray_usable(p->org_x[i], p->org_y[i], p->org_z[i], p->dir_x[i], p->dir_y[i], p->dir_z[i], p->tnear[i],
+                           p->tfar[i]);
+    if (RP_LIKELY(bad == 0)) {
+        trace_n(scene, desc, p, any);
+        return;
+    }
+    if (bad == count) return;
+    RP_ALIGN(64) int32_t live[RP_PACKET_N_MAX * RP_PACKET_N_MAX];
+    for (uint32_t i = 0; i < count; i++)
+        live[i] = (!p->valid || p->valid[i]) &&
+                  ray_usable(p->org_x[i], p->org_y[i], p->org_z[i], p->dir_x[i], p->dir_y[i], p->dir_z[i],
+                             p->tnear[i], p->tfar[i]) ? -1 : 0;
+    rp_rayhit_n q = *p; /* the same arrays, another mask */
+    q.valid = live;
+    trace_n(scene, desc, &q, any);
+}
+
 void rp_intersect_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *packet) {
-    if (packet_ok(scene, packet, true, "rp_intersect_n")) trace_n(scene, desc, packet, false);
+    if (packet_ok(scene, packet, true, "rp_intersect_n")) trace_usable(scene, desc, packet, false);
 }
 
 void rp_occluded_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *packet) {
-    if (packet_ok(scene, packet, false, "rp_occluded_n")) trace_n(scene, desc, packet, true);
+    if (packet_ok(scene, packet, false, "rp_occluded_n")) trace_usable(scene, desc, packet, true);
 }

@@ -2,6 +2,7 @@
 #ifndef RP_CORE_H
 #define RP_CORE_H
 
+#include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
 
@@ -88,5 +89,14 @@ void scene_free_accel(rp_scene *scene);
 
 /* Item i of a geometry buffer. */
 static inline const void *geom_item(const geom_buffer *b, size_t i) { return b->data + i * b->stride; }
+
+/* A ray the kernels may trace: a finite origin and direction, a nonzero direction and an interval
+ * with tnear <= tfar (neither NaN) and tnear < +inf. Every other ray is a miss, decided once at
+ * the API (raypack.h) so that no kernel meets NaN/Inf: an infinite direction component had hit at
+ * t = 0. x - x is 0 exactly for finite x and NaN for NaN and +-Inf. */
+static inline bool ray_usable(float ox, float oy, float oz, float dx, float dy, float dz, float tn, float tf) {
+    float f = (ox - ox) + (oy - oy) + (oz - oz) + (dx - dx) + (dy - dy) + (dz - dz);
+    return f == 0.0f && (dx != 0.0f || dy != 0.0f || dz != 0.0f) && tn <= tf && tn < INFINITY;
+}
 
 #endif

@@ -94,22 +94,17 @@ static void mem_write(void *ctx, void *data, int size) {
     m->size += (size_t)size;
 }
 
+/* Header then data, through an atomic output (rp_atomic_open): a failed write keeps the old file. */
 static bool write_file(const char *path, const void *header, size_t header_size, const void *data,
                        size_t size, char *err, size_t err_size) {
-    FILE *f = fopen(path, "wb");
-    if (!f) {
-        set_err(err, err_size, path, "cannot open for writing: %s", strerror(errno));
-        return false;
-    }
+    rp_atomic_file *af = rp_atomic_open(path, err, err_size);
+    if (!af) return false;
+    FILE *f = rp_atomic_stream(af);
+    errno = 0;
     bool ok = (header_size == 0 || fwrite(header, 1, header_size, f) == header_size) &&
               (size == 0 || fwrite(data, 1, size, f) == size);
-    int e = errno;
-    if (fclose(f) != 0 && ok) {
-        ok = false;
-        e = errno;
-    }
-    if (!ok) set_err(err, err_size, path, "write failed: %s", strerror(e));
-    return ok;
+    if (!ok) rp_atomic_fail(af, errno);
+    return rp_atomic_commit(af, err, err_size);
 }
 
 bool rp_image_write(const char *path, int width, int height, int channels, const float *pixels, char *err,

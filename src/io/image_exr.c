@@ -16,9 +16,13 @@
 
 bool io_image_write_exr(const char *path, int width, int height, int channels, const float *pixels, char *err,
                         size_t err_size) {
+    /* OpenEXR writes the atomic output's temporary file by name; commit renames it into place, so a
+     * failed write keeps the old file (rp_atomic_open) */
+    rp_atomic_file *af = rp_atomic_open(path, err, err_size);
+    if (!af) return false;
     exr_context_t ctx = NULL;
     exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
-    exr_result_t r = exr_start_write(&ctx, path, EXR_WRITE_FILE_DIRECTLY, &init);
+    exr_result_t r = exr_start_write(&ctx, rp_atomic_temp_path(af), EXR_WRITE_FILE_DIRECTLY, &init);
     int part = 0;
     /* channels are stored in name order: B, G, R */
     static const char *const names[3] = {"B", "G", "R"};
@@ -53,10 +57,11 @@ bool io_image_write_exr(const char *path, int width, int height, int channels, c
     exr_result_t fr = exr_finish(&ctx);
     if (r == EXR_ERR_SUCCESS) r = fr;
     if (r != EXR_ERR_SUCCESS) {
+        rp_atomic_abort(af);
         if (err && err_size) snprintf(err, err_size, "%s: error: OpenEXR: %s", path, exr_get_default_error_message(r));
         return false;
     }
-    return true;
+    return rp_atomic_commit(af, err, err_size);
 }
 #else
 bool io_image_write_exr(const char *path, int width, int height, int channels, const float *pixels, char *err,

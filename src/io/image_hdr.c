@@ -76,14 +76,16 @@ bool io_image_write_hdr(const char *path, int width, int height, int channels, c
         for (int k = 0; k < 3; k++) if (!isfinite(c[k])) c[k] = 0.0f;
         rgbe(c, buf + 4 * i);
     }
-    FILE *f = fopen(path, "wb");
-    bool ok = f != NULL;
+    /* through an atomic output: a failed write keeps the old file (rp_atomic_open) */
+    rp_atomic_file *af = rp_atomic_open(path, err, err_size);
+    bool ok = af != NULL;
     if (ok) {
-        ok = fprintf(f, "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y %d +X %d\n", height, width) > 0;
-        ok = ok && fwrite(buf, 4, n, f) == n;
-        ok = (fclose(f) == 0) && ok;
+        FILE *f = rp_atomic_stream(af);
+        bool wrote = fprintf(f, "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y %d +X %d\n", height, width) > 0;
+        wrote = wrote && fwrite(buf, 4, n, f) == n;
+        if (!wrote) rp_atomic_fail(af, errno);
+        ok = rp_atomic_commit(af, err, err_size);
     }
-    if (!ok && err && err_size) snprintf(err, err_size, "%s: error: write failed: %s", path, strerror(errno));
     free(buf);
     return ok;
 }

@@ -69,6 +69,20 @@ typedef struct io_builder {
 
 /* ---- load context ----------------------------------------------------------------------------- */
 
+/* What a scene may cost before it is refused (hostile files: include bombs, gzip bombs). The
+ * defaults fit every shared scene many times over; environment variables raise them
+ * (RP_MAX_INCLUDES, RP_MAX_INCLUDE_BYTES, RP_MAX_FILE_BYTES, RP_MAX_TEXTURE_PIXELS; see README). */
+typedef struct io_limits {
+    uint64_t max_includes;      /* AFF/NFF `i` files parsed, all levels together */
+    uint64_t max_include_bytes; /* bytes of those files, after decompression */
+    uint64_t max_file_bytes;    /* one file after decompression */
+    uint64_t max_texture_pixels; /* one decoded PNG/JPEG texture (a 100-byte PNG may claim 10^9) */
+} io_limits;
+#define IO_DEFAULT_MAX_INCLUDES 4096u
+#define IO_DEFAULT_MAX_INCLUDE_BYTES (1ull << 30)
+#define IO_DEFAULT_MAX_FILE_BYTES (4ull << 30)
+#define IO_DEFAULT_MAX_TEXTURE_PIXELS (1ull << 26)
+
 typedef struct io_ctx {
     io_vfs vfs;
     io_builder b;
@@ -77,6 +91,9 @@ typedef struct io_ctx {
     bool failed;
     size_t bytes;  /* scene text parsed, after decompression */
     int depth;     /* include nesting */
+    io_limits limits;
+    uint64_t includes, include_bytes; /* spent so far, against the limits */
+    char why[256]; /* why the last vfs_read failed */
     uint32_t *scratch_u; /* per-polygon scratch, grown as needed */
     size_t scratch_u_cap;
     float *scratch_f;
@@ -94,13 +111,15 @@ float *io_scratch_f(io_ctx *ctx, size_t n);
 
 /* ---- files (io_vfs.c) ------------------------------------------------------------------------- */
 
-/* Reads `path` (on disk: gzip'd or plain; in an archive: an entry). Writes no error. */
+/* Reads `path` (on disk: gzip'd or plain, a regular file or a stream; in an archive: an entry).
+ * Writes no error; on failure ctx->why says why (errno's text, "corrupt gzip data", ...). */
 bool vfs_read(io_ctx *ctx, const char *path, io_buf *out);
 /* True when `path` can be read. */
 bool vfs_exists(io_ctx *ctx, const char *path);
 void vfs_buf_free(io_buf *buf);
-/* Reads every regular file of a tar (.tar, .tar.gz) archive into ctx->vfs. */
-bool vfs_open_archive(io_ctx *ctx, const char *path);
+/* Reads every regular file of a tar (.tar, .tar.gz) archive into ctx->vfs: the file at path, or the
+ * archive's bytes in memory when data is not NULL (path then only names it in errors). */
+bool vfs_open_archive(io_ctx *ctx, const char *path, const void *data, size_t size);
 void vfs_close(io_vfs *vfs);
 /* dir of `base` + `rel` into out (lexically normalized inside archives). */
 void vfs_join(const io_vfs *vfs, const char *base, const char *rel, char *out, size_t size);
@@ -138,6 +157,14 @@ uint32_t tex_add_encoded(io_ctx *ctx, const char *key, const char *as_written, c
 /* Adds decoded 8-bit RGB texels (malloc'ed; taken over, freed on failure) under `key`. */
 uint32_t tex_add_rgb(io_ctx *ctx, const char *key, const char *as_written, int32_t width,
                      int32_t height, uint8_t *rgb, const char *file, uint32_t line);
+
+/* ---- loading from memory (io_scene.c; for the fuzzers and tests) ------------------------------- */
+
+/* Loads the scene files[0] (its name gives the format) with files[1..n) serving its includes,
+ * material libraries and textures, as if they were the entries of an archive named "mem"; with
+ * archive, files[0] holds a tar(.gz) image instead and is unpacked first. The files stay the
+ * caller's. Same result and errors as rp_scene_data_load. */
+bool io_load_memory(const io_entry *files, size_t n, bool archive, rp_scene_data *out, char *err, size_t err_size);
 
 /* ---- polygons (io_poly.c) --------------------------------------------------------------------- */
 

@@ -506,6 +506,7 @@ static bool nff_viewpoint(nff_file *f) {
     memset(cam, 0, sizeof *cam);
     float angle = 45.0f;
     unsigned seen = 0;
+    uint32_t line_at = f->line, line_up = f->line;
     for (;;) {
         nff_skip(f);
         const char *p = f->p;
@@ -518,10 +519,12 @@ static bool nff_viewpoint(nff_file *f) {
             seen |= 1;
         } else if (NFF_IS("at")) {
             f->p += n;
+            line_at = f->line;
             if (!nff_floats(f, cam->look, 3, "at")) return false;
             seen |= 2;
         } else if (NFF_IS("up")) {
             f->p += n;
+            line_up = f->line;
             if (!nff_floats(f, cam->up, 3, "up")) return false;
             seen |= 4;
         } else if (NFF_IS("angle")) {
@@ -546,6 +549,22 @@ static bool nff_viewpoint(nff_file *f) {
 #undef NFF_IS
     }
     if (seen != 15) return io_error(f->ctx, f->shown, f->line, "viewpoint needs from, at, up and angle");
+    /* A camera the renderer cannot form (DESIGN.md's frame from look - eye and up) is the file's
+     * error, at the line that made it so, not a uniform image. */
+    float d[3] = {cam->look[0] - cam->eye[0], cam->look[1] - cam->eye[1], cam->look[2] - cam->eye[2]};
+    double dd = 0.0, uu = 0.0, cc = 0.0;
+    for (int k = 0; k < 3; k++) {
+        if (!isfinite(d[k])) return io_error(f->ctx, f->shown, line_at, "viewpoint: 'at' - 'from' overflows");
+        dd += (double)d[k] * d[k];
+        uu += (double)cam->up[k] * cam->up[k];
+        int a = (k + 1) % 3, b = (k + 2) % 3;
+        double c = (double)d[a] * cam->up[b] - (double)d[b] * cam->up[a];
+        cc += c * c;
+    }
+    if (!(dd > 0.0)) return io_error(f->ctx, f->shown, line_at, "viewpoint: 'from' and 'at' are the same point");
+    if (!(uu > 0.0)) return io_error(f->ctx, f->shown, line_up, "viewpoint: 'up' is the zero vector");
+    if (!(cc > 1e-10 * dd * uu))
+        return io_error(f->ctx, f->shown, line_up, "viewpoint: 'up' is parallel to the view direction (from -> at)");
     if (!(angle > 0.0f && angle < 180.0f)) return io_error(f->ctx, f->shown, f->line, "view angle %g out of (0, 180)", (double)angle);
     /* NFF's angle spans the smaller image side: the vertical fov unless the image is portrait. */
     float fov = angle;
@@ -754,23 +773,26 @@ static bool nff_apply_keyframes(io_ctx *ctx, nff_state *st, const char *shown) {
 
 /* ---- files ------------------------------------------------------------------------------------ */
 
-static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path);
+static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path, const nff_file *from, const char *as_written);
 
 static bool nff_include(nff_file *f) {
     int64_t level;
     char name[IO_PATH_MAX], full[IO_PATH_MAX];
     if (!nff_int(f, &level, "include detail level") || !nff_word(f, name, sizeof name, "include file name")) return false;
     if (level > f->st->detail) return true; /* more detail than asked for */
-    if (f->ctx->depth >= NFF_MAX_INCLUDE) return io_error(f->ctx, f->shown, f->line, "includes nested too deep (a cycle?)");
-    vfs_join(&f->ctx->vfs, f->path, name, full, sizeof full);
-    if (!vfs_exists(f->ctx, full)) {
-        char shown[IO_PATH_MAX + 256];
-        vfs_display(&f->ctx->vfs, full, shown, sizeof shown);
-        return io_error(f->ctx, f->shown, f->line, "cannot open include '%s' (%s)", name, shown);
-    }
-    f->ctx->depth++;
-    bool ok = nff_parse(f->ctx, f->st, full);
-    f->ctx->depth--;
+    io_ctx *ctx = f->ctx;
+    if (ctx->depth >= NFF_MAX_INCLUDE) return io_error(ctx, f->shown, f->line, "includes nested too deep (a cycle?)");
+    /* The total is capped as well as the depth: a file that includes the next one twice, 32 deep,
+     * would otherwise parse 2^32 files. */
+    if (ctx->includes >= ctx->limits.max_includes)
+        return io_error(ctx, f->shown, f->line,
+                        "more than %llu included files (an include bomb?); RP_MAX_INCLUDES raises the limit",
+                        (unsigned long long)ctx->limits.max_includes);
+    ctx->includes++;
+    vfs_join(&ctx->vfs, f->path, name, full, sizeof full);
+    ctx->depth++;
+    bool ok = nff_parse(ctx, f->st, full, f, name);
+    ctx->depth--;
     return ok;
 }
 
@@ -834,12 +856,29 @@ static bool nff_command(nff_file *f) {
     return io_error(f->ctx, f->shown, f->line, "unknown command '%s'", nff_preview(f, p, tok, sizeof tok));
 }
 
-static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path) {
+/* Parses one file; `from` is the file whose `i` line includes it (NULL for the scene itself), where
+ * errors about reading it are reported. */
+static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path, const nff_file *from, const char *as_written) {
     nff_file f = {.ctx = ctx, .st = st, .path = path, .line = 1};
     vfs_display(&ctx->vfs, path, f.shown, sizeof f.shown);
     io_buf buf;
-    if (!vfs_read(ctx, path, &buf)) return io_error(ctx, f.shown, 0, "cannot open or decompress file");
+    if (!vfs_read(ctx, path, &buf)) {
+        if (from)
+            return io_error(ctx, from->shown, from->line, "cannot open include '%s' (%s): %s", as_written, f.shown,
+                            ctx->why);
+        return io_error(ctx, f.shown, 0, "cannot open: %s", ctx->why);
+    }
     ctx->bytes += buf.size;
+    if (from) {
+        ctx->include_bytes += buf.size;
+        if (ctx->include_bytes > ctx->limits.max_include_bytes) {
+            vfs_buf_free(&buf);
+            return io_error(ctx, from->shown, from->line,
+                            "included files exceed %llu bytes in all (an include bomb?); RP_MAX_INCLUDE_BYTES "
+                            "raises the limit",
+                            (unsigned long long)ctx->limits.max_include_bytes);
+        }
+    }
     f.p = buf.data;
     f.end = buf.data + buf.size;
     int depth0 = st->depth;
@@ -868,7 +907,7 @@ bool nff_load(io_ctx *ctx, const char *path) {
     st->material = IO_NONE;
     xf_identity(&st->stack[0].xf);
     st->stack[0].anim = -1;
-    bool ok = nff_parse(ctx, st, path);
+    bool ok = nff_parse(ctx, st, path, NULL, path);
     if (ok) {
         char shown[IO_PATH_MAX + 256];
         vfs_display(&ctx->vfs, path, shown, sizeof shown);

@@ -288,7 +288,7 @@ bool obj_load(io_ctx *ctx, const char *path) {
     obj_file f = {.ctx = ctx, .path = path, .line = 1};
     vfs_display(&ctx->vfs, path, f.shown, sizeof f.shown);
     io_buf buf;
-    if (!vfs_read(ctx, path, &buf)) return io_error(ctx, f.shown, 0, "cannot open or decompress file");
+    if (!vfs_read(ctx, path, &buf)) return io_error(ctx, f.shown, 0, "cannot open: %s", ctx->why);
     ctx->bytes += buf.size;
     io_builder *b = &ctx->b;
     const char *p = buf.data, *end = buf.data + buf.size;
@@ -353,7 +353,7 @@ bool obj_load(io_ctx *ctx, const char *path) {
                 vfs_display(&ctx->vfs, full, shown, sizeof shown);
                 io_buf mb;
                 if (!vfs_read(ctx, full, &mb)) {
-                    ok = io_error(ctx, f.shown, f.line, "cannot open material library '%s' (%s)", rel, shown);
+                    ok = io_error(ctx, f.shown, f.line, "cannot open material library '%s' (%s): %s", rel, shown, ctx->why);
                     break;
                 }
                 ok = mtl_parse(ctx, full, shown, &mb);

@@ -422,6 +422,34 @@ static bool ply_read_faces(ply_file *f, const ply_elem *el, bool vertices_seen) 
     return true;
 }
 
+/* Declared counts against the bytes after the header, before any allocation or loop: every record
+ * takes at least one byte per binary value (its size) or two per ASCII value (a digit and a
+ * separator), so a count the file cannot hold, or records of no properties (which would loop over a
+ * count of 10^12 reading nothing), are errors at the element's line. */
+static bool ply_check_counts(ply_file *f) {
+    uint64_t left = (uint64_t)(f->end - f->p) + 1; /* +1: the last value may lack its separator */
+    for (size_t i = 0; i < f->elem_n; i++) {
+        const ply_elem *el = &f->elems[i];
+        if (el->count == 0) continue;
+        if (el->prop_n == 0)
+            return io_error(f->ctx, f->shown, el->line, "element '%s' declares %llu records but no properties",
+                            el->name, (unsigned long long)el->count);
+        uint64_t min = 0;
+        for (size_t j = 0; j < el->prop_n; j++) {
+            const ply_prop *pr = &el->props[j];
+            min += f->format == PLY_ASCII ? 2 : ply_size(pr->count_type != PLY_NONE ? pr->count_type : pr->type);
+        }
+        if (el->count > left / min)
+            return io_error(f->ctx, f->shown, el->line,
+                            "element '%s' declares %llu records of at least %llu bytes: more than the %llu bytes "
+                            "the file has left (truncated, or a wrong count)",
+                            el->name, (unsigned long long)el->count, (unsigned long long)min,
+                            (unsigned long long)(left - 1));
+        left -= el->count * min;
+    }
+    return true;
+}
+
 static void ply_free(ply_file *f) {
     for (size_t i = 0; i < f->elem_n; i++) free(f->elems[i].props);
     free(f->elems);
@@ -434,11 +462,11 @@ bool ply_load(io_ctx *ctx, const char *path) {
     f.line = 1;
     vfs_display(&ctx->vfs, path, f.shown, sizeof f.shown);
     io_buf buf;
-    if (!vfs_read(ctx, path, &buf)) return io_error(ctx, f.shown, 0, "cannot open or decompress file");
+    if (!vfs_read(ctx, path, &buf)) return io_error(ctx, f.shown, 0, "cannot open: %s", ctx->why);
     ctx->bytes += buf.size;
     f.p = buf.data;
     f.end = buf.data + buf.size;
-    bool ok = ply_read_header(&f);
+    bool ok = ply_read_header(&f) && ply_check_counts(&f);
     bool vertices_seen = false;
     for (size_t i = 0; ok && i < f.elem_n; i++) {
         const ply_elem *el = &f.elems[i];

@@ -354,47 +354,90 @@ static void move_out(io_builder *b, rp_scene_data *out) {
     memset(b, 0, sizeof *b);
 }
 
+/* A limit from the environment (a positive integer, k/M/G suffixes allowed), else its default. */
+static uint64_t env_limit(const char *name, uint64_t def) {
+    const char *v = getenv(name);
+    if (!v || !*v) return def;
+    char *end;
+    unsigned long long n = strtoull(v, &end, 10);
+    uint64_t scale = *end == 'k' || *end == 'K' ? 1ull << 10 : *end == 'M' ? 1ull << 20 : *end == 'G' ? 1ull << 30 : 1;
+    if (scale != 1) end++;
+    if (end == v || *end != '\0' || n == 0 || n > UINT64_MAX / scale) return def;
+    return (uint64_t)n * scale;
+}
+
+static void ctx_init(io_ctx *ctx, char *err, size_t err_size) {
+    memset(ctx, 0, sizeof *ctx);
+    ctx->err = err;
+    ctx->err_size = err_size;
+    ctx->b.default_material = IO_NONE;
+    ctx->limits.max_includes = env_limit("RP_MAX_INCLUDES", IO_DEFAULT_MAX_INCLUDES);
+    ctx->limits.max_include_bytes = env_limit("RP_MAX_INCLUDE_BYTES", IO_DEFAULT_MAX_INCLUDE_BYTES);
+    ctx->limits.max_file_bytes = env_limit("RP_MAX_FILE_BYTES", IO_DEFAULT_MAX_FILE_BYTES);
+    ctx->limits.max_texture_pixels = env_limit("RP_MAX_TEXTURE_PIXELS", IO_DEFAULT_MAX_TEXTURE_PIXELS);
+}
+
+/* The archive's main scene, loaded (the archive already in ctx->vfs). */
+static bool load_archive_main(io_ctx *ctx, const char *path) {
+    const char *main_file = archive_main(ctx);
+    if (!main_file)
+        return io_error(ctx, path, 0, "archive holds no single main scene (.aff/.nff not included by another, or one .obj/.ply)");
+    return load_scene_file(ctx, main_file, path);
+}
+
+/* After the loader: defaults, clean-up, and the builder's arrays handed to out. */
+static bool ctx_finish(io_ctx *ctx, bool ok, const char *path, rp_scene_data *out, double t0) {
+    if (ok && ctx->b.material_n == 0) builder_default_material(ctx);
+    if (ok && ctx->b.material_n == 0) ok = io_error(ctx, path, 0, "out of memory");
+    if (ok && !builder_fill_missing(ctx)) ok = io_error(ctx, path, 0, "out of memory");
+    free(ctx->scratch_u);
+    free(ctx->scratch_f);
+    vfs_close(&ctx->vfs);
+    if (!ok) {
+        if (!ctx->failed) io_error(ctx, path, 0, "load failed");
+        builder_free(&ctx->b);
+        return false;
+    }
+    move_out(&ctx->b, out);
+    out->file_bytes = ctx->bytes;
+    out->parse_ms = now_ms() - t0;
+    return true;
+}
+
 bool rp_scene_data_load(const char *path, rp_scene_data *out, char *err, size_t err_size) {
     double t0 = now_ms();
     if (err && err_size) err[0] = '\0';
     if (!out) return false;
     memset(out, 0, sizeof *out);
     io_ctx ctx;
-    memset(&ctx, 0, sizeof ctx);
-    ctx.err = err;
-    ctx.err_size = err_size;
-    ctx.b.default_material = IO_NONE;
+    ctx_init(&ctx, err, err_size);
     if (!path) return io_error(&ctx, "(null)", 0, "no path given");
     if (strlen(path) >= IO_PATH_MAX - 64) return io_error(&ctx, path, 0, "path too long");
-
     bool ok;
-    if (is_archive(path)) {
-        ok = vfs_open_archive(&ctx, path);
-        if (ok) {
-            const char *main_file = archive_main(&ctx);
-            if (!main_file)
-                ok = io_error(&ctx, path, 0, "archive holds no single main scene (.aff/.nff not included by another, or one .obj/.ply)");
-            else
-                ok = load_scene_file(&ctx, main_file, path);
-        }
+    if (is_archive(path)) ok = vfs_open_archive(&ctx, path, NULL, 0) && load_archive_main(&ctx, path);
+    else ok = load_scene_file(&ctx, path, path);
+    return ctx_finish(&ctx, ok, path, out, t0);
+}
+
+bool io_load_memory(const io_entry *files, size_t n, bool archive, rp_scene_data *out, char *err, size_t err_size) {
+    double t0 = now_ms();
+    if (err && err_size) err[0] = '\0';
+    memset(out, 0, sizeof *out);
+    io_ctx ctx;
+    ctx_init(&ctx, err, err_size);
+    if (n == 0) return io_error(&ctx, "mem", 0, "no files");
+    bool ok;
+    if (archive) {
+        ok = vfs_open_archive(&ctx, "mem", files[0].data, files[0].size) && load_archive_main(&ctx, "mem");
     } else {
-        ok = load_scene_file(&ctx, path, path);
+        /* the caller's entries, borrowed: taken back out of the vfs before it is closed */
+        ctx.vfs.archive = "mem";
+        ctx.vfs.entries = (io_entry *)files;
+        ctx.vfs.entry_count = n;
+        ok = load_scene_file(&ctx, files[0].name, "mem");
+        memset(&ctx.vfs, 0, sizeof ctx.vfs);
     }
-    if (ok && ctx.b.material_n == 0) builder_default_material(&ctx);
-    if (ok && ctx.b.material_n == 0) ok = io_error(&ctx, path, 0, "out of memory");
-    if (ok && !builder_fill_missing(&ctx)) ok = io_error(&ctx, path, 0, "out of memory");
-    free(ctx.scratch_u);
-    free(ctx.scratch_f);
-    vfs_close(&ctx.vfs);
-    if (!ok) {
-        if (!ctx.failed) io_error(&ctx, path, 0, "load failed");
-        builder_free(&ctx.b);
-        return false;
-    }
-    move_out(&ctx.b, out);
-    out->file_bytes = ctx.bytes;
-    out->parse_ms = now_ms() - t0;
-    return true;
+    return ctx_finish(&ctx, ok, "mem", out, t0);
 }
 
 void rp_scene_data_free(rp_scene_data *scene) {

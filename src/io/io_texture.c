@@ -1,5 +1,8 @@
-/* Texture images for materials: PPM (P3 and P6) decoded here, every other format by stb_image. All
- * end up 8-bit RGB, top row first. */
+/* Texture images for materials: PPM (P3 and P6) decoded here, PNG and JPEG by stb_image. All end up
+ * 8-bit RGB, top row first. stb_image trusts its input more than a loader may (fuzzing found a heap
+ * overflow in its 16-bit PNM path and one in its JPEG Huffman tables): only its PNG and JPEG
+ * decoders are compiled, JPEG Huffman tables are checked here first, and the declared size is
+ * capped before it allocates. */
 #include <stdio.h>
 
 #include "io/io_internal.h"
@@ -21,6 +24,8 @@
 #define STBI_NO_STDIO
 #define STBI_NO_HDR
 #define STBI_NO_LINEAR
+#define STBI_ONLY_PNG
+#define STBI_ONLY_JPEG
 #include <stb/stb_image.h>
 #pragma GCC diagnostic pop
 
@@ -95,6 +100,60 @@ static uint8_t *ppm_decode(const char *data, size_t size, int32_t *w, int32_t *h
     return rgb;
 }
 
+/* True unless a JPEG's DHT segment declares a table of more than 256 codes or runs past its
+ * segment: stb_image (2022-09) writes such counts past its 257-entry arrays. Walks the markers up to
+ * the end, skipping entropy-coded data (progressive files have tables between scans). */
+static bool jpeg_tables_ok(const uint8_t *d, size_t n) {
+    size_t i = 0; /* stb takes fill bytes (0xFF) before SOI, so the walk starts at 0 */
+    while (i + 4 <= n) {
+        if (d[i] != 0xFF) {
+            i++; /* entropy-coded data: look for the next marker */
+            continue;
+        }
+        uint8_t m = d[i + 1];
+        if (m == 0x00 || m == 0xFF || (m >= 0xD0 && m <= 0xD8) || m == 0x01) {
+            i += m == 0xFF ? 1 : 2; /* stuffing, fill, restart markers, SOI: no length */
+            continue;
+        }
+        if (m == 0xD9) return true; /* EOI */
+        size_t len = (size_t)d[i + 2] << 8 | d[i + 3];
+        if (len < 2) return false;
+        size_t seg = i + 4, seg_end = i + 2 + len;
+        if (seg_end > n) seg_end = n; /* truncated: stb reads zeros past the end */
+        if (m == 0xC4) {
+            size_t j = seg;
+            while (j < seg_end) {
+                if (j + 17 > seg_end) return false;
+                unsigned total = 0;
+                for (int k = 0; k < 16; k++) total += d[j + 1 + (size_t)k];
+                if (total > 256) return false;
+                j += 17 + total;
+            }
+        }
+        i = i + 2 + len;
+    }
+    return true;
+}
+
+/* True when every PNG chunk's declared length fits in the bytes that follow it (stb_image grows its
+ * IDAT buffer to the declared length, up to 1 GiB, before reading: a 200-byte file asked for
+ * 1.6 GB) and the first IDAT is not empty. */
+static bool png_chunks_ok(const uint8_t *d, size_t n) {
+    size_t i = 8; /* after the signature */
+    bool data = false;
+    while (i + 12 <= n) {
+        uint32_t len = (uint32_t)d[i] << 24 | (uint32_t)d[i + 1] << 16 | (uint32_t)d[i + 2] << 8 | d[i + 3];
+        if (len > n - i - 12) return false;
+        if (memcmp(d + i + 4, "IEND", 4) == 0) return true;
+        if (memcmp(d + i + 4, "IDAT", 4) == 0) {
+            if (len == 0 && !data) return false; /* stb_image then reads into a NULL buffer (UB) */
+            data = true;
+        }
+        i += 12 + (size_t)len;
+    }
+    return i == n; /* no IEND: stb decides on what is there */
+}
+
 uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const char *file,
                   uint32_t line) {
     io_builder *b = &ctx->b;
@@ -105,7 +164,7 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
     if (!vfs_read(ctx, path, &buf)) {
         char shown[IO_PATH_MAX + 256];
         vfs_display(&ctx->vfs, path, shown, sizeof shown);
-        io_error(ctx, file, line, "cannot open texture '%s' (%s)", as_written, shown);
+        io_error(ctx, file, line, "cannot open texture '%s' (%s): %s", as_written, shown, ctx->why);
         return IO_NONE;
     }
     int32_t w = 0, h = 0;
@@ -114,8 +173,25 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
     if (buf.size >= 3 && buf.data[0] == 'P' && (buf.data[1] == '3' || buf.data[1] == '6')) {
         rgb = ppm_decode(buf.data, buf.size, &w, &h, &why);
     } else if (buf.size <= INT32_MAX) {
-        int iw, ih, comp;
-        stbi_uc *px = stbi_load_from_memory((const stbi_uc *)buf.data, (int)buf.size, &iw, &ih, &comp, 3);
+        int iw = 0, ih = 0, comp;
+        const stbi_uc *bytes = (const stbi_uc *)buf.data;
+        bool jpeg = buf.size >= 2 && bytes[0] == 0xFF; /* what stb_image's JPEG test accepts */
+        stbi_uc *px = NULL;
+        bool png = buf.size >= 8 && memcmp(bytes, "\x89PNG\r\n\x1a\n", 8) == 0;
+        if (jpeg && !jpeg_tables_ok(bytes, buf.size)) { /* before stb reads the header too */
+            why = "corrupt JPEG (a Huffman table of more than 256 codes)";
+        } else if (png && !png_chunks_ok(bytes, buf.size)) {
+            why = "corrupt or truncated PNG (a chunk longer than the file, or an empty first IDAT)";
+        } else if (!stbi_info_from_memory(bytes, (int)buf.size, &iw, &ih, &comp)) {
+            why = stbi_failure_reason();
+        } else if ((uint64_t)iw * (uint64_t)ih > ctx->limits.max_texture_pixels) {
+            snprintf(ctx->why, sizeof ctx->why, "%dx%d is more than %llu pixels; RP_MAX_TEXTURE_PIXELS raises the limit",
+                     iw, ih, (unsigned long long)ctx->limits.max_texture_pixels);
+            why = ctx->why;
+        } else {
+            px = stbi_load_from_memory(bytes, (int)buf.size, &iw, &ih, &comp, 3);
+            if (!px) why = stbi_failure_reason();
+        }
         if (px) {
             size_t n = (size_t)iw * (size_t)ih * 3;
             rgb = malloc(n);
@@ -123,8 +199,6 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
             stbi_image_free(px);
             w = iw;
             h = ih;
-        } else {
-            why = stbi_failure_reason();
         }
     }
     vfs_buf_free(&buf);

@@ -601,13 +601,14 @@ bool bvh_build(const sys_allocator *alloc, sys_pool *pool, bvh_prim *boxes, uint
     node_chunk *chunks = sys_calloc(alloc, kbytes);
     out->nodes = sys_alloc(alloc, (size_t)cap * sizeof(bvh_node));
     out->prims = sys_alloc(alloc, (size_t)(n ? n : 1) * sizeof(uint32_t));
+    /* sizes first: bvh2_free hands them to the allocator hook, also on the failure path */
+    out->node_capacity = cap;
+    out->prim_count = n;
     if (!out->nodes || !out->prims || !chunks) {
         sys_free(alloc, chunks, kbytes);
         bvh2_free(alloc, out);
         return false;
     }
-    out->node_capacity = cap;
-    out->prim_count = n;
     box3 root = box3_empty();
     /* large inputs on all threads: a serial pass (and its page faults) over millions of boxes
      * was a tenth of a large build on two threads */

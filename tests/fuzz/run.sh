@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# Runs every libFuzzer harness of the fuzz build for FUZZ_SECONDS each (JOBS at a time), from a
+# scratch copy of its seed corpus (so the repository's seeds stay small), after replaying every
+# crash reproducer in tests/fuzz/crashes/NAME. Prints executions per second and in total per parser;
+# exits non-zero if any harness crashed, leaked, hung (-timeout) or went past -rss_limit_mb. A
+# crash's input is left in build/fuzz/artifacts/NAME/: copy it to tests/fuzz/crashes/NAME/ with
+# the fix, so every later run (and CTest's replay) checks it.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+SECONDS_EACH=${FUZZ_SECONDS:-60}
+JOBS=${FUZZ_JOBS:-2}
+BIN=build/fuzz/tests/fuzz
+OUT=build/fuzz/runs
+NAMES=${FUZZ_NAMES:-"obj mtl ply nff aff tar texture"}
+mkdir -p "$OUT"
+export ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+
+run_one() {
+    local name=$1 work=$OUT/corpus_$1 art=build/fuzz/artifacts/$1/
+    mkdir -p "$work" "$art"
+    if [ -d "tests/fuzz/crashes/$name" ] && [ -n "$(ls -A "tests/fuzz/crashes/$name")" ]; then
+        "$BIN/fuzz_$name" -runs=0 "tests/fuzz/crashes/$name"/* >"$OUT/$name.replay.log" 2>&1 ||
+            { echo "$name: a past crash reproducer fails again (see $OUT/$name.replay.log)"; return 1; }
+    fi
+    "$BIN/fuzz_$name" -max_total_time="$SECONDS_EACH" -timeout=10 -rss_limit_mb=1024 -malloc_limit_mb=512 \
+        -max_len=16384 -print_final_stats=1 -artifact_prefix="$art" "$work" "tests/fuzz/corpus/$name" \
+        >"$OUT/$name.log" 2>&1
+}
+export -f run_one
+export BIN OUT SECONDS_EACH
+
+status=0
+printf '%s\n' $NAMES | xargs -P "$JOBS" -I{} bash -c 'run_one {}' || status=1
+printf '%-8s %12s %12s %8s\n' parser executions "exec/s" corpus
+for name in $NAMES; do
+    log=$OUT/$name.log
+    execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
+    rate=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log" | tail -1)
+    files=$(ls "$OUT/corpus_$name" | wc -l)
+    printf '%-8s %12s %12s %8s\n' "$name" "${execs:-?}" "${rate:-?}" "$files"
+    if grep -qE "ERROR: (AddressSanitizer|LeakSanitizer|libFuzzer)|runtime error:|SUMMARY: " "$log"; then
+        echo "$name: FAILED (see $log; input in build/fuzz/artifacts/$name/)"
+        grep -m3 -E "ERROR:|runtime error:|SUMMARY:" "$log" || true
+        status=1
+    fi
+done
+exit $status

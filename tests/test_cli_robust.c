@@ -1,0 +1,204 @@
+/* The `raypack` command on hostile input (issue 23): outputs that would overwrite an input or each
+ * other, writes that fail part-way, FIFOs, folders, include bombs, degenerate cameras, sizes past the
+ * limits. Each case must end within its time with the right exit status and message, never hang,
+ * never damage a file. */
+#include <errno.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <stdbool.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "rp_test.h"
+
+static char exe[1024];
+static char tmp[1024];
+static char output[16384];
+
+/* Runs `raypack ARGS` (through sh, with a 20 s timeout so a hang fails instead of blocking CTest)
+ * with stdout and stderr captured together; returns its exit status, 124 on timeout. */
+static int run_prefixed(const char *prefix, const char *args) {
+    char cmd[16384];
+    snprintf(cmd, sizeof cmd, "%s timeout 20 '%s' %s 2>&1", prefix, exe, args);
+    FILE *p = popen(cmd, "r");
+    if (!p) return -1;
+    size_t n = fread(output, 1, sizeof output - 1, p);
+    output[n] = '\0';
+    int st = pclose(p);
+    return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+}
+
+#define EXPECT_P(prefix, args, status, text)                                                                \
+    do {                                                                                                    \
+        int rc_ = run_prefixed(prefix, args);                                                               \
+        CHECKF(rc_ == (status) && strstr(output, (text)) != NULL,                                           \
+               "raypack %s: exit %d (expected %d), output lacks '%s':\n%s", args, rc_, status, text, output); \
+    } while (0)
+#define EXPECT(args, status, text) EXPECT_P("", args, status, text)
+
+static bool find_exe(void) {
+    const char *env = getenv("RP_CLI");
+    if (env) {
+        snprintf(exe, sizeof exe, "%s", env);
+    } else {
+        char self[900];
+        ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+        if (n <= 0) return false;
+        self[n] = '\0';
+        char *slash = strrchr(self, '/'); /* build/<preset>/tests/test_cli_robust */
+        if (!slash) return false;
+        *slash = '\0';
+        snprintf(exe, sizeof exe, "%s/../raypack", self);
+    }
+    return access(exe, X_OK) == 0;
+}
+
+static bool write_text(const char *path, const char *text) {
+    FILE *f = fopen(path, "wb");
+    if (!f) return false;
+    bool ok = fputs(text, f) >= 0;
+    return fclose(f) == 0 && ok;
+}
+
+static bool file_is(const char *path, const char *text) {
+    static char buf[1 << 16];
+    FILE *f = fopen(path, "rb");
+    if (!f) return false;
+    size_t n = fread(buf, 1, sizeof buf - 1, f);
+    fclose(f);
+    buf[n] = '\0';
+    return n == strlen(text) && memcmp(buf, text, n) == 0;
+}
+
+static const char TRI_OBJ[] = "v -1 -1 0\nv 1 -1 0\nv 0 1 0\nf 1 2 3\n";
+
+/* Outputs equal to an input or to each other: usage errors before any work, nothing touched. */
+static void test_same_paths(void) {
+    char scene[1200], other[1200], args[8192];
+    snprintf(scene, sizeof scene, "%s/tri.obj", tmp);
+    CHECK(write_text(scene, TRI_OBJ));
+    snprintf(args, sizeof args, "render '%s' --stats-json '%s' -o '%s/x.png' --quiet", scene, scene, tmp);
+    EXPECT(args, 2, "--stats-json");
+    EXPECT(args, 2, "is the input SCENE");
+    CHECK(file_is(scene, TRI_OBJ));
+    /* another spelling of the same path, and a hard link: compared as files, not strings */
+    snprintf(args, sizeof args, "render '%s' -o '%s/./sub/../tri.obj' --quiet", scene, tmp);
+    char sub[1200];
+    snprintf(sub, sizeof sub, "%s/sub", tmp);
+    mkdir(sub, 0777);
+    EXPECT(args, 2, "-o");
+    CHECK(file_is(scene, TRI_OBJ));
+    snprintf(other, sizeof other, "%s/hard.ppm", tmp);
+    unlink(other);
+    CHECK(link(scene, other) == 0);
+    snprintf(args, sizeof args, "render '%s' -o '%s' --quiet", scene, other);
+    EXPECT(args, 2, "is the input SCENE");
+    CHECK(file_is(scene, TRI_OBJ));
+    /* two outputs naming one file, existing or not */
+    snprintf(args, sizeof args, "render -o '%s/same.png' --stats-json '%s/sub/../same.png' --quiet", tmp, tmp);
+    EXPECT(args, 2, "are the same file");
+    snprintf(args, sizeof args, "bench '%s' --json '%s'", scene, scene);
+    EXPECT(args, 2, "--json");
+    CHECK(file_is(scene, TRI_OBJ));
+}
+
+/* A file-size limit hit while writing: exit 1 naming the cause, the previous image intact. */
+static void test_failed_write_keeps_old(void) {
+    char img[1200], json[1200], args[8192];
+    snprintf(img, sizeof img, "%s/keep.png", tmp);
+    snprintf(json, sizeof json, "%s/keep.json", tmp);
+    CHECK(write_text(img, "previous image\n"));
+    CHECK(write_text(json, "{\"previous\": 1}\n"));
+    snprintf(args, sizeof args, "render --width 256 --height 256 -o '%s' --quiet", img);
+    EXPECT_P("ulimit -f 4;", args, 1, "File too large");
+    CHECKF(file_is(img, "previous image\n"), "a failed render write damaged %s", img);
+    /* the 8x8 image (207 bytes) fits in ulimit's 512-byte block, the stats JSON (a few KiB) does not */
+    snprintf(args, sizeof args, "render --width 8 --height 8 -o '%s/tiny.ppm' --stats-json '%s' --quiet", tmp, json);
+    EXPECT_P("ulimit -f 1;", args, 1, "File too large");
+    CHECKF(file_is(json, "{\"previous\": 1}\n"), "a failed --stats-json write damaged %s", json);
+    EXPECT(args, 0, "");
+    CHECK(!file_is(json, "{\"previous\": 1}\n"));
+}
+
+/* A FIFO as the scene: read once as a stream (an open check before the load had blocked forever);
+ * a folder or a missing file: exit 1 with errno's text. */
+static void test_not_regular_scenes(void) {
+    char fifo[1200], scene[1200], prefix[4096], args[8192];
+    snprintf(scene, sizeof scene, "%s/tri.obj", tmp);
+    CHECK(write_text(scene, TRI_OBJ));
+    snprintf(fifo, sizeof fifo, "%s/fifo.obj", tmp);
+    unlink(fifo);
+    CHECK(mkfifo(fifo, 0600) == 0);
+    snprintf(prefix, sizeof prefix, "(timeout 20 cat '%s' > '%s' &);", scene, fifo);
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/fifo.ppm'", fifo, tmp);
+    EXPECT_P(prefix, args, 0, "1 triangles");
+    snprintf(args, sizeof args, "info '%s'", fifo);
+    EXPECT_P(prefix, args, 0, "1 triangles");
+    unlink(fifo);
+    snprintf(args, sizeof args, "render '%s' -o '%s/x.png'", tmp, tmp);
+    EXPECT(args, 1, strerror(EISDIR));
+    snprintf(args, sizeof args, "render '%s/missing.obj' -o '%s/x.png'", tmp, tmp);
+    EXPECT(args, 1, strerror(ENOENT));
+}
+
+/* Cameras raypack cannot form, sizes past the limits, scenes with nothing (valid) to hit. */
+static void test_cameras_and_sizes(void) {
+    char args[8192], path[1200];
+    EXPECT("render --eye 1,1,1 --look 1,1,1 --quiet", 2, "--eye and --look: the eye is the look-at point");
+    EXPECT("render --up 0,0,0 --quiet", 2, "--up 0,0,0 is not a direction");
+    EXPECT("render --eye 0,0,0 --look 0,0,-1 --up 0,0,2 --quiet", 2, "parallel to the view direction");
+    EXPECT("render --eye 0,nan,0 --quiet", 2, "--eye expects three numbers");
+    EXPECT("render --look inf,0,0 --quiet", 2, "--look expects three numbers");
+    /* checked before loading: the scene does not even exist */
+    EXPECT("render /nonexistent/x.obj --width 16384 --height 16384", 2, "too many pixels");
+    EXPECT("render /nonexistent/x.obj --width 16385", 2, "--width expects an integer in [1, 16384]");
+    EXPECT("render --help", 0, "at most 67108864");
+    /* what --help allows is accepted: 16384 x 4096 = 67108864 passes the size check (and fails
+     * only later, on the missing scene) */
+    EXPECT("render /nonexistent/x.obj --width 16384 --height 4096", 1, "cannot open scene");
+    /* from the scene file: file:line */
+    snprintf(path, sizeof path, "%s/same.nff", tmp);
+    CHECK(write_text(path, "v\nfrom 1 2 3\nat 1 2 3\nup 0 1 0\nangle 45\nhither 1\nresolution 8 8\n"
+                           "p 3\n0 0 0\n1 0 0\n0 1 0\n"));
+    snprintf(args, sizeof args, "render '%s' -o '%s/same.png' --quiet", path, tmp);
+    EXPECT(args, 1, "same.nff:3: error: viewpoint: 'from' and 'at' are the same point");
+    CHECK(write_text(path, "v\nfrom 0 0 5\nat 0 0 0\nup 0 0 -3\nangle 45\nhither 1\nresolution 8 8\n"
+                           "p 3\n0 0 0\n1 0 0\n0 1 0\n"));
+    EXPECT(args, 1, "same.nff:4: error: viewpoint: 'up' is parallel");
+    /* a flag that makes the scene's camera degenerate: --look onto the scene's eye */
+    CHECK(write_text(path, "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nhither 1\nresolution 8 8\n"
+                           "p 3\n0 0 0\n1 0 0\n0 1 0\n"));
+    snprintf(args, sizeof args, "render '%s' --look 0,0,5 -o '%s/same.png' --quiet", path, tmp);
+    EXPECT(args, 2, "--look with the scene's camera: the eye is the look-at point");
+    snprintf(args, sizeof args, "render '%s' --up 0,0,1 -o '%s/same.png' --quiet", path, tmp);
+    EXPECT(args, 2, "--up with the scene's camera: the up vector is parallel");
+    /* a transform (scale 1e30) that overflows to inf drops its primitives, with a warning; nothing else left:
+     * the nothing-to-hit warning as well */
+    snprintf(path, sizeof path, "%s/overflow.aff", tmp);
+    CHECK(write_text(path, "xs 1e30 1e30 1e30 0 1 0 0 0 0 0 {\np 3\n1e10 0 0\n0 1e10 0\n0 0 1e10\n}\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/overflow.png' --quiet", path, tmp);
+    EXPECT(args, 0, "warning: 1 primitives with NaN/Inf coordinates");
+    EXPECT(args, 0, "warning: the scene has nothing to hit");
+    snprintf(path, sizeof path, "%s/tri.obj", tmp);
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/fine.png' --quiet", path, tmp);
+    int rc = run_prefixed("", args);
+    CHECKF(rc == 0 && !strstr(output, "warning"), "a valid scene warned (exit %d):\n%s", rc, output);
+}
+
+int main(void) {
+    if (!find_exe()) {
+        fprintf(stderr, "raypack binary not found at %s\n", exe);
+        CHECK(!"raypack binary built");
+        return RP_TEST_END();
+    }
+    const char *dir = getenv("RP_TEST_TMP");
+    snprintf(tmp, 900, "%s", dir ? dir : "/tmp/raypack_test_cli_robust");
+    mkdir(tmp, 0777);
+    test_same_paths();
+    test_failed_write_keeps_old();
+    test_not_regular_scenes();
+    test_cameras_and_sizes();
+    return RP_TEST_END();
+}

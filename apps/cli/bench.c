@@ -1402,6 +1402,7 @@ static int bench_core(bench_ctx *ctx) {
 }
 
 int cli_bench(int argc, char **argv) {
+    if (cli_stream_wanted(argc, argv, "--stream", NULL)) return cli_stream_bench(argc, argv);
     bench_ctx ctx;
     memset(&ctx, 0, sizeof ctx);
     int rc = parse_args(argc, argv, &ctx.opts);

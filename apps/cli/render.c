@@ -29,6 +29,7 @@ static void render_usage(FILE *out) {
             "  --width W, --height H  image size in pixels, 1..16384 [the scene's, else 512x512]\n"
             "  --spp N                samples per pixel, jittered deterministically when N > 1 [1]\n"
             "  --integrator NAME      eyelight or whitted [whitted]\n"
+            "  --engine stream        the stream tracer over a uniform grid (see --engine stream --help)\n"
             "  --max-depth N          Whitted reflection/refraction depth, 0..64 [5]\n"
             "  --aov NAME             debug output instead of shading: depth (PFM: distance along\n"
             "                         the primary ray, +inf on a miss), normal, primid or albedo\n"
@@ -399,6 +400,7 @@ static void json_work(FILE *f, const rp_render_stats *rs) {
 }
 
 int cli_render(int argc, char **argv) {
+    if (cli_stream_wanted(argc, argv, "--engine", "stream")) return cli_stream_render(argc, argv);
     render_options o = {.output = "raypack.png", .max_depth = -1, .integrator = RP_INTEGRATOR_WHITTED,
                         .integrator_name = "whitted", .traversal_name = "auto", .packet = 16};
     bool help = false;

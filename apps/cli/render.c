@@ -400,7 +400,7 @@ static void json_work(FILE *f, const rp_render_stats *rs) {
 }
 
 int cli_render(int argc, char **argv) {
-    if (cli_stream_wanted(argc, argv, "--engine", "stream")) return cli_stream_render(argc, argv);
+    if (cli_stream_wanted(argc, argv, "--engine", NULL)) return cli_stream_render(argc, argv);
     render_options o = {.output = "raypack.png", .max_depth = -1, .integrator = RP_INTEGRATOR_WHITTED,
                         .integrator_name = "whitted", .traversal_name = "auto", .packet = 16};
     bool help = false;

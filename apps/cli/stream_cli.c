@@ -251,6 +251,9 @@ int cli_stream_bench(int argc, char **argv) {
     int rc = parse("bench", argc, argv, &o, true);
     if (rc) return rc < 0 ? CLI_EXIT_OK : rc;
     if (o.purcell && !o.gd.min_dim && !(o.gd.density > 0.0f)) o.gd.min_dim = 64;
+    /* the paper's bunny fills its view (s = 0.82: 82% of the eye rays hit); the scene's framing
+     * camera narrowed to 11 degrees hits 82% of them too */
+    if (o.purcell && !o.has_fov && !o.has_eye && !o.has_look) o.fov = 11.0f, o.has_fov = true;
     loaded l;
     int status = CLI_EXIT_FAILURE;
     rp_rayhit *hits = NULL, *a = NULL, *b = NULL;
@@ -310,7 +313,8 @@ int cli_stream_bench(int argc, char **argv) {
             printf(" %s: %d passes = %d + %d + %d, max %d / %d, SIMD %.3f\n", p->scene, p->passes, p->traversal,
                    p->intersection, p->other, p->max_traversals, p->max_intersections, p->simd_efficiency);
         }
-        printf(" our camera is the scene's default one, not the paper's view)\n");
+        printf(" our view is the scene's framing camera at %.1f degrees, not the paper's exact one)\n",
+               (double)l.cam.pinhole.fov_deg);
     }
     status = differ == 0 ? CLI_EXIT_OK : CLI_EXIT_FAILURE;
     if (differ) fprintf(stderr, "raypack bench: the grid's hits differ from the BVH's\n");

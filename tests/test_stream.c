@@ -84,6 +84,16 @@ static void check_view(rp_render_scene *rs, const grid *g, const char *name, con
            (unsigned long long)st.passes, (unsigned long long)st.traversal_passes,
            (unsigned long long)st.intersection_passes, (unsigned long long)st.other_passes,
            (unsigned long long)st2.passes, st.max_voxels, st.max_tests, st.simd_efficiency);
+    /* the wavefront scheduler: the same image and work per ray, every ray of a pass busy */
+    stream_desc wave = sd;
+    wave.wavefront = true;
+    CHECK(stream_render(rs, g, &wave, px, NULL, &st2, err, sizeof err));
+    diff = 0;
+    for (size_t i = 0; i < n * 3; i++) diff += !same_f(px[i], ref[i]);
+    CHECKF(diff == 0 && st2.voxels == st.voxels && st2.tests == st.tests && st2.max_tests == st.max_tests &&
+               st2.passes == st2.traversal_passes + st2.intersection_passes + st2.other_passes &&
+               (st2.slots == 0 || st2.simd_efficiency == 1.0),
+           "%s: wavefront: %zu values differ, efficiency %.3f", name, diff, st2.simd_efficiency);
     /* shadow shading: a second stream of any-hit rays */
     sd.shading = STREAM_SHADE_SHADOW;
     CHECK(stream_render(rs, g, &sd, px, NULL, &st2, err, sizeof err));

@@ -42,6 +42,7 @@ static void usage(FILE *out, bool bench) {
             "  --min-dim N             the paper's rule instead: cubic voxels, N along the shortest side\n"
             "                          (--purcell uses 64, the paper's bunny grid)\n"
             "  --oracle F              intersect once this fraction of active rays needs it [0.2]\n"
+            "  --wavefront             the wavefront scheduler: per-kernel queues compacted between passes\n"
             "  --threads N, --isa NAME the device (the stream runs on one thread)\n");
     if (bench)
         fprintf(out, "  --purcell               print the paper's table 2 and fig. 6 beside ours\n");
@@ -67,6 +68,8 @@ static int parse(const char *cmd, int argc, char **argv, stream_opts *o, bool be
             }
         } else if (strcmp(a, "--stream") == 0 || strcmp(a, "--stats") == 0) {
             o->stats = true;
+        } else if (strcmp(a, "--wavefront") == 0) {
+            o->sd.wavefront = true;
         } else if (strcmp(a, "--purcell") == 0) {
             o->purcell = true;
         } else if (strcmp(a, "-q") == 0 || strcmp(a, "--quiet") == 0) {
@@ -275,6 +278,14 @@ int cli_stream_bench(int argc, char **argv) {
         fprintf(stderr, "raypack bench: %s\n", err);
         goto done;
     }
+    /* the other scheduler, for comparison */
+    stream_desc other = o.sd;
+    other.wavefront = !o.sd.wavefront;
+    stream_stats st_other;
+    if (!stream_render(l.rs, l.g, &other, px, NULL, &st_other, err, sizeof err)) {
+        fprintf(stderr, "raypack bench: %s\n", err);
+        goto done;
+    }
     /* the eye rays again, one at a time through the grid and the BVH: same hits, and the ratio */
     for (size_t i = 0; i < n; i++) {
         hits[i].ray.tfar = INFINITY;
@@ -289,6 +300,12 @@ int cli_stream_bench(int argc, char **argv) {
     printf("scene    %s: %zu triangles, %dx%d eye rays\n", o.scene, l.data.triangle_count, l.w, l.h);
     print_grid(l.g);
     print_stats(&st);
+    printf("%s passes total %llu = traversal %llu + intersection %llu + other %llu, SIMD efficiency %.3f; "
+           "%.1f ms (%s %.1f ms)\n",
+           other.wavefront ? "wavefront" : "multipass", (unsigned long long)st_other.passes,
+           (unsigned long long)st_other.traversal_passes, (unsigned long long)st_other.intersection_passes,
+           (unsigned long long)st_other.other_passes, st_other.simd_efficiency, st_other.ms,
+           o.sd.wavefront ? "wavefront" : "multipass", st.ms);
     printf("primary  one thread, single rays: grid %.2f Mrays/s, BVH (rp_intersect1) %.2f Mrays/s, "
            "grid/BVH time %.2fx; %zu of %zu hits differ\n",
            mg, mb, mg > 0.0 ? mb / mg : 0.0, differ, n);

@@ -41,12 +41,13 @@ typedef struct ray_stream {
     uint8_t *state;
     uint32_t *voxels, *tests;
     uint32_t *active;      /* rays traversing or intersecting, compacted after each pass */
+    uint32_t *queue;       /* wavefront: the intersect queue, then the traverse queue (2 per ray) */
     size_t active_count;
 } ray_stream;
 
 static void stream_free(ray_stream *s) {
     free(s->ray), free(s->walk), free(s->hit), free(s->cursor), free(s->end), free(s->mailbox);
-    free(s->state), free(s->voxels), free(s->tests), free(s->active);
+    free(s->state), free(s->voxels), free(s->tests), free(s->active), free(s->queue);
     memset(s, 0, sizeof *s);
 }
 
@@ -64,7 +65,8 @@ static bool stream_alloc(ray_stream *s, size_t n, bool any) {
     s->voxels = calloc(m, sizeof(uint32_t));
     s->tests = calloc(m, sizeof(uint32_t));
     s->active = malloc(m * sizeof(uint32_t));
-    if (!s->ray || !s->walk || !s->hit || !s->cursor || !s->end || !s->mailbox || !s->state || !s->voxels ||
+    s->queue = malloc(2 * m * sizeof(uint32_t));
+    if (!s->queue || !s->ray || !s->walk || !s->hit || !s->cursor || !s->end || !s->mailbox || !s->state || !s->voxels ||
         !s->tests || !s->active) {
         stream_free(s);
         return false;
@@ -123,11 +125,46 @@ static void kernel_intersect(const grid *g, ray_stream *s, uint32_t i) {
     s->state[i] = grid_walk_exit(g, w) < end ? RAY_TRAVERSING : RAY_SHADING;
 }
 
-/* The multipass loop: the oracle picks the pass, the pass runs its kernel on the rays in its state. */
-static void run_passes(const grid *g, ray_stream *s, float oracle, stream_stats *st) {
+/* The wavefront loop (Laine, Karras, Aila 2013): every iteration compacts the active rays into one
+ * queue per kernel and runs both kernels, each over its own queue only, so every ray of a pass
+ * does work (SIMD efficiency 1 by construction; the cost moves into the compaction). */
+static void run_wavefront(const grid *g, ray_stream *s, stream_stats *st) {
+    uint32_t *qi = s->queue, *qt = s->queue + (s->count ? s->count : 1);
+    for (;;) {
+        size_t ni = 0, nt = 0;
+        for (size_t k = 0; k < s->active_count; k++) {
+            uint32_t i = s->active[k];
+            if (s->state[i] == RAY_INTERSECTING) qi[ni++] = i;
+            else qt[nt++] = i;
+        }
+        if (ni + nt == 0) break;
+        if (ni) {
+            for (size_t k = 0; k < ni; k++) kernel_intersect(g, s, qi[k]);
+            st->intersection_passes++, st->work += ni, st->slots += ni;
+        }
+        if (nt) {
+            for (size_t k = 0; k < nt; k++) kernel_traverse(g, s, qt[k]);
+            st->traversal_passes++, st->work += nt, st->slots += nt;
+        }
+        size_t kept = 0;
+        for (size_t k = 0; k < s->active_count; k++) {
+            uint32_t i = s->active[k];
+            if (s->state[i] == RAY_TRAVERSING || s->state[i] == RAY_INTERSECTING) s->active[kept++] = i;
+        }
+        s->active_count = kept;
+    }
+}
+
+/* The multipass loop: the oracle picks the pass, the pass runs its kernel on the rays in its state
+ * (the others wait, as fragments killed by the stencil do). */
+static void run_passes(const grid *g, ray_stream *s, float oracle, bool wavefront, stream_stats *st) {
     kernel_setup(g, s);
     st->other_passes++;
     for (;;) {
+        if (wavefront) {
+            run_wavefront(g, s, st);
+            break;
+        }
         size_t n_trav = 0, n_isect = 0;
         for (size_t k = 0; k < s->active_count; k++) {
             uint8_t q = s->state[s->active[k]];
@@ -201,7 +238,7 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
     for (size_t i = 0; i < n; i++)
         camera_ray(&rc, (float)(i % (size_t)d.width) + 0.5f, (float)(i / (size_t)d.width) + 0.5f, &eye.ray[i]);
     st.other_passes++;
-    run_passes(g, &eye, d.oracle, &st);
+    run_passes(g, &eye, d.oracle, d.wavefront, &st);
     st.eye_rays = n;
 
     /* Kernel: shading (one pass); with shadows it emits the shadow stream */
@@ -254,7 +291,7 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
     }
     st.other_passes++;
     if (shadows) {
-        run_passes(g, &shadow, d.oracle, &st);
+        run_passes(g, &shadow, d.oracle, d.wavefront, &st);
         for (size_t i = 0; i < n; i++) {
             bool traced = shadow.ray[i].tfar >= 0.0f;
             if (!traced) continue;

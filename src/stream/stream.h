@@ -32,6 +32,8 @@ typedef struct stream_desc {
     stream_shading shading;
     float oracle;               /* intersect once this fraction of active rays needs it; 0: 0.2;
                                  * 1e-9 or less: the naive oracle (intersect if any ray needs to) */
+    bool wavefront;             /* the wavefront scheduler instead: per-kernel queues compacted
+                                 * between passes, both kernels every iteration (oracle unused) */
 } stream_desc;
 
 stream_desc stream_desc_defaults(const stream_desc *desc);
@@ -44,7 +46,7 @@ typedef struct stream_stats {
     uint64_t voxels, tests, shades; /* sums over rays: voxels visited, triangles tested, shading evaluations */
     uint32_t max_voxels, max_tests; /* the most of any ray */
     uint64_t work;               /* ray-passes that did work in traversal and intersection passes */
-    uint64_t slots;              /* rays of the stream summed over those passes */
+    uint64_t slots;              /* rays of the stream (wavefront: of the pass's queue) summed over those passes */
     double simd_efficiency;      /* work / slots: the mean fraction of a pass's rays doing work */
     uint64_t eye_hits, shadow_blocked;
     double ms;

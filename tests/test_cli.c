@@ -84,7 +84,7 @@ int main(void) {
     EXPECT("render --eye 1,2", 2, "--eye expects three numbers");
     EXPECT("render --integrator path", 2, "--integrator expects eyelight or whitted");
     EXPECT("render --aov colour", 2, "--aov expects depth, normal, primid or albedo");
-    EXPECT("render --traversal fast", 2, "--traversal expects auto, masked, ranged, partition, span, single or simd");
+    EXPECT("render --traversal fast", 2, "--traversal expects auto, masked, ranged, partition, span, single, simd or mlrt");
     EXPECT("render --packet 12", 2, "--packet expects 4, 8, 16 or 32");
     EXPECT("render --packet 64", 2, "--packet expects 4, 8, 16 or 32");
     EXPECT("render --frustum yes", 2, "--frustum expects on or off");

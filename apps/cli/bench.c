@@ -1416,6 +1416,7 @@ static int bench_core(bench_ctx *ctx) {
 
 int cli_bench(int argc, char **argv) {
     if (argc > 1 && strcmp(argv[1], "--render") == 0) return cli_bench_render(argc - 1, argv + 1);
+    if (cli_stream_wanted(argc, argv, "--stream", NULL)) return cli_stream_bench(argc, argv);
     bench_ctx ctx;
     memset(&ctx, 0, sizeof ctx);
     int rc = parse_args(argc, argv, &ctx.opts);

@@ -22,6 +22,11 @@ int cli_info(int argc, char **argv);
 /* Benchmarks (apps/cli/bench*.c). */
 int cli_bench(int argc, char **argv);
 
+/* The stream engine (apps/cli/stream_cli.c): render --engine stream, bench --stream. */
+int cli_stream_render(int argc, char **argv);
+int cli_stream_bench(int argc, char **argv);
+/* True when argv holds flag (followed by value, unless value is NULL). */
+bool cli_stream_wanted(int argc, char **argv, const char *flag, const char *value);
 /* Monotonic wall clock in milliseconds. */
 double cli_now_ms(void);
 /* Parses an integer flag value in [lo, hi]; prints "raypack CMD: FLAG expects ..." and returns false

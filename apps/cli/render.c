@@ -42,6 +42,7 @@ static void render_usage(FILE *out) {
             "                         occlusion) [whitted]. direct, path and ir are physically\n"
             "                         based: radiance in the scene's units, lit only by the scene's\n"
             "                         emitters (MTL Ke; Ka > 1), point lights and --env\n"
+            "  --engine stream        the stream tracer over a uniform grid (see --engine stream --help)\n"
             "  --max-depth N          Whitted reflection/refraction depth; path: bounces, 0..64 [5]\n"
             "  --env FILE.hdr         lat-long environment (+y up) for direct, path and ir\n"
             "  --env-scale R,G,B      multiplies --env; without --env, a constant environment\n"
@@ -516,6 +517,7 @@ static void json_work(FILE *f, const rp_render_stats *rs) {
 }
 
 int cli_render(int argc, char **argv) {
+    if (cli_stream_wanted(argc, argv, "--engine", NULL)) return cli_stream_render(argc, argv);
     for (int i = 1; i < argc; i++)
         if (strcmp(argv[i], "--mpi") == 0) {
 #ifdef RP_HAVE_MPI

@@ -1,0 +1,70 @@
+/* The streaming ray tracer of Purcell, Buck, Mark and Hanrahan 2002 on the CPU: a stream of rays
+ * with per-ray state (traversing, intersecting, shading, done) in structure-of-arrays form, run
+ * through the paper's kernels (eye-ray generation, traversal setup, traversal step, intersection,
+ * shading) over the uniform grid (accel/grid), one kernel per pass, by the multipass scheduler:
+ * an oracle runs an intersection pass once 20% of the active rays need one (sec. 4.2), else a
+ * traversal pass. A traversal pass steps every traversing ray by one voxel, an intersection pass
+ * tests every intersecting ray against one triangle of its voxel, as the paper's fragment programs
+ * do, so the pass counts and per-ray statistics are the paper's (table 2, fig. 6).
+ *
+ * Passes are run on one thread in ray order: every number, image and hit is deterministic. */
+#ifndef RP_STREAM_H
+#define RP_STREAM_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "accel/grid/grid.h"
+#include "raypack.h"
+#include "raypack_render.h"
+
+typedef enum stream_shading {
+    STREAM_SHADE_EYELIGHT = 0, /* ray casting: |cos| between geometric normal and ray, the
+                                * arithmetic of the renderer's eyelight integrator */
+    STREAM_SHADE_SHADOW = 1    /* ray casting + the paper's shadow caster: kd (ambient + lit |cos|)
+                                * for the first point light (or a headlight at the eye) */
+} stream_shading;
+
+typedef struct stream_desc {
+    int width, height;          /* 0: 512 */
+    const rp_camera *camera;    /* NULL: rp_render_scene_default_camera */
+    stream_shading shading;
+    float oracle;               /* intersect once this fraction of active rays needs it; 0: 0.2;
+                                 * 1e-9 or less: the naive oracle (intersect if any ray needs to) */
+    bool wavefront;             /* the wavefront scheduler instead: per-kernel queues compacted
+                                 * between passes, both kernels every iteration (oracle unused) */
+} stream_desc;
+
+stream_desc stream_desc_defaults(const stream_desc *desc);
+
+/* Statistics of one frame (all streams: eye rays, then shadow rays). */
+typedef struct stream_stats {
+    uint64_t rays, eye_rays, shadow_rays;
+    uint64_t passes;             /* = traversal + intersection + other */
+    uint64_t traversal_passes, intersection_passes, other_passes;
+    uint64_t voxels, tests, shades; /* sums over rays: voxels visited, triangles tested, shading evaluations */
+    uint32_t max_voxels, max_tests; /* the most of any ray */
+    uint64_t work;               /* ray-passes that did work in traversal and intersection passes */
+    uint64_t slots;              /* rays of the stream (wavefront: of the pass's queue) summed over those passes */
+    double simd_efficiency;      /* work / slots: the mean fraction of a pass's rays doing work */
+    uint64_t eye_hits, shadow_blocked;
+    double ms;
+} stream_stats;
+
+/* Renders width x height x 3 floats (top row first) of the scene with the stream tracer over g
+ * (built from rs's core scene). hits, if not NULL, receives each eye ray and its hit (pixel order)
+ * as rp_intersect1 would return them. false (with err) on bad arguments or out of memory. */
+bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc, float *pixels, rp_rayhit *hits,
+                   stream_stats *stats, char *err, size_t err_size);
+
+/* Paper's figures for comparison (Purcell et al. 2002, table 2 and fig. 6). */
+typedef struct stream_paper_row {
+    const char *scene;
+    int passes, traversal, intersection, other, max_traversals, max_intersections;
+    double simd_efficiency;
+} stream_paper_row;
+extern const stream_paper_row stream_paper_table2[];
+extern const size_t stream_paper_table2_count;
+
+#endif

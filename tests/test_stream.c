@@ -1,0 +1,150 @@
+// rp-test: labels=core timeout=300
+/* The stream tracer (src/stream) on the shared bunny, Cornell box and conference, from the default
+ * camera and random ones: every eye ray's hit equals rp_intersect1's bit for bit; the eyelight image
+ * equals the packet renderer's --integrator eyelight image value for value; the statistics are
+ * deterministic, their sums hold (passes = traversal + intersection + other), no ray does more
+ * steps or tests than there were passes of that kind, the per-ray work equals the single-ray grid
+ * loop's and does not depend on the oracle (20% rule, naive); shadow shading traces shadow rays. */
+#include <math.h>
+#include <stdint.h>
+
+#include "accel/grid/grid.h"
+#include "raypack.h"
+#include "raypack_io.h"
+#include "raypack_render.h"
+#include "rp_test.h"
+#include "stream/stream.h"
+
+static uint64_t rng_state = 99;
+static float rng_f(void) {
+    rng_state = rng_state * 6364136223846793005ull + 1442695040888963407ull;
+    return (float)(rng_state >> 40) * (1.0f / 16777216.0f);
+}
+
+static bool same_f(float a, float b) { return memcmp(&a, &b, sizeof a) == 0; }
+
+static void check_view(rp_render_scene *rs, const grid *g, const char *name, const rp_camera *cam, int w, int h) {
+    size_t n = (size_t)w * (size_t)h;
+    float *px = malloc(n * 3 * sizeof(float)), *ref = malloc(n * 3 * sizeof(float));
+    rp_rayhit *hits = malloc(n * sizeof(rp_rayhit));
+    char err[256] = "";
+    stream_desc sd = {.width = w, .height = h, .camera = cam};
+    stream_stats st, st2;
+    CHECKF(stream_render(rs, g, &sd, px, hits, &st, err, sizeof err), "%s: %s", name, err);
+    /* hits ray for ray */
+    rp_scene *scene = rp_render_scene_core(rs);
+    size_t bad = 0;
+    grid_work work = {0};
+    for (size_t i = 0; i < n; i++) {
+        rp_rayhit a = hits[i];
+        a.ray.tfar = INFINITY;
+        a.hit = (rp_hit){.geom_id = RP_INVALID_ID, .prim_id = RP_INVALID_ID, .inst_id = RP_INVALID_ID};
+        rp_rayhit b = a;
+        rp_intersect1(scene, &a);
+        grid_intersect1(g, &b, &work);
+        const rp_rayhit *s = &hits[i];
+        bool same = a.hit.geom_id == s->hit.geom_id && a.hit.prim_id == s->hit.prim_id && same_f(a.ray.tfar, s->ray.tfar);
+        if (same && a.hit.geom_id != RP_INVALID_ID)
+            same = same_f(a.hit.u, s->hit.u) && same_f(a.hit.v, s->hit.v) && same_f(a.hit.Ng_x, s->hit.Ng_x) &&
+                   same_f(a.hit.Ng_y, s->hit.Ng_y) && same_f(a.hit.Ng_z, s->hit.Ng_z);
+        bad += !same;
+    }
+    CHECKF(bad == 0, "%s: %zu of %zu stream hits differ from rp_intersect1", name, bad, n);
+    /* the same per-ray work as the single-ray grid loop (same voxels, same mailbox) */
+    CHECKF(work.voxels == st.voxels && work.tests == st.tests, "%s: voxels %llu/%llu tests %llu/%llu", name,
+           (unsigned long long)work.voxels, (unsigned long long)st.voxels, (unsigned long long)work.tests,
+           (unsigned long long)st.tests);
+    /* the packet renderer's eyelight image */
+    rp_render_desc rd = {.width = w, .height = h, .integrator = RP_INTEGRATOR_EYELIGHT, .camera = cam};
+    CHECK(rp_render(rs, &rd, ref, NULL));
+    size_t diff = 0;
+    for (size_t i = 0; i < n * 3; i++) diff += !same_f(px[i], ref[i]);
+    CHECKF(diff == 0, "%s: %zu of %zu values differ from the eyelight integrator's", name, diff, n * 3);
+    /* sums, bounds, determinism */
+    CHECK(st.passes == st.traversal_passes + st.intersection_passes + st.other_passes);
+    CHECK(st.other_passes == 3 && st.rays == n && st.eye_rays == n && st.shades == st.eye_hits);
+    CHECKF(st.max_voxels <= st.traversal_passes + 1 && st.max_tests <= st.intersection_passes,
+           "%s: max %u/%u, passes %llu/%llu", name, st.max_voxels, st.max_tests,
+           (unsigned long long)st.traversal_passes, (unsigned long long)st.intersection_passes);
+    CHECK(st.simd_efficiency > 0.0 && st.simd_efficiency <= 1.0 && st.work <= st.slots);
+    CHECK(stream_render(rs, g, &sd, px, NULL, &st2, err, sizeof err));
+    st2.ms = st.ms;
+    CHECKF(memcmp(&st, &st2, sizeof st) == 0, "%s: statistics differ between two runs", name);
+    /* the naive oracle: other passes, the same work per ray and the same image */
+    stream_desc naive = sd;
+    naive.oracle = 1e-9f;
+    CHECK(stream_render(rs, g, &naive, px, NULL, &st2, err, sizeof err));
+    diff = 0;
+    for (size_t i = 0; i < n * 3; i++) diff += !same_f(px[i], ref[i]);
+    CHECK(diff == 0 && st2.voxels == st.voxels && st2.tests == st.tests && st2.max_voxels == st.max_voxels);
+    CHECK(st2.passes == st2.traversal_passes + st2.intersection_passes + st2.other_passes);
+    printf("%s %dx%d: %.2f voxels, %.2f tests, %.2f shades per ray; passes %llu = %llu + %llu + %llu (naive "
+           "oracle %llu); max %u / %u; SIMD efficiency %.3f\n",
+           name, w, h, (double)st.voxels / (double)n, (double)st.tests / (double)n, (double)st.shades / (double)n,
+           (unsigned long long)st.passes, (unsigned long long)st.traversal_passes,
+           (unsigned long long)st.intersection_passes, (unsigned long long)st.other_passes,
+           (unsigned long long)st2.passes, st.max_voxels, st.max_tests, st.simd_efficiency);
+    /* the wavefront scheduler: the same image and work per ray, every ray of a pass busy */
+    stream_desc wave = sd;
+    wave.wavefront = true;
+    CHECK(stream_render(rs, g, &wave, px, NULL, &st2, err, sizeof err));
+    diff = 0;
+    for (size_t i = 0; i < n * 3; i++) diff += !same_f(px[i], ref[i]);
+    CHECKF(diff == 0 && st2.voxels == st.voxels && st2.tests == st.tests && st2.max_tests == st.max_tests &&
+               st2.passes == st2.traversal_passes + st2.intersection_passes + st2.other_passes &&
+               (st2.slots == 0 || st2.simd_efficiency == 1.0),
+           "%s: wavefront: %zu values differ, efficiency %.3f", name, diff, st2.simd_efficiency);
+    /* shadow shading: a second stream of any-hit rays */
+    sd.shading = STREAM_SHADE_SHADOW;
+    CHECK(stream_render(rs, g, &sd, px, NULL, &st2, err, sizeof err));
+    CHECK(st2.shadow_rays > 0 && st2.rays == n + st2.shadow_rays && st2.other_passes == 5);
+    CHECK(st2.passes == st2.traversal_passes + st2.intersection_passes + st2.other_passes);
+    free(px), free(ref), free(hits);
+}
+
+static void check_file(rp_device *dev, const char *file, int w, int h) {
+    char buf[512], err[512] = "";
+    const char *path = rp_test_scene(file, buf, sizeof buf);
+    CHECKF(path != NULL, "%s", file);
+    if (!path) return;
+    rp_scene_data d;
+    bool ok = rp_scene_data_load(path, &d, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (!ok) return;
+    rp_render_scene *rs = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
+    CHECKF(rs != NULL, "%s: %s", file, err);
+    grid *g = rs ? grid_build_scene(rp_render_scene_core(rs), NULL, err, sizeof err) : NULL;
+    CHECKF(g != NULL, "%s: %s", file, err);
+    if (g) {
+        rp_camera cam = rp_render_scene_default_camera(rs);
+        check_view(rs, g, file, &cam, w, h);
+        /* random cameras: inside and outside the box, random fields of view */
+        for (int k = 0; k < 2; k++) {
+            rp_camera c = cam;
+            for (int a = 0; a < 3; a++) {
+                float lo = g->lo[a], hi = g->hi[a], e = hi - lo;
+                c.pinhole.eye[a] = k == 0 ? lo + e * rng_f() : lo - e + 3.0f * e * rng_f();
+                c.pinhole.look[a] = lo + e * rng_f();
+            }
+            c.pinhole.fov_deg = 20.0f + 100.0f * rng_f();
+            char label[600];
+            snprintf(label, sizeof label, "%s (random camera %d)", file, k);
+            check_view(rs, g, label, &c, w / 2 + 3, h / 2 + 1);
+        }
+    }
+    grid_free(g);
+    rp_render_scene_release(rs);
+    rp_scene_data_free(&d);
+}
+
+int main(void) {
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
+    CHECK(dev != NULL);
+    if (!dev) return RP_TEST_END();
+    bool small = rp_test_sanitized();
+    check_file(dev, "stanford_bunny_bun_zipper.ply.gz", small ? 40 : 96, small ? 30 : 72);
+    check_file(dev, "cornell_box/cornell_box.obj", small ? 32 : 64, small ? 32 : 64);
+    check_file(dev, "conference_geom.obj.gz", small ? 40 : 80, small ? 30 : 60);
+    rp_device_release(dev);
+    return RP_TEST_END();
+}

@@ -8,48 +8,10 @@
 #include <unistd.h>
 
 #include "raypack_io.h"
+#include "cli_run.h"
 #include "rp_test.h"
 
-static char exe[1024];
 static char tmp[1024];
-static char output[16384];
-
-/* Runs `raypack ARGS` with stdout and stderr captured together; returns its exit status. */
-static int run(const char *args) {
-    if (strlen(args) > 8192) return -1;
-    char cmd[1024 + 8192 + 16];
-    snprintf(cmd, sizeof cmd, "'%s' %s 2>&1", exe, args);
-    FILE *p = popen(cmd, "r");
-    if (!p) return -1;
-    size_t n = fread(output, 1, sizeof output - 1, p);
-    output[n] = '\0';
-    int st = pclose(p);
-    return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-}
-
-#define EXPECT(args, status, text)                                                                          \
-    do {                                                                                                    \
-        int rc_ = run(args);                                                                                \
-        CHECKF(rc_ == (status) && strstr(output, (text)) != NULL,                                           \
-               "raypack %s: exit %d (expected %d), output lacks '%s':\n%s", args, rc_, status, text, output); \
-    } while (0)
-
-static bool find_exe(void) {
-    const char *env = getenv("RP_CLI");
-    if (env) {
-        snprintf(exe, sizeof exe, "%s", env);
-    } else {
-        char self[900];
-        ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-        if (n <= 0) return false;
-        self[n] = '\0';
-        char *slash = strrchr(self, '/'); /* build/<preset>/tests/test_cli */
-        if (!slash) return false;
-        *slash = '\0';
-        snprintf(exe, sizeof exe, "%s/../raypack", self);
-    }
-    return access(exe, X_OK) == 0;
-}
 
 int main(void) {
     if (!find_exe()) {

@@ -8,40 +8,9 @@
 #include <unistd.h>
 
 #include "raypack.h"
+#include "cli_run.h"
 #include "rp_test.h"
 
-static char exe[1024];
-static char output[65536];
-
-static int run(const char *args) {
-    char cmd[1024 + 4096 + 16];
-    snprintf(cmd, sizeof cmd, "'%s' %s 2>&1", exe, args);
-    FILE *p = popen(cmd, "r");
-    if (!p) return -1;
-    size_t n = fread(output, 1, sizeof output - 1, p);
-    output[n] = '\0';
-    int st = pclose(p);
-    return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-}
-
-#define EXPECT(args, status, text)                                                                          \
-    do {                                                                                                    \
-        int rc_ = run(args);                                                                                \
-        CHECKF(rc_ == (status) && strstr(output, (text)) != NULL,                                           \
-               "raypack %s: exit %d (expected %d), output lacks '%s':\n%s", args, rc_, status, text, output); \
-    } while (0)
-
-static bool find_exe(void) {
-    char self[900];
-    ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-    if (n <= 0) return false;
-    self[n] = '\0';
-    char *slash = strrchr(self, '/');
-    if (!slash) return false;
-    *slash = '\0';
-    snprintf(exe, sizeof exe, "%s/../raypack", self);
-    return access(exe, X_OK) == 0;
-}
 
 static char *slurp(const char *path, size_t *size) {
     FILE *f = fopen(path, "rb");

@@ -11,49 +11,11 @@
 #include <time.h>
 #include <unistd.h>
 
+#define CLI_RUN_TIMEOUT "20" /* a hang fails instead of blocking CTest */
+#include "cli_run.h"
 #include "rp_test.h"
 
-static char exe[1024];
 static char tmp[1024];
-static char output[16384];
-
-/* Runs `raypack ARGS` (through sh, with a 20 s timeout so a hang fails instead of blocking CTest)
- * with stdout and stderr captured together; returns its exit status, 124 on timeout. */
-static int run_prefixed(const char *prefix, const char *args) {
-    char cmd[16384];
-    snprintf(cmd, sizeof cmd, "%s timeout 20 '%s' %s 2>&1", prefix, exe, args);
-    FILE *p = popen(cmd, "r");
-    if (!p) return -1;
-    size_t n = fread(output, 1, sizeof output - 1, p);
-    output[n] = '\0';
-    int st = pclose(p);
-    return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-}
-
-#define EXPECT_P(prefix, args, status, text)                                                                \
-    do {                                                                                                    \
-        int rc_ = run_prefixed(prefix, args);                                                               \
-        CHECKF(rc_ == (status) && strstr(output, (text)) != NULL,                                           \
-               "raypack %s: exit %d (expected %d), output lacks '%s':\n%s", args, rc_, status, text, output); \
-    } while (0)
-#define EXPECT(args, status, text) EXPECT_P("", args, status, text)
-
-static bool find_exe(void) {
-    const char *env = getenv("RP_CLI");
-    if (env) {
-        snprintf(exe, sizeof exe, "%s", env);
-    } else {
-        char self[900];
-        ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-        if (n <= 0) return false;
-        self[n] = '\0';
-        char *slash = strrchr(self, '/'); /* build/<preset>/tests/test_cli_robust */
-        if (!slash) return false;
-        *slash = '\0';
-        snprintf(exe, sizeof exe, "%s/../raypack", self);
-    }
-    return access(exe, X_OK) == 0;
-}
 
 static bool write_text(const char *path, const char *text) {
     FILE *f = fopen(path, "wb");

@@ -101,9 +101,12 @@ static uint8_t *ppm_decode(const char *data, size_t size, int32_t *w, int32_t *h
 }
 
 /* True unless a JPEG's DHT segment declares a table of more than 256 codes or runs past its
- * segment: stb_image (2022-09) writes such counts past its 257-entry arrays. Walks the markers up to
- * the end, skipping entropy-coded data (progressive files have tables between scans). */
+ * segment (stb_image (2022-09) writes such counts past its 257-entry arrays), or a scan decodes with
+ * a Huffman table no DHT defined before it (stb then reads its never-written table: indices of
+ * 16777346 into a 256-entry array, found by the texture fuzzer). Walks the markers up to the end,
+ * skipping entropy-coded data (progressive files have tables between scans). */
 static bool jpeg_tables_ok(const uint8_t *d, size_t n) {
+    bool defined[2][4] = {{false}}; /* [DC, AC][table id] */
     size_t i = 0; /* stb takes fill bytes (0xFF) before SOI, so the walk starts at 0 */
     while (i + 4 <= n) {
         if (d[i] != 0xFF) {
@@ -127,7 +130,22 @@ static bool jpeg_tables_ok(const uint8_t *d, size_t n) {
                 unsigned total = 0;
                 for (int k = 0; k < 16; k++) total += d[j + 1 + (size_t)k];
                 if (total > 256) return false;
+                unsigned tc = d[j] >> 4, th = d[j] & 15u;
+                if (tc > 1 || th > 3) return false;
+                defined[tc][th] = true;
                 j += 17 + total;
+            }
+        }
+        if (m == 0xDA) { /* SOS: the tables each component's scan decodes with */
+            if (seg >= seg_end) return false;
+            size_t ns = d[seg];
+            if (ns < 1 || ns > 4 || seg + 1 + 2 * ns + 2 > seg_end) return false;
+            unsigned ss = d[seg + 1 + 2 * ns], se = d[seg + 2 + 2 * ns];
+            for (size_t c = 0; c < ns; c++) {
+                unsigned t = d[seg + 2 + 2 * c], td = t >> 4, ta = t & 15u;
+                if (td > 3 || ta > 3) return false;
+                if (ss == 0 && !defined[0][td]) return false; /* DC coefficients */
+                if (se > 0 && !defined[1][ta]) return false;  /* AC coefficients */
             }
         }
         i = i + 2 + len;
@@ -179,7 +197,7 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
         stbi_uc *px = NULL;
         bool png = buf.size >= 8 && memcmp(bytes, "\x89PNG\r\n\x1a\n", 8) == 0;
         if (jpeg && !jpeg_tables_ok(bytes, buf.size)) { /* before stb reads the header too */
-            why = "corrupt JPEG (a Huffman table of more than 256 codes)";
+            why = "corrupt JPEG (a Huffman table of more than 256 codes, or a scan without its table)";
         } else if (png && !png_chunks_ok(bytes, buf.size)) {
             why = "corrupt or truncated PNG (a chunk longer than the file, or an empty first IDAT)";
         } else if (!stbi_info_from_memory(bytes, (int)buf.size, &iw, &ih, &comp)) {

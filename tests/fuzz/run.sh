@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Runs every libFuzzer harness of the fuzz build for FUZZ_SECONDS each (JOBS at a time), from a
+# Runs every libFuzzer harness of the fuzz build for FUZZ_SECONDS each (or FUZZ_RUNS inputs from
+# seed FUZZ_SEED, as CI does: the same inputs every run) (JOBS at a time), from a
 # scratch copy of its seed corpus (so the repository's seeds stay small), after replaying every
 # crash reproducer in tests/fuzz/crashes/NAME. Prints executions per second and in total per parser;
 # exits non-zero if any harness crashed, leaked, hung (-timeout) or went past -rss_limit_mb. A
@@ -22,12 +23,16 @@ run_one() {
         "$BIN/fuzz_$name" -runs=0 "tests/fuzz/crashes/$name"/* >"$OUT/$name.replay.log" 2>&1 ||
             { echo "$name: a past crash reproducer fails again (see $OUT/$name.replay.log)"; return 1; }
     fi
-    "$BIN/fuzz_$name" -max_total_time="$SECONDS_EACH" -timeout=10 -rss_limit_mb=1024 -malloc_limit_mb=512 \
+    # FUZZ_RUNS (CI): a fixed number of inputs from a fixed seed, so the run is the same every time
+    # and CI fails only when the code changes, not when a random search gets lucky; else by time
+    local budget=(-max_total_time="$SECONDS_EACH")
+    [ -n "${FUZZ_RUNS:-}" ] && budget=(-runs="$FUZZ_RUNS" -seed="${FUZZ_SEED:-1}")
+    "$BIN/fuzz_$name" "${budget[@]}" -timeout=10 -rss_limit_mb=1024 -malloc_limit_mb=512 \
         -max_len=16384 -print_final_stats=1 -artifact_prefix="$art" "$work" "tests/fuzz/corpus/$name" \
         >"$OUT/$name.log" 2>&1
 }
 export -f run_one
-export BIN OUT SECONDS_EACH
+export BIN OUT SECONDS_EACH FUZZ_RUNS FUZZ_SEED
 
 status=0
 printf '%s\n' $NAMES | xargs -P "$JOBS" -I{} bash -c 'run_one {}' || status=1

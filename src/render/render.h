@@ -362,6 +362,10 @@ bool whitted_thread_init(const render_frame *f, render_thread *th);
 void whitted_thread_free(const render_frame *f, render_thread *th);
 /* Level `level` of the thread's packet stack, made on first use; NULL when out of memory. */
 whitted_level *whitted_packet_level(const render_frame *f, render_thread *th, int level);
+/* Fills level lv's packet with the primary rays of the n x n block at (bx, by), sample s; rays of
+ * the block outside the tile (x0, y0, tw x tile_h) are made but not live. Returns the live count. */
+uint64_t whitted_primary_rays(const render_frame *f, whitted_level *lv, int bx, int by, int x0, int y0, int tw,
+                              int tile_h, int s);
 /* The query of a packet of that level and ray kind (traversal, frustum, counters, auto's tally). */
 rp_query_n_desc whitted_packet_query(const render_frame *f, render_thread *th, whitted_level *lv, rp_ray_kind kind);
 /* Sets ray q of a packet (tnear 0, no hit yet). */

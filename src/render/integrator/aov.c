@@ -38,19 +38,7 @@ bool eyelight_block(const render_frame *f, render_thread *th, int bx, int by, in
     uint32_t n = (uint32_t)d->packet;
     whitted_level *lv = whitted_packet_level(f, th, 0);
     if (!lv) return false;
-    uint64_t live = 0;
-    for (uint32_t j = 0; j < n; j++)
-        for (uint32_t i = 0; i < n; i++) {
-            uint32_t q = rp_packet_n_index(n, i, j);
-            int x = bx + (int)i, y = by + (int)j;
-            float ox, oy;
-            render_sample_offset(x, y, s, &ox, &oy);
-            rp_ray r;
-            camera_ray(&f->cam, (float)x + ox, (float)y + oy, &r);
-            packet_set_ray(&lv->rh, q, v3_make(r.org_x, r.org_y, r.org_z), v3_make(r.dir_x, r.dir_y, r.dir_z), r.tfar);
-            lv->valid[q] = x < x0 + tw && y < y0 + tile_h ? -1 : 0;
-            live += lv->valid[q] != 0;
-        }
+    uint64_t live = whitted_primary_rays(f, lv, bx, by, x0, y0, tw, tile_h, s);
     lv->rh.valid = lv->valid;
     rp_query_n_desc qd = whitted_packet_query(f, th, lv, RP_RAY_PRIMARY);
     rp_intersect_n(f->s->scene, &qd, &lv->rh);

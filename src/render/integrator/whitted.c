@@ -319,12 +319,10 @@ static bool packet_trace(const render_frame *f, render_thread *th, int level, rp
     return packet_children(f, th, level, RP_RAY_REFLECTION) && packet_children(f, th, level, RP_RAY_REFRACTION);
 }
 
-bool whitted_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
-                         int s) {
-    const rp_render_desc *d = &f->desc;
-    uint32_t n = (uint32_t)d->packet;
-    whitted_level *lv = whitted_packet_level(f, th, 0);
-    if (!lv) return false;
+uint64_t whitted_primary_rays(const render_frame *f, whitted_level *lv, int bx, int by, int x0, int y0, int tw,
+                              int tile_h, int s) {
+    uint32_t n = (uint32_t)f->desc.packet;
+    uint64_t live = 0;
     for (uint32_t j = 0; j < n; j++)
         for (uint32_t i = 0; i < n; i++) {
             uint32_t q = rp_packet_n_index(n, i, j);
@@ -336,8 +334,19 @@ bool whitted_block(const render_frame *f, render_thread *th, int bx, int by, int
             camera_ray(&f->cam, (float)x + ox, (float)y + oy, &r);
             packet_set_ray(&lv->rh, q, v3_make(r.org_x, r.org_y, r.org_z), v3_make(r.dir_x, r.dir_y, r.dir_z), r.tfar);
             lv->valid[q] = x < x0 + tw && y < y0 + tile_h ? -1 : 0;
-            lv->weight[q] = 1.0f;
+            live += lv->valid[q] != 0;
         }
+    return live;
+}
+
+bool whitted_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
+                         int s) {
+    const rp_render_desc *d = &f->desc;
+    uint32_t n = (uint32_t)d->packet;
+    whitted_level *lv = whitted_packet_level(f, th, 0);
+    if (!lv) return false;
+    whitted_primary_rays(f, lv, bx, by, x0, y0, tw, tile_h, s);
+    for (uint32_t q = 0; q < n * n; q++) lv->weight[q] = 1.0f;
     if (!packet_trace(f, th, 0, RP_RAY_PRIMARY)) return false;
     for (uint32_t j = 0; j < n; j++)
         for (uint32_t i = 0; i < n; i++) {

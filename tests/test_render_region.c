@@ -1,6 +1,7 @@
 /* rp_render_desc.region (the MPI renderer's tiles): a region renders exactly the pixels the whole
  * frame has there, whatever its corner, size, the tile size and the packet size, and leaves every
- * pixel outside it untouched; a region outside the image is refused. Random regions and cameras on
+ * pixel outside it untouched (path, direct, AO and instant radiosity too, whose filter reads a margin
+ * around the region); a region outside the image is refused. Random regions and cameras on
  * the Cornell box, BART's kitchen and the built-in room. */
 #include <math.h>
 #include <stdint.h>
@@ -64,6 +65,37 @@ static void check_scene(const char *name, const rp_scene_data *data, int trials)
         CHECKF(wrong == 0 && touched == 0,
                "%s trial %d: region (%d,%d)-(%d,%d), tile %d, packet %d: %d pixels differ, %d outside written", name,
                t, x0, y0, x1, y1, r.tile_size, r.packet, wrong, touched);
+    }
+    /* The physically based integrators (the MPI renderer's other tiles): instant radiosity renders
+     * the region's margin for its discontinuity buffer, whose filter must then match the frame's. */
+    static const rp_integrator_type pbr[] = {RP_INTEGRATOR_PATH, RP_INTEGRATOR_IR, RP_INTEGRATOR_DIRECT,
+                                             RP_INTEGRATOR_AO};
+    for (int t = 0; t < trials; t++) {
+        rp_render_desc d = {.width = W, .height = H, .integrator = pbr[t % 4], .spp = t % 3 == 1 ? 2 : 1,
+                            .ir = {.vpls = 4, .interleave = t % 2 ? 3 : 0, .filter = t % 5 == 4 ? 5 : 0}};
+        CHECK(rp_render(rs, &d, whole, NULL));
+        int x0 = range(0, W - 1), y0 = range(0, H - 1);
+        rp_render_desc r = d;
+        r.region[0] = x0;
+        r.region[1] = y0;
+        r.region[2] = range(x0 + 1, W);
+        r.region[3] = range(y0 + 1, H);
+        r.tile_size = range(1, 40);
+        for (int i = 0; i < W * H * 3; i++) part[i] = -7.0f;
+        CHECK(rp_render(rs, &r, part, NULL));
+        int wrong = 0, touched = 0;
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++)
+                for (int k = 0; k < 3; k++) {
+                    size_t i = ((size_t)y * W + (size_t)x) * 3 + (size_t)k;
+                    bool inside = x >= r.region[0] && x < r.region[2] && y >= r.region[1] && y < r.region[3];
+                    if (inside && memcmp(&part[i], &whole[i], sizeof(float)) != 0) wrong++;
+                    if (!inside && part[i] != -7.0f) touched++;
+                }
+        CHECKF(wrong == 0 && touched == 0,
+               "%s pbr trial %d (integrator %d): region (%d,%d)-(%d,%d), tile %d: %d pixels differ, %d outside written",
+               name, t, (int)d.integrator, r.region[0], r.region[1], r.region[2], r.region[3], r.tile_size, wrong,
+               touched);
     }
     /* Regions that are not inside the image. */
     static const int bad[][4] = {{0, 0, W + 1, H}, {-1, 0, 5, 5}, {5, 5, 5, 9}, {6, 5, 5, 9}, {0, 0, 0, 1}};

@@ -341,6 +341,8 @@ typedef struct render_frame {
     float *pixels;
     uint32_t tiles_x, tiles_y;
     int rx0, ry0, rx1, ry1;    /* the region rendered (desc.region, or the whole image); tiles start at its corner */
+    int ox0, oy0, ox1, oy1;    /* the pixels written: the region, which instant radiosity renders with a
+                                * margin of its filter's radius around it */
     uint32_t tile;             /* tile side in pixels (a multiple of the packet side) */
     bool packets;              /* Whitted in n x n packets */
     rp_traversal traversal[RP_RAY_KIND_COUNT];
@@ -382,6 +384,8 @@ bool pbr_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, 
 void pbr_frame_finish(render_frame *f);
 /* Tile side the integrator wants (a multiple of its packet side), from the desc's tile size. */
 uint32_t pbr_tile_side(const rp_render_desc *d);
+/* Instant radiosity's discontinuity buffer radius in pixels (0: no filter). */
+int ir_filter_radius(const rp_render_desc *d);
 
 /* Eye light and the debug AOVs of a primary hit (integrator/aov.c). */
 v3 eyelight_shade(const rp_rayhit *rh);

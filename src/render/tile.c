@@ -155,14 +155,22 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     if (!whole && !(rg[0] >= 0 && rg[1] >= 0 && rg[0] < rg[2] && rg[1] < rg[3] && rg[2] <= dd.width &&
                     rg[3] <= dd.height))
         return false;
-    /* instant radiosity's discontinuity buffer filters across tiles: whole frames only */
-    if (!whole && dd.integrator == RP_INTEGRATOR_IR) return false;
     render_frame *f = calloc(1, sizeof *f);
     if (!f) return false;
-    f->rx0 = whole ? 0 : rg[0];
-    f->ry0 = whole ? 0 : rg[1];
-    f->rx1 = whole ? dd.width : rg[2];
-    f->ry1 = whole ? dd.height : rg[3];
+    f->ox0 = f->rx0 = whole ? 0 : rg[0];
+    f->oy0 = f->ry0 = whole ? 0 : rg[1];
+    f->ox1 = f->rx1 = whole ? dd.width : rg[2];
+    f->oy1 = f->ry1 = whole ? dd.height : rg[3];
+    if (dd.integrator == RP_INTEGRATOR_IR) {
+        /* The discontinuity buffer averages each pixel with neighbours up to its radius away: a
+         * region renders them too (each pixel's VPL sum depends only on the pixel), then filters
+         * its own pixels, as the whole frame would. */
+        int r = ir_filter_radius(&dd);
+        f->rx0 = f->rx0 - r > 0 ? f->rx0 - r : 0;
+        f->ry0 = f->ry0 - r > 0 ? f->ry0 - r : 0;
+        f->rx1 = f->rx1 + r < dd.width ? f->rx1 + r : dd.width;
+        f->ry1 = f->ry1 + r < dd.height ? f->ry1 + r : dd.height;
+    }
     f->s = scene;
     f->desc = dd;
     f->packets = packets;

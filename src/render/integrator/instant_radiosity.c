@@ -349,13 +349,17 @@ typedef struct ir_filter_job {
     render_frame *f;
 } ir_filter_job;
 
-static void ir_filter_row(void *user, uint32_t y, uint32_t thread) {
+int ir_filter_radius(const rp_render_desc *d) { return d->ir.filter == 0 ? 1 : (d->ir.filter > 1 ? d->ir.filter / 2 : 0); }
+
+/* One row of the written pixels (f->ox0..ox1 of row f->oy0 + row); its neighbours were rendered. */
+static void ir_filter_row(void *user, uint32_t row, uint32_t thread) {
     (void)thread;
     render_frame *f = ((ir_filter_job *)user)->f;
     const pbr_frame *pf = f->pbr;
     int W = f->desc.width, H = f->desc.height;
-    int r = f->desc.ir.filter == 0 ? 1 : (f->desc.ir.filter > 1 ? f->desc.ir.filter / 2 : 0);
-    for (int x = 0; x < W; x++) {
+    int r = ir_filter_radius(&f->desc);
+    uint32_t y = (uint32_t)f->oy0 + row;
+    for (int x = f->ox0; x < f->ox1; x++) {
         size_t gi = (size_t)y * (size_t)W + (size_t)x;
         v3 out = pf->emit[gi];
         if (pf->valid[gi]) {
@@ -385,5 +389,5 @@ static void ir_filter_row(void *user, uint32_t y, uint32_t thread) {
 
 void ir_frame_finish(render_frame *f) {
     ir_filter_job job = {.f = f};
-    rp_device_parallel_for(f->s->device, (uint32_t)f->desc.height, ir_filter_row, &job);
+    rp_device_parallel_for(f->s->device, (uint32_t)(f->oy1 - f->oy0), ir_filter_row, &job);
 }

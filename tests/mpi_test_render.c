@@ -1,10 +1,11 @@
 /* `mpirun raypack render --mpi` on localhost (registered as test_mpi_render when MPI is found):
- * the image of -np 1..4, of --mpi-bcast (also when only rank 0 can read the scene), PNG output and
- * a 3-frame orbit are byte-identical to the single-process `raypack render` of the same camera; a
- * client killed mid-frame (by itself, and with kill -9 from outside) or hanging mid-frame loses no
- * frame and changes no pixel; rank 0's death ends the job without a hang; a client that never answers, one of another protocol and one whose
- * scene is broken end the job with a clear message from rank 0 within the time-out. Every mpirun
- * runs under timeout(1), so nothing can hang CI. */
+ * the image of -np 1..4 (Whitted, path tracing, instant radiosity; direct and AO with -np 3), of
+ * --mpi-bcast (also when only rank 0 can read the scene), PNG output and a 3-frame orbit are
+ * byte-identical to the single-process `raypack render` of the same camera; a client killed
+ * mid-frame (by itself, and with kill -9 from outside at two moments) or hanging mid-frame loses no
+ * frame and changes no pixel; rank 0's death ends the job without a hang; a client that never
+ * answers, one of another protocol and one whose scene is broken end the job with a clear message
+ * from rank 0 within the time-out. Every mpirun runs under timeout(1), so nothing can hang CI. */
 #include <signal.h>
 #include <stdbool.h>
 #include <sys/stat.h>
@@ -88,6 +89,42 @@ static void check_frames(const char *prefix, int frames, const char *what) {
     }
 }
 
+/* A -np 3 orbit of frames, where the client `rank` is killed with SIGKILL from outside when rank 0
+ * prints a line starting with `trigger`: the job still writes every frame, each identical. */
+static void outside_kill(const char *trigger, int rank, int frames, const char *prefix) {
+    char got[1200], args[8192], pidline[64], name[64];
+    snprintf(name, sizeof name, "%s.pfm", prefix);
+    file_in_tmp(got, sizeof got, name);
+    snprintf(args, sizeof args,
+             "timeout -k 5 90 '%s' --oversubscribe --enable-recovery -np 3 '%s' render '%s' --mpi %s --frames %d "
+             "--orbit 60 -o '%s' --mpi-timeout 2 2>&1",
+             mpirun, exe, kitchen, SIZE, frames, got);
+    snprintf(pidline, sizeof pidline, "client   rank %d: pid %%d", rank);
+    FILE *p = popen(args, "r");
+    CHECK(p != NULL);
+    if (!p) return;
+    size_t len = 0;
+    char line[4096];
+    int killed = 0, pid = 0;
+    while (fgets(line, sizeof line, p)) {
+        int v;
+        if (!pid && sscanf(line, pidline, &v) == 1 && v > 1) pid = v;
+        if (!killed && pid && strncmp(line, trigger, strlen(trigger)) == 0) killed = kill(pid, SIGKILL) == 0;
+        size_t n = strlen(line);
+        if (len + n < sizeof output) {
+            memcpy(output + len, line, n);
+            len += n;
+        }
+    }
+    output[len] = '\0';
+    int st = pclose(p);
+    char lost[64];
+    snprintf(lost, sizeof lost, "rank %d (pid", rank);
+    CHECKF(killed && WIFEXITED(st) && WEXITSTATUS(st) == 0 && strstr(output, lost),
+           "kill -9 from outside at '%s': killed %d, status %d:\n%s", trigger, killed, st, output);
+    check_frames(prefix, frames, "orbit with a client killed from outside");
+}
+
 int main(void) {
     const char *env = getenv("RP_CLI");
     if (env) snprintf(exe, sizeof exe, "%s", env);
@@ -131,6 +168,26 @@ int main(void) {
         CHECKF(rc == 0 && same_file(ref, got), "-np %d: exit %d, image %s:\n%s", np, rc,
                same_file(ref, got) ? "identical" : "differs", output);
         if (np > 1) CHECKF(strstr(output, "share    frame 0: rank 1"), "-np %d reports no shares:\n%s", np, output);
+    }
+    /* The physically based integrators: path and instant radiosity for -np 1..4 (IR's tiles read a
+     * margin for its filter), direct and AO with -np 3, each against its single process. */
+    static const char *const pbr[][2] = {{"path", "--spp 2"}, {"ir", "--ir-vpls 8"}, {"direct", ""}, {"ao", "--spp 2"}};
+    for (int i = 0; i < 4; i++) {
+        char pref[1200], name[64];
+        snprintf(name, sizeof name, "ref_%s.pfm", pbr[i][0]);
+        file_in_tmp(pref, sizeof pref, name);
+        snprintf(args, sizeof args, "'%s' render '%s' --width 200 --height 150 --integrator %s %s -o '%s' --quiet", exe,
+                 kitchen, pbr[i][0], pbr[i][1], pref);
+        CHECK(run(args) == 0);
+        for (int np = i < 2 ? 1 : 3; np <= (i < 2 ? 4 : 3); np++) {
+            snprintf(name, sizeof name, "%s_np%d.pfm", pbr[i][0], np);
+            file_in_tmp(got, sizeof got, name);
+            snprintf(args, sizeof args, "'%s' --mpi %s --integrator %s %s -o '%s'", kitchen, SIZE, pbr[i][0], pbr[i][1],
+                     got);
+            int rc = run_mpi("", np, args);
+            CHECKF(rc == 0 && same_file(pref, got), "--integrator %s -np %d: exit %d, image %s:\n%s", pbr[i][0], np, rc,
+                   same_file(pref, got) ? "identical" : "differs", output);
+        }
     }
     file_in_tmp(got, sizeof got, "np3.png");
     snprintf(args, sizeof args, "'%s' --mpi %s -o '%s' --mpi-tile 48", kitchen, SIZE, got);
@@ -191,40 +248,11 @@ int main(void) {
     CHECKF(rc == 0 && same_file(ref, got) && strstr(output, "rank 1 (pid") && elapsed_s < 40.0,
            "hanging client: exit %d after %.1f s:\n%s", rc, elapsed_s, output);
 
-    /* kill -9 from outside, as soon as rank 0 has named its clients, during the orbit. Known defect:
-     * a kill that lands while the client's message is in flight can leave rank 0 inside Open MPI's
-     * transport ("Read -1, expected N, errno = 3"), so the frame is lost; seen in 1 of 2 CI runs.
-     * Until the transport is ours (clients as separate jobs, or sockets), this case runs only when
-     * RAYPACK_MPI_TEST_OUTSIDE_KILL is set; the self-kill above, which holds tiles but no message in
-     * flight, always runs. */
-    const bool outside_kill = getenv("RAYPACK_MPI_TEST_OUTSIDE_KILL") != NULL;
-    if (!outside_kill) printf("kill -9 from outside: skipped (known defect; RAYPACK_MPI_TEST_OUTSIDE_KILL=1 runs it)\n");
-    file_in_tmp(got, sizeof got, "orbitk.pfm");
-    snprintf(args, sizeof args,
-             "timeout -k 5 90 '%s' --oversubscribe --enable-recovery -np 3 '%s' render '%s' --mpi %s --frames 3 "
-             "--orbit 60 -o '%s' --mpi-timeout 2 2>&1",
-             mpirun, exe, kitchen, SIZE, got);
-    FILE *p = outside_kill ? popen(args, "r") : NULL;
-    CHECK(p != NULL || !outside_kill);
-    if (p) {
-        size_t len = 0;
-        char line[4096];
-        int killed = 0;
-        while (fgets(line, sizeof line, p)) {
-            int pid;
-            if (!killed && sscanf(line, "client   rank 2: pid %d", &pid) == 1 && pid > 1) killed = kill(pid, SIGKILL) == 0;
-            size_t n = strlen(line);
-            if (len + n < sizeof output) {
-                memcpy(output + len, line, n);
-                len += n;
-            }
-        }
-        output[len] = '\0';
-        int st = pclose(p);
-        CHECKF(killed && WIFEXITED(st) && WEXITSTATUS(st) == 0 && strstr(output, "rank 2 (pid"),
-               "kill -9 from outside: killed %d, status %d:\n%s", killed, st, output);
-        check_frames("orbitk", 3, "orbit with a client killed");
-    }
+    /* kill -9 from outside: as soon as rank 0 has named its clients (frame 0 starting), and after
+     * frame 1 of a sequence (tiles in flight both ways). Rank 0 sees the connection close and hands
+     * the tiles on; every frame equals the single process. */
+    outside_kill("client   rank 2:", 2, 3, "orbitk");
+    outside_kill("frame    1:", 1, 4, "orbitk1");
 
     /* Rank 0 dies mid-frame: the job ends (under --enable-recovery the clients give up after 4
      * time-outs of silence), nothing hangs. */

@@ -3,6 +3,7 @@
 #include <errno.h>
 #include <math.h>
 #include <mpi.h>
+#include <poll.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -14,31 +15,65 @@
 #include "cli.h"
 #include "mpi_render.h"
 
+/* Sends the queued frames; false (with a message) when rank 0 is gone or silent. */
+static bool send_all(mpir_conn *c, int rank, double idle_s, const char *what) {
+    int rc = mpir_conn_send_idle(c, idle_s);
+    if (rc > 0) return true;
+    if (rc < 0) fprintf(stderr, "raypack render: rank %d lost rank 0 sending %s (%s); giving up\n", rank, what, c->err);
+    else fprintf(stderr, "raypack render: rank %d could not send %s to rank 0 within %.1f s; giving up\n", rank, what, idle_s);
+    return false;
+}
+
 int mpir_client_run(const mpir_options *o, int rank, bool *no_finalize) {
     double idle_s = 4.0 * o->timeout_s; /* silence from rank 0 after which a client gives up */
     if (mpir_test_hook("STALL", rank)) {
         for (;;) mpir_sleep_us(1000000); /* a client that never answers: rank 0 must time out */
     }
+    /* Rank 0's address, the one MPI message; then everything goes over our connection. */
+    rendezvous_msg rv;
+    memset(&rv, 0, sizeof rv);
+    MPI_Request req;
+    char err[256];
+    if (MPI_Irecv(&rv, (int)sizeof rv, MPI_BYTE, 0, TAG_RENDEZVOUS, MPI_COMM_WORLD, &req) != MPI_SUCCESS ||
+        !mpir_wait_until(&req, mpir_now_s() + idle_s)) {
+        fprintf(stderr, "raypack render: rank %d heard nothing from rank 0 for %.1f s; giving up\n", rank, idle_s);
+        return CLI_EXIT_FAILURE;
+    }
+    rv.host[sizeof rv.host - 1] = '\0';
+    int fd = rv.magic == MPIR_MAGIC ? mpir_connect(&rv, mpir_now_s() + idle_s, err, sizeof err) : -1;
+    if (fd < 0) {
+        fprintf(stderr, "raypack render: rank %d: %s; giving up\n", rank,
+                rv.magic == MPIR_MAGIC ? err : "rank 0 is not a raypack render server");
+        return CLI_EXIT_FAILURE;
+    }
+    mpir_conn conn;
+    mpir_conn_init(&conn, fd, (uint64_t)1 << 40);
     hello_msg hello = {.magic = MPIR_MAGIC, .protocol = MPIR_PROTOCOL,
                        .version = {RP_VERSION_MAJOR, RP_VERSION_MINOR, RP_VERSION_PATCH},
-                       .desc_bytes = (uint32_t)sizeof(rp_render_desc), .pid = (int32_t)getpid()};
+                       .desc_bytes = (uint32_t)sizeof(rp_render_desc), .pid = (int32_t)getpid(), .rank = rank,
+                       .token = rv.token};
     long proto = mpir_test_hook("PROTOCOL", rank);
     if (proto) hello.protocol = (uint32_t)proto;
     gethostname(hello.host, sizeof hello.host - 1);
-    if (!mpir_send_until(&hello, sizeof hello, 0, TAG_HELLO, MPI_Wtime() + idle_s)) return CLI_EXIT_FAILURE;
-
+    int status = CLI_EXIT_FAILURE;
     mpir_scene rs;
     memset(&rs, 0, sizeof rs);
+    mpir_tile_worker w = {0};
+    if (!mpir_conn_queue(&conn, MSG_HELLO, &hello, sizeof hello, NULL, 0) || !send_all(&conn, rank, idle_s, "its hello"))
+        goto done;
+
     ready_msg ready = {.ok = 1};
     bool loaded;
     if (o->bcast) {
-        uint64_t size = 0;
-        uint8_t *buf = NULL;
-        loaded = mpir_bcast_until(&size, sizeof size, MPI_Wtime() + idle_s) && (buf = malloc(size ? size : 1)) &&
-                 mpir_bcast_until(buf, size, MPI_Wtime() + idle_s);
-        if (!loaded) snprintf(ready.err, sizeof ready.err, "did not receive the broadcast scene");
-        else loaded = wire_scene_unpack(buf, size, &rs.data, ready.err, sizeof ready.err);
-        free(buf);
+        int rc = mpir_conn_recv_idle(&conn, idle_s);
+        loaded = rc > 0 && conn.hdr.type == MSG_SCENE;
+        if (!loaded) snprintf(ready.err, sizeof ready.err, "did not receive the broadcast scene (%s)", rc < 0 ? conn.err : "time-out");
+        else loaded = wire_scene_unpack(conn.in, (size_t)conn.hdr.bytes, &rs.data, ready.err, sizeof ready.err);
+        mpir_conn_next(&conn);
+        /* the scene's buffer is not needed again: a frame of tiles is small */
+        free(conn.in);
+        conn.in = NULL;
+        conn.in_cap = 0;
     } else {
         loaded = mpir_scene_load(&rs, o->scene, ready.err, sizeof ready.err);
     }
@@ -48,29 +83,33 @@ int mpir_client_run(const mpir_options *o, int rank, bool *no_finalize) {
     } else {
         ready.ok = 0;
     }
-    int status = CLI_EXIT_FAILURE;
-    mpir_tile_worker w = {0};
-    if (!mpir_send_until(&ready, sizeof ready, 0, TAG_READY, MPI_Wtime() + idle_s)) goto done;
+    if (!mpir_conn_queue(&conn, MSG_READY, &ready, sizeof ready, NULL, 0) || !send_all(&conn, rank, idle_s, "its ready"))
+        goto done;
     if (!ready.ok) {
         /* Rank 0 reports the error and aborts the job; leaving first could let mpirun kill rank 0
-         * before it has said why. */
-        double until = MPI_Wtime() + idle_s;
-        while (MPI_Wtime() < until) mpir_sleep_us(10000);
+         * before it has said why. Wait for it to close the connection. */
+        mpir_conn_recv_idle(&conn, idle_s);
         goto done;
     }
 
     long kill_after = mpir_test_hook("KILL", rank), hang_after = mpir_test_hook("HANG", rank);
     long rendered = 0;
-    uint8_t *msg = NULL;
-    size_t msg_cap = 0;
+    int frame = -1;
     for (;;) {
-        MPI_Status st;
-        if (!mpir_probe_until(0, TAG_JOB, MPI_Wtime() + idle_s, &st)) {
-            fprintf(stderr, "raypack render: rank %d heard nothing from rank 0 for %.1f s; giving up\n", rank, idle_s);
+        int rc = mpir_conn_recv_idle(&conn, idle_s);
+        if (rc <= 0) {
+            if (rc < 0) fprintf(stderr, "raypack render: rank %d lost rank 0 (%s); giving up\n", rank, conn.err);
+            else fprintf(stderr, "raypack render: rank %d heard nothing from rank 0 for %.1f s; giving up\n", rank, idle_s);
             break;
         }
         job_msg job;
-        MPI_Recv(&job, (int)sizeof job, MPI_BYTE, 0, TAG_JOB, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+        if (conn.hdr.type != MSG_JOB || conn.hdr.bytes != sizeof job) {
+            fprintf(stderr, "raypack render: rank %d got a frame of type %u from rank 0, not a job; giving up\n", rank,
+                    conn.hdr.type);
+            break;
+        }
+        memcpy(&job, conn.in, sizeof job);
+        mpir_conn_next(&conn);
         if (job.kind == JOB_QUIT) {
             status = CLI_EXIT_OK;
             *no_finalize = job.tile != 0;
@@ -81,13 +120,16 @@ int mpir_client_run(const mpir_options *o, int rank, bool *no_finalize) {
         /* ... or hang there, alive but silent */
         if (hang_after && rendered == hang_after)
             for (;;) mpir_sleep_us(1000000);
-        rp_render_stats rst;
         result_msg res = {.kind = RESULT_TILE, .frame = job.frame, .tile = job.tile,
                           .region = {job.region[0], job.region[1], job.region[2], job.region[3]}};
         size_t payload = 0;
         const void *body = NULL;
-        char err[256];
-        if (mpir_tile_render(&w, rs.scene, &job, &rst)) {
+        char jerr[512] = "";
+        rp_render_stats rst;
+        if ((int)job.frame != frame && !mpir_scene_frame(&rs, o, (int)job.frame, jerr, sizeof jerr)) {
+            /* reported below as the tile's error */
+        } else if (mpir_tile_render(&w, rs.scene, &job, &rst)) {
+            frame = (int)job.frame;
             double c0 = mpir_cpu_ms();
             res.floats = (uint64_t)(job.region[2] - job.region[0]) * (uint64_t)(job.region[3] - job.region[1]) * 3;
             payload = wire_tile_pack(w.codec, w.tile, (size_t)res.floats, job.raw_planes, w.scratch, w.packed,
@@ -99,30 +141,21 @@ int mpir_client_run(const mpir_options *o, int rank, bool *no_finalize) {
             res.pack_cpu_ms = mpir_cpu_ms() - c0;
             for (int k = 0; k < RP_RAY_KIND_COUNT; k++) res.rays += rst.rays[k];
         }
+        char text[700];
         if (!payload) {
             res.kind = RESULT_ERROR;
-            snprintf(err, sizeof err, "rank %d could not render tile %u of frame %u (out of memory?)", rank, job.tile,
-                     job.frame);
-            body = err;
-            payload = strlen(err) + 1;
+            snprintf(text, sizeof text, "rank %d could not render tile %u of frame %u: %s", rank, job.tile, job.frame,
+                     jerr[0] ? jerr : "out of memory?");
+            body = text;
+            payload = strlen(text);
         }
-        if (sizeof res + payload > msg_cap) {
-            free(msg);
-            msg_cap = sizeof res + payload;
-            msg = malloc(msg_cap);
-            if (!msg) break;
-        }
-        memcpy(msg, &res, sizeof res);
-        memcpy(msg + sizeof res, body, payload);
-        if (!mpir_send_until(msg, sizeof res + payload, 0, TAG_RESULT, MPI_Wtime() + idle_s)) {
-            fprintf(stderr, "raypack render: rank %d could not send a tile to rank 0 within %.1f s; giving up\n", rank,
-                    idle_s);
+        if (!mpir_conn_queue(&conn, MSG_RESULT, &res, sizeof res, body, payload) ||
+            !send_all(&conn, rank, idle_s, "a tile"))
             break;
-        }
         rendered++;
     }
-    free(msg);
 done:
+    mpir_conn_close(&conn);
     mpir_tile_worker_free(&w);
     mpir_scene_free(&rs);
     return status;

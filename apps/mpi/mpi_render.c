@@ -6,20 +6,23 @@
  * same rp_image_write as `raypack render`. A pixel's value depends only on the pixel (the
  * deterministic sampler), so the image is bit-identical to the single process for any N.
  *
- * Faults, with Open MPI 4.1 (no ULFM): the server never blocks on a client. Every send and receive
- * is non-blocking and polled against a deadline, so a client that dies (kill -9) or stops answering
- * is noticed when it has sent nothing for --mpi-timeout seconds while it holds tiles; those tiles
- * go back to the queue and the others render them, and the frame comes out the same. That needs the
- * job to outlive the client: `mpirun --enable-recovery` (without it mpirun kills every rank when one
- * dies). MPI_Finalize would then wait for the dead rank forever, so after the last frame is written a
- * server that lost a client tells the others to leave without it, kills a lost client that still
- * runs on its host (one that hangs), and leaves too; a lost client on another host is stopped with
- * MPI_Abort(0) (exit status 0). The server's own death ends the job (mpirun kills the clients;
- * under --enable-recovery each client gives up after hearing nothing for 4 timeouts).
+ * Transport and faults, with Open MPI 4.1 (no ULFM): MPI starts the ranks and carries one message,
+ * rank 0's TCP address and a token, to each client; scenes (--mpi-bcast), tiles and results travel
+ * on one TCP connection per client (mpi_net.c), polled by rank 0, so no MPI call can leave rank 0
+ * waiting on a dead peer inside Open MPI's transport. A client that dies (kill -9, a crash, its node
+ * going down) closes its connection: rank 0 sees the end of stream at once (a node that vanishes
+ * without a reset: silence) and hands its tiles to the others; one that stops answering is dropped
+ * when it has sent nothing for --mpi-timeout seconds while it holds tiles. The frame comes out the
+ * same. That needs the job to outlive the client: `mpirun --enable-recovery` (without it mpirun kills
+ * every rank when one dies). MPI_Finalize would then wait for the dead rank forever, so after the
+ * last frame a server that lost a client tells the others to leave without it, kills a lost client
+ * that still runs on its host (one that hangs), and leaves too; a lost client on another host is
+ * stopped with MPI_Abort(0) (exit status 0). The server's own death ends the job: each client sees
+ * its connection close and gives up at once.
  *
  * Files: mpi_render.c (options, the entry, MPI start and end), mpi_server.c (rank 0), mpi_client.c
- * (the others), mpi_tile.c (a rank's scene, one tile's rendering), mpi_net.c (transfers with
- * deadlines), wire.c (the byte formats of scenes and tiles). */
+ * (the others), mpi_tile.c (a rank's scene, one tile's rendering), mpi_net.c (the TCP transport),
+ * wire.c (the byte formats of scenes and tiles). */
 #include <errno.h>
 #include <math.h>
 #include <mpi.h>
@@ -40,11 +43,14 @@ static void mpi_usage(FILE *out) {
             "\n"
             "Distributed rendering: rank 0 hands image tiles to ranks 1..N-1 (each with the device's\n"
             "threads) and writes the image, identical to `raypack render`'s. With -np 1 rank 0 renders\n"
-            "alone. Use `mpirun --enable-recovery` so that a client's death does not end the job: its\n"
-            "tiles are then rendered by the others.\n"
+            "alone. MPI only starts the ranks and tells the clients rank 0's TCP address; tiles travel on\n"
+            "one TCP connection per client. Use `mpirun --enable-recovery` so that a client's death does\n"
+            "not end the job: its tiles are then rendered by the others.\n"
             "\n"
             "options (as in `raypack render`): -o FILE (.png .ppm .pfm), --width W, --height H, --spp N,\n"
-            "  --integrator eyelight|whitted, --max-depth N, --packet N, --threads N, --isa NAME,\n"
+            "  --integrator whitted|eyelight|direct|path|ir|ao, --max-depth N, --packet N, --threads N,\n"
+            "  --isa NAME, --ir-interleave N, --ir-vpls N, --ir-filter N, --ir-clamp C, --ao-distance D,\n"
+            "  --env FILE.hdr (read by every rank), --env-scale R,G,B, --exposure EV, --tonemap srgb|aces,\n"
             "  --eye X,Y,Z --look X,Y,Z --up X,Y,Z --fov DEG, --quiet\n"
             "MPI options:\n"
             "  --mpi                  distributed rendering (needed)\n"
@@ -107,12 +113,56 @@ static int parse_mpi_options(int argc, char **argv, mpir_options *o, bool *help)
             }
         } else if (strcmp(a, "--integrator") == 0) {
             VALUE();
-            if (strcmp(v, "eyelight") == 0) o->integrator = RP_INTEGRATOR_EYELIGHT;
-            else if (strcmp(v, "whitted") == 0) o->integrator = RP_INTEGRATOR_WHITTED;
-            else {
-                fprintf(stderr, "raypack render: --integrator expects eyelight or whitted, got '%s'\n", v);
+            static const struct { const char *name; rp_integrator_type type; } integrators[] = {
+                {"whitted", RP_INTEGRATOR_WHITTED}, {"eyelight", RP_INTEGRATOR_EYELIGHT},
+                {"direct", RP_INTEGRATOR_DIRECT},   {"path", RP_INTEGRATOR_PATH},
+                {"ir", RP_INTEGRATOR_IR},           {"ao", RP_INTEGRATOR_AO}};
+            size_t k = 0, n = sizeof integrators / sizeof integrators[0];
+            while (k < n && strcmp(v, integrators[k].name) != 0) k++;
+            if (k == n) {
+                fprintf(stderr, "raypack render: --integrator expects whitted, eyelight, direct, path, ir or ao, got "
+                                "'%s'\n", v);
                 return CLI_EXIT_USAGE;
             }
+            o->integrator = integrators[k].type;
+        } else if (strcmp(a, "--ir-interleave") == 0) {
+            VALUE();
+            if (!cli_parse_int(MPIR_CMD, a, v, 1, 16, &o->ir_interleave)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--ir-vpls") == 0) {
+            VALUE();
+            if (!cli_parse_int(MPIR_CMD, a, v, 1, 4096, &o->ir_vpls)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--ir-filter") == 0) {
+            VALUE();
+            if (!cli_parse_int(MPIR_CMD, a, v, 1, 31, &o->ir_filter)) return CLI_EXIT_USAGE;
+            if (o->ir_filter % 2 == 0) {
+                fprintf(stderr, "raypack render: --ir-filter expects an odd side, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
+        } else if (strcmp(a, "--ir-clamp") == 0) {
+            VALUE();
+            if (!cli_parse_float(MPIR_CMD, a, v, -1.0, 1.0, false, &o->ir_clamp)) return CLI_EXIT_USAGE;
+            if (o->ir_clamp == 0.0f) o->ir_clamp = -1.0f;
+        } else if (strcmp(a, "--ao-distance") == 0) {
+            VALUE();
+            if (!cli_parse_float(MPIR_CMD, a, v, 0.0, 1e30, true, &o->ao_distance)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--exposure") == 0) {
+            VALUE();
+            if (!cli_parse_float(MPIR_CMD, a, v, -64.0, 64.0, false, &o->exposure)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--tonemap") == 0) {
+            VALUE();
+            if (strcmp(v, "srgb") == 0) o->tonemap = RP_TONEMAP_SRGB;
+            else if (strcmp(v, "aces") == 0) o->tonemap = RP_TONEMAP_ACES;
+            else {
+                fprintf(stderr, "raypack render: --tonemap expects srgb or aces, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
+        } else if (strcmp(a, "--env") == 0) {
+            VALUE();
+            o->env = v;
+        } else if (strcmp(a, "--env-scale") == 0) {
+            VALUE();
+            if (!cli_parse_vec3(MPIR_CMD, a, v, o->env_scale)) return CLI_EXIT_USAGE;
+            o->has_env_scale = true;
         } else if (strcmp(a, "--eye") == 0 || strcmp(a, "--look") == 0 || strcmp(a, "--up") == 0 ||
                    strcmp(a, "--to-eye") == 0 || strcmp(a, "--to-look") == 0) {
             VALUE();

@@ -16,21 +16,38 @@
 
 #define MPIR_CMD "render"
 
-/* Bumped whenever a message below changes; the handshake refuses a client of another protocol. */
-#define MPIR_PROTOCOL 1u
+/* Bumped whenever a message below changes; the handshake refuses a client of another protocol.
+ * Protocol 1 sent every message over MPI; 2 uses MPI only to tell clients rank 0's address. */
+#define MPIR_PROTOCOL 2u
 #define MPIR_MAGIC 0x4d435052u /* "RPCM" */
 
-enum { TAG_HELLO = 1, TAG_READY = 2, TAG_JOB = 3, TAG_RESULT = 4 };
+/* TAG_RENDEZVOUS is the one MPI message (rank 0 to each client); the others are frames on the
+ * client's TCP connection (mpi_net.c). TAG_HELLO is kept so that rank 0 can name a protocol-1 client. */
+enum { TAG_HELLO = 1, TAG_RENDEZVOUS = 5 };
+enum { MSG_HELLO = 1, MSG_READY = 2, MSG_JOB = 3, MSG_RESULT = 4, MSG_SCENE = 5 };
 enum { JOB_TILE = 1, JOB_QUIT = 2 };
 enum { RESULT_TILE = 1, RESULT_ERROR = 2 };
 
-/* Client -> server, first thing after MPI_Init: who it is and which build it runs. */
+/* Rank 0 -> each client over MPI: where to connect, and the token that proves a connection is
+ * one of this job's ranks. The first two fields keep their place in every protocol. */
+typedef struct rendezvous_msg {
+    uint32_t magic, protocol;
+    uint64_t token;
+    uint32_t port;           /* TCP, host order */
+    uint32_t addr_count;
+    uint32_t addr[8];        /* rank 0's IPv4 addresses, network order, loopback last */
+    char host[64];
+} rendezvous_msg;
+
+/* Client -> server, the first frame on its connection: who it is and which build it runs. */
 typedef struct hello_msg {
     uint32_t magic, protocol;
     int32_t version[3];
     uint32_t desc_bytes; /* sizeof(rp_render_desc): the same struct layout on both ends */
     int32_t pid;
     char host[64];
+    int32_t rank;
+    uint64_t token;
 } hello_msg;
 
 /* Client -> server once it has the scene and its BVH, or why it has not. */
@@ -49,6 +66,8 @@ typedef struct job_msg {
     int32_t width, height, spp, integrator, max_depth, packet;
     int32_t raw_planes; /* wire_tile_pack: 3 (--mpi-compress fast) or 2 (small) */
     rp_camera camera;
+    rp_ir_desc ir;
+    float ao_distance;
 } job_msg;
 
 /* Client -> server: a finished tile (followed by its compressed floats) or an error (its text). */
@@ -74,6 +93,13 @@ typedef struct mpir_options {
     int tile;
     float timeout_s;
     int raw_planes;
+    /* as in `raypack render` */
+    int ir_interleave, ir_vpls, ir_filter;
+    float ir_clamp, ao_distance, exposure;
+    rp_tonemap tonemap;
+    const char *env;       /* every rank reads it, with --mpi-bcast too */
+    bool has_env_scale;
+    float env_scale[3];
 } mpir_options;
 
 /* ---- a rank's scene and tiles (mpi_tile.c) ---- */
@@ -99,6 +125,11 @@ typedef struct mpir_tile_worker {
 bool mpir_scene_load(mpir_scene *s, const char *path, char *err, size_t err_size);
 /* Makes the device and commits the render scene of s->data; false with a message in err. */
 bool mpir_scene_build(mpir_scene *s, const mpir_options *o, int threads, char *err, size_t err_size);
+/* The per-frame scene update, on rank 0 and every client before frame `frame` of a sequence renders
+ * (a client calls it when its first tile of that frame comes). This is where an animated scene
+ * (BART's animation, evaluated by the loader and scene layer) moves to the frame's time and is
+ * refitted; nothing moves yet, so it returns true. False with a message in err. */
+bool mpir_scene_frame(mpir_scene *s, const mpir_options *o, int frame, char *err, size_t err_size);
 /* Frees what load and build made. */
 void mpir_scene_free(mpir_scene *s);
 /* Renders job's region and leaves its floats in w->tile, row by row; false when out of memory. */
@@ -106,8 +137,31 @@ bool mpir_tile_render(mpir_tile_worker *w, rp_render_scene *scene, const job_msg
 /* Frees a worker's buffers. */
 void mpir_tile_worker_free(mpir_tile_worker *w);
 
-/* ---- transfers with deadlines (mpi_net.c) ---- */
+/* ---- our transport (mpi_net.c): frames on TCP, polled against deadlines ---- */
 
+/* A frame's header on the stream: its type, a check word, the payload's size. */
+typedef struct net_header {
+    uint32_t type, check;
+    uint64_t bytes;
+} net_header;
+
+/* One end of a connection, non-blocking: frames queued for sending, and the frame being read. */
+typedef struct mpir_conn {
+    int fd;
+    uint8_t *out;               /* queued bytes, sent from out_off */
+    size_t out_len, out_off, out_cap;
+    const uint8_t *borrowed;    /* then these (the scene, not copied per client), borrowed_len bytes */
+    size_t borrowed_len, borrowed_off;
+    net_header hdr;             /* the frame being read */
+    size_t hdr_have, in_have, in_cap;
+    uint8_t *in;                /* its payload */
+    uint64_t max_in;            /* largest payload accepted */
+    uint64_t bytes_in, bytes_out;
+    char err[160];              /* why the connection ended */
+} mpir_conn;
+
+/* Seconds on a monotonic clock. */
+double mpir_now_s(void);
 /* CPU time of this process, all threads, in milliseconds. */
 double mpir_cpu_ms(void);
 /* Sleeps us microseconds. */
@@ -115,14 +169,36 @@ void mpir_sleep_us(long us);
 /* Test hooks for the fault tests (tests/mpi_test_render.c): RAYPACK_MPI_TEST_<NAME>=RANK[:VALUE]
  * makes that rank misbehave; returns VALUE (1 without one) for this rank, else 0. */
 long mpir_test_hook(const char *name, int rank);
-/* Waits for a non-blocking request until deadline (MPI_Wtime seconds); false on time-out. */
+/* Waits for a non-blocking MPI request until deadline (mpir_now_s); false on time-out. */
 bool mpir_wait_until(MPI_Request *req, double deadline);
-/* A send that gives up at deadline instead of hanging on a dead peer. */
-bool mpir_send_until(const void *buf, size_t bytes, int dest, int tag, double deadline);
-/* Waits for a message with tag from src (or MPI_ANY_SOURCE) until deadline; fills status. */
-bool mpir_probe_until(int src, int tag, double deadline, MPI_Status *st);
-/* A broadcast from rank 0 that times out (chunks below INT_MAX bytes, each an MPI_Ibcast). */
-bool mpir_bcast_until(void *buf, size_t bytes, double deadline);
+
+/* A listening TCP socket on every interface (port 0: any) and the rendezvous that names it; -1
+ * with a message in err. */
+int mpir_listen(rendezvous_msg *rv, char *err, size_t err_size);
+/* Connects to rank 0 at one of rv's addresses by deadline; -1 with a message in err. */
+int mpir_connect(const rendezvous_msg *rv, double deadline, char *err, size_t err_size);
+/* Takes a connected socket (non-blocking from now on); max_in bounds the payloads it accepts. */
+void mpir_conn_init(mpir_conn *c, int fd, uint64_t max_in);
+/* Closes the socket and frees the buffers. */
+void mpir_conn_close(mpir_conn *c);
+/* Queues a frame of type with payload a then b (either may be empty); false when out of memory. */
+bool mpir_conn_queue(mpir_conn *c, uint32_t type, const void *a, size_t an, const void *b, size_t bn);
+/* Queues a frame whose payload stays the caller's until it is sent; nothing can be queued behind
+ * it until then. */
+bool mpir_conn_queue_borrowed(mpir_conn *c, uint32_t type, const void *buf, size_t n);
+/* True while queued bytes wait to be sent. */
+bool mpir_conn_pending(const mpir_conn *c);
+/* Sends what the socket takes now: 1 all sent, 0 some left, -1 the connection failed (c->err). */
+int mpir_conn_flush(mpir_conn *c);
+/* Reads what has arrived: 1 a frame is complete (c->hdr.type, c->in, c->hdr.bytes; call
+ * mpir_conn_next before reading on), 0 not yet, -1 closed or broken (c->err). */
+int mpir_conn_read(mpir_conn *c);
+/* Forgets the complete frame, to read the next. */
+void mpir_conn_next(mpir_conn *c);
+/* Blocking forms for the clients: send everything queued, or wait for one frame, giving up when
+ * nothing moved for idle_s seconds (0 on time-out, -1 when the connection failed). */
+int mpir_conn_send_idle(mpir_conn *c, double idle_s);
+int mpir_conn_recv_idle(mpir_conn *c, double idle_s);
 
 /* ---- the two roles ---- */
 

@@ -3,7 +3,9 @@
 #include <errno.h>
 #include <math.h>
 #include <mpi.h>
+#include <poll.h>
 #include <signal.h>
+#include <sys/socket.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -18,14 +20,15 @@ enum { QUEUE_AHEAD = 2 }; /* tiles a client holds: the one it renders and the on
 
 typedef struct client {
     int rank;
-    bool alive;
+    bool alive;                    /* connected and ready, not lost */
+    bool ready;
     hello_msg hello;
     int threads;
+    mpir_conn conn;                /* its TCP connection (mpi_net.c); fd -1 once closed */
     int held;                      /* tiles issued and not returned */
     uint32_t held_tile[QUEUE_AHEAD];
-    job_msg job[QUEUE_AHEAD];      /* send buffers, one per slot, live until their request completes */
-    MPI_Request req[QUEUE_AHEAD];
-    double last_heard;             /* MPI_Wtime of its last result, or of an issue to it while it held none */
+    double last_heard;             /* mpir_now_s of its last result, or of an issue to it while it held none */
+    uint64_t in0, out0;            /* conn's byte counts when this frame began */
     uint64_t tiles, bytes_in, bytes_out;          /* this frame */
     uint64_t tiles_all, bytes_in_all, bytes_out_all;
     double tile_ms_all;
@@ -43,8 +46,7 @@ typedef struct server {
     int *owner;          /* the client that rendered each tile last frame (affinity), -1 none */
     int done;
     float *image;
-    uint8_t *msg, *scratch;
-    size_t msg_cap;
+    uint8_t *scratch;
     wire_codec *codec;
     float *tile_px;      /* one tile's floats, decompressed */
     bool lost_client;
@@ -77,28 +79,20 @@ static int pick_tile(const server *s, int c) {
     return -1;
 }
 
+static void drop_client(server *s, int c, const char *why);
+
 static bool issue(server *s, int c, int t) {
     client *cl = &s->clients[c];
-    int slot = -1;
-    for (int k = 0; k < QUEUE_AHEAD && slot < 0; k++) {
-        if (cl->req[k] != MPI_REQUEST_NULL) {
-            int done = 0;
-            MPI_Test(&cl->req[k], &done, MPI_STATUS_IGNORE);
-            if (!done) continue;
-        }
-        slot = k;
-    }
-    if (slot < 0) return false; /* both sends still in flight: try again later */
-    job_msg *j = &cl->job[slot];
-    *j = s->proto_job;
-    j->kind = JOB_TILE;
-    j->tile = (uint32_t)t;
-    tile_region(s, t, j->region);
-    if (MPI_Isend(j, (int)sizeof *j, MPI_BYTE, cl->rank, TAG_JOB, MPI_COMM_WORLD, &cl->req[slot]) != MPI_SUCCESS)
+    job_msg j = s->proto_job;
+    j.kind = JOB_TILE;
+    j.tile = (uint32_t)t;
+    tile_region(s, t, j.region);
+    if (!mpir_conn_queue(&cl->conn, MSG_JOB, &j, sizeof j, NULL, 0)) {
+        drop_client(s, c, "could not be sent a tile (out of memory)");
         return false;
-    if (cl->held == 0) cl->last_heard = MPI_Wtime();
+    }
+    if (cl->held == 0) cl->last_heard = mpir_now_s();
     cl->held_tile[cl->held++] = (uint32_t)t;
-    cl->bytes_out += sizeof *j;
     s->state[t] = TILE_ISSUED;
     return true;
 }
@@ -111,35 +105,24 @@ static void drop_client(server *s, int c, const char *why) {
         if (s->state[cl->held_tile[k]] == TILE_ISSUED) s->state[cl->held_tile[k]] = TILE_PENDING;
     cl->held = 0;
     cl->alive = false;
+    mpir_conn_close(&cl->conn);
     s->lost_client = true;
 }
 
-/* Receives one result; false on a fatal error (message printed). */
-static bool take_result(server *s, const MPI_Status *st) {
-    int bytes = 0;
-    MPI_Get_count(st, MPI_BYTE, &bytes);
-    if ((size_t)bytes > s->msg_cap) {
-        free(s->msg);
-        s->msg_cap = (size_t)bytes;
-        s->msg = malloc(s->msg_cap);
-        if (!s->msg) {
-            fprintf(stderr, "raypack render: out of memory for a %d-byte tile\n", bytes);
-            return false;
-        }
-    }
-    MPI_Recv(s->msg, bytes, MPI_BYTE, st->MPI_SOURCE, TAG_RESULT, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-    int c = st->MPI_SOURCE - 1;
+/* Takes client c's complete frame (a result); false on a fatal error (message printed). */
+static bool take_result(server *s, int c) {
     client *cl = &s->clients[c];
-    if (!cl->alive) return true; /* dropped as silent: its tiles were re-issued, this one is a duplicate */
+    const uint8_t *msg = cl->conn.in;
+    size_t bytes = (size_t)cl->conn.hdr.bytes;
     result_msg res;
-    if ((size_t)bytes < sizeof res) {
-        fprintf(stderr, "raypack render: rank %d sent a %d-byte result\n", cl->rank, bytes);
+    if (cl->conn.hdr.type != MSG_RESULT || bytes < sizeof res) {
+        fprintf(stderr, "raypack render: rank %d sent a %zu-byte frame of type %u, not a result\n", cl->rank, bytes,
+                cl->conn.hdr.type);
         return false;
     }
-    memcpy(&res, s->msg, sizeof res);
+    memcpy(&res, msg, sizeof res);
     if (res.kind == RESULT_ERROR) {
-        s->msg[bytes - 1] = '\0';
-        fprintf(stderr, "raypack render: %s\n", (const char *)s->msg + sizeof res);
+        fprintf(stderr, "raypack render: %.*s\n", (int)(bytes - sizeof res), (const char *)msg + sizeof res);
         return false;
     }
     int k = 0;
@@ -150,14 +133,13 @@ static bool take_result(server *s, const MPI_Status *st) {
         return false;
     }
     cl->held_tile[k] = cl->held_tile[--cl->held];
-    cl->last_heard = MPI_Wtime();
-    cl->bytes_in += (uint64_t)bytes;
+    cl->last_heard = mpir_now_s();
     int32_t r[4];
     tile_region(s, (int)res.tile, r);
     size_t n = (size_t)(r[2] - r[0]) * (size_t)(r[3] - r[1]) * 3;
     float *px = s->tile_px;
     bool ok = res.floats == n &&
-              wire_tile_unpack(s->codec, s->msg + sizeof res, (size_t)bytes - sizeof res, n, s->scratch, px);
+              wire_tile_unpack(s->codec, msg + sizeof res, bytes - sizeof res, n, s->scratch, px);
     if (!ok) {
         fprintf(stderr, "raypack render: rank %d sent a corrupt tile %u of frame %u\n", cl->rank, res.tile, res.frame);
         return false;
@@ -178,41 +160,76 @@ static bool take_result(server *s, const MPI_Status *st) {
     return true;
 }
 
+/* Reads what client c sent; false on a fatal error. A closed or broken connection drops it. */
+static bool serve_input(server *s, int c) {
+    client *cl = &s->clients[c];
+    for (;;) {
+        int rc = mpir_conn_read(&cl->conn);
+        if (rc == 0) return true;
+        if (rc < 0) {
+            char why[200];
+            snprintf(why, sizeof why, "was lost (%s)", cl->conn.err);
+            drop_client(s, c, why);
+            return true;
+        }
+        bool ok = take_result(s, c);
+        mpir_conn_next(&cl->conn);
+        if (!ok) return false;
+        if (s->kill_after && s->done >= s->kill_after) raise(SIGKILL); /* the test of rank 0's death */
+    }
+}
+
 /* Renders one frame with the clients; false on a fatal error. */
 static bool server_frame(server *s) {
     int nc = s->size - 1;
     memset(s->state, TILE_PENDING, (size_t)s->tiles);
     s->done = 0;
-    for (int c = 0; c < nc; c++) s->clients[c].tiles = s->clients[c].bytes_in = s->clients[c].bytes_out = 0;
+    for (int c = 0; c < nc; c++) {
+        client *cl = &s->clients[c];
+        cl->tiles = 0;
+        cl->in0 = cl->conn.bytes_in;
+        cl->out0 = cl->conn.bytes_out;
+    }
     double timeout = s->o->timeout_s;
-    long idle_us = 10;
-    while (s->done < s->tiles) {
-        int alive = 0;
+    struct pollfd *pfd = malloc((size_t)nc * sizeof *pfd);
+    int *who = malloc((size_t)nc * sizeof *who);
+    bool ok = pfd && who;
+    if (!ok) fprintf(stderr, "raypack render: out of memory\n");
+    while (ok && s->done < s->tiles) {
+        int n = 0;
+        double now = mpir_now_s(), next = now + 1.0;
         for (int c = 0; c < nc; c++) {
             client *cl = &s->clients[c];
-            if (!cl->alive) continue;
-            alive++;
-            while (cl->held < QUEUE_AHEAD) {
+            while (cl->alive && cl->held < QUEUE_AHEAD) {
                 int t = pick_tile(s, c);
                 if (t < 0 || !issue(s, c, t)) break;
             }
+            if (cl->alive && mpir_conn_flush(&cl->conn) < 0) {
+                char why[200];
+                snprintf(why, sizeof why, "was lost (%s)", cl->conn.err);
+                drop_client(s, c, why);
+            }
+            if (!cl->alive) continue;
+            if (cl->held > 0 && cl->last_heard + timeout < next) next = cl->last_heard + timeout;
+            pfd[n] = (struct pollfd){.fd = cl->conn.fd, .events = (short)(POLLIN | (mpir_conn_pending(&cl->conn) ? POLLOUT : 0))};
+            who[n++] = c;
         }
-        if (!alive) {
+        if (!n) {
             fprintf(stderr, "raypack render: no render client is left (all were lost); frame %u is incomplete\n",
                     s->proto_job.frame);
-            return false;
+            ok = false;
+            break;
         }
-        MPI_Status st;
-        int flag = 0;
-        MPI_Iprobe(MPI_ANY_SOURCE, TAG_RESULT, MPI_COMM_WORLD, &flag, &st);
-        if (flag) {
-            idle_us = 10;
-            if (!take_result(s, &st)) return false;
-            if (s->kill_after && s->done >= s->kill_after) raise(SIGKILL); /* the test of rank 0's death */
-            continue;
+        /* Rank 0 sleeps in poll until a client sends or a time-out is due: it takes no core from
+         * clients on its node, and a result is taken the moment it arrives. */
+        double wait = next - now;
+        int ms = wait <= 0.0 ? 0 : (int)(wait * 1e3) + 1;
+        if (poll(pfd, (nfds_t)n, ms) > 0) {
+            for (int i = 0; ok && i < n; i++)
+                if (pfd[i].revents) ok = serve_input(s, who[i]);
         }
-        double now = MPI_Wtime();
-        for (int c = 0; c < nc; c++) {
+        now = mpir_now_s();
+        for (int c = 0; ok && c < nc; c++) {
             client *cl = &s->clients[c];
             if (cl->alive && cl->held > 0 && now - cl->last_heard > timeout) {
                 char why[128];
@@ -220,12 +237,15 @@ static bool server_frame(server *s) {
                 drop_client(s, c, why);
             }
         }
-        /* Back off while nothing comes: every client holds a tile queued ahead, so a late look costs
-         * no client time, and a busy rank 0 would take cores from clients on the same node. */
-        mpir_sleep_us(idle_us);
-        if (idle_us < 1000) idle_us *= 2;
     }
-    return true;
+    for (int c = 0; c < nc; c++) {
+        client *cl = &s->clients[c];
+        cl->bytes_in = cl->conn.bytes_in - cl->in0;
+        cl->bytes_out = cl->conn.bytes_out - cl->out0;
+    }
+    free(pfd);
+    free(who);
+    return ok;
 }
 
 /* "out.png" -> "out_0007.png" for frame 7 of a sequence. */
@@ -267,85 +287,216 @@ static rp_camera frame_camera(const mpir_options *o, const rp_camera *base, int 
     return c;
 }
 
-/* Handshake: every client's hello, then (with --mpi-bcast) the scene, then every client's ready. */
+/* The client of a hello, if it is one of this job's ranks of this build; NULL after printing why
+ * not. *fatal: the client is ours but cannot take part (another build), which ends the job. */
+static client *check_hello(server *s, const mpir_conn *pc, const rendezvous_msg *rv, bool *fatal) {
+    hello_msg h;
+    if (pc->hdr.type != MSG_HELLO || pc->hdr.bytes < 2 * sizeof(uint32_t)) return NULL;
+    memset(&h, 0, sizeof h);
+    memcpy(&h, pc->in, pc->hdr.bytes < sizeof h ? (size_t)pc->hdr.bytes : sizeof h);
+    h.host[sizeof h.host - 1] = '\0';
+    if (h.magic != MPIR_MAGIC) return NULL;
+    if (pc->hdr.bytes == sizeof h && h.token != rv->token) return NULL; /* another job's client */
+    if (pc->hdr.bytes != sizeof h || h.protocol != MPIR_PROTOCOL || h.version[0] != RP_VERSION_MAJOR ||
+        h.version[1] != RP_VERSION_MINOR || h.version[2] != RP_VERSION_PATCH || h.desc_bytes != sizeof(rp_render_desc)) {
+        fprintf(stderr, "raypack render: rank %d (pid %d on %s) runs raypack %d.%d.%d with MPI protocol %u "
+                        "(render desc %u bytes); rank 0 runs %d.%d.%d with protocol %u (%zu bytes): run the "
+                        "same build on every rank\n",
+                h.rank, h.pid, h.host, h.version[0], h.version[1], h.version[2], h.protocol, h.desc_bytes,
+                RP_VERSION_MAJOR, RP_VERSION_MINOR, RP_VERSION_PATCH, MPIR_PROTOCOL, sizeof(rp_render_desc));
+        *fatal = true;
+        return NULL;
+    }
+    if (h.rank < 1 || h.rank >= s->size || s->clients[h.rank - 1].conn.fd >= 0) return NULL;
+    client *cl = &s->clients[h.rank - 1];
+    cl->hello = h;
+    return cl;
+}
+
+/* A client of protocol 1 sends its hello over MPI: name it rather than wait for it in vain. */
+static bool old_protocol_client(void) {
+    int flag = 0;
+    MPI_Status st;
+    if (MPI_Iprobe(MPI_ANY_SOURCE, TAG_HELLO, MPI_COMM_WORLD, &flag, &st) != MPI_SUCCESS || !flag) return false;
+    hello_msg h;
+    memset(&h, 0, sizeof h);
+    MPI_Recv(&h, (int)sizeof h, MPI_BYTE, st.MPI_SOURCE, TAG_HELLO, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    h.host[sizeof h.host - 1] = '\0';
+    fprintf(stderr, "raypack render: rank %d (pid %d on %s) runs raypack %d.%d.%d with MPI protocol %u; rank 0 runs "
+                    "%d.%d.%d with protocol %u: run the same build on every rank\n",
+            st.MPI_SOURCE, h.pid, h.host, h.version[0], h.version[1], h.version[2], h.protocol, RP_VERSION_MAJOR,
+            RP_VERSION_MINOR, RP_VERSION_PATCH, MPIR_PROTOCOL);
+    return true;
+}
+
+/* Start-up: rank 0's address to every client over MPI (the only MPI message), their connections
+ * and hellos, then (with --mpi-bcast) the scene over each connection, then every client's ready. */
 static bool server_start(server *s, mpir_scene *rs, double *scene_bytes) {
     int nc = s->size - 1;
-    double deadline = MPI_Wtime() + s->o->timeout_s;
-    for (int c = 0; c < nc; c++) {
-        client *cl = &s->clients[c];
-        MPI_Status st;
-        if (!mpir_probe_until(cl->rank, TAG_HELLO, deadline, &st)) {
-            fprintf(stderr, "raypack render: rank %d did not answer within %.1f s (--mpi-timeout): is it running "
-                            "raypack render --mpi?\n", cl->rank, s->o->timeout_s);
-            return false;
-        }
-        int bytes = 0;
-        MPI_Get_count(&st, MPI_BYTE, &bytes);
-        hello_msg h;
-        memset(&h, 0, sizeof h);
-        MPI_Recv(&h, (int)sizeof h, MPI_BYTE, cl->rank, TAG_HELLO, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-        h.host[sizeof h.host - 1] = '\0';
-        if (bytes != (int)sizeof h || h.magic != MPIR_MAGIC) {
-            fprintf(stderr, "raypack render: rank %d is not a raypack render client (its first message: %d bytes)\n",
-                    cl->rank, bytes);
-            return false;
-        }
-        if (h.protocol != MPIR_PROTOCOL || h.version[0] != RP_VERSION_MAJOR || h.version[1] != RP_VERSION_MINOR ||
-            h.version[2] != RP_VERSION_PATCH || h.desc_bytes != sizeof(rp_render_desc)) {
-            fprintf(stderr, "raypack render: rank %d (pid %d on %s) runs raypack %d.%d.%d with MPI protocol %u "
-                            "(render desc %u bytes); rank 0 runs %d.%d.%d with protocol %u (%zu bytes): run the "
-                            "same build on every rank\n",
-                    cl->rank, h.pid, h.host, h.version[0], h.version[1], h.version[2], h.protocol, h.desc_bytes,
-                    RP_VERSION_MAJOR, RP_VERSION_MINOR, RP_VERSION_PATCH, MPIR_PROTOCOL, sizeof(rp_render_desc));
-            return false;
-        }
-        cl->hello = h;
+    char err[256];
+    rendezvous_msg rv;
+    int lfd = mpir_listen(&rv, err, sizeof err);
+    if (lfd < 0) {
+        fprintf(stderr, "raypack render: %s\n", err);
+        return false;
     }
-    if (s->o->bcast) {
-        uint8_t *buf = NULL;
-        size_t n = 0;
-        if (!wire_scene_pack(&rs->data, &buf, &n)) {
+    MPI_Request *reqs = malloc((size_t)nc * sizeof *reqs);
+    enum { SPARE = 8 };
+    mpir_conn *pend = calloc((size_t)(nc + SPARE), sizeof *pend); /* connections not yet identified */
+    struct pollfd *pfd = malloc((size_t)(2 * nc + SPARE + 1) * sizeof *pfd);
+    bool ok = reqs && pend && pfd;
+    for (int i = 0; ok && i < nc + SPARE; i++) pend[i].fd = -1;
+    for (int c = 0; ok && c < nc; c++)
+        ok = MPI_Isend(&rv, (int)sizeof rv, MPI_BYTE, c + 1, TAG_RENDEZVOUS, MPI_COMM_WORLD, &reqs[c]) == MPI_SUCCESS;
+    double deadline = mpir_now_s() + s->o->timeout_s;
+    int known = 0;
+    while (ok && known < nc) {
+        if (mpir_now_s() > deadline) {
+            for (int c = 0; c < nc; c++)
+                if (s->clients[c].conn.fd < 0) {
+                    fprintf(stderr, "raypack render: rank %d did not answer within %.1f s (--mpi-timeout): is it "
+                                    "running raypack render --mpi?\n", c + 1, s->o->timeout_s);
+                    break;
+                }
+            ok = false;
+            break;
+        }
+        if (old_protocol_client()) {
+            ok = false;
+            break;
+        }
+        int n = 0;
+        pfd[n++] = (struct pollfd){.fd = lfd, .events = POLLIN};
+        for (int i = 0; i < nc + SPARE; i++)
+            if (pend[i].fd >= 0) pfd[n++] = (struct pollfd){.fd = pend[i].fd, .events = POLLIN};
+        poll(pfd, (nfds_t)n, 20);
+        for (;;) {
+            int fd = accept(lfd, NULL, NULL);
+            if (fd < 0) break;
+            int slot = 0;
+            while (slot < nc + SPARE && pend[slot].fd >= 0) slot++;
+            if (slot == nc + SPARE) {
+                close(fd);
+                continue;
+            }
+            mpir_conn_init(&pend[slot], fd, sizeof(hello_msg) + 4096);
+        }
+        for (int i = 0; ok && i < nc + SPARE; i++) {
+            if (pend[i].fd < 0) continue;
+            int rc = mpir_conn_read(&pend[i]);
+            if (rc == 0) continue;
+            bool fatal = false;
+            client *cl = rc > 0 ? check_hello(s, &pend[i], &rv, &fatal) : NULL;
+            if (fatal) ok = false;
+            if (!cl) {
+                if (rc > 0 && !fatal)
+                    fprintf(stderr, "raypack render: warning: a connection that is not one of this job's ranks was closed\n");
+                mpir_conn_close(&pend[i]);
+                continue;
+            }
+            mpir_conn_next(&pend[i]);
+            cl->conn = pend[i];
+            cl->conn.max_in = sizeof(result_msg) + wire_tile_bound((size_t)s->o->tile * (size_t)s->o->tile * 3) + 4096;
+            pend[i].fd = -1;
+            pend[i].in = pend[i].out = NULL;
+            known++;
+        }
+    }
+    for (int i = 0; pend && i < nc + SPARE; i++) mpir_conn_close(&pend[i]);
+    close(lfd);
+    /* every client has its rendezvous (it connected), so these sends are complete */
+    for (int c = 0; ok && c < nc; c++) mpir_wait_until(&reqs[c], mpir_now_s() + s->o->timeout_s);
+    free(reqs);
+    free(pend);
+
+    uint8_t *buf = NULL;
+    size_t bytes = 0;
+    if (ok && s->o->bcast) {
+        if (!wire_scene_pack(&rs->data, &buf, &bytes)) {
             fprintf(stderr, "raypack render: out of memory packing the scene\n");
-            return false;
+            ok = false;
         }
-        uint64_t size = n;
-        bool ok = mpir_bcast_until(&size, sizeof size, MPI_Wtime() + s->o->timeout_s) &&
-                  mpir_bcast_until(buf, n, MPI_Wtime() + s->o->timeout_s + (double)n / 1e8);
-        free(buf);
-        if (!ok) {
-            fprintf(stderr, "raypack render: broadcasting the scene (%zu bytes) did not finish within %.1f s\n", n,
-                    s->o->timeout_s);
-            return false;
-        }
-        *scene_bytes = (double)n;
+        for (int c = 0; ok && c < nc; c++) ok = mpir_conn_queue_borrowed(&s->clients[c].conn, MSG_SCENE, buf, bytes);
+        *scene_bytes = (double)bytes;
     }
-    deadline = MPI_Wtime() + s->o->timeout_s;
-    for (int c = 0; c < nc; c++) {
-        client *cl = &s->clients[c];
-        MPI_Status st;
-        if (!mpir_probe_until(cl->rank, TAG_READY, deadline, &st)) {
-            fprintf(stderr, "raypack render: rank %d (pid %d on %s) did not report its scene ready within %.1f s "
-                            "(--mpi-timeout)\n", cl->rank, cl->hello.pid, cl->hello.host, s->o->timeout_s);
-            return false;
+    /* Ready: the scene is loaded (or received) and built. Nothing moved for a time-out is an error;
+     * a client lost now only leaves the others more to do. */
+    int ready = 0, lost = 0;
+    for (int c = 0; c < nc; c++) s->clients[c].last_heard = mpir_now_s();
+    while (ok && ready + lost < nc) {
+        int n = 0;
+        double now = mpir_now_s();
+        for (int c = 0; c < nc; c++) {
+            client *cl = &s->clients[c];
+            if (cl->ready || cl->conn.fd < 0) continue;
+            uint64_t before = cl->conn.bytes_out;
+            int rc = mpir_conn_flush(&cl->conn);
+            if (cl->conn.bytes_out != before) cl->last_heard = now;
+            if (rc >= 0 && now - cl->last_heard > s->o->timeout_s) {
+                fprintf(stderr, "raypack render: rank %d (pid %d on %s) did not report its scene ready within %.1f s "
+                                "(--mpi-timeout)\n", cl->rank, cl->hello.pid, cl->hello.host, s->o->timeout_s);
+                ok = false;
+                break;
+            }
+            if (rc < 0) {
+                fprintf(stderr, "raypack render: warning: rank %d (pid %d on %s) was lost during start-up (%s)\n",
+                        cl->rank, cl->hello.pid, cl->hello.host, cl->conn.err);
+                mpir_conn_close(&cl->conn);
+                s->lost_client = true;
+                lost++;
+                continue;
+            }
+            pfd[n++] = (struct pollfd){.fd = cl->conn.fd, .events = (short)(POLLIN | (rc == 0 ? POLLOUT : 0))};
         }
-        ready_msg r;
-        MPI_Recv(&r, (int)sizeof r, MPI_BYTE, cl->rank, TAG_READY, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-        r.err[sizeof r.err - 1] = '\0';
-        if (!r.ok) {
-            fprintf(stderr, "raypack render: rank %d (pid %d on %s) has no scene: %s\n", cl->rank, cl->hello.pid,
-                    cl->hello.host, r.err);
-            return false;
+        if (!ok || !n) break;
+        poll(pfd, (nfds_t)n, 20);
+        for (int c = 0; ok && c < nc; c++) {
+            client *cl = &s->clients[c];
+            if (cl->ready || cl->conn.fd < 0) continue;
+            int rc = mpir_conn_read(&cl->conn);
+            if (rc == 0) continue;
+            if (rc < 0) {
+                fprintf(stderr, "raypack render: warning: rank %d (pid %d on %s) was lost during start-up (%s)\n",
+                        cl->rank, cl->hello.pid, cl->hello.host, cl->conn.err);
+                mpir_conn_close(&cl->conn);
+                s->lost_client = true;
+                lost++;
+                continue;
+            }
+            ready_msg r;
+            memset(&r, 0, sizeof r);
+            if (cl->conn.hdr.type != MSG_READY || cl->conn.hdr.bytes != sizeof r) {
+                fprintf(stderr, "raypack render: rank %d sent a frame of type %u where its ready was due\n", cl->rank,
+                        cl->conn.hdr.type);
+                ok = false;
+                break;
+            }
+            memcpy(&r, cl->conn.in, sizeof r);
+            mpir_conn_next(&cl->conn);
+            r.err[sizeof r.err - 1] = '\0';
+            if (!r.ok) {
+                fprintf(stderr, "raypack render: rank %d (pid %d on %s) has no scene: %s\n", cl->rank, cl->hello.pid,
+                        cl->hello.host, r.err);
+                ok = false;
+            } else if (r.triangles != rs->data.triangle_count) {
+                fprintf(stderr, "raypack render: rank %d loaded %llu triangles from %s, rank 0 %zu: not the same scene\n",
+                        cl->rank, (unsigned long long)r.triangles, s->o->scene ? s->o->scene : "(built-in room)",
+                        rs->data.triangle_count);
+                ok = false;
+            } else {
+                cl->threads = r.threads;
+                cl->ready = cl->alive = true;
+                ready++;
+            }
         }
-        if (r.triangles != rs->data.triangle_count) {
-            fprintf(stderr, "raypack render: rank %d loaded %llu triangles from %s, rank 0 %zu: not the same scene\n",
-                    cl->rank, (unsigned long long)r.triangles, s->o->scene ? s->o->scene : "(built-in room)",
-                    rs->data.triangle_count);
-            return false;
-        }
-        cl->threads = r.threads;
-        cl->alive = true;
     }
-    return true;
+    if (ok && ready == 0) {
+        fprintf(stderr, "raypack render: every render client was lost during start-up\n");
+        ok = false;
+    }
+    free(pfd);
+    free(buf); /* every ready client has received it all */
+    return ok;
 }
 
 /* Ends the clients. After a lost client MPI_Finalize would wait for it forever, so the live ones
@@ -360,16 +511,16 @@ static bool quit_clients(server *s) {
     for (int c = 0; c < s->size - 1; c++) {
         client *cl = &s->clients[c];
         if (cl->alive) {
-            mpir_send_until(&q, sizeof q, cl->rank, TAG_JOB, MPI_Wtime() + s->o->timeout_s);
+            if (mpir_conn_queue(&cl->conn, MSG_JOB, &q, sizeof q, NULL, 0)) mpir_conn_send_idle(&cl->conn, s->o->timeout_s);
         } else if (strcmp(cl->hello.host, host) == 0 && cl->hello.pid > 1) {
             kill((pid_t)cl->hello.pid, SIGKILL);
         } else {
             local = false;
         }
+        mpir_conn_close(&cl->conn);
     }
     return local;
 }
-
 
 int mpir_server_run(const mpir_options *o, int size) {
     double t0 = cli_now_ms();
@@ -417,6 +568,10 @@ int mpir_server_run(const mpir_options *o, int size) {
     s.image = malloc((size_t)wd * (size_t)ht * 3 * sizeof(float));
     s.scratch = malloc((size_t)o->tile * (size_t)o->tile * 3 * sizeof(float));
     s.clients = calloc((size_t)(size > 1 ? size - 1 : 1), sizeof *s.clients);
+    for (int c = 0; s.clients && c < size - 1; c++) {
+        s.clients[c].rank = c + 1;
+        s.clients[c].conn.fd = -1;
+    }
     s.codec = wire_codec_new();
     s.tile_px = malloc((size_t)o->tile * (size_t)o->tile * 3 * sizeof(float));
     if (!s.state || !s.owner || !s.image || !s.scratch || !s.clients || !s.codec || !s.tile_px) {
@@ -424,10 +579,6 @@ int mpir_server_run(const mpir_options *o, int size) {
         goto done;
     }
     for (int t = 0; t < s.tiles; t++) s.owner[t] = -1;
-    for (int c = 0; c < size - 1; c++) {
-        s.clients[c].rank = c + 1;
-        for (int k = 0; k < QUEUE_AHEAD; k++) s.clients[c].req[k] = MPI_REQUEST_NULL;
-    }
     double scene_bytes = 0.0;
     if (size > 1 && !server_start(&s, &rs, &scene_bytes)) goto done;
     if (!o->quiet) {
@@ -446,10 +597,16 @@ int mpir_server_run(const mpir_options *o, int size) {
     int frames = o->frames > 0 ? o->frames : 1;
     double total_ms = 0.0;
     for (int f = 0; f < frames; f++) {
+        if (!mpir_scene_frame(&rs, o, f, err, sizeof err)) {
+            fprintf(stderr, "raypack render: frame %d: %s\n", f, err);
+            goto done;
+        }
         rp_camera fc = frame_camera(o, &cam, f);
         s.proto_job = (job_msg){.frame = (uint32_t)f, .width = wd, .height = ht, .spp = o->spp,
                                 .integrator = (int32_t)o->integrator, .packet = o->packet, .camera = fc,
-                                .raw_planes = o->raw_planes,
+                                .raw_planes = o->raw_planes, .ao_distance = o->ao_distance,
+                                .ir = {.interleave = o->ir_interleave, .vpls = o->ir_vpls, .filter = o->ir_filter,
+                                       .clamp = o->ir_clamp},
                                 /* rp_render_desc: 0 is the default depth (5), negative is none */
                                 .max_depth = o->max_depth < 0 ? 0 : (o->max_depth == 0 ? -1 : o->max_depth)};
         double f0 = cli_now_ms(), c0 = mpir_cpu_ms();
@@ -477,6 +634,10 @@ int mpir_server_run(const mpir_options *o, int size) {
         total_ms += frame_ms;
         char path[1100];
         frame_path(o->output, frames, f, path, sizeof path);
+        /* 8-bit files: the exposure and tone map of `raypack render`, after the last tile */
+        const char *dot = strrchr(path, '.');
+        if (dot && (strcasecmp(dot, ".png") == 0 || strcasecmp(dot, ".ppm") == 0))
+            rp_film_tonemap(s.image, (size_t)wd * (size_t)ht, 3, o->exposure, o->tonemap);
         if (!rp_image_write(path, wd, ht, 3, s.image, err, sizeof err)) {
             fprintf(stderr, "raypack render: %s\n", err);
             goto done;
@@ -506,6 +667,7 @@ int mpir_server_run(const mpir_options *o, int size) {
                 printf("\n");
             }
         }
+        fflush(stdout); /* a frame's report as it ends: a supervisor (or the kill test) reads it */
         for (int c = 0; c < size - 1; c++) {
             client *cl = &s.clients[c];
             cl->tiles_all += cl->tiles;
@@ -528,12 +690,12 @@ int mpir_server_run(const mpir_options *o, int size) {
 done:
     fflush(stdout);
     bool all_local = status == CLI_EXIT_OK && size > 1 ? quit_clients(&s) : true;
+    for (int c = 0; s.clients && c < size - 1; c++) mpir_conn_close(&s.clients[c].conn);
     mpir_tile_worker_free(&w);
     free(s.state);
     free(s.owner);
     free(s.image);
     free(s.scratch);
-    free(s.msg);
     free(s.clients);
     free(s.tile_px);
     wire_codec_free(s.codec);

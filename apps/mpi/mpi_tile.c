@@ -29,8 +29,15 @@ bool mpir_scene_build(mpir_scene *rs, const mpir_options *o, int threads, char *
         snprintf(err, err_size, "cannot create the device (--threads %d, --isa)", threads);
         return false;
     }
-    rs->scene = rp_render_scene_new(rs->device, &rs->data, NULL, err, err_size);
+    rp_render_scene_desc sd = {.environment = o->env};
+    if (o->has_env_scale) memcpy(sd.environment_scale, o->env_scale, sizeof o->env_scale);
+    rs->scene = rp_render_scene_new(rs->device, &rs->data, &sd, err, err_size);
     return rs->scene != NULL;
+}
+
+bool mpir_scene_frame(mpir_scene *rs, const mpir_options *o, int frame, char *err, size_t err_size) {
+    (void)rs, (void)o, (void)frame, (void)err, (void)err_size;
+    return true;
 }
 
 bool mpir_scene_load(mpir_scene *rs, const char *path, char *err, size_t err_size) {
@@ -57,7 +64,7 @@ bool mpir_scene_load(mpir_scene *rs, const char *path, char *err, size_t err_siz
 static rp_render_desc job_desc(const job_msg *j) {
     return (rp_render_desc){.width = j->width, .height = j->height, .spp = j->spp,
                             .integrator = (rp_integrator_type)j->integrator, .max_depth = j->max_depth,
-                            .camera = &j->camera, .packet = j->packet,
+                            .camera = &j->camera, .packet = j->packet, .ir = j->ir, .ao_distance = j->ao_distance,
                             .region = {j->region[0], j->region[1], j->region[2], j->region[3]}};
 }
 

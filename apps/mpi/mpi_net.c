@@ -111,35 +111,33 @@ int mpir_connect(const rendezvous_msg *rv, double deadline, char *err, size_t er
     bool same_host = strncmp(host, rv->host, sizeof host) == 0;
     snprintf(err, err_size, "rank 0 (%s) named no address", rv->host);
     uint32_t n = rv->addr_count < 8 ? rv->addr_count : 8;
-    /* On rank 0's host loopback first; elsewhere its other addresses in order. */
-    for (int pass = 0; pass < 2; pass++)
-        for (uint32_t k = 0; k < n; k++) {
-            bool loop = (ntohl(rv->addr[k]) >> 24) == 127;
-            if (loop != (pass == 0 && same_host)) continue;
-            if (loop && !same_host) continue;
-            int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-            if (fd < 0) continue;
-            set_nonblocking(fd);
-            struct sockaddr_in a = {.sin_family = AF_INET, .sin_addr.s_addr = rv->addr[k],
-                                    .sin_port = htons((uint16_t)rv->port)};
-            int rc = connect(fd, (struct sockaddr *)&a, sizeof a);
-            if (rc != 0 && errno == EINPROGRESS) {
-                struct pollfd p = {.fd = fd, .events = POLLOUT};
-                double left = deadline - mpir_now_s();
-                int ms = left > 3.0 ? 3000 : (left > 0.0 ? (int)(left * 1e3) + 1 : 0);
-                int so = ETIMEDOUT;
-                socklen_t sl = sizeof so;
-                if (poll(&p, 1, ms) == 1) getsockopt(fd, SOL_SOCKET, SO_ERROR, &so, &sl);
-                rc = so == 0 ? 0 : -1;
-                errno = so;
-            }
-            if (rc == 0) return fd;
-            char ip[INET_ADDRSTRLEN] = "";
-            inet_ntop(AF_INET, &rv->addr[k], ip, sizeof ip);
-            snprintf(err, err_size, "cannot connect to rank 0 at %s:%u (%s): %s", ip, rv->port, rv->host,
-                     strerror(errno));
-            close(fd);
+    /* In rank 0's order (loopback last, and only from its own host): a local address of this host
+     * is routed through loopback anyway. */
+    for (uint32_t k = 0; k < n; k++) {
+        if ((ntohl(rv->addr[k]) >> 24) == 127 && !same_host) continue;
+        int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+        if (fd < 0) continue;
+        set_nonblocking(fd);
+        struct sockaddr_in a = {.sin_family = AF_INET, .sin_addr.s_addr = rv->addr[k],
+                                .sin_port = htons((uint16_t)rv->port)};
+        int rc = connect(fd, (struct sockaddr *)&a, sizeof a);
+        if (rc != 0 && errno == EINPROGRESS) {
+            struct pollfd p = {.fd = fd, .events = POLLOUT};
+            double left = deadline - mpir_now_s();
+            int ms = left > 3.0 ? 3000 : (left > 0.0 ? (int)(left * 1e3) + 1 : 0);
+            int so = ETIMEDOUT;
+            socklen_t sl = sizeof so;
+            if (poll(&p, 1, ms) == 1) getsockopt(fd, SOL_SOCKET, SO_ERROR, &so, &sl);
+            rc = so == 0 ? 0 : -1;
+            errno = so;
         }
+        if (rc == 0) return fd;
+        char ip[INET_ADDRSTRLEN] = "";
+        inet_ntop(AF_INET, &rv->addr[k], ip, sizeof ip);
+        snprintf(err, err_size, "cannot connect to rank 0 at %s:%u (%s): %s", ip, rv->port, rv->host,
+                 strerror(errno));
+        close(fd);
+    }
     return -1;
 }
 

@@ -662,8 +662,9 @@ int mpir_server_run(const mpir_options *o, int size) {
                        s.render_cpu_ms > 0.0 ? 100.0 * (s.pack_cpu_ms + server_cpu_ms) / s.render_cpu_ms : 0.0);
                 printf("share    frame %d:", f);
                 for (int c = 0; c < size - 1; c++)
-                    printf(" rank %d %.1f%%%s", s.clients[c].rank, 100.0 * (double)s.clients[c].tiles / s.tiles,
-                           s.clients[c].alive ? "" : " (lost)");
+                    printf(" rank %d %.1f%% (%llu KiB in, %llu KiB out)%s", s.clients[c].rank,
+                           100.0 * (double)s.clients[c].tiles / s.tiles, (unsigned long long)(s.clients[c].bytes_in + 512) / 1024,
+                           (unsigned long long)(s.clients[c].bytes_out + 512) / 1024, s.clients[c].alive ? "" : " (lost)");
                 printf("\n");
             }
         }

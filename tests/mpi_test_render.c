@@ -241,6 +241,12 @@ int main(void) {
     rc = run_mpi("--enable-recovery -x RAYPACK_MPI_TEST_KILL=2:3", 4, args);
     CHECKF(rc == 0 && same_file(ref, got) && strstr(output, "rank 2 (pid") && strstr(output, "go to the others") &&
            elapsed_s < 40.0, "killed client: exit %d after %.1f s:\n%s", rc, elapsed_s, output);
+    /* ... or dies during start-up, while rank 0 sends it the scene: it is left out. */
+    file_in_tmp(got, sizeof got, "died_at_start.pfm");
+    snprintf(args, sizeof args, "'%s' --mpi --mpi-bcast %s -o '%s' --mpi-timeout 2", kitchen, SIZE, got);
+    rc = run_mpi("--enable-recovery -x RAYPACK_MPI_TEST_DIE_AT_START=1", 3, args);
+    CHECKF(rc == 0 && same_file(ref, got) && strstr(output, "rank 1 (pid") && strstr(output, "during start-up") &&
+           elapsed_s < 40.0, "client dead at start-up: exit %d after %.1f s:\n%s", rc, elapsed_s, output);
     /* ... or hangs there, alive: the job still ends, with the image. */
     file_in_tmp(got, sizeof got, "hung.pfm");
     snprintf(args, sizeof args, "'%s' --mpi %s -o '%s' --mpi-timeout 2", kitchen, SIZE, got);

@@ -62,6 +62,8 @@ int mpir_client_run(const mpir_options *o, int rank, bool *no_finalize) {
     if (!mpir_conn_queue(&conn, MSG_HELLO, &hello, sizeof hello, NULL, 0) || !send_all(&conn, rank, idle_s, "its hello"))
         goto done;
 
+    /* the test of a client's death during start-up (with --mpi-bcast: while its scene is sent) */
+    if (mpir_test_hook("DIE_AT_START", rank)) raise(SIGKILL);
     ready_msg ready = {.ok = 1};
     bool loaded;
     if (o->bcast) {

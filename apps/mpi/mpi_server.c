@@ -589,9 +589,14 @@ int mpir_server_run(const mpir_options *o, int size) {
                scene_bytes > 0.0 ? "" : "", load_ms);
         if (scene_bytes > 0.0) printf(", %.2f MiB sent", scene_bytes / 1048576.0);
         printf("\n");
-        for (int c = 0; c < size - 1; c++)
-            printf("client   rank %d: pid %d on %s, %d threads\n", s.clients[c].rank, s.clients[c].hello.pid,
-                   s.clients[c].hello.host, s.clients[c].threads);
+        for (int c = 0; c < size - 1; c++) {
+            if (s.clients[c].alive)
+                printf("client   rank %d: pid %d on %s, %d threads\n", s.clients[c].rank, s.clients[c].hello.pid,
+                       s.clients[c].hello.host, s.clients[c].threads);
+            else
+                printf("client   rank %d: pid %d on %s, lost during start-up\n", s.clients[c].rank,
+                       s.clients[c].hello.pid, s.clients[c].hello.host);
+        }
         fflush(stdout); /* who the clients are, before the frames: a supervisor (or the kill test) reads it */
     }
     int frames = o->frames > 0 ? o->frames : 1;

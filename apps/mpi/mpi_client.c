@@ -67,7 +67,9 @@ int mpir_client_run(const mpir_options *o, int rank, bool *no_finalize) {
     ready_msg ready = {.ok = 1};
     bool loaded;
     if (o->bcast) {
-        int rc = mpir_conn_recv_idle(&conn, idle_s);
+        /* rank 0 loads the scene first; a dead rank 0 is an end of stream at once, so this bound
+         * is only for one that hangs */
+        int rc = mpir_conn_recv_idle(&conn, idle_s > 120.0 ? idle_s : 120.0);
         loaded = rc > 0 && conn.hdr.type == MSG_SCENE;
         if (!loaded) snprintf(ready.err, sizeof ready.err, "did not receive the broadcast scene (%s)", rc < 0 ? conn.err : "time-out");
         else loaded = wire_scene_unpack(conn.in, (size_t)conn.hdr.bytes, &rs.data, ready.err, sizeof ready.err);

@@ -329,25 +329,35 @@ static bool old_protocol_client(void) {
     return true;
 }
 
-/* Start-up: rank 0's address to every client over MPI (the only MPI message), their connections
- * and hellos, then (with --mpi-bcast) the scene over each connection, then every client's ready. */
-static bool server_start(server *s, mpir_scene *rs, double *scene_bytes) {
+/* Start-up, first part, before rank 0 loads its scene (so that the clients load theirs meanwhile):
+ * a listening socket and its address to every client over MPI, the only MPI message. */
+static bool server_listen(server *s, rendezvous_msg *rv, int *lfd, MPI_Request **reqs) {
     int nc = s->size - 1;
     char err[256];
-    rendezvous_msg rv;
-    int lfd = mpir_listen(&rv, err, sizeof err);
-    if (lfd < 0) {
+    *lfd = mpir_listen(rv, err, sizeof err);
+    if (*lfd < 0) {
         fprintf(stderr, "raypack render: %s\n", err);
         return false;
     }
-    MPI_Request *reqs = malloc((size_t)nc * sizeof *reqs);
+    *reqs = malloc((size_t)nc * sizeof **reqs);
+    bool ok = *reqs != NULL;
+    for (int c = 0; ok && c < nc; c++)
+        ok = MPI_Isend(rv, (int)sizeof *rv, MPI_BYTE, c + 1, TAG_RENDEZVOUS, MPI_COMM_WORLD, &(*reqs)[c]) == MPI_SUCCESS;
+    if (!ok) fprintf(stderr, "raypack render: cannot send the clients rank 0's address\n");
+    return ok;
+}
+
+/* Start-up, second part: the clients' connections and hellos, then (with --mpi-bcast) the scene
+ * over each connection, then every client's ready. Takes lfd and reqs. */
+static bool server_start(server *s, mpir_scene *rs, const rendezvous_msg *rvp, int lfd, MPI_Request *reqs,
+                         double *scene_bytes) {
+    int nc = s->size - 1;
+    rendezvous_msg rv = *rvp;
     enum { SPARE = 8 };
     mpir_conn *pend = calloc((size_t)(nc + SPARE), sizeof *pend); /* connections not yet identified */
     struct pollfd *pfd = malloc((size_t)(2 * nc + SPARE + 1) * sizeof *pfd);
     bool ok = reqs && pend && pfd;
     for (int i = 0; ok && i < nc + SPARE; i++) pend[i].fd = -1;
-    for (int c = 0; ok && c < nc; c++)
-        ok = MPI_Isend(&rv, (int)sizeof rv, MPI_BYTE, c + 1, TAG_RENDEZVOUS, MPI_COMM_WORLD, &reqs[c]) == MPI_SUCCESS;
     double deadline = mpir_now_s() + s->o->timeout_s;
     int known = 0;
     while (ok && known < nc) {
@@ -534,9 +544,15 @@ int mpir_server_run(const mpir_options *o, int size) {
     memset(&rs, 0, sizeof rs);
     mpir_tile_worker w = {0};
     char err[512] = "";
+    rendezvous_msg rv;
+    int lfd = -1;
+    MPI_Request *reqs = NULL;
+    if (size > 1 && !server_listen(&s, &rv, &lfd, &reqs)) return CLI_EXIT_FAILURE;
     /* With clients rank 0 only hands out tiles: one thread, so it does not take their cores. */
     if (!mpir_scene_load(&rs, o->scene, err, sizeof err) || !mpir_scene_build(&rs, o, size > 1 ? 1 : o->threads, err, sizeof err)) {
         fprintf(stderr, "%s%s\n", strstr(err, "error:") ? "" : "raypack render: ", err);
+        mpir_scene_free(&rs);
+        free(reqs);
         return CLI_EXIT_FAILURE;
     }
     double load_ms = cli_now_ms() - t0;
@@ -580,7 +596,7 @@ int mpir_server_run(const mpir_options *o, int size) {
     }
     for (int t = 0; t < s.tiles; t++) s.owner[t] = -1;
     double scene_bytes = 0.0;
-    if (size > 1 && !server_start(&s, &rs, &scene_bytes)) goto done;
+    if (size > 1 && !server_start(&s, &rs, &rv, lfd, reqs, &scene_bytes)) goto done;
     if (!o->quiet) {
         printf("mpi      %d ranks: rank 0 serves %d tiles of %dx%d per frame (%dx%d image) to %d client%s", size,
                s.tiles, o->tile, o->tile, wd, ht, size - 1, size == 2 ? "" : "s");

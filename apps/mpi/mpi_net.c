@@ -19,7 +19,6 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "cli.h"
 #include "mpi_render.h"
 
 double mpir_now_s(void) {

@@ -2,10 +2,11 @@
  * the image of -np 1..4 (Whitted, path tracing, instant radiosity; direct and AO with -np 3), of
  * --mpi-bcast (also when only rank 0 can read the scene), PNG output and a 3-frame orbit are
  * byte-identical to the single-process `raypack render` of the same camera; a client killed
- * mid-frame (by itself, and with kill -9 from outside at two moments) or hanging mid-frame loses no
- * frame and changes no pixel; rank 0's death ends the job without a hang; a client that never
- * answers, one of another protocol and one whose scene is broken end the job with a clear message
- * from rank 0 within the time-out. Every mpirun runs under timeout(1), so nothing can hang CI. */
+ * mid-frame (by itself, and with kill -9 from outside at two moments), hanging mid-frame or dying
+ * during start-up loses no frame and changes no pixel; rank 0's death ends the job without a hang;
+ * a client that never answers, one of another protocol (also protocol 1, which spoke MPI) and one
+ * whose scene is broken end the job with a clear message from rank 0 within the time-out. Every
+ * mpirun runs under timeout(1), so nothing can hang CI. */
 #include <signal.h>
 #include <stdbool.h>
 #include <sys/stat.h>
@@ -239,7 +240,7 @@ int main(void) {
     file_in_tmp(got, sizeof got, "killed.pfm");
     snprintf(args, sizeof args, "'%s' --mpi %s -o '%s' --mpi-timeout 2", kitchen, SIZE, got);
     rc = run_mpi("--enable-recovery -x RAYPACK_MPI_TEST_KILL=2:3", 4, args);
-    CHECKF(rc == 0 && same_file(ref, got) && strstr(output, "rank 2 (pid") && strstr(output, "go to the others") &&
+    CHECKF(rc == 0 && same_file(ref, got) && strstr(output, "rank 2 (pid") && strstr(output, "to the others") &&
            elapsed_s < 40.0, "killed client: exit %d after %.1f s:\n%s", rc, elapsed_s, output);
     /* ... or dies during start-up, while rank 0 sends it the scene: it is left out. */
     file_in_tmp(got, sizeof got, "died_at_start.pfm");
@@ -278,5 +279,10 @@ int main(void) {
     rc = run_mpi("-x RAYPACK_MPI_TEST_PROTOCOL=1:99", 3, args);
     CHECKF(rc != 0 && rc != 124 && strstr(output, "rank 1 (pid") && strstr(output, "protocol 99") &&
            strstr(output, "run the same build on every rank"), "another protocol: exit %d:\n%s", rc, output);
+    /* a client of protocol 1 (all over MPI) says hello there: rank 0 names it */
+    rc = run_mpi("-x RAYPACK_MPI_TEST_PROTOCOL1=2", 3, args);
+    CHECKF(rc != 0 && rc != 124 && strstr(output, "rank 2 (pid") && strstr(output, "MPI protocol 1;") &&
+           strstr(output, "run the same build on every rank") && elapsed_s < 30.0, "protocol 1: exit %d:\n%s", rc,
+           output);
     return RP_TEST_END();
 }

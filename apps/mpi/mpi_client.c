@@ -29,6 +29,15 @@ int mpir_client_run(const mpir_options *o, int rank, bool *no_finalize) {
     if (mpir_test_hook("STALL", rank)) {
         for (;;) mpir_sleep_us(1000000); /* a client that never answers: rank 0 must time out */
     }
+    if (mpir_test_hook("PROTOCOL1", rank)) {
+        /* a client of protocol 1, which said hello over MPI: rank 0 must name it, not wait for it */
+        hello_msg old = {.magic = MPIR_MAGIC, .protocol = 1, .version = {RP_VERSION_MAJOR, RP_VERSION_MINOR, 0},
+                         .pid = (int32_t)getpid()};
+        gethostname(old.host, sizeof old.host - 1);
+        MPI_Request r;
+        MPI_Isend(&old, (int)offsetof(hello_msg, rank), MPI_BYTE, 0, TAG_HELLO, MPI_COMM_WORLD, &r);
+        for (;;) mpir_sleep_us(1000000);
+    }
     /* Rank 0's address, the one MPI message; then everything goes over our connection. */
     rendezvous_msg rv;
     memset(&rv, 0, sizeof rv);

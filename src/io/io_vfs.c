@@ -3,8 +3,10 @@
  * textures of the scene inside them. */
 #include <errno.h>
 #include <fcntl.h>
+#include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
@@ -44,13 +46,47 @@ static const char *zlib_reason(const char *msg) {
 /* deflate expands at most 1032:1; a gzip trailer claiming more than that is a lie */
 #define DEFLATE_MAX_RATIO 1032u
 
+/* Page faults on the output cost about as much as inflating into it (182 MB of the SPD tree: some
+ * 45,000 faults). With a second thread those pages are mapped ahead of libdeflate while it writes
+ * (MADV_POPULATE_WRITE maps a page without touching its contents, so it is harmless on pages the
+ * inflater has already written); inflating then runs at the speed of a warm buffer. */
+#define PREFAULT_MIN_BYTES (8u << 20)
+#define PREFAULT_STEP (2u << 20)
+
+typedef struct prefault_job {
+    char *lo, *hi; /* page-aligned span inside the buffer */
+} prefault_job;
+
+static void *prefault_run(void *arg) {
+#ifdef MADV_POPULATE_WRITE
+    prefault_job *job = arg;
+    for (char *p = job->lo; p < job->hi; p += PREFAULT_STEP) {
+        size_t n = (size_t)(job->hi - p) < PREFAULT_STEP ? (size_t)(job->hi - p) : PREFAULT_STEP;
+        if (madvise(p, n, MADV_POPULATE_WRITE) != 0) break; /* an older kernel: the inflater faults them */
+    }
+#else
+    (void)arg;
+#endif
+    return NULL;
+}
+
+/* Starts the prefaulting thread for data[0, size); false when none was started. */
+static bool prefault_start(char *data, size_t size, prefault_job *job, pthread_t *tid) {
+    long page = sysconf(_SC_PAGESIZE);
+    if (size < PREFAULT_MIN_BYTES || page <= 0) return false;
+    uintptr_t mask = (uintptr_t)page - 1;
+    job->lo = (char *)(((uintptr_t)data + mask) & ~mask);
+    job->hi = (char *)(((uintptr_t)data + size) & ~mask);
+    return job->hi > job->lo && pthread_create(tid, NULL, prefault_run, job) == 0;
+}
+
 /* The fast path for a regular gzip file (1.5-3.7x faster than zlib's stream on the shared scenes):
  * the compressed file read whole (fd, at its start) and inflated by libdeflate in one call into
  * the size its trailer states, once that size is checked against what the file can hold (the
  * ratio above) and against the limit. False, with nothing allocated and fd back at its start,
  * whenever that does not work out (not gzip, a lying trailer, several members, corrupt data): the
  * caller then streams the file with zlib, which says what went wrong. */
-static bool deflate_read(int fd, size_t file_size, uint64_t limit, io_buf *out) {
+static bool deflate_read(int fd, size_t file_size, uint64_t limit, bool prefault, io_buf *out) {
     unsigned char magic[2];
     if (file_size < 18 || file_size > limit || pread(fd, magic, 2, 0) != 2 || magic[0] != 0x1f || magic[1] != 0x8b)
         return false; /* not gzip: not read twice */
@@ -71,9 +107,13 @@ static bool deflate_read(int fd, size_t file_size, uint64_t limit, io_buf *out) 
     }
     char *data = ok ? malloc(hint + 1) : NULL;
     struct libdeflate_decompressor *d = data ? libdeflate_alloc_decompressor() : NULL;
+    prefault_job job;
+    pthread_t tid;
+    bool prefaulting = d && prefault && prefault_start(data, hint, &job, &tid);
     size_t used = 0, size = 0;
     ok = d && libdeflate_gzip_decompress_ex(d, in, file_size, data, hint, &used, &size) == LIBDEFLATE_SUCCESS &&
          used == file_size;
+    if (prefaulting) pthread_join(tid, NULL);
     if (d) libdeflate_free_decompressor(d);
     free(in);
     if (!ok) {
@@ -108,7 +148,7 @@ static bool disk_read(io_ctx *ctx, const char *path, io_buf *out) {
     }
     uint64_t limit = ctx->limits.max_file_bytes;
 #if RP_IO_HAVE_LIBDEFLATE
-    if (S_ISREG(st.st_mode) && deflate_read(fd, (size_t)st.st_size, limit, out)) {
+    if (S_ISREG(st.st_mode) && deflate_read(fd, (size_t)st.st_size, limit, ctx->threads > 1, out)) {
         close(fd);
         return true;
     }
@@ -287,7 +327,7 @@ bool vfs_open_archive(io_ctx *ctx, const char *path, const void *image, size_t i
         int fd = open(path, O_RDONLY | O_CLOEXEC);
         struct stat st;
         if (fd >= 0 && fstat(fd, &st) == 0 && S_ISREG(st.st_mode) &&
-            deflate_read(fd, (size_t)st.st_size, ctx->limits.max_file_bytes, &raw))
+            deflate_read(fd, (size_t)st.st_size, ctx->limits.max_file_bytes, ctx->threads > 1, &raw))
             image = raw.data, image_size = raw.size;
         if (fd >= 0) close(fd);
     }

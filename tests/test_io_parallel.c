@@ -104,7 +104,7 @@ static void check_scene(const char *name) {
         rp_scene_data_free(&par);
     }
     /* the chunked parsers did run: every text format but a few-kB file has chunks taken */
-    bool text = strstr(name, ".nff") != NULL;
+    bool text = strstr(name, ".nff") || (strstr(name, ".obj") && serial.file_bytes > 8192);
     CHECKF(!text || taken > 0, "%s: no chunk was parsed in parallel", name);
     printf("%-42s %8zu triangles, %6zu chunks taken: serial = parallel\n", name, serial.triangle_count, taken);
     rp_scene_data_free(&serial);
@@ -115,12 +115,12 @@ static void check_scene(const char *name) {
 /* Loads text as `name` serially and with chunks of 1..97 bytes (on 1 and 3 threads); every load
  * must give the serial result, or the serial error message. Returns the serial message ("" when it
  * loaded). */
-static void check_text(const char *name, const char *text, const char *want_error) {
-    io_entry e = {.name = (char *)name, .data = (char *)text, .size = strlen(text)};
+static void check_files(const io_entry *e, size_t files, const char *want_error) {
+    const char *name = e[0].name;
     rp_scene_data serial;
     char serr[512] = "";
     io_load_opts one = {.threads = 1};
-    bool sok = io_load_memory_opts(&e, 1, false, &one, &serial, serr, sizeof serr);
+    bool sok = io_load_memory_opts(e, files, false, &one, &serial, serr, sizeof serr);
     if (want_error) {
         CHECKF(!sok && strstr(serr, want_error) != NULL, "%s: serial load: want an error with '%s', got '%s'", name,
                want_error, sok ? "(loaded)" : serr);
@@ -134,7 +134,7 @@ static void check_text(const char *name, const char *text, const char *want_erro
             io_load_opts o = {.threads = threads, .chunk_bytes = chunk, .chunks_taken = &taken};
             rp_scene_data par;
             char perr[512] = "";
-            bool pok = io_load_memory_opts(&e, 1, false, &o, &par, perr, sizeof perr);
+            bool pok = io_load_memory_opts(e, files, false, &o, &par, perr, sizeof perr);
             char why[128] = "";
             bool same = pok == sok && (sok ? same_scene(&serial, &par, why, sizeof why) : strcmp(serr, perr) == 0);
             if (!same) {
@@ -149,6 +149,105 @@ static void check_text(const char *name, const char *text, const char *want_erro
     CHECKF(bad == 0, "%s: chunked loads differ", name);
     CHECKF(taken_all > 0, "%s: no chunk was parsed in parallel", name);
     if (sok) rp_scene_data_free(&serial);
+}
+
+static void check_text(const char *name, const char *text, const char *want_error) {
+    io_entry e = {.name = (char *)name, .data = (char *)text, .size = strlen(text)};
+    check_files(&e, 1, want_error);
+}
+
+/* A shared scene's files as memory entries (the OBJ and its MTL), chunked on every byte. */
+static void check_shared_text(const char *obj, const char *mtl) {
+    const char *names[2] = {obj, mtl};
+    io_entry e[2];
+    char *bufs[2] = {NULL, NULL};
+    size_t n = 0;
+    for (int i = 0; i < 2 && names[i]; i++) {
+        char path[1024];
+        if (!rp_test_scene(names[i], path, sizeof path)) {
+            CHECKF(0, "missing scene %s", names[i]);
+            return;
+        }
+        FILE *fp = fopen(path, "rb");
+        fseek(fp, 0, SEEK_END);
+        long size = ftell(fp);
+        rewind(fp);
+        bufs[i] = calloc((size_t)size + 1, 1);
+        size_t got = fread(bufs[i], 1, (size_t)size, fp);
+        fclose(fp);
+        const char *slash = strrchr(names[i], '/');
+        e[n++] = (io_entry){.name = (char *)(slash ? slash + 1 : names[i]), .data = bufs[i], .size = got};
+    }
+    check_files(e, n, NULL);
+    free(bufs[0]);
+    free(bufs[1]);
+}
+
+static const char obj_good[] =
+    "# vertices, texture coordinates and normals in every form\n"
+    "mtllib a.mtl\n"
+    "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+    "vt 0 0\nvt 1 0\nvt 1 1\nvt 0.5\n"
+    "vn 0 0 1\nvn 0 0 -1\n"
+    "f 1 2 3\n"
+    "f 1/1 2/2 3/3 4/4\n"                 /* a quad, with texture coordinates */
+    "usemtl red\n"
+    "f 1//1 2//1 3//1\n"
+    "f -4/-4/-2 -3/-3/-2 -2/-2/-2\n"      /* negative indices */
+    "\n   \t\n"
+    "g group\no object\ns 1\n"
+    "v 2 0 0\r\nv 2 1 0\r\n"             /* CRLF */
+    "f -1 -2 1#comment\r\n"
+    "usemtl nosuch\n"                      /* unknown: the default material */
+    "f 1 2 -1\n"
+    "usemtl blue\n"
+    "v 0 2 0\nv 1 3 0\nv 2 2 0\nv 2 4 0\nv 0 4 0\n"
+    "f -5 -4 -3 -2 -1\n"                  /* a pentagon, concave: ear clipping */
+    "f 5 6 7 8 9 10 11\n"
+    "f 1/1/1 2/2 3/3/2\n"                 /* mixed corners: the serial pass */
+    "f 1 2 3 4 5 6 7 8 9 10 11 1 2 3 4 5 6 7 8 9 10 11 1 2 3 4 5 6 7 8 9 10 11 1 2 3 4 5 6 7 8 9 10 11 "
+    "1 2 3 4 5 6 7 8 9 10 11 1 2 3 4 5 6 7 8 9 10 11 1 2 3\n" /* 69 corners */
+    "mtllib b.mtl\n"                      /* a library in the middle */
+    "usemtl green\n"
+    "vt 0.25 0.75\n"
+    "f 1/-1 2/-1 3/-1\n"
+    "usemtl red\n"
+    "f 3 2 1\n";
+
+static void check_obj(void) {
+    static const char mtl_a[] = "newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 1\n";
+    static const char mtl_b[] = "newmtl green\nKd 0 1 0\n";
+    io_entry e[3] = {{.name = "good.obj", .data = (char *)obj_good, .size = sizeof obj_good - 1},
+                     {.name = "a.mtl", .data = (char *)mtl_a, .size = sizeof mtl_a - 1},
+                     {.name = "b.mtl", .data = (char *)mtl_b, .size = sizeof mtl_b - 1}};
+    check_files(e, 3, NULL);
+    unsigned lines = 0;
+    for (const char *c = obj_good; *c; c++) lines += *c == '\n';
+    struct {
+        const char *tail, *error;
+        unsigned line; /* after obj_good */
+    } bad[] = {
+        {"f 1 2 99\n", "vertex index 99 out of range (11 defined so far)", 1},
+        {"v 1 2 3\nf 1 2 -18\n", "vertex index -18 out of range (12 defined so far)", 2},
+        {"f 1/9 2/1 3/1\n", "texture coordinate index 9 out of range", 1},
+        {"f 1//3 2//1 3//1\n", "normal index 3 out of range", 1},
+        {"f 0 1 2\n", "vertex index 0 is invalid", 1},
+        {"v 1 2\n", "v: expected a finite number", 1},
+        {"v 1 2 3\nvn 1 x 3\n", "vn: expected a finite number, got 'x'", 2},
+        {"f 1 2\n", "face with 2 vertices", 1},
+        {"bogus 1\n", "unknown statement 'bogus'", 1},
+        {"f 1 2 3/\n", "bad texture coordinate index", 1},
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        static char text[8192];
+        char want[256];
+        snprintf(text, sizeof text, "%s%s", obj_good, bad[i].tail);
+        snprintf(want, sizeof want, "bad.obj:%u: error: %s", lines + bad[i].line, bad[i].error);
+        e[0] = (io_entry){.name = "bad.obj", .data = text, .size = strlen(text)};
+        check_files(e, 3, want);
+    }
+    check_shared_text("cornell_box/cornell_box.obj", "cornell_box/cornell_box.mtl");
+    check_shared_text("cornell_original/CornellBox-Original.obj", "cornell_original/CornellBox-Original.mtl");
 }
 
 static const char nff_good[] =
@@ -201,5 +300,6 @@ static void check_nff(void) {
 int main(void) {
     for (size_t i = 0; i < sizeof scenes / sizeof scenes[0]; i++) check_scene(scenes[i]);
     check_nff();
+    check_obj();
     return RP_TEST_END();
 }

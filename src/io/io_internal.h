@@ -141,9 +141,9 @@ uint32_t builder_add_material(io_ctx *ctx, const rp_material_data *m);
 bool builder_add_triangle(io_ctx *ctx, const uint32_t v[3], const uint32_t *n, const uint32_t *t,
                           uint32_t material);
 /* Counts `tris` more triangles whose arrays (idx, mat, and nidx/tidx where they exist) the caller
- * writes itself later, before anything reads them; with `normals`, nidx exists afterwards (the
- * triangles before them IO_NONE). For the parallel parsers' chunks. */
-bool builder_claim_triangles(io_ctx *ctx, size_t tris, bool normals);
+ * writes itself later, before anything reads them; with `normals` (`texcoords`), nidx (tidx) exists
+ * afterwards, the triangles before them IO_NONE. For the parallel parsers' chunks. */
+bool builder_claim_triangles(io_ctx *ctx, size_t tris, bool normals, bool texcoords);
 bool builder_reserve_vertices(io_ctx *ctx, size_t extra);
 /* Frees every array of a builder (a chunk's, or the scene's after a failure) and zeroes it. */
 void builder_free(io_builder *b);

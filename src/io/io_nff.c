@@ -927,7 +927,7 @@ static bool nff_chunk_claim(nff_file *f, nff_chunk *c) {
     c->v0 = b->pos_n, c->n0 = b->nrm_n, c->t0 = b->tri_n;
     if (b->pos_n + cb->pos_n >= UINT32_MAX || b->nrm_n + cb->nrm_n >= UINT32_MAX ||
         !builder_reserve_vertices(ctx, cb->pos_n) || !builder_reserve_normals(ctx, cb->nrm_n) ||
-        !builder_claim_triangles(ctx, cb->tri_n, normals))
+        !builder_claim_triangles(ctx, cb->tri_n, normals, false))
         return io_error(ctx, f->shown, f->line, "out of memory");
     b->pos_n += cb->pos_n;
     b->nrm_n += cb->nrm_n;

@@ -127,10 +127,11 @@ static uint32_t *corner_array(const io_builder *b) {
     return a;
 }
 
-bool builder_claim_triangles(io_ctx *ctx, size_t tris, bool normals) {
+bool builder_claim_triangles(io_ctx *ctx, size_t tris, bool normals, bool texcoords) {
     io_builder *b = &ctx->b;
     if (tris >= UINT32_MAX / 3 - b->tri_n || !builder_reserve_triangles(ctx, tris)) return false;
     if (normals && !b->nidx && !(b->nidx = corner_array(b))) return false;
+    if (texcoords && !b->tidx && !(b->tidx = corner_array(b))) return false;
     b->tri_n += tris;
     return true;
 }

@@ -37,6 +37,8 @@ typedef struct io_vfs {
     const char *archive; /* path of the archive, NULL: the disk */
     io_entry *entries;
     size_t entry_count;
+    char *image; /* the inflated .tar.gz the entries point into, when they do; freed with them */
+    size_t image_size;
 } io_vfs;
 
 /* ---- builder ---------------------------------------------------------------------------------- */

@@ -256,6 +256,12 @@ static bool is_archive(const char *path) {
     return ends_with(lower, ".tar") || ends_with(lower, ".tar.gz") || ends_with(lower, ".tgz");
 }
 
+/* The newline ending the line at p, or end. */
+static const char *line_end(const char *p, const char *end) {
+    const char *nl = p < end ? memchr(p, '\n', (size_t)(end - p)) : NULL;
+    return nl ? nl : end;
+}
+
 /* Scans an AFF/NFF text for `i <detail> <file>` includes and marks the archive entries they name. */
 static void mark_includes(io_ctx *ctx, const io_entry *e, bool *included) {
     const char *p = e->data, *end = e->data + e->size;
@@ -278,8 +284,7 @@ static void mark_includes(io_ctx *ctx, const io_entry *e, bool *included) {
                     if (strcmp(ctx->vfs.entries[k].name, full) == 0) included[k] = true;
             }
         }
-        while (p < end && *p != '\n') p++;
-        p++;
+        p = line_end(p, end) + 1;
     }
 }
 
@@ -289,8 +294,7 @@ static size_t count_includes(const io_entry *e) {
     while (p < end) {
         while (p < end && io_is_space(*p)) p++;
         if (p + 1 < end && p[0] == 'i' && io_is_space(p[1])) n++;
-        while (p < end && *p != '\n') p++;
-        p++;
+        p = line_end(p, end) + 1;
     }
     return n;
 }

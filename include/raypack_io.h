@@ -124,6 +124,18 @@ typedef struct rp_scene_data {
  * On failure returns false and writes "file:line: error: message" into err (err_size bytes);
  * out is then empty and needs no free. */
 RP_API bool rp_scene_data_load(const char *path, rp_scene_data *out, char *err, size_t err_size);
+/* How rp_scene_data_load_ex loads; zero fields mean the defaults. */
+typedef struct rp_scene_load_desc {
+    /* Threads that parse a large OBJ, NFF/AFF or ASCII PLY file in chunks (files under 512 kB are
+     * parsed on the calling thread): 0 all hardware threads, 1 the calling thread alone. The
+     * result is the same for every count, to the bit and in the same order, and so are errors. */
+    int threads;
+} rp_scene_load_desc;
+/* Fills desc with the defaults. */
+RP_API void rp_scene_load_desc_defaults(rp_scene_load_desc *desc);
+/* rp_scene_data_load with options (desc NULL: the defaults, what rp_scene_data_load uses). */
+RP_API bool rp_scene_data_load_ex(const char *path, const rp_scene_load_desc *desc, rp_scene_data *out, char *err,
+                                  size_t err_size);
 /* Frees every array of a loaded scene and zeroes it. */
 RP_API void rp_scene_data_free(rp_scene_data *scene);
 

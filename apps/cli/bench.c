@@ -1134,10 +1134,13 @@ static bool load_scene(bench_ctx *ctx) {
         rp_scene_data data;
         char err[512] = "";
         memset(&data, 0, sizeof data);
-        if (!rp_scene_data_load(o->scene_path, &data, err, sizeof err)) {
+        double t0 = cli_now_ms();
+        if (!rp_scene_data_load_ex(o->scene_path, &(rp_scene_load_desc){.threads = o->threads}, &data, err, sizeof err)) {
             fprintf(stderr, "raypack bench: %s\n", err[0] ? err : "cannot load the scene");
             return false;
         }
+        ctx->load_ms = cli_now_ms() - t0;
+        ctx->load_bytes = data.file_bytes;
         bool ok = mesh_from_data(&ctx->mesh, data.positions, data.vertex_count, data.indices,
                                  data.triangle_count);
         if (data.camera.valid) {
@@ -1285,6 +1288,9 @@ static int bench_core(bench_ctx *ctx) {
         return 1;
     }
     bench_print_header(ctx);
+    if (ctx->load_ms > 0.0)
+        printf("load      %.2f ms on %d threads, %.1f MB parsed (%.0f MB/s)\n", ctx->load_ms, ctx->opts.threads,
+               (double)ctx->load_bytes / 1e6, (double)ctx->load_bytes / 1e3 / ctx->load_ms);
     printf("build     %.2f ms (commit stats %.2f ms), %.2f MiB; %llu triangles, %llu rejected, "
            "%llu nodes of width %u, %llu leaves, depth %u, SAH %.2f\n",
            build_ms, st.build_ms, (double)st.bytes / (1024.0 * 1024.0),
@@ -1387,6 +1393,8 @@ static int bench_core(bench_ctx *ctx) {
                    "\"repeats\": %d, \"isa\": \"%s\",\n",
                 ctx->mesh.triangle_count, ctx->opts.threads, ctx->opts.width, ctx->opts.height,
                 ctx->opts.repeats, cli_isa_name(rp_device_isa(ctx->device)));
+        fprintf(f, " \"load\": {\"ms\": %.3f, \"bytes\": %zu, \"threads\": %d},\n", ctx->load_ms, ctx->load_bytes,
+                ctx->opts.threads);
         fprintf(f, " \"build\": {\"raypack_ms\": %.3f, \"raypack_commit_ms\": %.3f, "
                    "\"raypack_bytes\": %zu, \"sah_cost\": %.4f},\n \"rays\": {",
                 build_ms, st.build_ms, st.bytes, st.sah_cost);

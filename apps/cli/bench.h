@@ -185,6 +185,8 @@ typedef struct bench_ctx {
     bench_camera camera;
     float light[3];
     bool have_camera, have_light; /* the file brought them */
+    double load_ms;          /* rp_scene_data_load_ex on --threads threads; 0 for the built-in scene */
+    size_t load_bytes;       /* text parsed, after decompression */
     rp_device *device;
     rp_scene *scene;         /* raypack's committed scene */
     bench_rays sets[BENCH_KIND_COUNT];

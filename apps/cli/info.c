@@ -17,7 +17,7 @@ static void info_usage(FILE *out) {
             "materials, textures, lights, camera, and the BVH's nodes, depth, SAH cost and build time.\n"
             "\n"
             "options:\n"
-            "  --threads N   build threads, 1..%d; 0 for all hardware threads [0]\n"
+            "  --threads N   load and build threads, 1..%d; 0 for all hardware threads [0]\n"
             "  --accel KIND  the triangles' structure: bvh, kdtree or bih [bvh]\n"
             "  --materials   list every material (else the first 16)\n"
             "  -h, --help    this help\n",
@@ -76,7 +76,7 @@ int cli_info(int argc, char **argv) {
         /* stat, not open: opening a FIFO here would block, and the loader reads it once as a stream */
         if (!cli_scene_readable("info", path)) return CLI_EXIT_FAILURE;
         char err[512] = "";
-        if (!rp_scene_data_load(path, &d, err, sizeof err)) {
+        if (!rp_scene_data_load_ex(path, &(rp_scene_load_desc){.threads = threads}, &d, err, sizeof err)) {
             fprintf(stderr, "%s\n", err[0] ? err : "raypack info: cannot load the scene");
             return CLI_EXIT_FAILURE;
         }

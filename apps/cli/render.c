@@ -58,7 +58,8 @@ static void render_usage(FILE *out) {
             "                         the image: NAME.albedo.EXT and NAME.normal.EXT\n"
             "  --aov NAME             debug output instead of shading: depth (PFM: distance along\n"
             "                         the primary ray, +inf on a miss), normal, primid or albedo\n"
-            "  --threads N            worker threads, 1..%d; 0 for all hardware threads [0]\n"
+            "  --threads N            worker threads (they also parse the scene file), 1..%d;\n"
+            "                         0 for all hardware threads [0]\n"
             "  --isa NAME             kernels: auto (the widest the CPU has), scalar, sse, avx2\n"
             "                         or avx512 [auto]; every choice gives the same image\n"
             "  --accel KIND           the triangles' structure: bvh, kdtree or bih [bvh]\n"
@@ -567,7 +568,7 @@ int cli_render(int argc, char **argv) {
         /* stat, not open: opening a FIFO here would block, and the loader reads it once as a stream */
         if (!cli_scene_readable(CMD, o.scene)) return CLI_EXIT_FAILURE;
         char err[512] = "";
-        if (!rp_scene_data_load(o.scene, &data, err, sizeof err)) {
+        if (!rp_scene_data_load_ex(o.scene, &(rp_scene_load_desc){.threads = o.threads}, &data, err, sizeof err)) {
             fprintf(stderr, "%s\n", err[0] ? err : "raypack render: cannot load the scene");
             return CLI_EXIT_FAILURE;
         }
@@ -857,7 +858,8 @@ bool cli_render_load(const char *cmd, const cli_render_setup *setup, rp_scene_da
     }
     fclose(probe);
     char err[512] = "";
-    if (rp_scene_data_load(setup->scene, data, err, sizeof err)) return true;
+    if (rp_scene_data_load_ex(setup->scene, &(rp_scene_load_desc){.threads = setup->threads}, data, err, sizeof err))
+        return true;
     fprintf(stderr, "%s\n", err[0] ? err : "raypack: cannot load the scene");
     return false;
 }

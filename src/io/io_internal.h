@@ -37,6 +37,8 @@ typedef struct io_vfs {
     const char *archive; /* path of the archive, NULL: the disk */
     io_entry *entries;
     size_t entry_count;
+    char *image; /* the inflated .tar.gz the entries point into, when they do; freed with them */
+    size_t image_size;
 } io_vfs;
 
 /* ---- builder ---------------------------------------------------------------------------------- */
@@ -98,6 +100,9 @@ typedef struct io_ctx {
     size_t scratch_u_cap;
     float *scratch_f;
     size_t scratch_f_cap;
+    int threads;        /* resolved: threads that parse a large file's chunks (1: serial) */
+    size_t chunk_bytes; /* chunk size for the parallel parsers; 0: chosen from the file and threads */
+    size_t chunks_taken; /* chunks whose parallel result was used (for the tests) */
 } io_ctx;
 
 /* Records the first error as "file:line: error: message"; always returns false. */
@@ -137,7 +142,15 @@ uint32_t builder_default_material(io_ctx *ctx);
 uint32_t builder_add_material(io_ctx *ctx, const rp_material_data *m);
 bool builder_add_triangle(io_ctx *ctx, const uint32_t v[3], const uint32_t *n, const uint32_t *t,
                           uint32_t material);
+/* Counts `tris` more triangles whose arrays (idx, mat, and nidx/tidx where they exist) the caller
+ * writes itself later, before anything reads them; with `normals` (`texcoords`), nidx (tidx) exists
+ * afterwards, the triangles before them IO_NONE. For the parallel parsers' chunks. */
+bool builder_claim_triangles(io_ctx *ctx, size_t tris, bool normals, bool texcoords);
 bool builder_reserve_vertices(io_ctx *ctx, size_t extra);
+/* Frees every array of a builder (a chunk's, or the scene's after a failure) and zeroes it. */
+void builder_free(io_builder *b);
+/* A builder for one chunk of a parallel parse (default material IO_NONE, nothing allocated). */
+void builder_init(io_builder *b);
 bool builder_reserve_normals(io_ctx *ctx, size_t extra);
 bool builder_reserve_texcoords(io_ctx *ctx, size_t extra);
 bool builder_reserve_triangles(io_ctx *ctx, size_t extra);
@@ -165,6 +178,29 @@ uint32_t tex_add_rgb(io_ctx *ctx, const char *key, const char *as_written, int32
  * archive, files[0] holds a tar(.gz) image instead and is unpacked first. The files stay the
  * caller's. Same result and errors as rp_scene_data_load. */
 bool io_load_memory(const io_entry *files, size_t n, bool archive, rp_scene_data *out, char *err, size_t err_size);
+
+/* Loading options for the tests: threads (0: all hardware threads) and the chunk size of the
+ * parallel parsers (0: chosen per file; a few bytes puts chunk boundaries everywhere, which is
+ * how the tests check that chunked parsing gives the serial result). */
+typedef struct io_load_opts {
+    int threads;
+    size_t chunk_bytes;
+    size_t *chunks_taken; /* when not NULL: set to the number of chunks whose parallel result was used */
+} io_load_opts;
+/* io_load_memory and rp_scene_data_load with those options. */
+bool io_load_memory_opts(const io_entry *files, size_t n, bool archive, const io_load_opts *opts, rp_scene_data *out,
+                         char *err, size_t err_size);
+bool io_load_file_opts(const char *path, const io_load_opts *opts, rp_scene_data *out, char *err, size_t err_size);
+
+/* ---- threads (io_par.c) ----------------------------------------------------------------------- */
+
+typedef void (*io_task_fn)(void *user, uint32_t index);
+/* threads <= 0: the hardware threads; capped at 64. */
+int io_threads_resolve(int threads);
+/* Runs fn(user, i) for i in [0, count) on up to `threads` threads, the caller's among them. */
+void io_parallel_for(int threads, uint32_t count, io_task_fn fn, void *user);
+/* Chunks a text of `size` bytes is parsed in (1: serially), from ctx->threads and chunk_bytes. */
+uint32_t io_chunk_count(const io_ctx *ctx, size_t size);
 
 /* ---- polygons (io_poly.c) --------------------------------------------------------------------- */
 

@@ -771,6 +771,227 @@ static bool nff_apply_keyframes(io_ctx *ctx, nff_state *st, const char *shown) {
     return true;
 }
 
+/* ---- parallel polygon lists ------------------------------------------------------------------- */
+
+/* A large file's polygon lists (`p`, `pp` and `f`: nearly all of an SPD file) are parsed in chunks
+ * on several threads, each chunk by the serial functions above into a builder of its own, then
+ * appended in file order. A chunk starts at a line that begins with `p`, `pp` or `f`; that is a
+ * guess (such a line could be a texture or block name inside another command), so the serial pass
+ * takes a chunk only when it reaches exactly that start as a command, with no transform block open
+ * (chunks are parsed under the identity), and parses on by itself from wherever a chunk stopped:
+ * at a command chunks leave to it, or at an error, whose message it then writes with the file's own
+ * line number. The result, errors included, is the serial one to the bit. */
+
+typedef struct nff_chunk {
+    const char *start, *limit; /* parses commands from start until one begins at or after limit */
+    const char *stop;          /* the first command it did not parse */
+    uint32_t lines;            /* newlines from start to stop */
+    io_ctx ctx;                /* the chunk's builder; its material 0 stands for the one current at start */
+    bool claimed;              /* taken by the serial pass: written into the scene at v0, n0, t0 */
+    size_t v0, n0, t0;
+    uint32_t *map;             /* chunk material -> scene material */
+} nff_chunk;
+
+typedef struct nff_par {
+    nff_chunk *chunks;
+    uint32_t n, next;
+    const char *path, *end;
+} nff_par;
+
+static bool nff_sync_line(const char *p) {
+    if (p[0] == 'f') return p[1] == ' ' || p[1] == '\t';
+    if (p[0] != 'p') return false;
+    if (p[1] == 'p') return p[2] == ' ' || p[2] == '\t';
+    return p[1] == ' ' || p[1] == '\t';
+}
+
+/* The first line at or after p (p itself when it starts one) that begins like a chunk. */
+static const char *nff_sync(const char *p, const char *begin, const char *end) {
+    if (p > begin && p[-1] != '\n') {
+        const char *nl = memchr(p, '\n', (size_t)(end - p));
+        p = nl ? nl + 1 : end;
+    }
+    while (p < end && !nff_sync_line(p)) {
+        const char *nl = memchr(p, '\n', (size_t)(end - p));
+        p = nl ? nl + 1 : end;
+    }
+    return p;
+}
+
+static void nff_chunk_task(void *user, uint32_t index) {
+    nff_par *par = user;
+    nff_chunk *c = &par->chunks[index];
+    io_ctx *ctx = &c->ctx;
+    c->stop = c->start;
+    c->lines = 0;
+    ctx->failed = true; /* writes no message: the serial pass does, at the stop */
+    ctx->threads = 1;
+    rp_material_data inherited;
+    builder_material_defaults(&inherited, "");
+    nff_state *st = calloc(1, sizeof *st);
+    if (!st || builder_add_material(ctx, &inherited) != 0) {
+        free(st);
+        return;
+    }
+    xf_identity(&st->stack[0].xf);
+    st->stack[0].anim = -1;
+    st->material = 0;
+    nff_file f = {.ctx = ctx, .st = st, .path = par->path, .p = c->start, .end = par->end, .line = 0};
+    io_builder *b = &ctx->b;
+    for (;;) {
+        nff_skip(&f);
+        const char *cmd = f.p;
+        uint32_t line = f.line;
+        if (cmd >= c->limit || cmd >= f.end) break;
+        size_t pos_n = b->pos_n, nrm_n = b->nrm_n, tri_n = b->tri_n, mat_n = b->material_n;
+        size_t n = 0;
+        while (!nff_delim(cmd[n])) n++;
+        f.p = cmd + n;
+        bool ok = false;
+        if (n == 1 && cmd[0] == 'p') ok = nff_poly(&f, false);
+        else if (n == 2 && cmd[0] == 'p' && cmd[1] == 'p') ok = nff_poly(&f, true);
+        else if (n == 1 && cmd[0] == 'f') ok = nff_fill(&f);
+        if (!ok) { /* left to the serial pass, as if this chunk ended here */
+            b->pos_n = pos_n, b->nrm_n = nrm_n, b->tri_n = tri_n, b->material_n = mat_n;
+            f.p = cmd;
+            f.line = line;
+            break;
+        }
+    }
+    c->stop = f.p;
+    c->lines = f.line;
+    free(st);
+}
+
+static void nff_chunk_free(nff_chunk *c) {
+    free(c->map);
+    c->map = NULL;
+    c->claimed = false;
+    builder_free(&c->ctx.b);
+    free(c->ctx.scratch_u);
+    free(c->ctx.scratch_f);
+    memset(&c->ctx, 0, sizeof c->ctx);
+}
+
+/* Splits the file into chunks and parses them; leaves par->n at 0 (all serial) for small files. */
+static void nff_par_start(io_ctx *ctx, nff_par *par, const char *path, const char *data, size_t size) {
+    memset(par, 0, sizeof *par);
+    uint32_t k = io_chunk_count(ctx, size);
+    if (k < 2 || !(par->chunks = calloc(k, sizeof *par->chunks))) return;
+    const char *end = data + size;
+    for (uint32_t i = 0; i < k; i++) {
+        const char *s = nff_sync(data + (uint64_t)size * i / k, data, end);
+        if (s >= end || (par->n && s <= par->chunks[par->n - 1].start)) continue;
+        nff_chunk *c = &par->chunks[par->n++];
+        c->start = s;
+        builder_init(&c->ctx.b);
+    }
+    for (uint32_t i = 0; i < par->n; i++) par->chunks[i].limit = i + 1 < par->n ? par->chunks[i + 1].start : end;
+    par->path = path;
+    par->end = end;
+    io_parallel_for(ctx->threads, par->n, nff_chunk_task, par);
+    /* The scene's arrays sized once for every chunk, not grown (and copied) chunk by chunk. */
+    size_t pos = 0, nrm = 0, tri = 0;
+    for (uint32_t i = 0; i < par->n; i++) {
+        const io_builder *cb = &par->chunks[i].ctx.b;
+        pos += cb->pos_n, nrm += cb->nrm_n, tri += cb->tri_n;
+    }
+    (void)(builder_reserve_vertices(ctx, pos) && builder_reserve_normals(ctx, nrm) && builder_reserve_triangles(ctx, tri));
+}
+
+static void nff_par_end(nff_par *par) {
+    for (uint32_t i = 0; i < par->n; i++) nff_chunk_free(&par->chunks[i]);
+    free(par->chunks);
+    memset(par, 0, sizeof *par);
+}
+
+/* Takes a chunk's result into the scene as the serial pass would have built it: its materials now,
+ * in order, and room for its vertices and triangles, which nff_par_fill writes once the file is
+ * read (the serial pass reads no earlier vertex in the meantime). */
+static bool nff_chunk_claim(nff_file *f, nff_chunk *c) {
+    io_ctx *ctx = f->ctx;
+    io_builder *b = &ctx->b;
+    const io_builder *cb = &c->ctx.b;
+    if (!(c->map = malloc(cb->material_n * sizeof *c->map))) return io_error(ctx, f->shown, f->line, "out of memory");
+    /* Triangles of the material current at the start come before the chunk's first `f`. */
+    bool inherits = cb->tri_n && cb->mat[0] == 0;
+    c->map[0] = inherits ? nff_material(f) : IO_NONE;
+    if (inherits && c->map[0] == IO_NONE) return io_error(ctx, f->shown, f->line, "out of memory");
+    for (size_t i = 1; i < cb->material_n; i++) {
+        rp_material_data m = cb->materials[i];
+        if (!nff_add_material(f, &m)) return false;
+        c->map[i] = f->st->material;
+    }
+    bool normals = false;
+    for (size_t i = 0; cb->nidx && !normals && i < cb->tri_n; i++) normals = cb->nidx[3 * i] != IO_NONE;
+    c->v0 = b->pos_n, c->n0 = b->nrm_n, c->t0 = b->tri_n;
+    if (b->pos_n + cb->pos_n >= UINT32_MAX || b->nrm_n + cb->nrm_n >= UINT32_MAX ||
+        !builder_reserve_vertices(ctx, cb->pos_n) || !builder_reserve_normals(ctx, cb->nrm_n) ||
+        !builder_claim_triangles(ctx, cb->tri_n, normals, false))
+        return io_error(ctx, f->shown, f->line, "out of memory");
+    b->pos_n += cb->pos_n;
+    b->nrm_n += cb->nrm_n;
+    c->claimed = true;
+    return true;
+}
+
+typedef struct nff_fill_job {
+    io_builder *b;
+    nff_chunk **chunks;
+} nff_fill_job;
+
+static void nff_fill_task(void *user, uint32_t index) {
+    nff_fill_job *job = user;
+    nff_chunk *c = job->chunks[index];
+    io_builder *b = job->b;
+    const io_builder *cb = &c->ctx.b;
+    if (cb->pos_n) memcpy(b->pos + 3 * c->v0, cb->pos, 3 * sizeof(float) * cb->pos_n);
+    if (cb->nrm_n) memcpy(b->nrm + 3 * c->n0, cb->nrm, 3 * sizeof(float) * cb->nrm_n);
+    uint32_t v0 = (uint32_t)c->v0, n0 = (uint32_t)c->n0;
+    for (size_t i = 0; i < cb->tri_n; i++) {
+        size_t k = 3 * (c->t0 + i);
+        const uint32_t *iv = cb->idx + 3 * i, *in = cb->nidx ? cb->nidx + 3 * i : NULL;
+        bool has_n = in && in[0] != IO_NONE;
+        for (int j = 0; j < 3; j++) {
+            b->idx[k + j] = v0 + iv[j];
+            if (b->nidx) b->nidx[k + j] = has_n ? n0 + in[j] : IO_NONE;
+            if (b->tidx) b->tidx[k + j] = IO_NONE;
+        }
+        b->mat[c->t0 + i] = c->map[cb->mat[i]];
+    }
+    nff_chunk_free(c);
+}
+
+/* Writes the claimed chunks into the scene's arrays, in parallel. */
+static bool nff_par_fill(io_ctx *ctx, nff_par *par) {
+    nff_chunk **list = malloc((par->n + 1) * sizeof *list);
+    if (!list) return false;
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < par->n; i++)
+        if (par->chunks[i].claimed) list[n++] = &par->chunks[i];
+    nff_fill_job job = {.b = &ctx->b, .chunks = list};
+    io_parallel_for(ctx->threads, n, nff_fill_task, &job);
+    free(list);
+    return true;
+}
+
+/* At f->p: takes the chunk that starts there, if one does and its state holds; true when it did
+ * (*ok false after an error), f then past the chunk. Chunks the serial pass went past are dropped. */
+static bool nff_par_take(nff_file *f, nff_par *par, bool *ok) {
+    while (par->next < par->n && par->chunks[par->next].start < f->p) nff_chunk_free(&par->chunks[par->next++]);
+    if (par->next >= par->n || par->chunks[par->next].start != f->p) return false;
+    nff_chunk *c = &par->chunks[par->next++];
+    if (f->st->depth != 0 || c->stop == c->start) {
+        nff_chunk_free(c);
+        return false;
+    }
+    *ok = nff_chunk_claim(f, c);
+    f->ctx->chunks_taken++;
+    f->p = c->stop;
+    f->line += c->lines;
+    return true;
+}
+
 /* ---- files ------------------------------------------------------------------------------------ */
 
 static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path, const nff_file *from, const char *as_written);
@@ -883,9 +1104,15 @@ static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path, const nff_fi
     f.end = buf.data + buf.size;
     int depth0 = st->depth;
     bool ok = true;
+    nff_par par;
+    nff_par_start(ctx, &par, path, buf.data, buf.size);
     for (;;) {
         nff_skip(&f);
         if (f.p >= f.end) break;
+        if (par.n && nff_par_take(&f, &par, &ok)) {
+            if (!ok) break;
+            continue;
+        }
         if (*f.p == '\0' || *f.p == '{') {
             ok = io_error(ctx, f.shown, f.line, "%s", *f.p ? "unexpected '{'" : "binary data (NUL byte) in a text file");
             break;
@@ -897,6 +1124,8 @@ static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path, const nff_fi
         ok = io_error(ctx, f.shown, f.line, "end of file inside the transform block opened at line %u", lv->line);
     }
     if (ok && st->depth < depth0) ok = io_error(ctx, f.shown, f.line, "file closes a transform block it did not open");
+    if (ok && par.n && !nff_par_fill(ctx, &par)) ok = io_error(ctx, f.shown, f.line, "out of memory");
+    nff_par_end(&par);
     vfs_buf_free(&buf);
     return ok;
 }

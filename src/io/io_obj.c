@@ -284,6 +284,307 @@ static uint32_t obj_find_material(io_ctx *ctx, size_t first, const char *name) {
     return IO_NONE;
 }
 
+/* ---- parallel parsing ------------------------------------------------------------------------- */
+
+/* A large OBJ file is cut at line starts (every line is a statement) and the chunks are parsed on
+ * the load's threads: vertices into arrays of their own, faces as their corners' indices, usemtl
+ * by name. The serial pass then takes each chunk at its start, in file order: it checks that every
+ * index the chunk holds is in range of what was defined before it (else it parses that chunk
+ * itself and finds the error, with its message and line), resolves the material names, copies the
+ * vertices in, and counts the triangles, which are triangulated and written in parallel at the end.
+ * A chunk stops at a line it leaves to the serial pass (mtllib, an error, a face whose corners mix
+ * with and without normals or texture coordinates). The result is the serial one, to the bit. */
+
+#define OBJ_REL (INT64_C(1) << 40) /* corner index relative to the chunk's start: stored r - OBJ_REL */
+#define OBJ_NONE INT64_MIN         /* no texture coordinate / normal */
+
+typedef struct obj_usemtl {
+    size_t face; /* the first face it applies to */
+    char name[256];
+    uint32_t material; /* resolved by the serial pass */
+} obj_usemtl;
+
+typedef struct obj_chunk {
+    const char *start, *limit, *stop;
+    uint32_t lines;                   /* lines from start to stop */
+    float *pos, *nrm, *uv;            /* the chunk's v, vn, vt */
+    size_t pos_n, nrm_n, uv_n, pos_cap, nrm_cap, uv_cap;
+    int64_t *corners;                 /* v, vt, vn per corner: absolute index >= 0, relative, or OBJ_NONE */
+    size_t corner_n, corner_cap;
+    uint32_t *faces;                  /* first corner of each face; one past the last at faces[face_n] */
+    size_t face_n, face_cap, tri_n;
+    obj_usemtl *mtls;
+    size_t mtl_n, mtl_cap;
+    int64_t need[3];                  /* v, vt, vn that must be defined before the chunk */
+    bool has_t, has_n, oom;
+    size_t base[3], t0;               /* where the serial pass put it */
+    uint32_t first_material;          /* the material current at its start */
+} obj_chunk;
+
+typedef struct obj_par {
+    obj_chunk *chunks;
+    uint32_t n, next;
+    const char *end;
+    io_builder *b;
+} obj_par;
+
+static const char *obj_chunk_floats(const char *p, float *v, int n) {
+    for (int i = 0; i < n; i++) {
+        p = skip_blank(p);
+        const char *q = io_parse_float(p, &v[i]);
+        if (!q || !is_delim(*q)) return NULL;
+        p = q;
+    }
+    return p;
+}
+
+static float *obj_chunk_vec(float **a, size_t *n, size_t *cap, int dim, bool *oom) {
+    if (*n >= *cap && !io_reserve((void **)a, cap, *n + 1, (size_t)dim * sizeof(float))) {
+        *oom = true;
+        return NULL;
+    }
+    return *a + (size_t)dim * (*n)++;
+}
+
+/* One face line into the chunk, as obj_face would read it; false leaves it to the serial pass. */
+static bool obj_chunk_face(obj_chunk *c, const char *p) {
+    size_t first = c->corner_n;
+    uint32_t n = 0;
+    int has[2] = {0, 0}; /* corners with a texture coordinate, with a normal */
+    const size_t counts[3] = {c->pos_n, c->uv_n, c->nrm_n};
+    for (;;) {
+        p = skip_blank(p);
+        if (at_eol(p)) break;
+        if (c->corner_n + 3 > c->corner_cap &&
+            !io_reserve((void **)&c->corners, &c->corner_cap, c->corner_n + 3, sizeof(int64_t)))
+            return c->oom = true, false;
+        int64_t raw[3] = {0, 0, 0};
+        bool present[3] = {true, false, false};
+        const char *q = io_parse_int(p, &raw[0]);
+        if (!q) return false;
+        if (*q == '/') {
+            q++;
+            if (*q != '/' && !(present[1] = (q = io_parse_int(q, &raw[1])) != NULL)) return false;
+            if (*q == '/' && !(present[2] = (q = io_parse_int(q + 1, &raw[2])) != NULL)) return false;
+        }
+        if (!is_delim(*q) && *q != '#') return false;
+        int64_t *e = c->corners + c->corner_n;
+        for (int k = 0; k < 3; k++) {
+            if (!present[k]) {
+                e[k] = OBJ_NONE;
+                continue;
+            }
+            /* index 0 and huge ones are errors or rarities the serial pass reports */
+            if (raw[k] == 0 || raw[k] > INT32_MAX || raw[k] < -INT32_MAX) return false;
+            int64_t lc = (int64_t)counts[k];
+            if (raw[k] > 0) { /* index raw - 1 must exist: base + lc > raw - 1 */
+                e[k] = raw[k] - 1;
+                if (raw[k] - lc > c->need[k]) c->need[k] = raw[k] - lc;
+            } else { /* base + lc + raw >= 0 */
+                e[k] = lc + raw[k] - OBJ_REL;
+                if (-(lc + raw[k]) > c->need[k]) c->need[k] = -(lc + raw[k]);
+            }
+        }
+        has[0] += e[1] != OBJ_NONE;
+        has[1] += e[2] != OBJ_NONE;
+        c->corner_n += 3;
+        p = q;
+        if (++n >= 64) return false; /* big polygons: the serial pass */
+    }
+    if (n < 3 || (has[0] && has[0] != (int)n) || (has[1] && has[1] != (int)n)) return false;
+    if (c->face_n + 2 > c->face_cap && !io_reserve((void **)&c->faces, &c->face_cap, c->face_n + 2, sizeof(uint32_t)))
+        return c->oom = true, false;
+    if (first > UINT32_MAX - 3 * 64) return false;
+    c->faces[c->face_n++] = (uint32_t)first;
+    c->faces[c->face_n] = (uint32_t)c->corner_n;
+    c->tri_n += n - 2;
+    c->has_t |= has[0] != 0;
+    c->has_n |= has[1] != 0;
+    return true;
+}
+
+static void obj_chunk_task(void *user, uint32_t index) {
+    obj_par *par = user;
+    obj_chunk *c = &par->chunks[index];
+    c->need[0] = c->need[1] = c->need[2] = INT64_MIN;
+    const char *p = c->start, *end = par->end;
+    uint32_t line = 0;
+    for (; p < c->limit; p = next_line(p, end), line++) {
+        size_t undo[5] = {c->pos_n, c->nrm_n, c->uv_n, c->corner_n, c->mtl_n};
+        const char *s = skip_blank(p);
+        bool ok = true;
+        if (at_eol(s)) {
+            ok = !(*s == '\0' && s < end);
+        } else if (s[0] == 'v' && (s[1] == ' ' || s[1] == '\t')) {
+            float *v = obj_chunk_vec(&c->pos, &c->pos_n, &c->pos_cap, 3, &c->oom);
+            ok = v && obj_chunk_floats(s + 1, v, 3);
+        } else if (s[0] == 'f' && (s[1] == ' ' || s[1] == '\t')) {
+            ok = obj_chunk_face(c, s + 1);
+        } else if (s[0] == 'v' && s[1] == 'n' && is_delim(s[2])) {
+            float *v = obj_chunk_vec(&c->nrm, &c->nrm_n, &c->nrm_cap, 3, &c->oom);
+            ok = v && obj_chunk_floats(s + 2, v, 3);
+        } else if (s[0] == 'v' && s[1] == 't' && is_delim(s[2])) {
+            float *v = obj_chunk_vec(&c->uv, &c->uv_n, &c->uv_cap, 2, &c->oom);
+            const char *q = v ? obj_chunk_floats(s + 2, v, 1) : NULL;
+            ok = q != NULL;
+            if (ok) {
+                v[1] = 0.0f;
+                if (!at_eol(skip_blank(q))) ok = obj_chunk_floats(q, v + 1, 1) != NULL;
+            }
+        } else if (word_is(s, "usemtl")) {
+            ok = io_reserve((void **)&c->mtls, &c->mtl_cap, c->mtl_n + 1, sizeof *c->mtls);
+            if (ok) {
+                obj_usemtl *u = &c->mtls[c->mtl_n++];
+                u->face = c->face_n;
+                rest_of_line(s + 6, u->name, sizeof u->name);
+            } else {
+                c->oom = true;
+            }
+        } else {
+            ok = !word_is(s, "mtllib") && obj_skippable(s);
+        }
+        if (!ok) { /* this line and the rest to the serial pass */
+            c->pos_n = undo[0], c->nrm_n = undo[1], c->uv_n = undo[2], c->corner_n = undo[3], c->mtl_n = undo[4];
+            break;
+        }
+    }
+    c->stop = p < c->limit ? p : c->limit;
+    c->lines = line;
+}
+
+static void obj_chunk_free(obj_chunk *c) {
+    free(c->pos);
+    free(c->nrm);
+    free(c->uv);
+    free(c->corners);
+    free(c->faces);
+    free(c->mtls);
+    memset(c, 0, sizeof *c);
+}
+
+static void obj_par_start(io_ctx *ctx, obj_par *par, const char *data, size_t size) {
+    memset(par, 0, sizeof *par);
+    uint32_t k = io_chunk_count(ctx, size);
+    if (k < 2 || !(par->chunks = calloc(k, sizeof *par->chunks))) return;
+    const char *end = data + size;
+    for (uint32_t i = 0; i < k; i++) {
+        const char *s = data + (uint64_t)size * i / k;
+        if (s > data && s[-1] != '\n') {
+            const char *nl = memchr(s, '\n', (size_t)(end - s));
+            s = nl ? nl + 1 : end;
+        }
+        if (s >= end || (par->n && s <= par->chunks[par->n - 1].start)) continue;
+        par->chunks[par->n++].start = s;
+    }
+    for (uint32_t i = 0; i < par->n; i++) par->chunks[i].limit = i + 1 < par->n ? par->chunks[i + 1].start : end;
+    par->end = end;
+    par->b = &ctx->b;
+    io_parallel_for(ctx->threads, par->n, obj_chunk_task, par);
+    size_t pos = 0, nrm = 0, uv = 0, tri = 0;
+    for (uint32_t i = 0; i < par->n; i++) {
+        const obj_chunk *c = &par->chunks[i];
+        pos += c->pos_n, nrm += c->nrm_n, uv += c->uv_n, tri += c->tri_n;
+    }
+    (void)(builder_reserve_vertices(ctx, pos) && builder_reserve_normals(ctx, nrm) &&
+           builder_reserve_texcoords(ctx, uv) && builder_reserve_triangles(ctx, tri));
+}
+
+static void obj_par_end(obj_par *par) {
+    for (uint32_t i = 0; i < par->n; i++) obj_chunk_free(&par->chunks[i]);
+    free(par->chunks);
+    memset(par, 0, sizeof *par);
+}
+
+/* At line start *p: takes the chunk that starts there when its indices hold; true when it did,
+ * *p and f->line then past it. *material is the current material before and after. */
+static bool obj_par_take(obj_file *f, obj_par *par, const char **p, uint32_t *material, size_t first_mtl, bool *ok) {
+    while (par->next < par->n && par->chunks[par->next].start < *p) obj_chunk_free(&par->chunks[par->next++]);
+    if (par->next >= par->n || par->chunks[par->next].start != *p) return false;
+    obj_chunk *c = &par->chunks[par->next++];
+    io_ctx *ctx = f->ctx;
+    io_builder *b = &ctx->b;
+    const size_t have[3] = {b->pos_n, b->uv_n, b->nrm_n};
+    bool fits = c->stop > c->start && !c->oom;
+    for (int k = 0; fits && k < 3; k++) fits = c->need[k] == INT64_MIN || c->need[k] <= (int64_t)have[k];
+    if (!fits) { /* the serial pass parses it, and finds the error if there is one */
+        obj_chunk_free(c);
+        return false;
+    }
+    /* Materials in file order, as the serial pass meets the usemtl lines and faces: the faces after
+     * each usemtl (and before the first) use its material, the default one (made at the first
+     * such face) when the name is unknown. */
+    uint32_t cur = *material;
+    for (size_t i = 0; i <= c->mtl_n; i++) {
+        size_t from = i ? c->mtls[i - 1].face : 0, to = i < c->mtl_n ? c->mtls[i].face : c->face_n;
+        uint32_t use = cur;
+        if (to > from && use == IO_NONE && (use = builder_default_material(ctx)) == IO_NONE)
+            return *ok = io_error(ctx, f->shown, f->line, "out of memory"), true;
+        if (i) c->mtls[i - 1].material = use;
+        else c->first_material = use;
+        if (i < c->mtl_n) cur = obj_find_material(ctx, first_mtl, c->mtls[i].name);
+    }
+    *material = cur;
+    if (b->pos_n + c->pos_n >= UINT32_MAX || b->nrm_n + c->nrm_n >= UINT32_MAX || b->uv_n + c->uv_n >= UINT32_MAX ||
+        !builder_reserve_vertices(ctx, c->pos_n) || !builder_reserve_normals(ctx, c->nrm_n) ||
+        !builder_reserve_texcoords(ctx, c->uv_n) || !builder_claim_triangles(ctx, c->tri_n, c->has_n, c->has_t))
+        return *ok = io_error(ctx, f->shown, f->line, "out of memory"), true;
+    /* vertices now (serial faces after the chunk may triangulate with them), triangles at the end */
+    c->base[0] = b->pos_n, c->base[1] = b->uv_n, c->base[2] = b->nrm_n;
+    c->t0 = b->tri_n - c->tri_n;
+    if (c->pos_n) memcpy(b->pos + 3 * b->pos_n, c->pos, 3 * sizeof(float) * c->pos_n);
+    if (c->nrm_n) memcpy(b->nrm + 3 * b->nrm_n, c->nrm, 3 * sizeof(float) * c->nrm_n);
+    if (c->uv_n) memcpy(b->uv + 2 * b->uv_n, c->uv, 2 * sizeof(float) * c->uv_n);
+    b->pos_n += c->pos_n, b->nrm_n += c->nrm_n, b->uv_n += c->uv_n;
+    ctx->chunks_taken++;
+    *p = c->stop;
+    f->line += c->lines;
+    return true;
+}
+
+static inline uint32_t obj_resolve(int64_t e, size_t base) {
+    if (e == OBJ_NONE) return IO_NONE;
+    return (uint32_t)(e >= 0 ? e : (int64_t)base + (e + OBJ_REL));
+}
+
+static void obj_fill_task(void *user, uint32_t index) {
+    obj_par *par = user;
+    obj_chunk *c = &par->chunks[index];
+    if (!c->faces) return; /* not taken, or no faces */
+    io_builder *b = par->b;
+    uint32_t material = c->first_material;
+    size_t next_mtl = 0, t = c->t0;
+    for (size_t fi = 0; fi < c->face_n; fi++) {
+        while (next_mtl < c->mtl_n && c->mtls[next_mtl].face == fi) material = c->mtls[next_mtl++].material;
+        const int64_t *e = c->corners + c->faces[fi];
+        uint32_t n = (c->faces[fi + 1] - c->faces[fi]) / 3;
+        uint32_t corner[3 * 64], tris[3 * 62], ring[64];
+        float pts[3 * 64];
+        for (uint32_t i = 0; i < n; i++)
+            for (int k = 0; k < 3; k++) corner[3 * i + (uint32_t)k] = obj_resolve(e[3 * i + (uint32_t)k], c->base[k]);
+        if (n == 3) {
+            tris[0] = 0, tris[1] = 1, tris[2] = 2;
+        } else {
+            for (uint32_t i = 0; i < n; i++) memcpy(pts + 3 * i, b->pos + 3 * (size_t)corner[3 * i], 3 * sizeof(float));
+            poly_triangulate(pts, n, tris, ring);
+        }
+        for (uint32_t k = 0; k < n - 2; k++, t++) {
+            bool has_t = true, has_n = true;
+            for (int j = 0; j < 3; j++) {
+                const uint32_t *cj = corner + 3 * tris[3 * k + (uint32_t)j];
+                b->idx[3 * t + (size_t)j] = cj[0];
+                has_t &= cj[1] != IO_NONE;
+                has_n &= cj[2] != IO_NONE;
+            }
+            for (int j = 0; j < 3; j++) {
+                const uint32_t *cj = corner + 3 * tris[3 * k + (uint32_t)j];
+                if (b->tidx) b->tidx[3 * t + (size_t)j] = has_t ? cj[1] : IO_NONE;
+                if (b->nidx) b->nidx[3 * t + (size_t)j] = has_n ? cj[2] : IO_NONE;
+            }
+            b->mat[t] = material;
+        }
+    }
+}
+
 bool obj_load(io_ctx *ctx, const char *path) {
     obj_file f = {.ctx = ctx, .path = path, .line = 1};
     vfs_display(&ctx->vfs, path, f.shown, sizeof f.shown);
@@ -295,7 +596,11 @@ bool obj_load(io_ctx *ctx, const char *path) {
     uint32_t material = IO_NONE;
     size_t first_mtl = b->material_n;
     bool ok = true;
+    obj_par par;
+    obj_par_start(ctx, &par, buf.data, buf.size);
     for (; ok && p < end; p = next_line(p, end), f.line++) {
+        while (ok && p < end && par.n && obj_par_take(&f, &par, &p, &material, first_mtl, &ok)) {}
+        if (!ok || p >= end) break;
         p = skip_blank(p);
         if (at_eol(p)) {
             if (*p == '\0' && p < end) ok = io_error(ctx, f.shown, f.line, "binary data in a text file");
@@ -366,6 +671,8 @@ bool obj_load(io_ctx *ctx, const char *path) {
             ok = io_error(ctx, f.shown, f.line, "unknown statement '%.*s'", len, p);
         }
     }
+    if (ok && par.n) io_parallel_for(ctx->threads, par.n, obj_fill_task, &par);
+    obj_par_end(&par);
     vfs_buf_free(&buf);
     return ok;
 }

@@ -127,6 +127,15 @@ static uint32_t *corner_array(const io_builder *b) {
     return a;
 }
 
+bool builder_claim_triangles(io_ctx *ctx, size_t tris, bool normals, bool texcoords) {
+    io_builder *b = &ctx->b;
+    if (tris >= UINT32_MAX / 3 - b->tri_n || !builder_reserve_triangles(ctx, tris)) return false;
+    if (normals && !b->nidx && !(b->nidx = corner_array(b))) return false;
+    if (texcoords && !b->tidx && !(b->tidx = corner_array(b))) return false;
+    b->tri_n += tris;
+    return true;
+}
+
 bool builder_add_triangle(io_ctx *ctx, const uint32_t v[3], const uint32_t *n, const uint32_t *t,
                           uint32_t material) {
     io_builder *b = &ctx->b;
@@ -150,7 +159,12 @@ bool builder_add_triangle(io_ctx *ctx, const uint32_t v[3], const uint32_t *n, c
     return true;
 }
 
-static void builder_free(io_builder *b) {
+void builder_init(io_builder *b) {
+    memset(b, 0, sizeof *b);
+    b->default_material = IO_NONE;
+}
+
+void builder_free(io_builder *b) {
     free(b->pos);
     free(b->nrm);
     free(b->uv);
@@ -242,6 +256,12 @@ static bool is_archive(const char *path) {
     return ends_with(lower, ".tar") || ends_with(lower, ".tar.gz") || ends_with(lower, ".tgz");
 }
 
+/* The newline ending the line at p, or end. */
+static const char *line_end(const char *p, const char *end) {
+    const char *nl = p < end ? memchr(p, '\n', (size_t)(end - p)) : NULL;
+    return nl ? nl : end;
+}
+
 /* Scans an AFF/NFF text for `i <detail> <file>` includes and marks the archive entries they name. */
 static void mark_includes(io_ctx *ctx, const io_entry *e, bool *included) {
     const char *p = e->data, *end = e->data + e->size;
@@ -264,8 +284,7 @@ static void mark_includes(io_ctx *ctx, const io_entry *e, bool *included) {
                     if (strcmp(ctx->vfs.entries[k].name, full) == 0) included[k] = true;
             }
         }
-        while (p < end && *p != '\n') p++;
-        p++;
+        p = line_end(p, end) + 1;
     }
 }
 
@@ -275,8 +294,7 @@ static size_t count_includes(const io_entry *e) {
     while (p < end) {
         while (p < end && io_is_space(*p)) p++;
         if (p + 1 < end && p[0] == 'i' && io_is_space(p[1])) n++;
-        while (p < end && *p != '\n') p++;
-        p++;
+        p = line_end(p, end) + 1;
     }
     return n;
 }
@@ -366,11 +384,13 @@ static uint64_t env_limit(const char *name, uint64_t def) {
     return (uint64_t)n * scale;
 }
 
-static void ctx_init(io_ctx *ctx, char *err, size_t err_size) {
+static void ctx_init(io_ctx *ctx, const io_load_opts *opts, char *err, size_t err_size) {
     memset(ctx, 0, sizeof *ctx);
     ctx->err = err;
     ctx->err_size = err_size;
     ctx->b.default_material = IO_NONE;
+    ctx->threads = io_threads_resolve(opts ? opts->threads : 0);
+    ctx->chunk_bytes = opts ? opts->chunk_bytes : 0;
     ctx->limits.max_includes = env_limit("RP_MAX_INCLUDES", IO_DEFAULT_MAX_INCLUDES);
     ctx->limits.max_include_bytes = env_limit("RP_MAX_INCLUDE_BYTES", IO_DEFAULT_MAX_INCLUDE_BYTES);
     ctx->limits.max_file_bytes = env_limit("RP_MAX_FILE_BYTES", IO_DEFAULT_MAX_FILE_BYTES);
@@ -386,7 +406,8 @@ static bool load_archive_main(io_ctx *ctx, const char *path) {
 }
 
 /* After the loader: defaults, clean-up, and the builder's arrays handed to out. */
-static bool ctx_finish(io_ctx *ctx, bool ok, const char *path, rp_scene_data *out, double t0) {
+static bool ctx_finish(io_ctx *ctx, bool ok, const char *path, rp_scene_data *out, double t0, const io_load_opts *opts) {
+    if (opts && opts->chunks_taken) *opts->chunks_taken = ctx->chunks_taken;
     if (ok && ctx->b.material_n == 0) builder_default_material(ctx);
     if (ok && ctx->b.material_n == 0) ok = io_error(ctx, path, 0, "out of memory");
     if (ok && !builder_fill_missing(ctx)) ok = io_error(ctx, path, 0, "out of memory");
@@ -404,27 +425,62 @@ static bool ctx_finish(io_ctx *ctx, bool ok, const char *path, rp_scene_data *ou
     return true;
 }
 
-bool rp_scene_data_load(const char *path, rp_scene_data *out, char *err, size_t err_size) {
+/* Below this a text is parsed serially: threads cost more than they save on a few hundred kB. */
+#define IO_MIN_CHUNK_BYTES (256u << 10)
+#define IO_MAX_CHUNKS 65536u
+
+uint32_t io_chunk_count(const io_ctx *ctx, size_t size) {
+    if (ctx->chunk_bytes) { /* the tests' setting, even on one thread */
+        size_t k = size / ctx->chunk_bytes + 1;
+        return k > IO_MAX_CHUNKS ? IO_MAX_CHUNKS : (uint32_t)k;
+    }
+    if (ctx->threads <= 1 || size < 2 * (size_t)IO_MIN_CHUNK_BYTES) return 1;
+    /* four chunks a thread, so a thread that was descheduled does not hold up the others */
+    size_t k = (size_t)ctx->threads * 4, most = size / IO_MIN_CHUNK_BYTES;
+    return (uint32_t)(k < most ? k : most);
+}
+
+void rp_scene_load_desc_defaults(rp_scene_load_desc *desc) {
+    if (desc) memset(desc, 0, sizeof *desc);
+}
+
+bool io_load_file_opts(const char *path, const io_load_opts *opts, rp_scene_data *out, char *err, size_t err_size) {
     double t0 = now_ms();
     if (err && err_size) err[0] = '\0';
     if (!out) return false;
     memset(out, 0, sizeof *out);
     io_ctx ctx;
-    ctx_init(&ctx, err, err_size);
+    ctx_init(&ctx, opts, err, err_size);
     if (!path) return io_error(&ctx, "(null)", 0, "no path given");
     if (strlen(path) >= IO_PATH_MAX - 64) return io_error(&ctx, path, 0, "path too long");
     bool ok;
     if (is_archive(path)) ok = vfs_open_archive(&ctx, path, NULL, 0) && load_archive_main(&ctx, path);
     else ok = load_scene_file(&ctx, path, path);
-    return ctx_finish(&ctx, ok, path, out, t0);
+    return ctx_finish(&ctx, ok, path, out, t0, opts);
+}
+
+bool rp_scene_data_load_ex(const char *path, const rp_scene_load_desc *desc, rp_scene_data *out, char *err,
+                           size_t err_size) {
+    io_load_opts opts = {.threads = desc ? desc->threads : 0};
+    return io_load_file_opts(path, &opts, out, err, err_size);
+}
+
+bool rp_scene_data_load(const char *path, rp_scene_data *out, char *err, size_t err_size) {
+    return io_load_file_opts(path, NULL, out, err, err_size);
 }
 
 bool io_load_memory(const io_entry *files, size_t n, bool archive, rp_scene_data *out, char *err, size_t err_size) {
+    io_load_opts opts = {.threads = 1}; /* the fuzzers: one thread, as before */
+    return io_load_memory_opts(files, n, archive, &opts, out, err, err_size);
+}
+
+bool io_load_memory_opts(const io_entry *files, size_t n, bool archive, const io_load_opts *opts, rp_scene_data *out,
+                         char *err, size_t err_size) {
     double t0 = now_ms();
     if (err && err_size) err[0] = '\0';
     memset(out, 0, sizeof *out);
     io_ctx ctx;
-    ctx_init(&ctx, err, err_size);
+    ctx_init(&ctx, opts, err, err_size);
     if (n == 0) return io_error(&ctx, "mem", 0, "no files");
     bool ok;
     if (archive) {
@@ -437,7 +493,7 @@ bool io_load_memory(const io_entry *files, size_t n, bool archive, rp_scene_data
         ok = load_scene_file(&ctx, files[0].name, "mem");
         memset(&ctx.vfs, 0, sizeof ctx.vfs);
     }
-    return ctx_finish(&ctx, ok, "mem", out, t0);
+    return ctx_finish(&ctx, ok, "mem", out, t0, opts);
 }
 
 void rp_scene_data_free(rp_scene_data *scene) {

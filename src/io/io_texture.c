@@ -88,6 +88,10 @@ static uint8_t *ppm_decode(const char *data, size_t size, int32_t *w, int32_t *h
             return NULL;
         }
         const uint8_t *s = (const uint8_t *)p;
+        if (maxval == 255) { /* the common case: the samples as they are */
+            memcpy(rgb, s, n);
+            n = 0;
+        }
         for (size_t i = 0; i < n; i++) {
             int64_t v = bpc == 2 ? (int64_t)s[2 * i] << 8 | s[2 * i + 1] : s[i];
             if (v > maxval) v = maxval;

@@ -98,6 +98,7 @@ typedef struct io_ctx {
     size_t scratch_u_cap;
     float *scratch_f;
     size_t scratch_f_cap;
+    rp_animation_data *anim; /* what the AFF loader parsed of an animation, finished by anim_finish */
 } io_ctx;
 
 /* Records the first error as "file:line: error: message"; always returns false. */
@@ -165,6 +166,14 @@ uint32_t tex_add_rgb(io_ctx *ctx, const char *key, const char *as_written, int32
  * archive, files[0] holds a tar(.gz) image instead and is unpacked first. The files stay the
  * caller's. Same result and errors as rp_scene_data_load. */
 bool io_load_memory(const io_entry *files, size_t n, bool archive, rp_scene_data *out, char *err, size_t err_size);
+
+/* ---- animation (io_anim.c) ------------------------------------------------------------------ */
+
+/* Completes ctx->anim against the finished scene (per-vertex and per-normal nodes, rest copies)
+ * and hands it to out at the animation's start time; false when out of memory. */
+bool anim_finish(io_ctx *ctx, rp_scene_data *out);
+/* Frees an animation and every array it owns. */
+void anim_free(rp_animation_data *a);
 
 /* ---- polygons (io_poly.c) --------------------------------------------------------------------- */
 

@@ -947,8 +947,11 @@ void cli_render_size(const cli_render_setup *setup, const rp_scene_data *data, i
 
 int cli_render_scene_flags(const char *cmd, const cli_render_setup *setup, rp_scene_data *data) {
     if (setup->light_count >= 0 && !rp_scene_data_keep_lights(data, setup->lights, (size_t)setup->light_count)) {
-        fprintf(stderr, "raypack %s: --lights: the scene has %zu lights (indices 0..%zu)\n", cmd, data->light_count,
-                data->light_count ? data->light_count - 1 : 0);
+        if (data->light_count)
+            fprintf(stderr, "raypack %s: --lights: the scene has %zu lights (indices 0..%zu)\n", cmd, data->light_count,
+                    data->light_count - 1);
+        else
+            fprintf(stderr, "raypack %s: --lights: the scene has no point lights\n", cmd);
         return CLI_EXIT_USAGE;
     }
     if (setup->has_anim_time && !rp_scene_data_set_time(data, setup->anim_time)) {

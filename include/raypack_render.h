@@ -150,6 +150,10 @@ typedef struct rp_render_scene_desc {
      * so a frame only sets transforms, refits the `tpa` sub-scenes and rebuilds the top level;
      * true builds the one flat structure of a still scene (a frame then refits all of it). */
     bool flatten_animation;
+    /* Animated scenes, instanced: true moves the world-space vertices of keyframed blocks of
+     * triangles (no spheres or cones) under the identity and refits their sub-scenes every frame,
+     * instead of setting their transforms (to measure what a refit of them costs) */
+    bool refit_blocks;
 } rp_render_scene_desc;
 
 /* Returns the defaults for every zero field of desc (NULL gives all defaults). */

@@ -305,6 +305,13 @@ static void test_bart(rp_device *dev, const char *name, const float *times, int 
     CHECKF(ok && anim.animation, "%s: %s", name, err);
     if (!ok) return;
     rp_render_scene *inst = rp_render_scene_new(dev, &anim, NULL, err, sizeof err);
+    /* the blocks' world-space vertices refitted under the identity: the flat frame's triangles */
+    rp_scene_data refit_data;
+    rp_render_scene *refit = NULL;
+    bool refit_loaded = rp_scene_data_load(path, &refit_data, err, sizeof err);
+    if (refit_loaded)
+        refit = rp_render_scene_new(dev, &refit_data, &(rp_render_scene_desc){.refit_blocks = true}, err, sizeof err);
+    CHECKF(refit != NULL, "%s: %s", name, err);
     rp_render_scene *flat_up = NULL;
     rp_scene_data flat_up_data;
     ok = rp_scene_data_load(path, &flat_up_data, err, sizeof err);
@@ -315,8 +322,9 @@ static void test_bart(rp_device *dev, const char *name, const float *times, int 
         rp_render_update_stats us;
         CHECK(rp_render_scene_set_time(inst, &anim, t, &us));
         CHECK(us.rebuilds >= 1 && us.instances >= 1); /* the top level at least */
-        rp_render_update_stats fs;
+        rp_render_update_stats fs, rs;
         CHECK(rp_render_scene_set_time(flat_up, &flat_up_data, t, &fs));
+        CHECK(refit && rp_render_scene_set_time(refit, &refit_data, t, &rs) && rs.refits + rs.rebuilds >= 2);
         /* the reference: the frame flattened and built from scratch */
         ok = rp_scene_data_load(path, &flat, err, sizeof err);
         CHECKF(ok, "%s", err);
@@ -324,21 +332,26 @@ static void test_bart(rp_device *dev, const char *name, const float *times, int 
         CHECK(rp_scene_data_set_time(&flat, t));
         rp_render_scene *ref = rp_render_scene_new(dev, &flat, &(rp_render_scene_desc){.flatten_animation = true}, err, sizeof err);
         CHECKF(ref, "%s", err);
-        frame_px fa = {0}, fb = {0}, fc = {0};
-        if (ref && render_frame(inst, w, h, &fa) && render_frame(ref, w, h, &fb) && render_frame(flat_up, w, h, &fc)) {
+        frame_px fa = {0}, fb = {0}, fc = {0}, fd = {0};
+        if (ref && refit && render_frame(inst, w, h, &fa) && render_frame(ref, w, h, &fb) &&
+            render_frame(flat_up, w, h, &fc) && render_frame(refit, w, h, &fd)) {
             char what[256];
             snprintf(what, sizeof what, "%s t %g, instanced + updated vs flat rebuilt", name, (double)t);
             compare_frames(what, &fa, &fb, w, h, exact);
             snprintf(what, sizeof what, "%s t %g, flat refitted/rebuilt by the update vs flat built", name, (double)t);
             compare_frames(what, &fc, &fb, w, h, true);
+            snprintf(what, sizeof what, "%s t %g, blocks refitted in world space vs flat built", name, (double)t);
+            compare_frames(what, &fd, &fb, w, h, true);
         } else {
             CHECKF(false, "%s t %g: rendering failed", name, (double)t);
         }
-        frame_free(&fa), frame_free(&fb), frame_free(&fc);
+        frame_free(&fa), frame_free(&fb), frame_free(&fc), frame_free(&fd);
         rp_render_scene_release(ref);
         rp_scene_data_free(&flat);
     }
     rp_render_scene_release(inst);
+    rp_render_scene_release(refit);
+    if (refit_loaded) rp_scene_data_free(&refit_data);
     rp_render_scene_release(flat_up);
     rp_scene_data_free(&anim);
     rp_scene_data_free(&flat_up_data);

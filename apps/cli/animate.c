@@ -34,6 +34,8 @@ static void animate_usage(FILE *out) {
             "                         --frames)\n"
             "  --first I, --last I    render only frames I..I' of those (0-based, inclusive)\n"
             "  --anim-flat            one flat structure refitted every frame instead of instances\n"
+            "  --anim-refit           the keyframed blocks' vertices moved and refitted every frame\n"
+            "                         instead of their instance transforms set (what a refit costs)\n"
             "  --quiet                only the summary\n"
             "  -h, --help             this help\n"
             "Every other option is raypack render's (--width, --height, --threads, --integrator,\n"
@@ -42,6 +44,11 @@ static void animate_usage(FILE *out) {
             "--refract-depth 4.\n"
             "\n"
             "exit status: 0 ok, 1 the scene could not be loaded or a frame written, 2 usage error\n");
+}
+
+static int cmp_double(const void *a, const void *b) {
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
 }
 
 /* True when pattern holds exactly one integer conversion (%d, %04d, ...) and no other. */
@@ -151,6 +158,7 @@ int cli_animate(int argc, char **argv) {
     rp_device *device = NULL;
     rp_render_scene *scene = NULL;
     float *pixels = NULL;
+    double *upd = NULL, *ren = NULL;
     rc = cli_render_scene_flags(CMD, &setup, &data);
     if (rc != CLI_EXIT_OK) {
         status = rc;
@@ -198,7 +206,10 @@ int cli_animate(int argc, char **argv) {
     if (!quiet)
         printf("animate  %s: %d frames over [%g, %g] (frames %d..%d here), %dx%d, %s, %d threads, %s; build %.1f ms\n",
                setup.scene, count, (double)anim->start, (double)anim->end, first, last, w, h, setup.integrator_name,
-               rp_device_thread_count(device), setup.scene_desc.flatten_animation ? "flat" : "instanced", build_ms);
+               rp_device_thread_count(device), setup.scene_desc.flatten_animation ? "flat" : setup.scene_desc.refit_blocks ? "instanced, blocks refitted" : "instanced", build_ms);
+    upd = malloc((size_t)(last - first + 1) * 2 * sizeof *upd);
+    if (!upd) goto done;
+    ren = upd + (last - first + 1);
     double sum_update = 0.0, sum_refit = 0.0, sum_top = 0.0, sum_render = 0.0, max_update = 0.0, sum_write = 0.0;
     uint64_t rays = 0;
     int done_frames = 0;
@@ -237,6 +248,7 @@ int cli_animate(int argc, char **argv) {
         sum_write += write_ms;
         sum_update += us.update_ms, sum_refit += us.refit_ms, sum_top += us.top_ms, sum_render += rs.render_ms;
         if (us.update_ms > max_update) max_update = us.update_ms;
+        upd[done_frames] = us.update_ms, ren[done_frames] = rs.render_ms;
         done_frames++;
         if (!quiet)
             printf("frame %5d t %8.4f  update %7.3f ms (eval %.3f, refit %.3f, top %.3f; %u instances, %u refit, %u rebuilt)"
@@ -245,8 +257,12 @@ int cli_animate(int argc, char **argv) {
                    rs.render_ms, rs.render_ms > 0.0 ? (double)fr / (rs.render_ms * 1e3) : 0.0);
     }
     double total = sum_update + sum_render, n = done_frames > 0 ? done_frames : 1;
-    printf("summary  %d frames: update %.3f ms a frame (max %.3f; refit %.3f, top level %.3f), render %.1f ms a frame\n",
-           done_frames, sum_update / n, max_update, sum_refit / n, sum_top / n, sum_render / n);
+    qsort(upd, (size_t)done_frames, sizeof *upd, cmp_double);
+    qsort(ren, (size_t)done_frames, sizeof *ren, cmp_double);
+    printf("summary  %d frames: update %.3f ms a frame (median %.3f, max %.3f; refit %.3f, top level %.3f), render %.1f ms "
+           "a frame (median %.1f)\n",
+           done_frames, sum_update / n, upd[done_frames / 2], max_update, sum_refit / n, sum_top / n, sum_render / n,
+           ren[done_frames / 2]);
     printf("fps      %.3f frames/s with updates (BART), %.3f rendering alone; updates %.2f%% of the time; "
            "%.2f Mrays/s%s\n",
            total > 0.0 ? 1e3 * n / total : 0.0, sum_render > 0.0 ? 1e3 * n / sum_render : 0.0,
@@ -255,6 +271,7 @@ int cli_animate(int argc, char **argv) {
     if (pattern) printf("written  %d images, %.1f ms a frame (not counted above)\n", done_frames, sum_write / n);
     status = CLI_EXIT_OK;
 done:
+    free(upd);
     free(pixels);
     rp_render_scene_release(scene);
     if (device) rp_device_release(device);

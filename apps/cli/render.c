@@ -54,6 +54,8 @@ static void render_usage(FILE *out) {
             "                         (--time is the progressive time budget)\n"
             "  --anim-flat            animated scenes: one flat structure instead of an instance\n"
             "                         per keyframed block (same image, for comparisons)\n"
+            "  --anim-refit           animated scenes: keyframed blocks' vertices moved and their\n"
+            "                         sub-scenes refitted each frame instead of instance transforms\n"
             "  --env FILE.hdr         lat-long environment (+y up) for direct, path and ir\n"
             "  --env-scale R,G,B      multiplies --env; without --env, a constant environment\n"
             "  --exposure EV          PNG/PPM: multiply by 2^EV before the tone map [0]\n"
@@ -123,7 +125,7 @@ typedef struct render_options {
     bool no_frustum;
     rp_accel_type accel;
     int reflect_depth, refract_depth; /* -1: not given */
-    bool has_anim_time, anim_flat;
+    bool has_anim_time, anim_flat, anim_refit;
     float anim_time;
     uint32_t lights[CLI_MAX_LIGHTS];
     int light_count;                  /* -1: all lights */
@@ -311,6 +313,8 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
             o->has_anim_time = true;
         } else if (strcmp(a, "--anim-flat") == 0) {
             o->anim_flat = true;
+        } else if (strcmp(a, "--anim-refit") == 0) {
+            o->anim_refit = true;
         } else if (strcmp(a, "--lights") == 0) {
             VALUE();
             o->light_count = cli_parse_list(CMD, a, v, o->lights, CLI_MAX_LIGHTS);
@@ -621,7 +625,8 @@ int cli_render(int argc, char **argv) {
     if (!device) goto done;
     double t1 = cli_now_ms();
     char err[512] = "";
-    rp_render_scene_desc sdesc = {.accel = {.accel = o.accel}, .environment = o.env, .flatten_animation = o.anim_flat};
+    rp_render_scene_desc sdesc = {.accel = {.accel = o.accel}, .environment = o.env, .flatten_animation = o.anim_flat,
+                                  .refit_blocks = o.anim_refit};
     if (o.has_env_scale) memcpy(sdesc.environment_scale, o.env_scale, sizeof o.env_scale);
     scene = rp_render_scene_new(device, &data, &sdesc, err, sizeof err);
     if (!scene) {
@@ -879,7 +884,7 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
         .ao_distance = o.ao_distance,
     };
     out->scene_desc = (rp_render_scene_desc){.accel = {.accel = o.accel}, .environment = o.env,
-                                             .flatten_animation = o.anim_flat};
+                                             .flatten_animation = o.anim_flat, .refit_blocks = o.anim_refit};
     out->has_anim_time = o.has_anim_time;
     out->anim_time = o.anim_time;
     out->light_count = o.light_count;

@@ -23,34 +23,62 @@ static uint32_t group_key(int32_t node, bool tpa) { return (uint32_t)(node + 1) 
 
 static const float identity_xfm[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
 
-/* The world-space bounds of the data (positions, spheres, cones): animated scenes take their ray
- * offsets from them in both builds, so the flat and the instanced frame agree. */
-static void data_bounds(const rp_scene_data *d, rp_bounds *out) {
-    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (size_t i = 0; i < d->vertex_count; i++)
-        for (int k = 0; k < 3; k++) {
-            float v = d->positions[3 * i + (size_t)k];
-            if (!isfinite(v)) continue;
-            lo[k] = fminf(lo[k], v), hi[k] = fmaxf(hi[k], v);
-        }
-    for (size_t i = 0; i < d->sphere_count; i++)
-        for (int k = 0; k < 3; k++) {
-            float r = fabsf(d->spheres[i].radius);
-            lo[k] = fminf(lo[k], d->spheres[i].center[k] - r), hi[k] = fmaxf(hi[k], d->spheres[i].center[k] + r);
-        }
-    for (size_t i = 0; i < d->cone_count; i++)
-        for (int k = 0; k < 3; k++) {
-            const rp_cone_data *c = &d->cones[i];
-            float r = fmaxf(fabsf(c->base_radius), fabsf(c->apex_radius));
-            lo[k] = fminf(lo[k], fminf(c->base[k], c->apex[k]) - r), hi[k] = fmaxf(hi[k], fmaxf(c->base[k], c->apex[k]) + r);
-        }
-    *out = (rp_bounds){lo[0], lo[1], lo[2], 0.0f, hi[0], hi[1], hi[2], 0.0f};
+static void grow(float *lo, float *hi, const float *p, float r) {
+    for (int k = 0; k < 3; k++)
+        if (isfinite(p[k])) lo[k] = fminf(lo[k], p[k] - r), hi[k] = fmaxf(hi[k], p[k] + r);
 }
 
+static void grow_cone(float *lo, float *hi, const rp_cone_data *c) {
+    float r = fmaxf(fabsf(c->base_radius), fabsf(c->apex_radius));
+    grow(lo, hi, c->base, r);
+    grow(lo, hi, c->apex, r);
+}
+
+/* The world-space bounds of the data (positions, spheres, cones): animated scenes take their ray
+ * offsets from them in both builds, so the flat and the instanced frame agree. What never moves is
+ * scanned once; a frame adds the moving vertices, spheres and cones (min and max: the same result
+ * as a scan of everything). */
 void anim_scene_bounds(rp_render_scene *s) {
-    data_bounds(s->data, &s->bounds);
-    const rp_bounds *b = &s->bounds;
-    const float bv[6] = {b->lower_x, b->lower_y, b->lower_z, b->upper_x, b->upper_y, b->upper_z};
+    const rp_scene_data *d = s->data;
+    const rp_animation_data *a = d->animation;
+    if (!s->anim_still_ok) {
+        float *lo = s->anim_still, *hi = s->anim_still + 3;
+        for (int k = 0; k < 3; k++) lo[k] = INFINITY, hi[k] = -INFINITY;
+        uint8_t *moves = calloc(d->vertex_count + 1, 1);
+        if (!moves) return;
+        for (size_t i = 0; i < a->tpa_count; i++)
+            for (uint32_t c = 0; c < 3; c++) moves[a->tpas[i].vertex + c] = 1;
+        size_t n = 0;
+        for (size_t i = 0; i < d->vertex_count; i++) {
+            moves[i] |= a->vertex_node[i] >= 0;
+            n += moves[i];
+        }
+        s->anim_moving = malloc((n + 1) * sizeof *s->anim_moving);
+        if (!s->anim_moving) {
+            free(moves);
+            return;
+        }
+        for (size_t i = 0; i < d->vertex_count; i++) {
+            if (moves[i]) s->anim_moving[s->anim_moving_n++] = (uint32_t)i;
+            else grow(lo, hi, d->positions + 3 * i, 0.0f);
+        }
+        free(moves);
+        for (size_t i = 0; i < d->sphere_count; i++)
+            if (a->sphere_node[i] < 0) grow(lo, hi, d->spheres[i].center, fabsf(d->spheres[i].radius));
+        for (size_t i = 0; i < d->cone_count; i++)
+            if (a->cone_node[i] < 0) grow_cone(lo, hi, &d->cones[i]);
+        s->anim_still_ok = true;
+    }
+    float lo[3], hi[3];
+    memcpy(lo, s->anim_still, sizeof lo);
+    memcpy(hi, s->anim_still + 3, sizeof hi);
+    for (size_t j = 0; j < s->anim_moving_n; j++) grow(lo, hi, d->positions + 3 * (size_t)s->anim_moving[j], 0.0f);
+    for (size_t i = 0; i < d->sphere_count; i++)
+        if (a->sphere_node[i] >= 0) grow(lo, hi, d->spheres[i].center, fabsf(d->spheres[i].radius));
+    for (size_t i = 0; i < d->cone_count; i++)
+        if (a->cone_node[i] >= 0) grow_cone(lo, hi, &d->cones[i]);
+    s->bounds = (rp_bounds){lo[0], lo[1], lo[2], 0.0f, hi[0], hi[1], hi[2], 0.0f};
+    const float bv[6] = {lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]};
     float m = 1e-3f;
     for (int k = 0; k < 6; k++)
         if (isfinite(bv[k]) && fabsf(bv[k]) > m) m = fabsf(bv[k]);
@@ -67,6 +95,8 @@ void anim_groups_free(rp_render_scene *s) {
     }
     free(s->groups);
     free(s->group_of_top);
+    free(s->anim_moving);
+    s->anim_moving = NULL;
     s->groups = NULL;
     s->group_count = 0;
 }
@@ -78,6 +108,11 @@ static uint32_t attach_to(rp_scene *sc, rp_geometry *g) {
     return id;
 }
 
+/* The transform placing a group: its block's, or the identity (still geometry; world-space blocks). */
+static const float *group_xfm(const rp_animation_data *a, const render_group *g) {
+    return g->node >= 0 && (!g->deform || g->tpa) ? a->nodes[g->node].xfm : identity_xfm;
+}
+
 /* One group's sub-scene: its triangles (indices into the rest positions), spheres and cones. */
 static bool group_build(rp_render_scene *s, const rp_scene_data *d, const rp_render_scene_desc *desc, render_group *g,
                         const uint32_t count[3]) {
@@ -85,10 +120,14 @@ static bool group_build(rp_render_scene *s, const rp_scene_data *d, const rp_ren
     g->sub = rp_scene_new(s->device, &desc->accel);
     if (!g->sub) return false;
     for (int k = 0; k < 3; k++) g->sub_ids[k] = RP_INVALID_ID;
+    /* refit_blocks: a block of triangles alone moves its world-space vertices under the identity */
+    bool world = desc->refit_blocks && g->node >= 0 && !g->tpa && !count[RENDER_GEOM_SPHERES] && !count[RENDER_GEOM_CONES];
+    g->deform = g->tpa || world;
     if (count[RENDER_GEOM_TRIANGLES]) {
         rp_geometry *geo = rp_geometry_new(s->device, RP_GEOMETRY_TRIANGLE);
         if (!geo) return false;
-        rp_geometry_set_buffer(geo, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, a->rest_positions, 0, 0, d->vertex_count);
+        rp_geometry_set_buffer(geo, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, world ? d->positions : a->rest_positions, 0, 0,
+                               d->vertex_count);
         rp_geometry_set_buffer(geo, RP_BUFFER_INDEX, RP_FORMAT_UINT3, g->idx, 0, 0, count[RENDER_GEOM_TRIANGLES]);
         g->tri_geom = geo;
         g->sub_ids[RENDER_GEOM_TRIANGLES] = attach_to(g->sub, geo);
@@ -122,8 +161,7 @@ static bool group_build(rp_render_scene *s, const rp_scene_data *d, const rp_ren
     if (rp_scene_commit(g->sub) != RP_ERROR_NONE) return false;
     rp_geometry *inst = rp_geometry_new(s->device, RP_GEOMETRY_INSTANCE);
     if (!inst) return false;
-    const float *xfm = g->node >= 0 ? a->nodes[g->node].xfm : identity_xfm;
-    rp_geometry_set_instance(inst, g->sub, xfm);
+    rp_geometry_set_instance(inst, g->sub, group_xfm(a, g));
     if (g->node >= 0 && !a->nodes[g->node].visible) rp_geometry_set_mask(inst, 0);
     g->inst = inst;
     g->top_id = attach_to(s->scene, inst);
@@ -252,13 +290,13 @@ bool rp_render_scene_set_time(rp_render_scene *s, rp_scene_data *data, float tim
     if (s->groups) {
         for (uint32_t i = 0; i < s->group_count; i++) {
             render_group *g = &s->groups[i];
-            if (g->tpa && g->tri_geom) {
+            if (g->deform && g->tri_geom) {
                 rp_geometry_update(g->tri_geom, RP_BUFFER_VERTEX);
                 double r0 = now_ms();
                 ok = ok && rp_scene_commit(g->sub) == RP_ERROR_NONE;
                 st.refit_ms += now_ms() - r0;
                 count_commit(g->sub, &st);
-                rp_geometry_set_instance(g->inst, g->sub, g->node >= 0 ? a->nodes[g->node].xfm : identity_xfm);
+                rp_geometry_set_instance(g->inst, g->sub, group_xfm(a, g));
                 st.instances++;
             } else if (g->node >= 0) {
                 rp_geometry_set_instance(g->inst, g->sub, a->nodes[g->node].xfm);

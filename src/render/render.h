@@ -81,6 +81,7 @@ typedef struct render_group {
     uint32_t top_id;         /* the instance's geom_id in the top scene */
     int32_t node;            /* the keyframed block placing it, -1: none (identity) */
     bool tpa;                /* `tpa` triangles: their vertices move, a frame refits the sub-scene */
+    bool deform;             /* its vertices move in place (tpa, or a block with refit_blocks): refit per frame */
     uint32_t sub_ids[3];     /* geom_id in the sub-scene per render_geom_kind, RP_INVALID_ID if none */
     uint32_t *map[3];        /* per kind: prim_id in the sub-scene -> index in the flat arrays */
     uint32_t *idx;           /* the sub-scene's index buffer (into the rest positions) */
@@ -111,6 +112,10 @@ struct rp_render_scene {
     render_group *groups;          /* animated scenes built with instances, else NULL */
     uint32_t group_count;
     uint32_t *group_of_top;        /* top-level geom_id -> index into groups */
+    float anim_still[6];           /* animated scenes: bounds of what never moves (lo xyz, hi xyz) */
+    bool anim_still_ok;
+    uint32_t *anim_moving;         /* ... and the vertices that move */
+    size_t anim_moving_n;
 };
 
 /* Result of turning a hit into a shading point. */

@@ -212,6 +212,9 @@ static void tally_add(rp_auto_tally *t, int c, int way, uint64_t rays, uint64_t 
 
 static void trace_usable(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p, bool any);
 
+static inline float fmin2(float a, float b) { return a < b ? a : b; }
+static inline float fmax2(float a, float b) { return a > b ? a : b; }
+
 /* Instances in one scene at most for trace_instances (an animated scene's top level holds a few). */
 #define FANOUT_MAX_INSTANCES 64
 
@@ -232,7 +235,7 @@ static bool instances_only(const rp_scene *s) {
 static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit_n *p, bool any) {
     uint32_t count = p->n * p->n;
     size_t each = (size_t)count * 4;
-    char *mem = sys_alloc(&scene->device->alloc, each * (PACKET_ARRAYS + 1));
+    char *mem = sys_alloc(&scene->device->alloc, each * (PACKET_ARRAYS + 4));
     if (!mem) { /* no memory for the copy: the rays one by one, as the prim BVH takes them */
         trace_small(scene, RP_TRAVERSAL_SINGLE, p, any);
         return;
@@ -247,13 +250,48 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
     int32_t *valid = (int32_t *)(void *)(mem + 16 * each);
     q.valid = valid;
     q.mask = p->mask;
+    /* the rays' inverse directions for the slab tests, once for every instance; a zero (or
+     * denormal) component becomes +-1e30, which never makes a NaN and keeps the test conservative */
+    float *ix = (float *)(void *)(mem + 17 * each), *iy = ix + count, *iz = iy + count;
+    for (uint32_t i = 0; i < count; i++) {
+        float dv[3] = {p->dir_x[i], p->dir_y[i], p->dir_z[i]}, *out[3] = {ix, iy, iz};
+        for (int r = 0; r < 3; r++) out[r][i] = fabsf(dv[r]) > 1e-30f ? 1.0f / dv[r] : copysignf(1e30f, dv[r]);
+    }
     for (uint32_t gi = 0; gi < scene->geom_count; gi++) {
         const rp_geometry *g = scene->geoms[gi];
         if (!g || g->mask == 0) continue;
+        /* the instance's box in this scene's space, widened past the rounding of the mapping: rays
+         * that miss it cannot hit inside, so they (and an instance no ray reaches) are skipped */
+        const rp_bounds *cb = &g->inst->bounds;
+        if (!(cb->lower_x <= cb->upper_x)) continue;
+        float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        for (int corner = 0; corner < 8; corner++) {
+            float c[3] = {corner & 1 ? cb->upper_x : cb->lower_x, corner & 2 ? cb->upper_y : cb->lower_y,
+                          corner & 4 ? cb->upper_z : cb->lower_z};
+            for (int r = 0; r < 3; r++) {
+                const float *x = g->xfm + 4 * r;
+                float v = x[0] * c[0] + x[1] * c[1] + x[2] * c[2] + x[3];
+                lo[r] = fminf(lo[r], v), hi[r] = fmaxf(hi[r], v);
+            }
+        }
+        for (int r = 0; r < 3; r++) {
+            float e = (fmaxf(fabsf(lo[r]), fabsf(hi[r])) + (hi[r] - lo[r])) * 1e-5f;
+            lo[r] -= e, hi[r] += e;
+        }
         const float *m = g->inv;
         uint32_t live_n = 0;
         for (uint32_t i = 0; i < count; i++) {
             bool on = live(p, i) && ((p->mask ? p->mask[i] : 0xFFFFFFFFu) & g->mask) != 0;
+            if (on) { /* slab test */
+                float t0 = p->tnear[i], t1 = p->tfar[i];
+                float a = (lo[0] - p->org_x[i]) * ix[i], b = (hi[0] - p->org_x[i]) * ix[i];
+                t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
+                a = (lo[1] - p->org_y[i]) * iy[i], b = (hi[1] - p->org_y[i]) * iy[i];
+                t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
+                a = (lo[2] - p->org_z[i]) * iz[i], b = (hi[2] - p->org_z[i]) * iz[i];
+                t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
+                on = t0 <= t1;
+            }
             valid[i] = on ? -1 : 0;
             if (!on) continue;
             live_n++;
@@ -290,7 +328,7 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
             p->geom_id[i] = q.geom_id[i], p->prim_id[i] = q.prim_id[i], p->inst_id[i] = gi;
         }
     }
-    sys_free(&scene->device->alloc, mem, each * (PACKET_ARRAYS + 1));
+    sys_free(&scene->device->alloc, mem, each * (PACKET_ARRAYS + 4));
 }
 
 static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p, bool any) {

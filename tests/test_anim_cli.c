@@ -1,6 +1,7 @@
 // rp-test: timeout=300
 /* `raypack animate` on a few frames of BART's museum (frames written, the per-frame and fps lines),
  * `raypack render --anim-time`, --lights, --reflect-depth / --refract-depth, and their errors. */
+#include <math.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -68,12 +69,28 @@ int main(void) {
     EXPECT(args, 2, "the scene has 2 lights");
     snprintf(args, sizeof args, "render '%s' --lights 0,x -o '%s/l.png'", museum, tmp);
     EXPECT(args, 2, "--lights expects");
-    const char *teapot = rp_test_scene("spd_teapot.nff.gz", buf, sizeof buf);
+    char buf2[512];
+    const char *teapot = rp_test_scene("spd_teapot.nff.gz", buf2, sizeof buf2);
     if (teapot) {
         snprintf(args, sizeof args, "render '%s' --anim-time 1 -o '%s/t.png'", teapot, tmp);
         EXPECT(args, 2, "not animated");
         snprintf(args, sizeof args, "animate '%s'", teapot);
         EXPECT(args, 2, "not animated");
+    }
+    /* the viewer: space plays the animation (scene time with the clock: --fps 2, 0.5 a frame) and the
+     * camera follows the path; paused at frame 5, t = -1 + 5 x 0.5 = 1.5, the path's key there: the
+     * eye at (0, 3, 4.9) */
+    if (system("command -v xvfb-run > /dev/null 2>&1") == 0 && run("view --help") == 0) {
+        snprintf(args, sizeof args, "view '%s' --width 32 --height 24 --threads 2 --fps 2 --frames 6 --no-overlay "
+                 "--script '0 key space; 5 key space'", museum);
+        EXPECT_P("xvfb-run -a -s '-screen 0 1280x1024x24'", args, 0, "animation: paused at t 1.500");
+        const char *last = NULL;
+        for (const char *c = strstr(output, "camera: --eye "); c; c = strstr(c + 1, "camera: --eye ")) last = c;
+        float e[3] = {0, 0, 0};
+        CHECKF(last && sscanf(last, "camera: --eye %f,%f,%f", &e[0], &e[1], &e[2]) == 3 && fabsf(e[0]) < 1e-4f &&
+               fabsf(e[1] - 3.0f) < 1e-4f && fabsf(e[2] - 4.9f) < 1e-4f, "viewer's camera at t 1.5:\n%s", output);
+    } else {
+        printf("no xvfb-run or no viewer: the viewer's animation is not checked\n");
     }
     EXPECT("animate", 2, "expected an animated SCENE");
     EXPECT("animate --help", 0, "--frames N");

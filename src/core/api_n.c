@@ -235,7 +235,7 @@ static bool instances_only(const rp_scene *s) {
 static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit_n *p, bool any) {
     uint32_t count = p->n * p->n;
     size_t each = (size_t)count * 4;
-    char *mem = sys_alloc(&scene->device->alloc, each * (PACKET_ARRAYS + 4));
+    char *mem = sys_alloc(&scene->device->alloc, each * (PACKET_ARRAYS + 5));
     if (!mem) { /* no memory for the copy: the rays one by one, as the prim BVH takes them */
         trace_small(scene, RP_TRAVERSAL_SINGLE, p, any);
         return;
@@ -252,8 +252,9 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
     q.mask = p->mask;
     /* the rays' inverse directions for the slab tests, once for every instance; a zero (or
      * denormal) component becomes +-1e30, which never makes a NaN and keeps the test conservative */
-    float *ix = (float *)(void *)(mem + 17 * each), *iy = ix + count, *iz = iy + count;
+    float *ix = (float *)(void *)(mem + 17 * each), *iy = ix + count, *iz = iy + count, *tn0 = iz + count;
     for (uint32_t i = 0; i < count; i++) {
+        tn0[i] = live(p, i) ? p->tnear[i] : INFINITY;
         float dv[3] = {p->dir_x[i], p->dir_y[i], p->dir_z[i]}, *out[3] = {ix, iy, iz};
         for (int r = 0; r < 3; r++) out[r][i] = fabsf(dv[r]) > 1e-30f ? 1.0f / dv[r] : copysignf(1e30f, dv[r]);
     }
@@ -279,19 +280,21 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
             lo[r] -= e, hi[r] += e;
         }
         const float *m = g->inv;
+        /* slab tests, branch free (the compiler's vectors): rays not live start at +inf, occluded
+         * ones end at -inf */
+        for (uint32_t i = 0; i < count; i++) {
+            float t0 = tn0[i], t1 = p->tfar[i];
+            float a = (lo[0] - p->org_x[i]) * ix[i], b = (hi[0] - p->org_x[i]) * ix[i];
+            t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
+            a = (lo[1] - p->org_y[i]) * iy[i], b = (hi[1] - p->org_y[i]) * iy[i];
+            t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
+            a = (lo[2] - p->org_z[i]) * iz[i], b = (hi[2] - p->org_z[i]) * iz[i];
+            t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
+            valid[i] = t0 <= t1 ? -1 : 0;
+        }
         uint32_t live_n = 0;
         for (uint32_t i = 0; i < count; i++) {
-            bool on = live(p, i) && ((p->mask ? p->mask[i] : 0xFFFFFFFFu) & g->mask) != 0;
-            if (on) { /* slab test */
-                float t0 = p->tnear[i], t1 = p->tfar[i];
-                float a = (lo[0] - p->org_x[i]) * ix[i], b = (hi[0] - p->org_x[i]) * ix[i];
-                t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
-                a = (lo[1] - p->org_y[i]) * iy[i], b = (hi[1] - p->org_y[i]) * iy[i];
-                t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
-                a = (lo[2] - p->org_z[i]) * iz[i], b = (hi[2] - p->org_z[i]) * iz[i];
-                t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
-                on = t0 <= t1;
-            }
+            bool on = valid[i] && p->tnear[i] <= p->tfar[i] && ((p->mask ? p->mask[i] : 0xFFFFFFFFu) & g->mask) != 0;
             valid[i] = on ? -1 : 0;
             if (!on) continue;
             live_n++;
@@ -328,7 +331,7 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
             p->geom_id[i] = q.geom_id[i], p->prim_id[i] = q.prim_id[i], p->inst_id[i] = gi;
         }
     }
-    sys_free(&scene->device->alloc, mem, each * (PACKET_ARRAYS + 4));
+    sys_free(&scene->device->alloc, mem, each * (PACKET_ARRAYS + 5));
 }
 
 static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p, bool any) {

@@ -171,7 +171,15 @@ int cli_animate(int argc, char **argv) {
         goto done;
     }
     int count = frames_wanted ? frames_wanted : anim->frames > 0 ? anim->frames : 1;
-    if (fps > 0.0f) count = (int)floor(((double)anim->end - anim->start) * fps + 1e-6) + 1;
+    if (fps > 0.0f) {
+        double c = floor(((double)anim->end - anim->start) * fps + 1e-6) + 1.0;
+        if (!(c <= 10000000.0)) {
+            fprintf(stderr, "raypack animate: --fps %g makes %.3g frames (at most 10^7)\n", (double)fps, c);
+            status = CLI_EXIT_USAGE;
+            goto done;
+        }
+        count = (int)c;
+    }
     if (last < 0 || last >= count) last = count - 1;
     if (first > last) {
         fprintf(stderr, "raypack animate: --first %d is past the last frame (%d)\n", first, last);

@@ -760,6 +760,7 @@ static void viewer_free(viewer *v) {
 static bool viewer_init(viewer *v) {
     if (!cli_render_load(CMD, &v->setup, &v->data)) return false;
     v->loaded = true;
+    if (cli_render_scene_flags(CMD, &v->setup, &v->data) != CLI_EXIT_OK) return false; /* --lights, --anim-time */
     if (v->setup.desc.integrator == RP_INTEGRATOR_AOV && v->setup.desc.aov == RP_AOV_DEPTH) {
         fprintf(stderr, "raypack view: --aov depth has one channel; the viewer shows normal, primid or albedo\n");
         return false;

@@ -85,6 +85,79 @@ typedef struct rp_cone_data {
     uint32_t material;
 } rp_cone_data;
 
+/* ---- animation (BART's AFF: Lext, Assarsson, Moller 2001) --------------------------------------
+ * An AFF scene is animated by `x name { ... }` blocks whose transform comes from a `k name { ... }`
+ * block of keyframes (translation, rotation, scale: Kochanek-Bartels splines, BART's reference
+ * interpolation; visibility: steps), by `tpa` triangles whose corners are keyed (linear between
+ * keys), and by `k camera` (the viewpoint's path: eye from the translation, view direction -z and up
+ * +y of the rotation). The flat arrays of rp_scene_data always hold the scene at one time (after
+ * loading: the animation's start, BART's frame 0); rp_scene_data_set_time moves them to another. */
+
+typedef enum rp_anim_channel { RP_ANIM_TRANSL = 0, RP_ANIM_ROT = 1, RP_ANIM_SCALE = 2 } rp_anim_channel;
+
+/* One keyframe. value: xyz for translation and scale; axis xyz and angle in degrees for rotation.
+ * A spline of n >= 4 keys runs from key 1 to key n-2 (clamped outside); keys 0 and n-1 only shape
+ * the tangents at its ends, as in BART. */
+typedef struct rp_anim_key {
+    float time;
+    float value[4];
+    float tension, continuity, bias;
+} rp_anim_key;
+
+/* Keys [first, first + count) of rp_animation_data.keys; count 0: the channel is absent. */
+typedef struct rp_anim_track {
+    uint32_t first, count;
+} rp_anim_track;
+
+/* An `x name` block. Elements inside it (innermost block) are stored in "rest" space: as the file
+ * places them with every keyframed transform left out; xfm maps rest space to the world at the
+ * current time: xfm = xfm(parent) * rest * K(t) * rest^-1, K(t) = T R S of the block's keys. */
+typedef struct rp_anim_node {
+    char name[64];
+    int32_t parent;          /* enclosing `x` block, -1 for none */
+    float rest[12];          /* 3x4 transform in force where the block opens (keys left out) */
+    rp_anim_track track[3];  /* by rp_anim_channel */
+    uint32_t vis_first, vis_count; /* visibility keys (vis_times, vis_values) */
+    float xfm[12];           /* rest space -> world at the current time (set by rp_scene_data_set_time) */
+    bool visible;            /* at the current time (this block and every enclosing one) */
+} rp_anim_node;
+
+/* A `tpa` triangle: count keys of 19 floats each (time, then per corner position xyz and normal
+ * xyz) in tpa_keys from first; between two keys its corners move linearly, before the first and
+ * after the last they stay (BART). */
+typedef struct rp_anim_tpa {
+    uint32_t triangle;       /* index of the triangle in the mesh */
+    uint32_t vertex, normal; /* its corners' first position and normal (three in a row, file order) */
+    uint32_t first, count;
+} rp_anim_tpa;
+
+typedef struct rp_animation_data {
+    float start, end;        /* the `a` line's time range (without one: the keys' range) */
+    int32_t frames;          /* frames of the animation (`a`); a frame's time is start + i (end - start) / (frames - 1) */
+    float time;              /* the time the flat arrays hold */
+    size_t node_count;
+    rp_anim_node *nodes;
+    size_t key_count;
+    rp_anim_key *keys;
+    size_t vis_count;
+    float *vis_times;
+    uint8_t *vis_values;
+    rp_anim_track camera[2]; /* `k camera`: RP_ANIM_TRANSL and RP_ANIM_ROT; counts 0: still camera */
+    size_t tpa_count;
+    rp_anim_tpa *tpas;
+    float *tpa_keys;
+    /* per element of the flat arrays: the innermost `x` block holding it, -1 for none */
+    int32_t *tri_node, *sphere_node, *cone_node, *light_node;
+    int32_t *vertex_node, *normal_node;
+    uint8_t *tri_tpa;        /* triangle_count: 1 for `tpa` triangles */
+    /* rest-space copies of the flat arrays (same counts); positions of `tpa` corners at the current time */
+    float *rest_positions, *rest_normals;
+    rp_sphere_data *rest_spheres;
+    rp_cone_data *rest_cones;
+    rp_light_data *rest_lights;
+    rp_camera_data rest_camera; /* the `v` viewpoint */
+} rp_animation_data;
+
 typedef struct rp_scene_data {
     /* Triangle mesh: positions are indexed by `indices`; normals and texcoords, when present, have
      * their own per-corner index arrays (OBJ style), NULL when absent. */
@@ -118,6 +191,7 @@ typedef struct rp_scene_data {
 
     size_t file_bytes;          /* bytes parsed, after decompression */
     double parse_ms;            /* wall time of rp_scene_data_load */
+    rp_animation_data *animation; /* AFF animation, owned by the scene; NULL for a still scene */
 } rp_scene_data;
 
 /* Loads a scene file (format from the extension; .gz and .tar(.gz) are unpacked transparently).
@@ -138,6 +212,18 @@ RP_API bool rp_scene_data_load_ex(const char *path, const rp_scene_load_desc *de
                                   size_t err_size);
 /* Frees every array of a loaded scene and zeroes it. */
 RP_API void rp_scene_data_free(rp_scene_data *scene);
+/* Moves an animated scene's flat arrays (positions, normals, spheres, cones, lights, camera) and
+ * its nodes' xfm and visible to time t (clamped to nothing: BART's splines clamp at their ends).
+ * Returns false for a still scene (nothing changes). */
+RP_API bool rp_scene_data_set_time(rp_scene_data *scene, float time);
+/* Time of frame i of the animation (start + i (end - start) / (frames - 1)); start for a still scene. */
+RP_API float rp_scene_data_frame_time(const rp_scene_data *scene, int frame);
+/* Value of one track at time t: xyz for translation and scale, a unit quaternion (x, y, z, w) for
+ * rotation (BART: squad through the keys with Kochanek-Bartels tangents of the quaternion logs). */
+RP_API void rp_anim_track_eval(const rp_animation_data *anim, rp_anim_track track, rp_anim_channel channel,
+                               float time, float out[4]);
+/* Keeps only the lights whose indices are listed (in that order); false when one is out of range. */
+RP_API bool rp_scene_data_keep_lights(rp_scene_data *scene, const uint32_t *keep, size_t count);
 
 
 /* Writes an image; the format follows the extension: .png and .ppm (8-bit, linear values clamped

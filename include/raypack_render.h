@@ -144,6 +144,16 @@ typedef struct rp_render_scene_desc {
      * the constant radiance environment_scale (all 0: no environment). */
     const char *environment;
     float environment_scale[3];
+    /* Animated scenes (rp_scene_data.animation): false (the default) puts the geometry of every
+     * keyframed block in a sub-scene of its own placed by an instance (RP_GEOMETRY_INSTANCE), the
+     * still geometry in another under the identity and each block's `tpa` triangles in one more,
+     * so a frame only sets transforms, refits the `tpa` sub-scenes and rebuilds the top level;
+     * true builds the one flat structure of a still scene (a frame then refits all of it). */
+    bool flatten_animation;
+    /* Animated scenes, instanced: true moves the world-space vertices of keyframed blocks of
+     * triangles (no spheres or cones) under the identity and refits their sub-scenes every frame,
+     * instead of setting their transforms (to measure what a refit of them costs) */
+    bool refit_blocks;
 } rp_render_scene_desc;
 
 /* Returns the defaults for every zero field of desc (NULL gives all defaults). */
@@ -164,6 +174,25 @@ RP_API rp_camera rp_render_scene_default_camera(rp_render_scene *scene);
 RP_API const rp_light_source *rp_render_scene_lights(const rp_render_scene *scene, size_t *count);
 /* The renderer's material of index i (i < material count of the data). */
 RP_API const rp_material *rp_render_scene_material(const rp_render_scene *scene, size_t i);
+
+/* What rp_render_scene_set_time did (wall times in milliseconds). */
+typedef struct rp_render_update_stats {
+    double update_ms;         /* all of it: eval_ms + refit_ms + top_ms + lights and bounds */
+    double eval_ms;           /* rp_scene_data_set_time: the splines and the flat arrays */
+    double refit_ms;          /* commits of the sub-scenes whose vertices moved (the flat build: its one commit) */
+    double top_ms;            /* commit of the top level (the instances) */
+    uint32_t instances;       /* instances placed anew */
+    uint32_t refits, rebuilds; /* structures the update's commits refitted / rebuilt */
+} rp_render_update_stats;
+
+/* Moves an animated render scene to time t: data (the rp_scene_data the scene was made from, passed
+ * again non-const: the only change to it a render scene allows) goes to t with
+ * rp_scene_data_set_time, then instance transforms, moved `tpa` vertices (refit), the top level,
+ * the lights and the bounds follow. The camera is the data's (rp_render_scene_default_camera).
+ * Not while a frame renders. stats may be NULL. False for a still scene, other data or a failed
+ * commit. */
+RP_API bool rp_render_scene_set_time(rp_render_scene *scene, rp_scene_data *data, float time,
+                                     rp_render_update_stats *stats);
 
 /* ---- rendering -------------------------------------------------------------------------------- */
 
@@ -218,6 +247,10 @@ typedef struct rp_render_desc {
     rp_aov aov;                 /* with RP_INTEGRATOR_AOV; AOVs trace the pixel centre only */
     int max_depth;              /* Whitted: reflection/refraction bounces; path: bounces; 0: 5,
                                  * negative: none */
+    int reflect_depth;          /* Whitted: a hit at depth d (primary: 0) spawns a reflection ray
+                                 * only when d < reflect_depth; 0: max_depth, negative: none */
+    int refract_depth;          /* Whitted: the same for refraction rays (Overbeck et al.'s fig. 1:
+                                 * reflect 1, refract 4); giving either makes max_depth the larger */
     rp_ir_desc ir;              /* with RP_INTEGRATOR_IR */
     float ao_distance;          /* ambient occlusion ray length; 0: 0.1 of the bounding radius */
     const rp_camera *camera;    /* NULL: rp_render_scene_default_camera */

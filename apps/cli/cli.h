@@ -12,6 +12,8 @@
 
 /* Exit statuses: success, a load/render/write failure, a usage error. */
 enum { CLI_EXIT_OK = 0, CLI_EXIT_FAILURE = 1, CLI_EXIT_USAGE = 2 };
+/* Most indices --lights takes. */
+#define CLI_MAX_LIGHTS 256
 
 /* Subcommands: argv[0] is the subcommand's name ("render", "info", "bench"). */
 int cli_render(int argc, char **argv);
@@ -62,12 +64,23 @@ typedef struct cli_render_setup {
     const char *integrator_name, *traversal_name;
     bool has_eye, has_look, has_up, has_fov;
     float eye[3], look[3], up[3], fov;
+    bool has_anim_time;         /* --anim-time */
+    float anim_time;
+    uint32_t lights[CLI_MAX_LIGHTS]; /* --lights */
+    int light_count;            /* -1: all */
 } cli_render_setup;
 /* Parses argv (argv[0] the command's name) as `raypack render` does, into out; sets *help for -h.
  * Returns CLI_EXIT_OK, or the exit status after printing why. */
 int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help);
 /* Loads the scene of the setup (the built-in room when it has none); prints why on failure. */
 bool cli_render_load(const char *cmd, const cli_render_setup *setup, rp_scene_data *data);
+/* Applies the setup's --lights and --anim-time to loaded data; prints why and returns the exit
+ * status when they do not fit the scene. */
+int cli_render_scene_flags(const char *cmd, const cli_render_setup *setup, rp_scene_data *data);
+/* Parses "a,b,c" (non-negative integers) into out (at most max); the count, or -1 after an error. */
+int cli_parse_list(const char *cmd, const char *flag, const char *text, uint32_t *out, int max);
+/* `raypack animate` (apps/cli/animate.c). */
+int cli_animate(int argc, char **argv);
 /* Frees what cli_render_load loaded. */
 void cli_render_unload(const cli_render_setup *setup, rp_scene_data *data);
 /* The scene's camera with the setup's --eye/--look/--up/--fov in place of its parts. */

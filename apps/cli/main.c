@@ -18,6 +18,7 @@ static void usage(FILE *out) {
             "  render [SCENE]   render a scene (the built-in room without SCENE) to an image\n"
             "  info SCENE       what a scene holds and how its BVH looks\n"
             "  bench [SCENE]    measure ray throughput\n"
+            "  animate SCENE    render an animated scene's frames (BART AFF), fps with updates\n"
             "  view [SCENE]     look around in a scene in a window (SDL2)\n"
             "\n"
             "`raypack COMMAND --help` describes a command's options.\n");
@@ -35,6 +36,7 @@ int main(int argc, char **argv) {
     if (strcmp(cmd, "render") == 0) return cli_render(argc - 1, argv + 1);
     if (strcmp(cmd, "info") == 0) return cli_info(argc - 1, argv + 1);
     if (strcmp(cmd, "bench") == 0) return cli_bench(argc - 1, argv + 1);
+    if (strcmp(cmd, "animate") == 0) return cli_animate(argc - 1, argv + 1);
     if (strcmp(cmd, "view") == 0) {
 #ifdef RP_HAVE_VIEWER
         return cli_view(argc - 1, argv + 1);
@@ -51,7 +53,7 @@ int main(int argc, char **argv) {
         printf("raypack %d.%d.%d\n", RP_VERSION_MAJOR, RP_VERSION_MINOR, RP_VERSION_PATCH);
         return CLI_EXIT_OK;
     }
-    fprintf(stderr, "raypack: unknown command '%s' (expected render, info, bench or view)\n", cmd);
+    fprintf(stderr, "raypack: unknown command '%s' (expected render, info, bench, animate or view)\n", cmd);
     usage(stderr);
     return CLI_EXIT_USAGE;
 }

@@ -44,6 +44,18 @@ static void render_usage(FILE *out) {
             "                         emitters (MTL Ke; Ka > 1), point lights and --env\n"
             "  --engine stream        the stream tracer over a uniform grid (see --engine stream --help)\n"
             "  --max-depth N          Whitted reflection/refraction depth; path: bounces, 0..64 [5]\n"
+            "  --reflect-depth N      Whitted: reflection rays only from hits at depth < N (primary\n"
+            "  --refract-depth N      0), the same for refraction; 0..64, either replaces --max-depth\n"
+            "                         for its kind (Overbeck et al.'s fig. 1: 1 and 4)\n"
+            "  --lights LIST          keep only the scene's point lights of these indices (0-based,\n"
+            "                         comma separated, as `raypack info` lists them)\n"
+            "  --anim-time T          animated scenes (BART AFF): the scene and camera at time T of\n"
+            "                         the animation [its start]; `raypack animate` renders frames\n"
+            "                         (--time is the progressive time budget)\n"
+            "  --anim-flat            animated scenes: one flat structure instead of an instance\n"
+            "                         per keyframed block (same image, for comparisons)\n"
+            "  --anim-refit           animated scenes: keyframed blocks' vertices moved and their\n"
+            "                         sub-scenes refitted each frame instead of instance transforms\n"
             "  --env FILE.hdr         lat-long environment (+y up) for direct, path and ir\n"
             "  --env-scale R,G,B      multiplies --env; without --env, a constant environment\n"
             "  --exposure EV          PNG/PPM: multiply by 2^EV before the tone map [0]\n"
@@ -113,6 +125,11 @@ typedef struct render_options {
     int packet;
     bool no_frustum;
     rp_accel_type accel;
+    int reflect_depth, refract_depth; /* -1: not given */
+    bool has_anim_time, anim_flat, anim_refit;
+    float anim_time;
+    uint32_t lights[CLI_MAX_LIGHTS];
+    int light_count;                  /* -1: all lights */
 } render_options;
 
 static const struct {
@@ -287,6 +304,22 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
             VALUE();
             if (!cli_parse_float(CMD, a, v, 0.0, 180.0, true, &o->fov)) return CLI_EXIT_USAGE;
             o->has_fov = true;
+        } else if (strcmp(a, "--reflect-depth") == 0 || strcmp(a, "--refract-depth") == 0) {
+            VALUE();
+            int *d = strcmp(a, "--reflect-depth") == 0 ? &o->reflect_depth : &o->refract_depth;
+            if (!cli_parse_int(CMD, a, v, 0, 64, d)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--anim-time") == 0) {
+            VALUE();
+            if (!cli_parse_float(CMD, a, v, -1e30, 1e30, true, &o->anim_time)) return CLI_EXIT_USAGE;
+            o->has_anim_time = true;
+        } else if (strcmp(a, "--anim-flat") == 0) {
+            o->anim_flat = true;
+        } else if (strcmp(a, "--anim-refit") == 0) {
+            o->anim_refit = true;
+        } else if (strcmp(a, "--lights") == 0) {
+            VALUE();
+            o->light_count = cli_parse_list(CMD, a, v, o->lights, CLI_MAX_LIGHTS);
+            if (o->light_count < 0) return CLI_EXIT_USAGE;
         } else if (strcmp(a, "--stats") == 0) {
             o->stats = true;
         } else if (strcmp(a, "--stats-json") == 0) {
@@ -530,7 +563,8 @@ int cli_render(int argc, char **argv) {
 #endif
         }
     render_options o = {.output = "raypack.png", .max_depth = -1, .integrator = RP_INTEGRATOR_WHITTED,
-                        .integrator_name = "whitted", .traversal_name = "auto", .packet = 16};
+                        .integrator_name = "whitted", .traversal_name = "auto", .packet = 16,
+                        .reflect_depth = -1, .refract_depth = -1, .light_count = -1};
     bool help = false;
     int rc = parse_options(argc, argv, &o, &help);
     if (rc != CLI_EXIT_OK) return rc;
@@ -574,6 +608,16 @@ int cli_render(int argc, char **argv) {
         }
     }
     double load_ms = cli_now_ms() - t0;
+    {
+        cli_render_setup anim = {.has_anim_time = o.has_anim_time, .anim_time = o.anim_time, .light_count = o.light_count};
+        memcpy(anim.lights, o.lights, sizeof o.lights);
+        int arc = cli_render_scene_flags(CMD, &anim, &data);
+        if (arc != CLI_EXIT_OK) {
+            if (builtin) rp_default_scene_free(&data);
+            else rp_scene_data_free(&data);
+            return arc;
+        }
+    }
 
     int status = CLI_EXIT_FAILURE;
     rp_device *device = cli_device_new(CMD, o.threads, o.isa);
@@ -582,7 +626,8 @@ int cli_render(int argc, char **argv) {
     if (!device) goto done;
     double t1 = cli_now_ms();
     char err[512] = "";
-    rp_render_scene_desc sdesc = {.accel = {.accel = o.accel}, .environment = o.env};
+    rp_render_scene_desc sdesc = {.accel = {.accel = o.accel}, .environment = o.env, .flatten_animation = o.anim_flat,
+                                  .refit_blocks = o.anim_refit};
     if (o.has_env_scale) memcpy(sdesc.environment_scale, o.env_scale, sizeof o.env_scale);
     scene = rp_render_scene_new(device, &data, &sdesc, err, sizeof err);
     if (!scene) {
@@ -648,6 +693,8 @@ int cli_render(int argc, char **argv) {
         .aov = o.aov, .camera = &cam,
         /* rp_render_desc: 0 is the default depth (5), negative is none. */
         .max_depth = o.max_depth < 0 ? 0 : (o.max_depth == 0 ? -1 : o.max_depth),
+        .reflect_depth = o.reflect_depth < 0 ? 0 : (o.reflect_depth == 0 ? -1 : o.reflect_depth),
+        .refract_depth = o.refract_depth < 0 ? 0 : (o.refract_depth == 0 ? -1 : o.refract_depth),
         .packet = o.packet, .traversal = o.traversal, .no_frustum = o.no_frustum,
         /* counting costs a little, so only when it is reported */
         .count_work = o.stats || o.stats_json,
@@ -744,6 +791,11 @@ int cli_render(int argc, char **argv) {
                    o.packet, o.packet, o.traversal_name, o.no_frustum ? "off" : "on");
         printf(", %d threads, %s kernels\n", threads, cli_isa_name(rp_device_isa(device)));
         printf("time     load %.1f ms, build %.1f ms, render %.1f ms\n", load_ms, build_ms, rs.render_ms);
+        if (data.animation)
+            printf("anim     time %g of [%g, %g] (%d frames), %zu keyframed blocks, %zu tpa triangles, %s\n",
+                   (double)data.animation->time, (double)data.animation->start, (double)data.animation->end,
+                   data.animation->frames, data.animation->node_count, data.animation->tpa_count,
+                   o.anim_flat ? "flat" : "instanced");
         printf("rays     primary %llu, shadow %llu, reflection %llu, refraction %llu, bounce %llu, total %llu\n",
                (unsigned long long)rs.rays[RP_RAY_PRIMARY], (unsigned long long)rs.rays[RP_RAY_SHADOW],
                (unsigned long long)rs.rays[RP_RAY_REFLECTION], (unsigned long long)rs.rays[RP_RAY_REFRACTION],
@@ -811,7 +863,8 @@ done:
 
 int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
     render_options o = {.output = "raypack.png", .max_depth = -1, .integrator = RP_INTEGRATOR_WHITTED,
-                        .integrator_name = "whitted", .traversal_name = "auto", .packet = 16};
+                        .integrator_name = "whitted", .traversal_name = "auto", .packet = 16,
+                        .reflect_depth = -1, .refract_depth = -1, .light_count = -1};
     int rc = parse_options(argc, argv, &o, help);
     if (rc != CLI_EXIT_OK) return rc;
     memset(out, 0, sizeof *out);
@@ -825,11 +878,18 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
     out->desc = (rp_render_desc){
         .spp = o.spp, .integrator = o.use_aov ? RP_INTEGRATOR_AOV : o.integrator, .aov = o.aov,
         .max_depth = o.max_depth < 0 ? 0 : (o.max_depth == 0 ? -1 : o.max_depth),
+        .reflect_depth = o.reflect_depth < 0 ? 0 : (o.reflect_depth == 0 ? -1 : o.reflect_depth),
+        .refract_depth = o.refract_depth < 0 ? 0 : (o.refract_depth == 0 ? -1 : o.refract_depth),
         .packet = o.packet, .traversal = o.traversal, .no_frustum = o.no_frustum,
         .ir = {.interleave = o.ir_interleave, .vpls = o.ir_vpls, .filter = o.ir_filter, .clamp = o.ir_clamp},
         .ao_distance = o.ao_distance,
     };
-    out->scene_desc = (rp_render_scene_desc){.accel = {.accel = o.accel}, .environment = o.env};
+    out->scene_desc = (rp_render_scene_desc){.accel = {.accel = o.accel}, .environment = o.env,
+                                             .flatten_animation = o.anim_flat, .refit_blocks = o.anim_refit};
+    out->has_anim_time = o.has_anim_time;
+    out->anim_time = o.anim_time;
+    out->light_count = o.light_count;
+    memcpy(out->lights, o.lights, sizeof o.lights);
     if (o.has_env_scale) memcpy(out->scene_desc.environment_scale, o.env_scale, sizeof o.env_scale);
     out->integrator_name = o.use_aov ? o.aov_name : o.integrator_name;
     out->traversal_name = o.traversal_name;
@@ -890,4 +950,21 @@ void cli_render_size(const cli_render_setup *setup, const rp_scene_data *data, i
     } else if (!*w) {
         *w = (int)fmax(1.0, floor((double)*h * sw / sh + 0.5));
     }
+}
+
+int cli_render_scene_flags(const char *cmd, const cli_render_setup *setup, rp_scene_data *data) {
+    if (setup->light_count >= 0 && !rp_scene_data_keep_lights(data, setup->lights, (size_t)setup->light_count)) {
+        if (data->light_count)
+            fprintf(stderr, "raypack %s: --lights: the scene has %zu lights (indices 0..%zu)\n", cmd, data->light_count,
+                    data->light_count - 1);
+        else
+            fprintf(stderr, "raypack %s: --lights: the scene has no point lights\n", cmd);
+        return CLI_EXIT_USAGE;
+    }
+    if (setup->has_anim_time && !rp_scene_data_set_time(data, setup->anim_time)) {
+        fprintf(stderr, "raypack %s: --anim-time: the scene is not animated (no AFF keyframes, tpa or camera path)\n",
+                cmd);
+        return CLI_EXIT_USAGE;
+    }
+    return CLI_EXIT_OK;
 }

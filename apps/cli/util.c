@@ -53,6 +53,23 @@ bool cli_parse_float(const char *cmd, const char *flag, const char *text, double
     return true;
 }
 
+int cli_parse_list(const char *cmd, const char *flag, const char *text, uint32_t *out, int max) {
+    int n = 0;
+    const char *p = text;
+    for (;;) {
+        char *end;
+        errno = 0;
+        long v = strtol(p, &end, 10);
+        if (end == p || v < 0 || v > 1000000 || errno || (*end != ',' && *end != '\0') || n >= max) {
+            fprintf(stderr, "raypack %s: %s expects up to %d indices like 0,2,3, got '%s'\n", cmd, flag, max, text);
+            return -1;
+        }
+        out[n++] = (uint32_t)v;
+        if (*end == '\0') return n;
+        p = end + 1;
+    }
+}
+
 bool cli_parse_vec3(const char *cmd, const char *flag, const char *text, float out[3]) {
     const char *p = text;
     for (int k = 0; k < 3; k++) {

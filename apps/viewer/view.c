@@ -248,6 +248,8 @@ typedef struct viewer {
     uint64_t total_rays;
     double total_render_ms, total_frame_ms;
     int frames_done;
+    bool playing;               /* space: an animated scene's time runs (frame 0 until then) */
+    double anim_t;
 } viewer;
 
 enum { HELD_W, HELD_A, HELD_S, HELD_D, HELD_Q, HELD_E, HELD_SHIFT };
@@ -331,7 +333,7 @@ static void pick_pivot(viewer *v, int x, int y) {
 static void print_keys(void) {
     printf("keys: W/S A/D Q/E fly (Shift 4x), right drag look, left drag orbit, wheel speed, - = fov,\n"
            "      P camera, F12 screenshot, I integrator, T traversal, K packet, F frusta, , . depth,\n"
-           "      O overlay, R reset camera, Escape quit\n");
+           "      O overlay, R reset camera, Space play/pause an animation, Escape quit\n");
     fflush(stdout);
 }
 
@@ -400,7 +402,13 @@ static void on_key(viewer *v, const SDL_KeyboardEvent *k, bool down) {
     case SDLK_r: v->cam = v->home; v->camera_moved = true; settings = false; break;
     case SDLK_h: print_keys(); settings = false; break;
     case SDLK_SPACE:
-        printf("animation: this scene has no animation the viewer can play yet\n");
+        if (v->data.animation) {
+            v->playing = !v->playing;
+            if (v->playing) v->anim_t = v->data.animation->time; /* the start, or where it paused */
+            printf("animation: %s at t %.3f\n", v->playing ? "playing" : "paused", v->anim_t);
+        } else {
+            printf("animation: this scene is not animated\n");
+        }
         fflush(stdout);
         settings = false;
         break;
@@ -643,6 +651,18 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
     SDL_Event e;
     while (SDL_PollEvent(&e)) handle_event(v, &e);
     fly(v, dt);
+    if (v->playing) { /* scene time runs with the wall clock, from the end back to the start */
+        const rp_animation_data *a = v->data.animation;
+        v->anim_t += dt;
+        if (v->anim_t > a->end) v->anim_t = a->start;
+        if (!rp_render_scene_set_time(v->scene, &v->data, (float)v->anim_t, NULL)) return false;
+        if (a->camera[RP_ANIM_TRANSL].count || a->camera[RP_ANIM_ROT].count) { /* the camera's path */
+            memcpy(v->cam.eye, v->data.camera.eye, sizeof v->cam.eye);
+            memcpy(v->cam.look, v->data.camera.look, sizeof v->cam.look);
+            memcpy(v->cam.up, v->data.camera.up, sizeof v->cam.up);
+        }
+        v->camera_moved = true;
+    }
     bool moved = v->camera_moved;
     v->camera_moved = false;
     if (moved || v->reset) v->samples = 0;
@@ -740,6 +760,7 @@ static void viewer_free(viewer *v) {
 static bool viewer_init(viewer *v) {
     if (!cli_render_load(CMD, &v->setup, &v->data)) return false;
     v->loaded = true;
+    if (cli_render_scene_flags(CMD, &v->setup, &v->data) != CLI_EXIT_OK) return false; /* --lights, --anim-time */
     if (v->setup.desc.integrator == RP_INTEGRATOR_AOV && v->setup.desc.aov == RP_AOV_DEPTH) {
         fprintf(stderr, "raypack view: --aov depth has one channel; the viewer shows normal, primid or albedo\n");
         return false;

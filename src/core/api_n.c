@@ -210,10 +210,138 @@ static void tally_add(rp_auto_tally *t, int c, int way, uint64_t rays, uint64_t 
     }
 }
 
+static void trace_usable(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p, bool any);
+
+static inline float fmin2(float a, float b) { return a < b ? a : b; }
+static inline float fmax2(float a, float b) { return a > b ? a : b; }
+
+/* Instances in one scene at most for trace_instances (an animated scene's top level holds a few). */
+#define FANOUT_MAX_INSTANCES 64
+
+/* A scene of nothing but instances (an animated scene's top level): the prim BVH over them would
+ * take the packet's rays one by one into the instanced scenes. */
+static bool instances_only(const rp_scene *s) {
+    if (s->stats.triangles || s->stats.spheres || s->geom_count == 0 || s->geom_count > FANOUT_MAX_INSTANCES)
+        return false;
+    for (uint32_t i = 0; i < s->geom_count; i++)
+        if (s->geoms[i] && (s->geoms[i]->type != RP_GEOMETRY_INSTANCE || !s->geoms[i]->inst)) return false;
+    return true;
+}
+
+/* The packet goes into each instance's scene in turn, mapped into its space as instance_ray maps a
+ * single ray (scene.c), so the packet kernels walk the instanced scenes (their frusta cull the
+ * instances it misses); a closer hit replaces a farther one, its normal mapped back by the inverse
+ * transpose and inst_id the instance's geom_id (the outermost level writes last). */
+static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit_n *p, bool any) {
+    uint32_t count = p->n * p->n;
+    size_t each = (size_t)count * 4;
+    char *mem = sys_alloc(&scene->device->alloc, each * (PACKET_ARRAYS + 5));
+    if (!mem) { /* no memory for the copy: the rays one by one, as the prim BVH takes them */
+        trace_small(scene, RP_TRAVERSAL_SINGLE, p, any);
+        return;
+    }
+    rp_rayhit_n q = {.n = p->n};
+    float **f[13] = {&q.org_x, &q.org_y, &q.org_z, &q.tnear, &q.dir_x, &q.dir_y, &q.dir_z,
+                     &q.tfar, &q.Ng_x, &q.Ng_y, &q.Ng_z, &q.u, &q.v};
+    for (int i = 0; i < 13; i++) *f[i] = (float *)(void *)(mem + (size_t)i * each);
+    q.prim_id = (uint32_t *)(void *)(mem + 13 * each);
+    q.geom_id = (uint32_t *)(void *)(mem + 14 * each);
+    q.inst_id = (uint32_t *)(void *)(mem + 15 * each);
+    int32_t *valid = (int32_t *)(void *)(mem + 16 * each);
+    q.valid = valid;
+    q.mask = p->mask;
+    /* the rays' inverse directions for the slab tests, once for every instance; a zero (or
+     * denormal) component becomes +-1e30, which never makes a NaN and keeps the test conservative */
+    float *ix = (float *)(void *)(mem + 17 * each), *iy = ix + count, *iz = iy + count, *tn0 = iz + count;
+    for (uint32_t i = 0; i < count; i++) {
+        tn0[i] = live(p, i) ? p->tnear[i] : INFINITY;
+        float dv[3] = {p->dir_x[i], p->dir_y[i], p->dir_z[i]}, *out[3] = {ix, iy, iz};
+        for (int r = 0; r < 3; r++) out[r][i] = fabsf(dv[r]) > 1e-30f ? 1.0f / dv[r] : copysignf(1e30f, dv[r]);
+    }
+    for (uint32_t gi = 0; gi < scene->geom_count; gi++) {
+        const rp_geometry *g = scene->geoms[gi];
+        if (!g || g->mask == 0) continue;
+        /* the instance's box in this scene's space, widened past the rounding of the mapping: rays
+         * that miss it cannot hit inside, so they (and an instance no ray reaches) are skipped */
+        const rp_bounds *cb = &g->inst->bounds;
+        if (!(cb->lower_x <= cb->upper_x)) continue;
+        float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        for (int corner = 0; corner < 8; corner++) {
+            float c[3] = {corner & 1 ? cb->upper_x : cb->lower_x, corner & 2 ? cb->upper_y : cb->lower_y,
+                          corner & 4 ? cb->upper_z : cb->lower_z};
+            for (int r = 0; r < 3; r++) {
+                const float *x = g->xfm + 4 * r;
+                float v = x[0] * c[0] + x[1] * c[1] + x[2] * c[2] + x[3];
+                lo[r] = fminf(lo[r], v), hi[r] = fmaxf(hi[r], v);
+            }
+        }
+        for (int r = 0; r < 3; r++) {
+            float e = (fmaxf(fabsf(lo[r]), fabsf(hi[r])) + (hi[r] - lo[r])) * 1e-5f;
+            lo[r] -= e, hi[r] += e;
+        }
+        const float *m = g->inv;
+        /* slab tests, branch free (the compiler's vectors): rays not live start at +inf, occluded
+         * ones end at -inf */
+        for (uint32_t i = 0; i < count; i++) {
+            float t0 = tn0[i], t1 = p->tfar[i];
+            float a = (lo[0] - p->org_x[i]) * ix[i], b = (hi[0] - p->org_x[i]) * ix[i];
+            t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
+            a = (lo[1] - p->org_y[i]) * iy[i], b = (hi[1] - p->org_y[i]) * iy[i];
+            t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
+            a = (lo[2] - p->org_z[i]) * iz[i], b = (hi[2] - p->org_z[i]) * iz[i];
+            t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
+            valid[i] = t0 <= t1 ? -1 : 0;
+        }
+        uint32_t live_n = 0;
+        for (uint32_t i = 0; i < count; i++) {
+            bool on = valid[i] && p->tnear[i] <= p->tfar[i] && ((p->mask ? p->mask[i] : 0xFFFFFFFFu) & g->mask) != 0;
+            valid[i] = on ? -1 : 0;
+            if (!on) continue;
+            live_n++;
+            float ox = p->org_x[i], oy = p->org_y[i], oz = p->org_z[i], dx = p->dir_x[i], dy = p->dir_y[i], dz = p->dir_z[i];
+            q.org_x[i] = m[0] * ox + m[1] * oy + m[2] * oz + m[3];
+            q.org_y[i] = m[4] * ox + m[5] * oy + m[6] * oz + m[7];
+            q.org_z[i] = m[8] * ox + m[9] * oy + m[10] * oz + m[11];
+            q.dir_x[i] = m[0] * dx + m[1] * dy + m[2] * dz;
+            q.dir_y[i] = m[4] * dx + m[5] * dy + m[6] * dz;
+            q.dir_z[i] = m[8] * dx + m[9] * dy + m[10] * dz;
+            q.tnear[i] = p->tnear[i], q.tfar[i] = p->tfar[i];
+            q.geom_id[i] = RP_INVALID_ID;
+        }
+        if (!live_n) continue;
+        rp_query_n_desc sd = *d;
+        if (sd.frustum == RP_FRUSTUM_SHADOW) { /* the common end point, in the instance's space */
+            float x = d->point[0], y = d->point[1], z = d->point[2];
+            for (int r = 0; r < 3; r++) sd.point[r] = m[4 * r] * x + m[4 * r + 1] * y + m[4 * r + 2] * z + m[4 * r + 3];
+        }
+        trace_usable(g->inst, &sd, &q, any);
+        for (uint32_t i = 0; i < count; i++) {
+            if (!valid[i]) continue;
+            if (any) {
+                if (q.tfar[i] == -INFINITY) p->tfar[i] = -INFINITY;
+                continue;
+            }
+            if (q.geom_id[i] == RP_INVALID_ID) continue;
+            float nx = q.Ng_x[i], ny = q.Ng_y[i], nz = q.Ng_z[i];
+            p->tfar[i] = q.tfar[i];
+            p->Ng_x[i] = m[0] * nx + m[4] * ny + m[8] * nz;
+            p->Ng_y[i] = m[1] * nx + m[5] * ny + m[9] * nz;
+            p->Ng_z[i] = m[2] * nx + m[6] * ny + m[10] * nz;
+            p->u[i] = q.u[i], p->v[i] = q.v[i];
+            p->geom_id[i] = q.geom_id[i], p->prim_id[i] = q.prim_id[i], p->inst_id[i] = gi;
+        }
+    }
+    sys_free(&scene->device->alloc, mem, each * (PACKET_ARRAYS + 5));
+}
+
 static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p, bool any) {
     rp_query_n_desc d = rp_query_n_desc_defaults(desc);
     if (d.traversal == RP_TRAVERSAL_SINGLE || d.traversal == RP_TRAVERSAL_SIMD) {
         trace_small(scene, d.traversal, p, any);
+        return;
+    }
+    if (instances_only(scene)) {
+        trace_instances(scene, &d, p, any);
         return;
     }
     /* the large-packet kernels walk the BVH; a kd-tree's or BIH's packet is traced as its SIMD rays */

@@ -103,6 +103,7 @@ typedef struct io_ctx {
     int threads;        /* resolved: threads that parse a large file's chunks (1: serial) */
     size_t chunk_bytes; /* chunk size for the parallel parsers; 0: chosen from the file and threads */
     size_t chunks_taken; /* chunks whose parallel result was used (for the tests) */
+    rp_animation_data *anim; /* what the AFF loader parsed of an animation, finished by anim_finish */
 } io_ctx;
 
 /* Records the first error as "file:line: error: message"; always returns false. */
@@ -201,6 +202,13 @@ int io_threads_resolve(int threads);
 void io_parallel_for(int threads, uint32_t count, io_task_fn fn, void *user);
 /* Chunks a text of `size` bytes is parsed in (1: serially), from ctx->threads and chunk_bytes. */
 uint32_t io_chunk_count(const io_ctx *ctx, size_t size);
+/* ---- animation (io_anim.c) ------------------------------------------------------------------ */
+
+/* Completes ctx->anim against the finished scene (per-vertex and per-normal nodes, rest copies)
+ * and hands it to out at the animation's start time; false when out of memory. */
+bool anim_finish(io_ctx *ctx, rp_scene_data *out);
+/* Frees an animation and every array it owns. */
+void anim_free(rp_animation_data *a);
 
 /* ---- polygons (io_poly.c) --------------------------------------------------------------------- */
 

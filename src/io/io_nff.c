@@ -2,8 +2,10 @@
  * Moller 2001): a stream of whitespace-separated commands, parsed in one pass over the file in
  * memory. Includes recurse into the same parser; transform blocks are a stack of 3x4 matrices
  * applied as primitives are emitted. Keyframed transforms (`x name {...}`) get their keyframes
- * from a `k name` block that may come later, so their geometry is recorded as index ranges and
- * moved by the first keyframe once the whole scene is read. */
+ * from a `k name` block that may come later, so their geometry is stored as if the keyframed
+ * transforms were the identity ("rest" space) and recorded as index ranges; the animation
+ * (nodes, keys, `tpa` keys, `a` range) goes to ctx->anim, and io_anim.c moves the scene to the
+ * animation's start once the whole scene is read. */
 #include <math.h>
 #include <stdio.h>
 
@@ -23,13 +25,15 @@ typedef struct nff_xf {
 typedef struct nff_anim_node {
     char name[64];
     nff_xf parent;
-    size_t pos0, pos1, nrm0, nrm1, sph0, sph1, cone0, cone1, light0, light1;
+    int parent_node; /* enclosing `x` block, -1 */
+    size_t tri0, tri1, sph0, sph1, cone0, cone1, light0, light1;
 } nff_anim_node;
 
+/* A `k name {` block: its tracks in the key arrays. */
 typedef struct nff_keys {
     char name[64];
-    bool has_t, has_r, has_s;
-    float t[3], r[4], s[3]; /* first keyframe of each channel; r = axis, degrees */
+    rp_anim_track track[3];
+    uint32_t vis_first, vis_count;
 } nff_keys;
 
 typedef struct nff_level {
@@ -51,6 +55,18 @@ typedef struct nff_state {
     uint32_t (*tex_mats)[3]; /* (base material, texture) -> material */
     size_t tex_mat_n, tex_mat_cap;
     size_t f_count;
+    rp_anim_key *akeys; /* every `k` block's spline keys */
+    size_t akey_n, akey_cap;
+    float *vis_t;
+    uint8_t *vis_v;
+    size_t vis_n, vis_cap, vis_cap2;
+    rp_anim_tpa *tpas;
+    size_t tpa_n, tpa_cap;
+    float *tpa_keys; /* 19 floats per key */
+    size_t tpak_n, tpak_cap;
+    bool has_range;
+    float start, end;
+    int32_t frames;
 } nff_state;
 
 typedef struct nff_file {
@@ -398,20 +414,52 @@ static bool nff_textured_triangle(nff_file *f, bool patch) {
     return nff_vertices(f, 3, patch, true, patch ? "ttp" : "tt") && nff_polygon(f, 3, patch, true, material);
 }
 
-/* `tpa n`: a triangle keyframed n times; the first keyframe is the static scene. */
+/* `tpa n`: a triangle keyframed n times (time, then 3 x position and normal); the corners at the
+ * first key go into the mesh, every key (in the transform's space) into the animation. */
 static bool nff_animated_triangle(nff_file *f) {
+    nff_state *st = f->st;
+    io_ctx *ctx = f->ctx;
+    io_builder *b = &ctx->b;
     int64_t n;
     if (!nff_int(f, &n, "tpa")) return false;
-    if (n < 1) return io_error(f->ctx, f->shown, f->line, "tpa: %lld keyframes (at least 1 needed)", (long long)n);
-    float time;
-    if (!nff_float(f, &time, "tpa time")) return false;
-    uint32_t material = nff_material(f);
-    if (material == IO_NONE) return io_error(f->ctx, f->shown, f->line, "out of memory");
-    if (!nff_vertices(f, 3, true, false, "tpa") || !nff_polygon(f, 3, true, false, material)) return false;
-    for (int64_t k = 1; k < n; k++) { /* later keyframes: read and checked, not kept */
-        float v[19];
+    if (n < 1 || (uint64_t)n > (uint64_t)(f->end - f->p) / 38 + 1)
+        return io_error(ctx, f->shown, f->line, "tpa: bad keyframe count %lld (at least 1)", (long long)n);
+    uint32_t line = f->line;
+    if (!io_reserve((void **)&st->tpa_keys, &st->tpak_cap, st->tpak_n + 19 * (size_t)n, sizeof(float)) ||
+        !io_reserve((void **)&st->tpas, &st->tpa_cap, st->tpa_n + 1, sizeof(rp_anim_tpa)))
+        return io_error(ctx, f->shown, f->line, "out of memory");
+    float *keys = st->tpa_keys + st->tpak_n;
+    const nff_xf *x = nff_top(f);
+    for (int64_t k = 0; k < n; k++) {
+        float *v = keys + 19 * k;
         if (!nff_floats(f, v, 19, "tpa")) return false;
+        if (k > 0 && !(v[0] >= v[-19]))
+            return io_error(ctx, f->shown, f->line, "tpa: keyframe time %g before the previous one (%g)", (double)v[0],
+                            (double)v[-19]);
+        for (int c = 0; c < 3 && !x->identity; c++) {
+            xf_point(x, v + 1 + 6 * c);
+            xf_normal(x, v + 4 + 6 * c);
+        }
     }
+    uint32_t material = nff_material(f);
+    if (material == IO_NONE) return io_error(ctx, f->shown, line, "out of memory");
+    if (b->pos_n + 3 >= UINT32_MAX || !builder_reserve_vertices(ctx, 3) || !builder_reserve_normals(ctx, 3))
+        return io_error(ctx, f->shown, line, "out of memory");
+    for (int c = 0; c < 3; c++) {
+        memcpy(b->pos + 3 * (b->pos_n + (size_t)c), keys + 1 + 6 * c, 3 * sizeof(float));
+        memcpy(b->nrm + 3 * (b->nrm_n + (size_t)c), keys + 4 + 6 * c, 3 * sizeof(float));
+    }
+    rp_anim_tpa *t = &st->tpas[st->tpa_n];
+    t->triangle = (uint32_t)b->tri_n, t->vertex = (uint32_t)b->pos_n, t->normal = (uint32_t)b->nrm_n;
+    t->first = (uint32_t)(st->tpak_n / 19), t->count = (uint32_t)n;
+    uint32_t here = f->line;
+    f->line = line;
+    bool ok = nff_polygon(f, 3, true, false, material);
+    f->line = here;
+    if (!ok) return false;
+    if (b->tri_n != (size_t)t->triangle + 1) return true; /* degenerate corners: no triangle to move */
+    st->tpak_n += 19 * (size_t)n;
+    st->tpa_n++;
     return true;
 }
 
@@ -677,7 +725,9 @@ static bool nff_transform(nff_file *f, bool is_static) {
         memset(a, 0, sizeof *a);
         snprintf(a->name, sizeof a->name, "%s", name);
         a->parent = parent->xf;
-        a->pos0 = b->pos_n, a->nrm0 = b->nrm_n, a->sph0 = b->sphere_n, a->cone0 = b->cone_n, a->light0 = b->light_n;
+        a->parent_node = -1;
+        for (int d = st->depth; d > 0 && a->parent_node < 0; d--) a->parent_node = st->stack[d].anim;
+        a->tri0 = b->tri_n, a->sph0 = b->sphere_n, a->cone0 = b->cone_n, a->light0 = b->light_n;
         lv->xf = parent->xf;
         lv->anim = (int)st->anim_n++;
     }
@@ -693,22 +743,32 @@ static bool nff_close(nff_file *f) {
     if (lv->anim >= 0) {
         io_builder *b = &f->ctx->b;
         nff_anim_node *a = &st->anims[lv->anim];
-        a->pos1 = b->pos_n, a->nrm1 = b->nrm_n, a->sph1 = b->sphere_n, a->cone1 = b->cone_n, a->light1 = b->light_n;
+        a->tri1 = b->tri_n, a->sph1 = b->sphere_n, a->cone1 = b->cone_n, a->light1 = b->light_n;
     }
     st->depth--;
     return true;
 }
 
-/* `k name { transl n ... rot n ... scale n ... visibility n ... }`: keeps the first keyframes. */
+/* `k name { transl n ... rot n ... scale n ... visibility n ... }`: each channel once, at least 4
+ * spline keys (BART: the first and last only shape the tangents), times never decreasing. */
 static bool nff_keyframes(nff_file *f) {
     nff_state *st = f->st;
+    io_ctx *ctx = f->ctx;
     char name[64], word[64];
     if (!nff_word(f, name, sizeof name, "k name") || !nff_expect(f, '{', "k name")) return false;
-    if (!io_reserve((void **)&st->keys, &st->key_cap, st->key_n + 1, sizeof(nff_keys)))
-        return io_error(f->ctx, f->shown, f->line, "out of memory");
-    nff_keys *k = &st->keys[st->key_n++];
+    /* a name keyed again (a file included twice) replaces the earlier keys, as BART's lookup finds
+     * the last animation of a name */
+    nff_keys *k = NULL;
+    for (size_t i = 0; i < st->key_n; i++)
+        if (strcmp(st->keys[i].name, name) == 0) k = &st->keys[i];
+    if (!k) {
+        if (!io_reserve((void **)&st->keys, &st->key_cap, st->key_n + 1, sizeof(nff_keys)))
+            return io_error(ctx, f->shown, f->line, "out of memory");
+        k = &st->keys[st->key_n++];
+    }
     memset(k, 0, sizeof *k);
     snprintf(k->name, sizeof k->name, "%s", name);
+    bool seen[4] = {false, false, false, false};
     for (;;) {
         nff_skip(f);
         if (f->p >= f->end) return nff_eof_error(f, "'}' closing the keyframes");
@@ -717,56 +777,130 @@ static bool nff_keyframes(nff_file *f) {
             return true;
         }
         int64_t n;
-        if (!nff_word(f, word, sizeof word, "keyframe type") || !nff_int(f, &n, "keyframe count")) return false;
-        int per;
-        float *first = NULL;
-        if (strcmp(word, "transl") == 0) per = 7, first = k->t, k->has_t = true;
-        else if (strcmp(word, "rot") == 0) per = 8, first = k->r, k->has_r = true;
-        else if (strcmp(word, "scale") == 0) per = 7, first = k->s, k->has_s = true;
-        else if (strcmp(word, "visibility") == 0) per = 2;
-        else return io_error(f->ctx, f->shown, f->line, "unknown keyframe type '%s' (transl, rot, scale, visibility)", word);
-        if (n < 1 || (uint64_t)n > (uint64_t)(f->end - f->p) / 4 + 1)
-            return io_error(f->ctx, f->shown, f->line, "bad keyframe count %lld", (long long)n);
+        if (!nff_word(f, word, sizeof word, "keyframe type")) return false;
+        uint32_t line = f->line;
+        if (!nff_int(f, &n, "keyframe count")) return false;
+        int ch;
+        if (strcmp(word, "transl") == 0) ch = RP_ANIM_TRANSL;
+        else if (strcmp(word, "rot") == 0) ch = RP_ANIM_ROT;
+        else if (strcmp(word, "scale") == 0) ch = RP_ANIM_SCALE;
+        else if (strcmp(word, "visibility") == 0) ch = 3;
+        else return io_error(ctx, f->shown, line, "unknown keyframe type '%s' (transl, rot, scale, visibility)", word);
+        if (seen[ch]) return io_error(ctx, f->shown, line, "'%s' keyframes given twice for '%s'", word, name);
+        seen[ch] = true;
+        int64_t least = ch == 3 ? 1 : 4;
+        if (n < least || (uint64_t)n > (uint64_t)(f->end - f->p) / 4 + 1)
+            return io_error(ctx, f->shown, line, "%s: %lld keyframes (at least %lld%s)", word, (long long)n, (long long)least,
+                            ch == 3 ? "" : ": the first and last only shape the spline's ends");
+        float prev = -INFINITY;
+        if (ch == 3) {
+            if (!io_reserve((void **)&st->vis_t, &st->vis_cap, st->vis_n + (size_t)n, sizeof(float)) ||
+                !io_reserve((void **)&st->vis_v, &st->vis_cap2, st->vis_n + (size_t)n, 1))
+                return io_error(ctx, f->shown, f->line, "out of memory");
+            k->vis_first = (uint32_t)st->vis_n, k->vis_count = (uint32_t)n;
+            for (int64_t i = 0; i < n; i++) {
+                float t = 0.0f;
+                int64_t v = 0;
+                if (!nff_float(f, &t, "visibility time") || !nff_int(f, &v, "visibility flag")) return false;
+                if (v != 0 && v != 1) return io_error(ctx, f->shown, f->line, "visibility flag %lld (0 or 1)", (long long)v);
+                if (!(t >= prev)) return io_error(ctx, f->shown, f->line, "visibility: time %g before the previous key's", (double)t);
+                prev = t;
+                st->vis_t[st->vis_n] = t, st->vis_v[st->vis_n++] = (uint8_t)v;
+            }
+            continue;
+        }
+        if (!io_reserve((void **)&st->akeys, &st->akey_cap, st->akey_n + (size_t)n, sizeof(rp_anim_key)))
+            return io_error(ctx, f->shown, f->line, "out of memory");
+        k->track[ch].first = (uint32_t)st->akey_n, k->track[ch].count = (uint32_t)n;
+        int per = ch == RP_ANIM_ROT ? 8 : 7;
         for (int64_t i = 0; i < n; i++) {
             float v[8];
             if (!nff_floats(f, v, per, word)) return false;
-            if (i == 0 && first) memcpy(first, v + 1, (size_t)(per == 8 ? 4 : 3) * sizeof(float));
+            if (!(v[0] >= prev))
+                return io_error(ctx, f->shown, f->line, "%s: keyframe time %g before the previous one (%g)", word, (double)v[0],
+                                (double)prev);
+            prev = v[0];
+            rp_anim_key *key = &st->akeys[st->akey_n++];
+            memset(key, 0, sizeof *key);
+            key->time = v[0];
+            memcpy(key->value, v + 1, (size_t)(per - 4) * sizeof(float));
+            key->tension = v[per - 3], key->continuity = v[per - 2], key->bias = v[per - 1];
+            if (ch == RP_ANIM_ROT && !(v[1] * v[1] + v[2] * v[2] + v[3] * v[3] > 0.0f))
+                return io_error(ctx, f->shown, f->line, "rot: the rotation axis is the zero vector");
         }
     }
 }
 
-/* Moves each keyframed block by its first keyframe: the stored data is parent * inner * p and must
- * become parent * key * inner * p, i.e. (parent * key * parent^-1) applied to it. Innermost blocks
- * come later in the list, so walking it backwards composes nested blocks correctly. */
-static bool nff_apply_keyframes(io_ctx *ctx, nff_state *st, const char *shown) {
-    io_builder *b = &ctx->b;
-    for (size_t ai = st->anim_n; ai-- > 0;) {
-        const nff_anim_node *a = &st->anims[ai];
-        const nff_keys *k = NULL;
+/* The parsed animation for io_anim.c: nodes with their keys looked up by name, `k camera`, the
+ * innermost node of every triangle, sphere, cone and light, the `tpa` keys and the `a` range. A
+ * scene without keys, `tpa` or camera path stays still (no animation). */
+static bool nff_animation(io_ctx *ctx, nff_state *st, const char *shown) {
+    const nff_keys *cam = NULL;
+    for (size_t i = 0; i < st->key_n; i++)
+        if (strcmp(st->keys[i].name, "camera") == 0) cam = &st->keys[i];
+    bool keyed = cam != NULL || st->tpa_n > 0;
+    for (size_t ai = 0; ai < st->anim_n && !keyed; ai++)
         for (size_t i = 0; i < st->key_n; i++)
-            if (strcmp(st->keys[i].name, a->name) == 0) k = &st->keys[i];
-        if (!k) continue; /* no keyframes: identity */
-        static const float zero[3] = {0, 0, 0}, one[3] = {1, 1, 1}, yaxis[3] = {0, 1, 0};
-        float key[12], inv[12];
-        xf_trs(k->has_t ? k->t : zero, k->has_r ? k->r : yaxis, k->has_r ? k->r[3] : 0.0f, k->has_s ? k->s : one, key);
-        if (!xf_inverse(a->parent.m, inv)) return io_error(ctx, shown, 0, "singular transform around keyframed block '%s'", a->name);
-        nff_xf c;
-        xf_mul(a->parent.m, key, c.m);
-        xf_mul(c.m, inv, c.m);
-        xf_finish(&c);
-        for (size_t i = a->pos0; i < a->pos1; i++) xf_point(&c, b->pos + 3 * i);
-        for (size_t i = a->nrm0; i < a->nrm1; i++) xf_normal(&c, b->nrm + 3 * i);
-        for (size_t i = a->sph0; i < a->sph1; i++) {
-            xf_point(&c, b->spheres[i].center);
-            b->spheres[i].radius *= c.scale;
+            if (strcmp(st->keys[i].name, st->anims[ai].name) == 0) keyed = true;
+    if (!keyed) return true;
+    io_builder *b = &ctx->b;
+    rp_animation_data *a = calloc(1, sizeof *a);
+    if (!a) return io_error(ctx, shown, 0, "out of memory");
+    ctx->anim = a;
+    a->node_count = st->anim_n;
+    a->nodes = calloc(st->anim_n + 1, sizeof *a->nodes);
+    a->tri_node = malloc((b->tri_n + 1) * sizeof *a->tri_node);
+    a->sphere_node = malloc((b->sphere_n + 1) * sizeof(int32_t));
+    a->cone_node = malloc((b->cone_n + 1) * sizeof(int32_t));
+    a->light_node = malloc((b->light_n + 1) * sizeof(int32_t));
+    if (!a->nodes || !a->tri_node || !a->sphere_node || !a->cone_node || !a->light_node)
+        return io_error(ctx, shown, 0, "out of memory");
+    for (size_t i = 0; i < b->tri_n; i++) a->tri_node[i] = -1;
+    for (size_t i = 0; i < b->sphere_n; i++) a->sphere_node[i] = -1;
+    for (size_t i = 0; i < b->cone_n; i++) a->cone_node[i] = -1;
+    for (size_t i = 0; i < b->light_n; i++) a->light_node[i] = -1;
+    /* blocks in the order they opened: an inner block's range lies inside its parent's and
+     * overwrites it, so every element ends with its innermost block */
+    for (size_t ai = 0; ai < st->anim_n; ai++) {
+        const nff_anim_node *s = &st->anims[ai];
+        rp_anim_node *n = &a->nodes[ai];
+        snprintf(n->name, sizeof n->name, "%s", s->name);
+        n->parent = s->parent_node;
+        memcpy(n->rest, s->parent.m, sizeof n->rest);
+        float inv[12];
+        if (!xf_inverse(n->rest, inv)) return io_error(ctx, shown, 0, "singular transform around keyframed block '%s'", s->name);
+        for (size_t i = 0; i < st->key_n; i++) {
+            if (strcmp(st->keys[i].name, s->name) != 0) continue;
+            memcpy(n->track, st->keys[i].track, sizeof n->track);
+            n->vis_first = st->keys[i].vis_first, n->vis_count = st->keys[i].vis_count;
         }
-        for (size_t i = a->cone0; i < a->cone1; i++) {
-            xf_point(&c, b->cones[i].base);
-            xf_point(&c, b->cones[i].apex);
-            b->cones[i].base_radius *= c.scale;
-            b->cones[i].apex_radius *= c.scale;
+        for (size_t i = s->tri0; i < s->tri1; i++) a->tri_node[i] = (int32_t)ai;
+        for (size_t i = s->sph0; i < s->sph1; i++) a->sphere_node[i] = (int32_t)ai;
+        for (size_t i = s->cone0; i < s->cone1; i++) a->cone_node[i] = (int32_t)ai;
+        for (size_t i = s->light0; i < s->light1; i++) a->light_node[i] = (int32_t)ai;
+    }
+    if (cam) {
+        a->camera[RP_ANIM_TRANSL] = cam->track[RP_ANIM_TRANSL];
+        a->camera[RP_ANIM_ROT] = cam->track[RP_ANIM_ROT];
+    }
+    a->keys = st->akeys, a->key_count = st->akey_n;
+    st->akeys = NULL;
+    a->vis_times = st->vis_t, a->vis_values = st->vis_v, a->vis_count = st->vis_n;
+    st->vis_t = NULL, st->vis_v = NULL;
+    a->tpas = st->tpas, a->tpa_count = st->tpa_n;
+    a->tpa_keys = st->tpa_keys;
+    st->tpas = NULL, st->tpa_keys = NULL;
+    if (st->has_range) {
+        a->start = st->start, a->end = st->end, a->frames = st->frames;
+    } else { /* no `a` line: the keys' range, one frame per key interval */
+        float lo = INFINITY, hi = -INFINITY;
+        for (size_t i = 0; i < a->key_count; i++) lo = fminf(lo, a->keys[i].time), hi = fmaxf(hi, a->keys[i].time);
+        for (size_t i = 0; i < a->tpa_count; i++) {
+            const float *k = a->tpa_keys + 19 * (size_t)a->tpas[i].first;
+            lo = fminf(lo, k[0]), hi = fmaxf(hi, k[19 * ((size_t)a->tpas[i].count - 1)]);
         }
-        for (size_t i = a->light0; i < a->light1; i++) xf_point(&c, b->lights[i].position);
+        if (!(lo <= hi)) lo = hi = 0.0f;
+        a->start = lo, a->end = hi, a->frames = hi > lo ? 2 : 1;
     }
     return true;
 }
@@ -1042,9 +1176,19 @@ static bool nff_command(nff_file *f) {
         case 'x': return nff_transform(f, false);
         case 'k': return nff_keyframes(f);
         case '}': return nff_close(f);
-        case 'a': {
-            float v[3]; /* animation start, end, frame count: a still scene needs none */
-            return nff_floats(f, v, 3, "a");
+        case 'a': { /* animation start, end, frame count */
+            nff_state *st = f->st;
+            int64_t frames;
+            if (!nff_float(f, &st->start, "a start") || !nff_float(f, &st->end, "a end") || !nff_int(f, &frames, "a frames"))
+                return false;
+            if (frames < 1 || frames > 10000000)
+                return io_error(f->ctx, f->shown, f->line, "a: %lld frames (1 to 10^7)", (long long)frames);
+            if (!(st->end >= st->start) || (frames > 1 && !(st->end > st->start)))
+                return io_error(f->ctx, f->shown, f->line, "a: the animation ends (%g) before it starts (%g)", (double)st->end,
+                                (double)st->start);
+            st->frames = (int32_t)frames;
+            st->has_range = true;
+            return true;
         }
         case 'd': {
             int64_t d;
@@ -1140,11 +1284,16 @@ bool nff_load(io_ctx *ctx, const char *path) {
     if (ok) {
         char shown[IO_PATH_MAX + 256];
         vfs_display(&ctx->vfs, path, shown, sizeof shown);
-        ok = nff_apply_keyframes(ctx, st, shown);
+        ok = nff_animation(ctx, st, shown);
     }
     free(st->anims);
     free(st->keys);
     free(st->tex_mats);
+    free(st->akeys);
+    free(st->vis_t);
+    free(st->vis_v);
+    free(st->tpas);
+    free(st->tpa_keys);
     free(st);
     return ok;
 }

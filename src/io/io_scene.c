@@ -417,9 +417,15 @@ static bool ctx_finish(io_ctx *ctx, bool ok, const char *path, rp_scene_data *ou
     if (!ok) {
         if (!ctx->failed) io_error(ctx, path, 0, "load failed");
         builder_free(&ctx->b);
+        anim_free(ctx->anim);
+        ctx->anim = NULL;
         return false;
     }
     move_out(&ctx->b, out);
+    if (!anim_finish(ctx, out)) {
+        rp_scene_data_free(out);
+        return io_error(ctx, path, 0, "out of memory");
+    }
     out->file_bytes = ctx->bytes;
     out->parse_ms = now_ms() - t0;
     return true;
@@ -511,5 +517,6 @@ void rp_scene_data_free(rp_scene_data *scene) {
     for (size_t i = 0; i < scene->texture_count; i++) free(scene->textures[i].rgb);
     free(scene->textures);
     free(scene->lights);
+    anim_free(scene->animation);
     memset(scene, 0, sizeof *scene);
 }

@@ -73,6 +73,21 @@ typedef struct light_sampler {
     size_t count;
 } light_sampler;
 
+/* An animated scene's sub-scene and the instance placing it (anim.c). */
+typedef struct render_group {
+    rp_scene *sub;
+    rp_geometry *inst;       /* in the top scene (owned by it) */
+    rp_geometry *tri_geom;   /* the sub-scene's triangles (owned by it), NULL if none */
+    uint32_t top_id;         /* the instance's geom_id in the top scene */
+    int32_t node;            /* the keyframed block placing it, -1: none (identity) */
+    bool tpa;                /* `tpa` triangles: their vertices move, a frame refits the sub-scene */
+    bool deform;             /* its vertices move in place (tpa, or a block with refit_blocks): refit per frame */
+    uint32_t sub_ids[3];     /* geom_id in the sub-scene per render_geom_kind, RP_INVALID_ID if none */
+    uint32_t *map[3];        /* per kind: prim_id in the sub-scene -> index in the flat arrays */
+    uint32_t *idx;           /* the sub-scene's index buffer (into the rest positions) */
+    render_cone *cones;      /* rest-space cones of the sub-scene's user geometry */
+} render_group;
+
 struct rp_render_scene {
     rp_device *device;
     rp_scene *scene;
@@ -94,6 +109,13 @@ struct rp_render_scene {
     int32_t env_light;             /* index into pb_lights, or -1 */
     float radius;                  /* bounding sphere radius of the scene */
     v3 center;
+    render_group *groups;          /* animated scenes built with instances, else NULL */
+    uint32_t group_count;
+    uint32_t *group_of_top;        /* top-level geom_id -> index into groups */
+    float anim_still[6];           /* animated scenes: bounds of what never moves (lo xyz, hi xyz) */
+    bool anim_still_ok;
+    uint32_t *anim_moving;         /* ... and the vertices that move */
+    size_t anim_moving_n;
 };
 
 /* Result of turning a hit into a shading point. */
@@ -118,6 +140,14 @@ bool cone_occluded(void *user, uint32_t prim, const rp_ray *ray);
 
 /* Builds the shading point of a hit (scene.c). */
 void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hit, render_surface *out);
+/* A hit inside an animated scene's instance rewritten to the flat build's geom_id and prim_id (and
+ * inst_id RP_INVALID_ID); other hits unchanged. */
+void scene_hit_flat(const rp_render_scene *s, rp_hit *h);
+/* Animated scenes (anim.c): one sub-scene and instance per keyframed block, `tpa` group and the
+ * still rest; their bounds (and ray offsets) from the data; freeing them. */
+bool anim_build_geometry(rp_render_scene *s, const rp_scene_data *d, const rp_render_scene_desc *desc);
+void anim_scene_bounds(rp_render_scene *s);
+void anim_groups_free(rp_render_scene *s);
 /* Linear RGB of a texture at uv, bilinear (material.c). */
 v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]);
 /* Base colour of a material at a surface: kd times its texture (material.c). */

@@ -20,6 +20,7 @@ static float srgb_decode(float c) {
 static void scene_free(rp_render_scene *s) {
     if (!s) return;
     if (s->scene) rp_scene_release(s->scene);
+    anim_groups_free(s); /* after the top scene, whose instances hold the sub-scenes */
     if (s->device) rp_device_release(s->device);
     free(s->materials);
     free(s->lights);
@@ -122,7 +123,8 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
 
     s->scene = rp_scene_new(device, &dd.accel);
     if (!s->scene) return fail(s, err, err_size, "cannot create a scene (out of memory)");
-    if (!build_geometry(s, data)) {
+    bool instanced = data->animation && !dd.flatten_animation;
+    if (!(instanced ? anim_build_geometry(s, data, &dd) : build_geometry(s, data))) {
         char msg[160];
         snprintf(msg, sizeof msg, "cannot create the scene's geometry: %s", rp_error_string(rp_device_get_error(device)));
         return fail(s, err, err_size, msg);
@@ -142,6 +144,7 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
         if (isfinite(bv[k]) && fabsf(bv[k]) > m) m = fabsf(bv[k]);
     }
     s->scale = m;
+    if (data->animation) anim_scene_bounds(s); /* the same in the flat and the instanced build */
     if (!light_scene_init(s, &dd, err, err_size)) {
         char msg[600];
         snprintf(msg, sizeof msg, "%s", err && err[0] ? err : "out of memory");
@@ -176,8 +179,11 @@ static v3 corner3(const float *a, const uint32_t *idx, uint32_t prim, int corner
     return v3_load(a + 3 * (size_t)idx[3 * (size_t)prim + (size_t)corner]);
 }
 
-void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hit, render_surface *out) {
+void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hit_in, render_surface *out) {
     const rp_scene_data *d = s->data;
+    rp_hit flat = *hit_in;
+    scene_hit_flat(s, &flat);
+    const rp_hit *hit = &flat;
     v3 dir = v3_make(ray->dir_x, ray->dir_y, ray->dir_z);
     out->p = v3_madd(v3_make(ray->org_x, ray->org_y, ray->org_z), dir, ray->tfar);
     v3 ng = v3_make(hit->Ng_x, hit->Ng_y, hit->Ng_z);

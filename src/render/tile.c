@@ -132,6 +132,13 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
                dd.integrator == RP_INTEGRATOR_IR || dd.integrator == RP_INTEGRATOR_AO;
     if (pbr && dd.packet < 0) dd.packet = 16; /* the physically based integrators always trace packets */
     if (dd.integrator == RP_INTEGRATOR_DIRECT) dd.max_depth = 1;
+    /* Whitted's depths per ray kind: given ones replace max_depth for their kind, which then covers
+     * both; resolved to a positive depth or -1 (none) */
+    int depth_r = dd.reflect_depth > 0 ? dd.reflect_depth : dd.reflect_depth < 0 ? 0 : dd.max_depth;
+    int depth_t = dd.refract_depth > 0 ? dd.refract_depth : dd.refract_depth < 0 ? 0 : dd.max_depth;
+    if (dd.integrator == RP_INTEGRATOR_WHITTED && (dd.reflect_depth || dd.refract_depth)) dd.max_depth = depth_r > depth_t ? depth_r : depth_t;
+    dd.reflect_depth = depth_r > 0 ? depth_r : -1;
+    dd.refract_depth = depth_t > 0 ? depth_t : -1;
     if (dd.integrator == RP_INTEGRATOR_AO && !(dd.ao_distance > 0.0f)) dd.ao_distance = 0.1f * scene->radius;
     bool packets = (dd.integrator == RP_INTEGRATOR_WHITTED || dd.integrator == RP_INTEGRATOR_EYELIGHT) && dd.packet > 0;
     if ((packets || pbr) && dd.packet != 4 && dd.packet != 8 && dd.packet != 16 && dd.packet != 32) return false;

@@ -8,7 +8,9 @@ v3 aov_shade(const render_frame *f, const rp_ray *ray, const rp_hit *hit) {
         return v3_make(miss ? INFINITY : ray->tfar, 0, 0);
     case RP_AOV_PRIMID: {
         if (miss) return v3_make(0, 0, 0);
-        uint32_t h = render_hash(render_hash(hit->geom_id + 1u) ^ hit->prim_id);
+        rp_hit fh = *hit;
+        scene_hit_flat(f->s, &fh); /* animated scenes: the same colours with and without instances */
+        uint32_t h = render_hash(render_hash(fh.geom_id + 1u) ^ fh.prim_id);
         return v3_make((float)(h & 255u) / 255.0f, (float)((h >> 8) & 255u) / 255.0f,
                        (float)((h >> 16) & 255u) / 255.0f);
     }

@@ -62,7 +62,9 @@ static bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, 
     if (!v3_is_zero(le)) {
         float w = 1.0f;
         int32_t li = -1;
-        if (rh->hit.geom_id == s->geom_ids[RENDER_GEOM_TRIANGLES] && s->tri_light) li = s->tri_light[rh->hit.prim_id];
+        rp_hit fh = rh->hit;
+        scene_hit_flat(s, &fh);
+        if (fh.geom_id == s->geom_ids[RENDER_GEOM_TRIANGLES] && s->tri_light) li = s->tri_light[fh.prim_id];
         if (!st->specular && li >= 0) {
             float pl = s->light_pick.pmf[li] * light_triangle_pdf(&s->pb_lights[li], st->prev, sf.p, sf.ng);
             w = pbr_mis(st->pdf, pl);

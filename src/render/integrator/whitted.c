@@ -24,7 +24,8 @@ static void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_h
     v3 dir = v3_make(ray->dir_x, ray->dir_y, ray->dir_z);
     v3 kd = material_albedo(s, m, &sf);
     o->color = v3_add(v3_load(m->ke), v3_scale(kd, f->desc.ambient));
-    bool more = depth < f->desc.max_depth;
+    /* reflect_depth / refract_depth: resolved by rp_render (positive, or -1 for none) */
+    bool more_r = depth < f->desc.reflect_depth, more_t = depth < f->desc.refract_depth;
     float eps = ray_offset(s);
     float cos_i = -v3_dot(dir, sf.ns);
     if (cos_i < 0.0f) cos_i = 0.0f;
@@ -47,7 +48,7 @@ static void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_h
     case RP_MATERIAL_MIRROR: {
         v3 kr = v3_load(m->mirror.kr);
         float w = weight * v3_max_abs(kr);
-        if (more && w > 1e-3f) {
+        if (more_r && w > 1e-3f) {
             o->has_r = true;
             o->w_r = w;
             o->mul_r = kr;
@@ -57,11 +58,11 @@ static void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_h
         break;
     }
     case RP_MATERIAL_DIELECTRIC: {
-        if (!more) break;
+        if (!more_r && !more_t) break;
         float ior = m->dielectric.ior;
         float eta = sf.entering ? 1.0f / ior : ior;
         float fr = material_fresnel(cos_i, eta);
-        if (weight * fr > 1e-3f) {
+        if (more_r && weight * fr > 1e-3f) {
             o->has_r = true;
             o->w_r = weight * fr;
             o->mul_r = v3_make(fr, fr, fr); /* fr * c is c * fr: the product is exact either way */
@@ -70,7 +71,7 @@ static void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_h
         }
         v3 kt = v3_scale(v3_load(m->dielectric.kt), 1.0f - fr);
         float wt = weight * v3_max_abs(kt);
-        if (fr < 1.0f && wt > 1e-3f) {
+        if (more_t && fr < 1.0f && wt > 1e-3f) {
             float cos_t = sqrtf(1.0f - eta * eta * (1.0f - cos_i * cos_i));
             v3 t = v3_normalize(v3_madd(v3_scale(dir, eta), sf.ns, eta * cos_i - cos_t));
             if (v3_dot(t, sf.ng) < 0.0f) {

@@ -228,8 +228,8 @@ float *rp_image_read_pfm(const char *path, int *width, int *height, int *channel
         return NULL;
     }
     size_t row = (size_t)w * (size_t)ch, n = row * (size_t)h;
-    float *pix = malloc(n * sizeof(float));
-    float *tmp = malloc(row * sizeof(float));
+    float *pix = io_malloc(n * sizeof(float));
+    float *tmp = io_malloc(row * sizeof(float));
     if (!pix || !tmp) {
         free(pix);
         free(tmp);

@@ -22,6 +22,10 @@
 #define STB_IMAGE_IMPLEMENTATION
 #define STB_IMAGE_STATIC
 #define STBI_ONLY_HDR
+/* stb's allocations are the loaders' (io_alloc.c), so a test can refuse them too */
+#define STBI_MALLOC(size) io_malloc(size)
+#define STBI_REALLOC(p, size) io_realloc(p, size)
+#define STBI_FREE(p) free(p)
 #include <stb/stb_image.h>
 #pragma GCC diagnostic pop
 /* stb declares static functions this file does not use; GCC reports them at the end of the file. */
@@ -30,15 +34,18 @@
 float *rp_image_read_hdr(const char *path, int *width, int *height, char *err, size_t err_size) {
     if (!path) path = "(null)";
     int w = 0, h = 0, comp = 0;
+    errno = 0; /* an errno left by an earlier call is not this one's reason */
+    unsigned long failures = io_alloc_failures();
     float *px = stbi_loadf(path, &w, &h, &comp, 3);
     if (!px) {
+        const char *why = io_alloc_failures() != failures ? "out of memory" : stbi_failure_reason();
         if (err && err_size) snprintf(err, err_size, "%s: error: cannot read a Radiance HDR image: %s", path,
-                                      errno ? strerror(errno) : stbi_failure_reason());
+                                      errno ? strerror(errno) : why);
         return NULL;
     }
     /* stb's buffer comes from its own malloc; hand the caller one that free() releases. */
     size_t n = (size_t)w * (size_t)h * 3;
-    float *out = malloc(n * sizeof(float));
+    float *out = io_malloc(n * sizeof(float));
     if (out) memcpy(out, px, n * sizeof(float));
     stbi_image_free(px);
     if (!out) {

@@ -478,6 +478,36 @@ static bool bench_case(const char *cli, const char *scene, const char *name, boo
     return true;
 }
 
+/* --bad-rays: every mode is checked on the sets with NaN/Inf/degenerate rays mixed in (the bench
+ * exits 1 when a bad ray does not miss or a good one loses its hit) and both are timed. */
+static void bad_rays_case(const char *cli, const char *scene, int size) {
+    char json[1024], log[1024], cmd[8192];
+    snprintf(json, sizeof json, "%s/bench_bad_rays.json", tmp_dir());
+    snprintf(log, sizeof log, "%s/bench_bad_rays.log", tmp_dir());
+    remove(json);
+    snprintf(cmd, sizeof cmd,
+             "'%s' bench '%s' --width %d --height %d --repeats 1 --warmup 0 --threads 2 --bad-rays 0.5 --json '%s'",
+             cli, scene, size, size, json);
+    int rc = run(cmd, log);
+    CHECKF(rc == 0, "bad rays: `%s` exited with %d", cmd, rc);
+    jvalue root;
+    bool parsed = json_load(json, &root);
+    CHECKF(parsed, "bad rays: %s is not valid JSON", json);
+    if (parsed) {
+        check_plain_json(&root, "bad rays");
+        const jvalue *sets = json_get(json_get(&root, "bad_rays"), "sets");
+        for (int k = 0; k < 4; k++) {
+            const jvalue *s = json_get(sets, kinds[k]);
+            CHECKF(json_num(s, "bad") > 0 || k == 1, "bad rays: bad_rays.sets.%s.bad", kinds[k]);
+            const jvalue *m = json_get(json_get(s, "modes"), "n16_auto_frustum");
+            CHECKF((json_num(m, "finite_mrays") > 0 && json_num(m, "mixed_mrays") > 0) || k == 1,
+                   "bad rays: bad_rays.sets.%s.modes.n16_auto_frustum", kinds[k]);
+        }
+        json_free(&root);
+    }
+    if (rc != 0 || !parsed) dump(log);
+}
+
 int main(void) {
     char cli[PATH_MAX + 64];
     if (!find_cli(cli, sizeof cli)) {
@@ -501,6 +531,7 @@ int main(void) {
         bench_case(cli, teapot, "teapot_vs_embree", true, size);
 
     if (cornell) grid_case(cli, cornell, small ? 16 : 48);
+    if (cornell) bad_rays_case(cli, cornell, small ? 32 : 64);
 
     /* Usage errors and missing files fail. */
     char cmd[sizeof cli + 128], log[1024];
@@ -513,6 +544,10 @@ int main(void) {
     CHECK(run(cmd, log) != 0);
     snprintf(cmd, sizeof cmd, "'%s' bench --grid --vs embree", cli);
     CHECK(run(cmd, log) != 0);
+    snprintf(cmd, sizeof cmd, "'%s' bench --bad-rays 0 --width 8 --height 8", cli);
+    CHECK(run(cmd, log) == 2);
+    snprintf(cmd, sizeof cmd, "'%s' bench --bad-rays 1.5 --width 8 --height 8", cli);
+    CHECK(run(cmd, log) == 2);
     snprintf(cmd, sizeof cmd, "'%s' bench /no/such/scene.obj --width 8 --height 8", cli);
     CHECK(run(cmd, log) != 0);
     return RP_TEST_END();

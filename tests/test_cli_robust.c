@@ -149,6 +149,28 @@ static void test_cameras_and_sizes(void) {
     CHECKF(rc == 0 && !strstr(output, "warning"), "a valid scene warned (exit %d):\n%s", rc, output);
 }
 
+/* Environment maps that lie (found by the texture fuzzer): an RLE scanline with a run of length 0
+ * had stb_image loop forever, a header of 30000 x 30000 pixels made it allocate 10 GB. */
+static void test_bad_env_maps(void) {
+    char scene[1200], env[1200], args[8192];
+    snprintf(scene, sizeof scene, "%s/tri.obj", tmp);
+    CHECK(write_text(scene, TRI_OBJ));
+    snprintf(env, sizeof env, "%s/zero_run.hdr", tmp);
+    FILE *f = fopen(env, "wb");
+    if (f) { /* one 8-pixel RLE scanline: red's run, then a count of 0 */
+        static const unsigned char rle[] = {2, 2, 0, 8, 0x88, 100, 0};
+        fputs("#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 2 +X 8\n", f);
+        fwrite(rle, 1, sizeof rle, f);
+        fclose(f);
+    }
+    snprintf(args, sizeof args, "render '%s' --env '%s' --width 8 --height 8 -o '%s/env.png' --quiet", scene, env, tmp);
+    EXPECT(args, 1, "zero_run.hdr: error: corrupt Radiance HDR image");
+    snprintf(env, sizeof env, "%s/huge.hdr", tmp);
+    CHECK(write_text(env, "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 30000 +X 30000\n"));
+    snprintf(args, sizeof args, "render '%s' --env '%s' --width 8 --height 8 -o '%s/env.png' --quiet", scene, env, tmp);
+    EXPECT(args, 1, "30000x30000 is more than 67108864 pixels");
+}
+
 int main(void) {
     if (!find_exe()) {
         fprintf(stderr, "raypack binary not found at %s\n", exe);
@@ -162,5 +184,6 @@ int main(void) {
     test_failed_write_keeps_old();
     test_not_regular_scenes();
     test_cameras_and_sizes();
+    test_bad_env_maps();
     return RP_TEST_END();
 }

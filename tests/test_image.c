@@ -4,6 +4,7 @@
 #include <stdint.h>
 #include <sys/stat.h>
 
+#include "io/io_internal.h"
 #include "raypack_io.h"
 #include "rp_test.h"
 
@@ -131,7 +132,46 @@ static void test_errors(void) {
     CHECKF(strstr(err, "truncated") != NULL, "%s", err);
 }
 
+static size_t largest_request;
+static bool note_size(void *user, size_t size) {
+    (void)user;
+    if (size > largest_request) largest_request = size;
+    return true;
+}
+
+/* Headers that claim more than the file holds (issue 23): a PFM of 65536 x 65536 pixels in 20
+ * bytes (51 GB), an HDR of 30000 x 30000 (10 GB, which stb would allocate whole and fill with zeros)
+ * are refused before anything that size is asked for. */
+static void test_declared_sizes(void) {
+    char path[512], err[512] = "";
+    int w, h, c;
+    io_set_alloc_hook(note_size, NULL);
+    tmp_path(path, sizeof path, "huge.pfm");
+    FILE *f = fopen(path, "wb");
+    if (f) {
+        fputs("PF\n65536 65536\n-1.0\n12345678", f);
+        fclose(f);
+    }
+    largest_request = 0;
+    CHECK(rp_image_read_pfm(path, &w, &h, &c, err, sizeof err) == NULL);
+    CHECKF(strstr(err, "truncated PFM data") != NULL, "%s", err);
+    CHECKF(largest_request < (1u << 20), "a 20-byte PFM asked for %zu bytes", largest_request);
+    tmp_path(path, sizeof path, "huge.hdr");
+    f = fopen(path, "wb");
+    if (f) {
+        fputs("#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 30000 +X 30000\n\x80\x80\x80\x81", f);
+        fclose(f);
+    }
+    largest_request = 0;
+    err[0] = '\0';
+    CHECK(rp_image_read_hdr(path, &w, &h, err, sizeof err) == NULL);
+    CHECKF(strstr(err, "RP_MAX_TEXTURE_PIXELS") != NULL, "%s", err);
+    CHECKF(largest_request < (1u << 20), "a 60-byte HDR asked for %zu bytes", largest_request);
+    io_set_alloc_hook(NULL, NULL);
+}
+
 int main(void) {
+    test_declared_sizes();
     test_pfm_roundtrip(1);
     test_pfm_roundtrip(3);
     test_8bit();

@@ -9,6 +9,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #if defined(__x86_64__) || defined(__i386__) || defined(__SSE__)
 #include <pmmintrin.h>
@@ -1043,6 +1044,11 @@ static void usage(FILE *f) {
             "  --warmup N         untimed passes per mode first (default 1)\n"
             "  --width W --height H   primary rays (default 1024x1024)\n"
             "  --eye x,y,z --look x,y,z --up x,y,z --fov DEG   override the scene's camera\n"
+            "  --bad-rays F       also time each mode on the sets with a fraction F (0 < F <= 1)\n"
+            "                     of their rays made NaN/Inf in origin or direction, zero-\n"
+            "                     direction, tnear > tfar, NaN/Inf tnear or tfar (16 kinds in\n"
+            "                     turn), checking they miss and the rest keep their hits;\n"
+            "                     prints Mrays/s of both and the slowdown\n"
             "  --json FILE        write the results as JSON\n");
 }
 
@@ -1105,6 +1111,14 @@ static int parse_args(int argc, char **argv, bench_opts *o) {
             ok = o->has_fov = cli_parse_float(cmd, a, val, 0.0, 180.0, true, &o->fov_deg);
         } else if (strcmp(a, "--json") == 0) {
             o->json_path = val;
+        } else if (strcmp(a, "--bad-rays") == 0) {
+            float f = 0.0f;
+            ok = cli_parse_float(cmd, a, val, 0.0, 1.0, false, &f);
+            if (ok && f == 0.0f) {
+                fprintf(stderr, "raypack bench: --bad-rays takes a fraction in (0, 1], got '%s'\n", val);
+                ok = false;
+            }
+            o->bad_rays = (double)f;
         } else {
             fprintf(stderr, "raypack bench: unknown option %s (see --help)\n", a);
             return CLI_EXIT_USAGE;
@@ -1271,6 +1285,161 @@ void bench_print_header(const bench_ctx *ctx) {
 
 #define BENCH_MAX_MODES 8
 
+/* ---- --bad-rays: rays no traversal should trust, mixed into the sets ------------------------ */
+
+enum { BAD_KINDS = 16 };
+
+/* The kinds of tests/test_bad_rays.c, applied to a good ray. */
+static void spoil_ray(bench_ray *r, int kind) {
+    switch (kind) {
+    case 0: r->org[0] = NAN; break;
+    case 1: r->org[1] = INFINITY; break;
+    case 2: r->org[2] = -INFINITY; break;
+    case 3: r->dir[0] = NAN; break;
+    case 4: r->dir[1] = NAN; break;
+    case 5: r->dir[2] = INFINITY; break;
+    case 6: r->dir[0] = -INFINITY, r->dir[1] = r->dir[2] = 0.0f; break;
+    case 7: r->dir[0] = r->dir[1] = r->dir[2] = 0.0f; break;
+    case 8: r->tnear = NAN; break;
+    case 9: r->tfar = NAN; break;
+    case 10: r->tnear = r->tfar == INFINITY ? 2.0f : r->tfar * 2.0f + 1.0f, r->tfar = r->tnear * 0.5f; break;
+    case 11: r->tnear = INFINITY; break;
+    case 12: r->dir[0] = r->dir[1] = r->dir[2] = NAN; break;
+    case 13: r->org[0] = r->org[1] = r->org[2] = INFINITY; break;
+    case 14: r->dir[0] = r->dir[1] = r->dir[2] = INFINITY; break;
+    default: r->tfar = -INFINITY; break;
+    }
+}
+
+/* Whether slot i gets a bad ray: a hash of the slot below the fraction, so the bad rays are spread
+ * over every packet, the same ones every run. */
+static bool bad_slot(size_t i, double fraction) {
+    uint32_t h = (uint32_t)i * 0x9E3779B1u;
+    h ^= h >> 15, h *= 0x85EBCA77u, h ^= h >> 13;
+    return (double)h < fraction * 4294967296.0;
+}
+
+typedef struct bad_result {
+    size_t bad;                           /* rays of the set made bad */
+    bench_stat finite[BENCH_MAX_MODES];   /* Mrays/s on the set as it is */
+    bench_stat mixed[BENCH_MAX_MODES];    /* ... with the bad rays mixed in */
+} bad_result;
+
+/* A copy of set with the bad rays, and a view of it whose valid mask leaves them out (to compare
+ * the good rays with the reference). */
+static bool make_bad_set(const bench_ctx *ctx, const bench_rays *set, bench_rays *mixed, bench_rays *good,
+                         size_t *bad) {
+    if (!bench_rays_alloc(mixed, set->kind, ctx->opts.width, ctx->opts.height) ||
+        !bench_rays_alloc(good, set->kind, ctx->opts.width, ctx->opts.height))
+        return false;
+    memcpy(mixed->rays, set->rays, set->slots * sizeof(bench_ray));
+    memcpy(mixed->valid, set->valid, set->slots * sizeof(int32_t));
+    memcpy(good->rays, set->rays, set->slots * sizeof(bench_ray));
+    memcpy(good->valid, set->valid, set->slots * sizeof(int32_t));
+    mixed->count = good->count = set->count;
+    *bad = 0;
+    for (size_t i = 0; i < set->slots; i++) {
+        if (!set->valid[i] || !bad_slot(i, ctx->opts.bad_rays)) continue;
+        spoil_ray(&mixed->rays[i], (int)(*bad % BAD_KINDS));
+        good->valid[i] = 0;
+        good->count--;
+        (*bad)++;
+    }
+    return true;
+}
+
+/* The bad rays' answers: a miss (intersect: no primitive, t +inf as the harness writes a miss;
+ * occluded: tfar keeps its bits, not set to -inf). Returns how many are wrong. */
+static size_t check_bad(const bench_rays *mixed, const bench_rays *good, const bench_hits *hits) {
+    size_t wrong = 0;
+    for (size_t i = 0; i < mixed->slots; i++) {
+        if (!mixed->valid[i] || good->valid[i]) continue;
+        if (mixed->occlusion) {
+            uint32_t a, b;
+            memcpy(&a, &hits->t[i], 4);
+            memcpy(&b, &mixed->rays[i].tfar, 4);
+            wrong += a != b;
+        } else {
+            wrong += hits->prim[i] != RP_INVALID_ID || hits->t[i] != INFINITY;
+        }
+    }
+    return wrong;
+}
+
+/* CPU seconds of the calling thread: the bad-ray comparison runs on one thread and counts its own
+ * time only, so other programs on a shared machine do not skew the ratio. */
+static double thread_cpu_seconds(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+/* Checks every mode on each set with bad rays mixed in, then times the set as it is and with the
+ * bad rays, alternating, on the calling thread by its CPU time; returns false when a mode got an
+ * answer wrong. */
+static bool bench_bad_rays(bench_ctx *ctx, bench_mode modes[][BENCH_MAX_MODES], const int *nmodes,
+                           bench_hits *hits, bad_result *res) {
+    bool ok = true;
+    int threads = 1, repeats = ctx->opts.repeats;
+    double *samples = calloc((size_t)repeats * 2, sizeof(double));
+    if (!samples) return false;
+    for (int k = 0; k < BENCH_KIND_COUNT && ok; k++) {
+        bench_rays mixed, good;
+        if (!make_bad_set(ctx, &ctx->sets[k], &mixed, &good, &res[k].bad)) {
+            fprintf(stderr, "raypack bench: out of memory\n");
+            bench_rays_free(&mixed);
+            bench_rays_free(&good);
+            ok = false;
+            break;
+        }
+        for (int m = 0; m < nmodes[k]; m++) {
+            bench_trace_set(ctx, threads, &modes[k][m], &mixed, hits);
+            bench_diff d = bench_compare(&ctx->mesh, &good, &ctx->ref[k], hits);
+            size_t wrong = check_bad(&mixed, &good, hits);
+            if (d.total || wrong) {
+                fprintf(stderr,
+                        "raypack bench: %s rays with bad rays mixed in, %s: %zu good rays lost their hits, "
+                        "%zu bad rays did not miss\n",
+                        bench_kind_name((bench_kind)k), modes[k][m].name, d.total, wrong);
+                ok = false;
+            }
+        }
+        for (int m = 0; ok && m < nmodes[k]; m++) {
+            const bench_rays *both[2] = {&ctx->sets[k], &mixed};
+            for (int w = 0; w < ctx->opts.warmup; w++)
+                for (int b = 0; b < 2; b++) bench_trace_set(ctx, threads, &modes[k][m], both[b], hits);
+            for (int r = 0; r < repeats; r++)
+                for (int b = 0; b < 2; b++) {
+                    double t0 = thread_cpu_seconds();
+                    bench_trace_set(ctx, threads, &modes[k][m], both[b], hits);
+                    double s = thread_cpu_seconds() - t0;
+                    samples[b * repeats + r] = s > 0.0 ? (double)both[b]->count / s * 1e-6 : 0.0;
+                }
+            res[k].finite[m] = bench_stats(samples, repeats);
+            res[k].mixed[m] = bench_stats(samples + repeats, repeats);
+        }
+        bench_rays_free(&mixed);
+        bench_rays_free(&good);
+    }
+    free(samples);
+    if (!ok) return false;
+    printf("\nbad rays  %.3g of each set's rays made NaN/Inf/zero-direction/tnear > tfar (%d kinds in turn), "
+           "%d thread, Mrays per CPU second; every mode checked first: the bad rays miss, the others keep their hits\n",
+           ctx->opts.bad_rays, BAD_KINDS, threads);
+    printf("%-11s %9s  %-17s  %18s  %18s  %8s\n", "rays", "bad", "mode", "finite Mrays/CPU-s", "mixed Mrays/CPU-s",
+           "slowdown");
+    double worst = 0.0;
+    for (int k = 0; k < BENCH_KIND_COUNT; k++)
+        for (int m = 0; m < nmodes[k]; m++) {
+            double slow = res[k].mixed[m].median > 0.0 ? res[k].finite[m].median / res[k].mixed[m].median : 0.0;
+            if (slow > worst) worst = slow;
+            printf("%-11s %9zu  %-17s  %18.2f  %18.2f  %7.2fx\n", m == 0 ? bench_kind_name((bench_kind)k) : "",
+                   res[k].bad, modes[k][m].name, res[k].finite[m].median, res[k].mixed[m].median, slow);
+        }
+    printf("bad rays  worst slowdown %.2fx (goal: at most 2.5x, as Embree promises)\n", worst);
+    return true;
+}
+
 typedef struct core_result {
     bench_stat stat[2][BENCH_MAX_MODES]; /* [thread config][mode] in Mrays/s */
 } core_result;
@@ -1379,6 +1548,15 @@ static int bench_core(bench_ctx *ctx) {
             printf("\n");
         }
 
+    bad_result bad[BENCH_KIND_COUNT];
+    memset(bad, 0, sizeof bad);
+    if (ctx->opts.bad_rays > 0.0) {
+        if (!bench_hits_alloc(&hits, ctx->sets[0].slots)) return 1;
+        bool bad_ok = bench_bad_rays(ctx, modes, nmodes, &hits, bad);
+        bench_hits_free(&hits);
+        if (!bad_ok) return 1;
+    }
+
     if (ctx->opts.json_path) {
         char werr[512];
         rp_atomic_file *af = rp_atomic_open(ctx->opts.json_path, werr, sizeof werr);
@@ -1413,7 +1591,20 @@ static int bench_core(bench_ctx *ctx) {
             }
             fprintf(f, "}}");
         }
-        fprintf(f, "\n }\n}\n");
+        fprintf(f, "\n }");
+        if (ctx->opts.bad_rays > 0.0) {
+            fprintf(f, ",\n \"bad_rays\": {\"fraction\": %.6g, \"threads\": 1, \"sets\": {", ctx->opts.bad_rays);
+            for (int k = 0; k < BENCH_KIND_COUNT; k++) {
+                fprintf(f, "%s\n  \"%s\": {\"bad\": %zu, \"modes\": {", k ? "," : "", bench_kind_name((bench_kind)k),
+                        bad[k].bad);
+                for (int m = 0; m < nmodes[k]; m++)
+                    fprintf(f, "%s\"%s\": {\"finite_mrays\": %.4f, \"mixed_mrays\": %.4f}", m ? ", " : "",
+                            modes[k][m].name, bad[k].finite[m].median, bad[k].mixed[m].median);
+                fprintf(f, "}}");
+            }
+            fprintf(f, "\n }}");
+        }
+        fprintf(f, "\n}\n");
         if (!rp_atomic_commit(af, werr, sizeof werr)) {
             fprintf(stderr, "raypack bench: %s\n", werr);
             return 1;

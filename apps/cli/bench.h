@@ -40,6 +40,7 @@ typedef struct bench_opts {
     int repeats;             /* timed repeats per mode */
     int warmup;              /* untimed passes per mode before timing */
     int width, height;
+    double bad_rays;         /* --bad-rays: fraction of each set made NaN/Inf/degenerate, 0: off */
     bool has_eye, has_look, has_up, has_fov;
     float eye[3], look[3], up[3];
     float fov_deg;

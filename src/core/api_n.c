@@ -383,23 +383,32 @@ static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p
 
 /* Traces p with its unusable rays (ray_usable: NaN/Inf, zero directions, empty intervals) taken
  * out of its valid mask, so they are misses and never reach the kernels or the frustum; a packet
- * without such rays goes as it is. */
+ * without such rays goes as it is. The mask is made in one branch-free pass the compiler
+ * vectorizes (the two scalar passes it replaced cost a third as much as the 16x16 kernel itself on
+ * Cornell's primary rays, and twice that with bad rays mixed in: bench --bad-rays). */
 static void trace_usable(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p, bool any) {
-    uint32_t count = p->n * p->n, bad = 0;
-    for (uint32_t i = 0; i < count; i++)
-        bad += (!p->valid || p->valid[i]) &&
-               !ray_usable(p->org_x[i], p->org_y[i], p->org_z[i], p->dir_x[i], p->dir_y[i], p->dir_z[i], p->tnear[i],
-                           p->tfar[i]);
+    uint32_t count = p->n * p->n;
+    const float *restrict ox = p->org_x, *restrict oy = p->org_y, *restrict oz = p->org_z;
+    const float *restrict dx = p->dir_x, *restrict dy = p->dir_y, *restrict dz = p->dir_z;
+    const float *restrict tn = p->tnear, *restrict tf = p->tfar;
+    static const int32_t all_live[RP_PACKET_N_MAX * RP_PACKET_N_MAX] = {[0 ... RP_PACKET_N_MAX * RP_PACKET_N_MAX - 1] = -1};
+    const int32_t *restrict valid = p->valid ? p->valid : all_live; /* (no branch in the loop) */
+    RP_ALIGN(64) int32_t live[RP_PACKET_N_MAX * RP_PACKET_N_MAX];
+    int32_t bad = 0;
+    for (uint32_t i = 0; i < count; i++) { /* ray_usable, lane by lane, with & and | */
+        float f = (ox[i] - ox[i]) + (oy[i] - oy[i]) + (oz[i] - oz[i]) + (dx[i] - dx[i]) + (dy[i] - dy[i]) +
+                  (dz[i] - dz[i]);
+        int32_t ok = (f == 0.0f) & ((dx[i] != 0.0f) | (dy[i] != 0.0f) | (dz[i] != 0.0f)) & (tn[i] <= tf[i]) &
+                     (tn[i] < INFINITY);
+        int32_t v = valid[i] != 0;
+        live[i] = -(v & ok);
+        bad += v & (ok ^ 1);
+    }
     if (RP_LIKELY(bad == 0)) {
         trace_n(scene, desc, p, any);
         return;
     }
-    if (bad == count) return;
-    RP_ALIGN(64) int32_t live[RP_PACKET_N_MAX * RP_PACKET_N_MAX];
-    for (uint32_t i = 0; i < count; i++)
-        live[i] = (!p->valid || p->valid[i]) &&
-                  ray_usable(p->org_x[i], p->org_y[i], p->org_z[i], p->dir_x[i], p->dir_y[i], p->dir_z[i],
-                             p->tnear[i], p->tfar[i]) ? -1 : 0;
+    if ((uint32_t)bad == count) return;
     rp_rayhit_n q = *p; /* the same arrays, another mask */
     q.valid = live;
     trace_n(scene, desc, &q, any);

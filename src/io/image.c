@@ -228,8 +228,21 @@ float *rp_image_read_pfm(const char *path, int *width, int *height, int *channel
         return NULL;
     }
     size_t row = (size_t)w * (size_t)ch, n = row * (size_t)h;
-    float *pix = malloc(n * sizeof(float));
-    float *tmp = malloc(row * sizeof(float));
+    /* the declared size against the bytes there are, before allocating for it (65536^2 pixels is
+     * 51 GB, and a 20-byte file may claim it) */
+    long here = ftell(f), end_at = -1; /* (a stream that cannot seek is read as it comes) */
+    if (here >= 0 && fseek(f, 0, SEEK_END) == 0) {
+        end_at = ftell(f);
+        if (fseek(f, here, SEEK_SET) != 0) end_at = -1, here = 0;
+    }
+    if (end_at >= here && here >= 0 && (uint64_t)(end_at - here) < (uint64_t)n * sizeof(float)) {
+        set_err(err, err_size, path, "truncated PFM data (%ld x %ld x %d floats declared, %ld bytes there)", w, h, ch,
+                end_at > here ? end_at - here : 0L);
+        fclose(f);
+        return NULL;
+    }
+    float *pix = io_malloc(n * sizeof(float));
+    float *tmp = io_malloc(row * sizeof(float));
     if (!pix || !tmp) {
         free(pix);
         free(tmp);

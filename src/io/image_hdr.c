@@ -22,23 +22,167 @@
 #define STB_IMAGE_IMPLEMENTATION
 #define STB_IMAGE_STATIC
 #define STBI_ONLY_HDR
+/* stb's allocations are the loaders' (io_alloc.c), so a test can refuse them too */
+#define STBI_MALLOC(size) io_malloc(size)
+#define STBI_REALLOC(p, size) io_realloc(p, size)
+#define STBI_FREE(p) free(p)
 #include <stb/stb_image.h>
 #pragma GCC diagnostic pop
 /* stb declares static functions this file does not use; GCC reports them at the end of the file. */
 #pragma GCC diagnostic ignored "-Wunused-function"
 
+/* RP_MAX_TEXTURE_PIXELS, as the loaders read it (io_scene.c's env_limit, kept small here). */
+static uint64_t max_pixels(void) {
+    const char *v = getenv("RP_MAX_TEXTURE_PIXELS");
+    if (!v || !*v) return IO_DEFAULT_MAX_TEXTURE_PIXELS;
+    char *end;
+    unsigned long long n = strtoull(v, &end, 10);
+    uint64_t scale = *end == 'k' || *end == 'K' ? 1ull << 10 : *end == 'M' ? 1ull << 20 : *end == 'G' ? 1ull << 30 : 1;
+    if (scale != 1) end++;
+    if (end == v || *end != '\0' || n == 0 || n > UINT64_MAX / scale) return IO_DEFAULT_MAX_TEXTURE_PIXELS;
+    return (uint64_t)n * scale;
+}
+
+/* The file whole (a stream too), at most limit bytes; NULL with *why (errno's text, "out of
+ * memory" or "more than N bytes"). */
+static unsigned char *read_all(const char *path, size_t limit, size_t *size, char *why, size_t why_size) {
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        snprintf(why, why_size, "%s", strerror(errno));
+        return NULL;
+    }
+    size_t cap = 1 << 16, n = 0;
+    unsigned char *d = io_malloc(cap);
+    while (d) {
+        if (n == cap) {
+            if (cap > limit) {
+                snprintf(why, why_size, "more than %zu bytes for at most %llu pixels; RP_MAX_TEXTURE_PIXELS raises the limit",
+                         limit, (unsigned long long)max_pixels());
+                free(d);
+                fclose(f);
+                return NULL;
+            }
+            unsigned char *g = io_realloc(d, cap * 2);
+            if (!g) {
+                free(d);
+                d = NULL;
+                break;
+            }
+            d = g, cap *= 2;
+        }
+        size_t got = fread(d + n, 1, cap - n, f);
+        n += got;
+        if (got == 0) break;
+    }
+    if (!d) snprintf(why, why_size, "out of memory");
+    else if (ferror(f)) {
+        snprintf(why, why_size, "%s", strerror(errno ? errno : EIO));
+        free(d);
+        d = NULL;
+    }
+    fclose(f);
+    *size = n;
+    return d;
+}
+
+/* stb_image 2.27 (Debian's) decodes an RLE scanline with a loop that never ends on a count of 0,
+ * which is also what it reads past the end of the file: an 88-byte file hung the reader (found by
+ * the texture fuzzer). False when the RLE scanlines hold such a count or stop before their last
+ * pixel; true for everything else, which stb decodes in bounds or refuses itself (flat scanlines,
+ * a bad header, a scanline of another width). Follows stbi__hdr_load's parsing step by step. */
+static bool hdr_rle_ok(const unsigned char *d, size_t n) {
+    size_t pos = 0;
+    char line[1024];
+    int lines = 0;
+    for (;;) { /* the magic line, header lines up to an empty one, then the resolution line */
+        size_t len = 0;
+        while (pos < n && d[pos] != '\n') {
+            if (len + 1 < sizeof line) line[len++] = (char)d[pos];
+            pos++;
+        }
+        if (pos >= n) return true; /* stb finds no pixels and says so */
+        pos++;
+        line[len] = '\0';
+        if (lines == 0 && strcmp(line, "#?RADIANCE") != 0 && strcmp(line, "#?RGBE") != 0) return true;
+        if (lines > 0 && len == 0) break;
+        lines++;
+    }
+    size_t len = 0;
+    while (pos < n && d[pos] != '\n') {
+        if (len + 1 < sizeof line) line[len++] = (char)d[pos];
+        pos++;
+    }
+    pos++;
+    line[len] = '\0';
+    if (strncmp(line, "-Y ", 3) != 0) return true;
+    char *t = line + 3;
+    long height = strtol(t, &t, 10);
+    while (*t == ' ') t++;
+    if (strncmp(t, "+X ", 3) != 0) return true;
+    long width = strtol(t + 3, NULL, 10);
+    if (width < 8 || width >= 32768 || height <= 0) return true; /* flat scanlines */
+    for (long y = 0; y < height; y++) {
+        if (pos + 4 > n || d[pos] != 2 || d[pos + 1] != 2 || (d[pos + 2] & 0x80)) return true; /* flat from here */
+        if (((long)d[pos + 2] << 8 | d[pos + 3]) != width) return true;
+        pos += 4;
+        for (int k = 0; k < 4; k++)
+            for (long x = 0; x < width;) {
+                if (pos >= n) return false; /* stb reads a count of 0 here, forever */
+                long count = d[pos++];
+                if (count > 128) {
+                    count -= 128;
+                    pos++; /* the run's value */
+                } else if (count == 0) {
+                    return false;
+                } else {
+                    pos += (size_t)count;
+                }
+                if (count > width - x) return true;
+                x += count;
+            }
+    }
+    return true;
+}
+
 float *rp_image_read_hdr(const char *path, int *width, int *height, char *err, size_t err_size) {
     if (!path) path = "(null)";
     int w = 0, h = 0, comp = 0;
-    float *px = stbi_loadf(path, &w, &h, &comp, 3);
+    char why[256];
+    size_t size = 0;
+    /* a flat scanline takes 4 bytes a pixel and RLE less, so no valid file within the pixel limit
+     * is larger than this (and a FIFO is read once) */
+    unsigned char *data = read_all(path, (size_t)(4 * max_pixels() + (1u << 20)), &size, why, sizeof why);
+    if (!data) {
+        if (err && err_size) snprintf(err, err_size, "%s: error: cannot read a Radiance HDR image: %s", path, why);
+        return NULL;
+    }
+    if (!hdr_rle_ok(data, size) || size > INT32_MAX) {
+        free(data);
+        if (err && err_size)
+            snprintf(err, err_size, "%s: error: corrupt Radiance HDR image (an RLE scanline with a run of length 0, or cut short)",
+                     path);
+        return NULL;
+    }
+    /* the declared size next: stb allocates it whole before reading a pixel, and fills what a
+     * short file lacks with zeros (a 40-byte header may claim 30000 x 30000 pixels, 10 GB) */
+    if (stbi_info_from_memory(data, (int)size, &w, &h, &comp) && (uint64_t)w * (uint64_t)h > max_pixels()) {
+        free(data);
+        if (err && err_size)
+            snprintf(err, err_size, "%s: error: %dx%d is more than %llu pixels; RP_MAX_TEXTURE_PIXELS raises the limit",
+                     path, w, h, (unsigned long long)max_pixels());
+        return NULL;
+    }
+    unsigned long failures = io_alloc_failures();
+    float *px = stbi_loadf_from_memory(data, (int)size, &w, &h, &comp, 3);
+    free(data);
     if (!px) {
-        if (err && err_size) snprintf(err, err_size, "%s: error: cannot read a Radiance HDR image: %s", path,
-                                      errno ? strerror(errno) : stbi_failure_reason());
+        const char *reason = io_alloc_failures() != failures ? "out of memory" : stbi_failure_reason();
+        if (err && err_size) snprintf(err, err_size, "%s: error: cannot read a Radiance HDR image: %s", path, reason);
         return NULL;
     }
     /* stb's buffer comes from its own malloc; hand the caller one that free() releases. */
     size_t n = (size_t)w * (size_t)h * 3;
-    float *out = malloc(n * sizeof(float));
+    float *out = io_malloc(n * sizeof(float));
     if (out) memcpy(out, px, n * sizeof(float));
     stbi_image_free(px);
     if (!out) {

@@ -110,7 +110,7 @@ static int32_t material_texture(load_state *s, const struct aiMaterial *am, enum
             idx = tex_add_encoded(ctx, key, tex, t->pcData, t->mWidth, s->path, 0);
         } else {
             size_t n = (size_t)t->mWidth * t->mHeight;
-            uint8_t *rgb = t->mWidth <= 65536 && t->mHeight <= 65536 ? malloc(n * 3) : NULL;
+            uint8_t *rgb = t->mWidth <= 65536 && t->mHeight <= 65536 ? io_malloc(n * 3) : NULL;
             if (!rgb) {
                 io_error(ctx, s->path, 0, "material '%s': embedded texture '%s' too large", mat_name, tex);
                 return -2;
@@ -314,7 +314,7 @@ bool assimp_load(io_ctx *ctx, const char *path) {
         ok = io_error(ctx, path, 0, "the file holds no complete scene (assimp: incomplete)");
     load_state s = {.ctx = ctx, .path = path, .scene = scene};
     if (ok && scene->mNumMaterials) {
-        s.materials = malloc(scene->mNumMaterials * sizeof *s.materials);
+        s.materials = io_malloc(scene->mNumMaterials * sizeof *s.materials);
         if (!s.materials) ok = io_error(ctx, path, 0, "out of memory");
         for (unsigned i = 0; ok && i < scene->mNumMaterials; i++) {
             rp_material_data m;
@@ -323,7 +323,7 @@ bool assimp_load(io_ctx *ctx, const char *path) {
                 ok = io_error(ctx, path, 0, "out of memory");
         }
     }
-    if (ok && !(s.light_done = calloc(scene->mNumLights + 1, sizeof(bool))))
+    if (ok && !(s.light_done = io_calloc(scene->mNumLights + 1, sizeof(bool))))
         ok = io_error(ctx, path, 0, "out of memory");
     mat4 identity = {{{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}}};
     if (ok) ok = visit(&s, scene->mRootNode, &identity, gltf, 0);

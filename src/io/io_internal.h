@@ -41,6 +41,25 @@ typedef struct io_vfs {
     size_t image_size;
 } io_vfs;
 
+/* ---- allocation (io_alloc.c) ----------------------------------------------------------------- */
+
+/* Every allocation of the loaders goes through these: malloc, calloc, realloc and strdup, asking
+ * the hook first; what they return is freed with free(). A hook returning false refuses that
+ * allocation (the call returns NULL), which is how tests fail the k-th one; NULL (the default)
+ * refuses none. Process-wide: install it while no load runs. */
+typedef bool (*io_alloc_hook_fn)(void *user, size_t size);
+void io_set_alloc_hook(io_alloc_hook_fn fn, void *user);
+/* Asks the hook about an allocation made elsewhere (a library call that allocates: a zlib or
+ * libarchive handle), so that failure path is tested too; true when it may go ahead. */
+bool io_alloc_ok(size_t size);
+/* How many allocations of the calling thread have failed so far (refused or out of memory): a
+ * library that says "corrupt image" when its malloc failed is told apart by comparing two counts. */
+unsigned long io_alloc_failures(void);
+void *io_malloc(size_t size);
+void *io_calloc(size_t n, size_t size);
+void *io_realloc(void *p, size_t size);
+char *io_strdup(const char *s);
+
 /* ---- builder ---------------------------------------------------------------------------------- */
 
 typedef struct io_builder {

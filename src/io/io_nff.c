@@ -1275,8 +1275,12 @@ static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path, const nff_fi
 }
 
 bool nff_load(io_ctx *ctx, const char *path) {
-    nff_state *st = calloc(1, sizeof *st);
-    if (!st) return io_error(ctx, path, 0, "out of memory");
+    nff_state *st = io_calloc(1, sizeof *st);
+    if (!st) {
+        char shown[IO_PATH_MAX + 256];
+        vfs_display(&ctx->vfs, path, shown, sizeof shown);
+        return io_error(ctx, shown, 0, "out of memory");
+    }
     st->material = IO_NONE;
     xf_identity(&st->stack[0].xf);
     st->stack[0].anim = -1;

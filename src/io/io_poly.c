@@ -64,7 +64,7 @@ void poly_triangulate(const float *pts, uint32_t n, uint32_t *tris, uint32_t *sc
     if (n <= 64) {
         xy = local;
     } else {
-        heap = malloc(2 * (size_t)n * sizeof(double));
+        heap = io_malloc(2 * (size_t)n * sizeof(double));
         if (!heap) {
             fan(n, tris);
             return;

@@ -28,7 +28,7 @@ bool io_reserve(void **p, size_t *cap, size_t need, size_t elem) {
         if (c > SIZE_MAX / 2 / elem) return false;
         c *= 2;
     }
-    void *q = realloc(*p, c * elem);
+    void *q = io_realloc(*p, c * elem);
     if (!q) return false;
     *p = q;
     *cap = c;
@@ -122,7 +122,7 @@ bool builder_reserve_triangles(io_ctx *ctx, size_t extra) {
 /* Allocates a per-corner index array for the triangles so far, every corner IO_NONE. */
 static uint32_t *corner_array(const io_builder *b) {
     size_t cap = b->tri_cap ? b->tri_cap : 16;
-    uint32_t *a = malloc(cap * 3 * sizeof(uint32_t));
+    uint32_t *a = io_malloc(cap * 3 * sizeof(uint32_t));
     if (a) memset(a, 0xFF, b->tri_n * 3 * sizeof(uint32_t));
     return a;
 }
@@ -304,8 +304,11 @@ static size_t count_includes(const io_entry *e) {
  * Archives without AFF/NFF files must hold exactly one .obj or .ply. */
 static const char *archive_main(io_ctx *ctx) {
     io_vfs *v = &ctx->vfs;
-    bool *included = calloc(v->entry_count + 1, sizeof(bool));
-    if (!included) return NULL;
+    bool *included = io_calloc(v->entry_count + 1, sizeof(bool));
+    if (!included) {
+        io_error(ctx, v->archive, 0, "out of memory");
+        return NULL;
+    }
     for (size_t i = 0; i < v->entry_count; i++)
         if (has_ext(v->entries[i].name, "aff") || has_ext(v->entries[i].name, "nff"))
             mark_includes(ctx, &v->entries[i], included);

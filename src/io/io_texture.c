@@ -26,6 +26,10 @@
 #define STBI_NO_LINEAR
 #define STBI_ONLY_PNG
 #define STBI_ONLY_JPEG
+/* stb's allocations are the loaders' (io_alloc.c), so a test can refuse them too */
+#define STBI_MALLOC(size) io_malloc(size)
+#define STBI_REALLOC(p, size) io_realloc(p, size)
+#define STBI_FREE(p) free(p)
 #include <stb/stb_image.h>
 #pragma GCC diagnostic pop
 
@@ -64,7 +68,7 @@ static uint8_t *ppm_decode(const char *data, size_t size, int32_t *w, int32_t *h
         *why = ascii ? "truncated or bad P3 pixel data" : "truncated P6 pixel data";
         return NULL;
     }
-    uint8_t *rgb = malloc(n);
+    uint8_t *rgb = io_malloc(n);
     if (!rgb) {
         *why = "out of memory";
         return NULL;
@@ -192,6 +196,7 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
     int32_t w = 0, h = 0;
     uint8_t *rgb = NULL;
     const char *why = "unsupported or corrupt image";
+    unsigned long failures = io_alloc_failures();
     if (buf.size >= 3 && buf.data[0] == 'P' && (buf.data[1] == '3' || buf.data[1] == '6')) {
         rgb = ppm_decode(buf.data, buf.size, &w, &h, &why);
     } else if (buf.size <= INT32_MAX) {
@@ -216,7 +221,7 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
         }
         if (px) {
             size_t n = (size_t)iw * (size_t)ih * 3;
-            rgb = malloc(n);
+            rgb = io_malloc(n);
             if (rgb) memcpy(rgb, px, n); /* stb's buffer goes back to stb's allocator */
             stbi_image_free(px);
             w = iw;
@@ -225,6 +230,7 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
     }
     vfs_buf_free(&buf);
     if (!rgb) {
+        if (io_alloc_failures() != failures) why = "out of memory"; /* stb then names another reason */
         io_error(ctx, file, line, "cannot decode texture '%s': %s", as_written, why);
         return IO_NONE;
     }
@@ -237,14 +243,17 @@ uint32_t tex_add_encoded(io_ctx *ctx, const char *key, const char *as_written, c
     for (size_t i = 0; i < b->texture_n; i++)
         if (strcmp(b->texture_keys[i], key) == 0) return (uint32_t)i;
     int iw, ih, comp;
+    unsigned long failures = io_alloc_failures();
     stbi_uc *px = size <= INT32_MAX ? stbi_load_from_memory((const stbi_uc *)data, (int)size, &iw, &ih, &comp, 3) : NULL;
     if (!px) {
         io_error(ctx, file, line, "cannot decode texture '%s': %s", as_written,
-                 size <= INT32_MAX ? stbi_failure_reason() : "too large");
+                 size > INT32_MAX                     ? "too large"
+                 : io_alloc_failures() != failures ? "out of memory"
+                                                   : stbi_failure_reason());
         return IO_NONE;
     }
     size_t n = (size_t)iw * (size_t)ih * 3;
-    uint8_t *rgb = malloc(n);
+    uint8_t *rgb = io_malloc(n);
     if (rgb) memcpy(rgb, px, n);
     stbi_image_free(px);
     if (!rgb) {
@@ -262,7 +271,7 @@ uint32_t tex_add_rgb(io_ctx *ctx, const char *path, const char *as_written, int3
             free(rgb);
             return (uint32_t)i;
         }
-    char *key = strdup(path);
+    char *key = io_strdup(path);
     if (!key || b->texture_n >= INT32_MAX ||
         !io_reserve((void **)&b->textures, &b->texture_cap, b->texture_n + 1, sizeof(rp_texture_data))) {
         free(key);
@@ -271,7 +280,7 @@ uint32_t tex_add_rgb(io_ctx *ctx, const char *path, const char *as_written, int3
         return IO_NONE;
     }
     /* texture_keys grows with textures: same capacity. */
-    char **keys = realloc(b->texture_keys, b->texture_cap * sizeof(char *));
+    char **keys = io_realloc(b->texture_keys, b->texture_cap * sizeof(char *));
     if (!keys) {
         free(key);
         free(rgb);

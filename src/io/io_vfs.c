@@ -90,7 +90,7 @@ static bool deflate_read(int fd, size_t file_size, uint64_t limit, bool prefault
     unsigned char magic[2];
     if (file_size < 18 || file_size > limit || pread(fd, magic, 2, 0) != 2 || magic[0] != 0x1f || magic[1] != 0x8b)
         return false; /* not gzip: not read twice */
-    unsigned char *in = malloc(file_size);
+    unsigned char *in = io_malloc(file_size);
     if (!in) return false;
     size_t got = 0;
     while (got < file_size) {
@@ -105,8 +105,8 @@ static bool deflate_read(int fd, size_t file_size, uint64_t limit, bool prefault
         hint = (size_t)t[0] | (size_t)t[1] << 8 | (size_t)t[2] << 16 | (size_t)t[3] << 24;
         ok = hint > 0 && hint <= limit && hint / DEFLATE_MAX_RATIO <= file_size;
     }
-    char *data = ok ? malloc(hint + 1) : NULL;
-    struct libdeflate_decompressor *d = data ? libdeflate_alloc_decompressor() : NULL;
+    char *data = ok ? io_malloc(hint + 1) : NULL;
+    struct libdeflate_decompressor *d = data && io_alloc_ok(1) ? libdeflate_alloc_decompressor() : NULL;
     prefault_job job;
     pthread_t tid;
     bool prefaulting = d && prefault && prefault_start(data, hint, &job, &tid);
@@ -155,13 +155,13 @@ static bool disk_read(io_ctx *ctx, const char *path, io_buf *out) {
 #endif
     size_t cap = S_ISREG(st.st_mode) && st.st_size > 0 ? (size_t)st.st_size + 1 : 65536;
     if (cap > limit + 1) cap = (size_t)limit + 1;
-    gzFile gz = gzdopen(fd, "rb");
+    gzFile gz = io_alloc_ok(1u << 18) ? gzdopen(fd, "rb") : NULL;
     if (!gz) {
         close(fd);
         return vfs_fail(ctx, "out of memory");
     }
     gzbuffer(gz, 1u << 18);
-    char *data = malloc(cap + 1);
+    char *data = io_malloc(cap + 1);
     size_t size = 0;
     bool ok = data != NULL, too_big = false;
     if (!ok) vfs_fail(ctx, "out of memory");
@@ -173,7 +173,7 @@ static bool disk_read(io_ctx *ctx, const char *path, io_buf *out) {
             }
             size_t grown = cap <= SIZE_MAX / 4 ? cap * 2 : SIZE_MAX / 2;
             if (grown > limit + 1) grown = (size_t)limit + 1;
-            char *d = realloc(data, grown + 1);
+            char *d = io_realloc(data, grown + 1);
             if (!d) {
                 ok = vfs_fail(ctx, "out of memory after %zu bytes", size);
                 break;
@@ -384,7 +384,7 @@ bool vfs_open_archive(io_ctx *ctx, const char *path, const void *data, size_t si
 }
 #else
 bool vfs_open_archive(io_ctx *ctx, const char *path, const void *image, size_t image_size) {
-    struct archive *a = archive_read_new();
+    struct archive *a = io_alloc_ok(1) ? archive_read_new() : NULL;
     if (!a) return io_error(ctx, path, 0, "out of memory");
     archive_read_support_filter_all(a);
     archive_read_support_format_tar(a);
@@ -445,7 +445,7 @@ bool vfs_open_archive(io_ctx *ctx, const char *path, const void *image, size_t i
         la_int64_t declared = archive_entry_size(entry);
         size_t ecap = declared > 0 && declared < (1 << 20) ? (size_t)declared : declared > 0 ? (size_t)1 << 20 : 4096;
         size_t size = 0;
-        char *data = malloc(ecap + 1);
+        char *data = io_malloc(ecap + 1);
         if (!data || !io_reserve((void **)&ctx->vfs.entries, &cap, ctx->vfs.entry_count + 1, sizeof(io_entry))) {
             free(data);
             ok = io_error(ctx, path, 0, "out of memory");
@@ -453,7 +453,7 @@ bool vfs_open_archive(io_ctx *ctx, const char *path, const void *image, size_t i
         }
         for (;;) {
             if (size == ecap) {
-                char *d = ecap <= SIZE_MAX / 4 ? realloc(data, 2 * ecap + 1) : NULL;
+                char *d = ecap <= SIZE_MAX / 4 ? io_realloc(data, 2 * ecap + 1) : NULL;
                 if (!d) {
                     ok = io_error(ctx, path, 0, "out of memory");
                     break;
@@ -475,7 +475,7 @@ bool vfs_open_archive(io_ctx *ctx, const char *path, const void *image, size_t i
                 break;
             }
         }
-        char *dup = ok ? strdup(norm) : NULL;
+        char *dup = ok ? io_strdup(norm) : NULL;
         if (!ok || !dup) {
             free(data);
             free(dup);

@@ -187,7 +187,7 @@ typedef struct rp_ir_desc {
     float clamp;      /* the geometry term's distance is at least clamp times the scene's bounding
                        * radius (cos cos / max(d, c)^2, which bounds the spikes near a VPL); 0:
                        * 0.02; negative: no clamping (unbiased) */
-    int depth;        /* bounces of the light paths; 0: max_depth */
+    int depth;        /* bounces of the light paths; 0: max_depth - 1 (reflections as path counts them) */
 } rp_ir_desc;
 
 typedef enum rp_aov {

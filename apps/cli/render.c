@@ -43,7 +43,7 @@ static void render_usage(FILE *out) {
             "                         based: radiance in the scene's units, lit only by the scene's\n"
             "                         emitters (MTL Ke; Ka > 1), point lights and --env\n"
             "  --engine stream        the stream tracer over a uniform grid (see --engine stream --help)\n"
-            "  --max-depth N          Whitted reflection/refraction depth; path: bounces, 0..64 [5]\n"
+            "  --max-depth N          Whitted reflection/refraction depth; path, ir: bounces, 0..64 [5]\n"
             "  --env FILE.hdr         lat-long environment (+y up) for direct, path and ir\n"
             "  --env-scale R,G,B      multiplies --env; without --env, a constant environment\n"
             "  --exposure EV          PNG/PPM: multiply by 2^EV before the tone map [0]\n"

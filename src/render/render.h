@@ -340,6 +340,7 @@ typedef struct render_frame {
     int channels;
     float *pixels;
     uint32_t tiles_x, tiles_y;
+    int passes, pass;          /* passes over the tiles (instant radiosity's spp, else 1); the current one */
     int rx0, ry0, rx1, ry1;    /* the region rendered (desc.region, or the whole image); tiles start at its corner */
     uint32_t tile;             /* tile side in pixels (a multiple of the packet side) */
     bool packets;              /* Whitted in n x n packets */

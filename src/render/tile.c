@@ -44,7 +44,7 @@ static void report_progress(render_frame *f, uint32_t done) {
     if (!f->desc.progress) return;
     /* Skip the report rather than wait when another thread is in the callback. */
     if (atomic_flag_test_and_set_explicit(&f->reporting, memory_order_acquire)) return;
-    f->desc.progress(f->desc.progress_user, done, f->tiles_x * f->tiles_y,
+    f->desc.progress(f->desc.progress_user, done, f->tiles_x * f->tiles_y * (uint32_t)f->passes,
                      atomic_load_explicit(&f->rays_done, memory_order_relaxed));
     atomic_flag_clear_explicit(&f->reporting, memory_order_release);
 }
@@ -204,6 +204,7 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     f->tile = ts;
     f->tiles_x = ((uint32_t)(f->rx1 - f->rx0) + ts - 1) / ts;
     f->tiles_y = ((uint32_t)(f->ry1 - f->ry0) + ts - 1) / ts;
+    f->passes = dd.integrator == RP_INTEGRATOR_IR ? dd.spp : 1;
     atomic_init(&f->tiles_done, 0u);
     atomic_init(&f->rays_done, 0u);
     atomic_flag_clear(&f->reporting);
@@ -224,11 +225,16 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     }
     if (ok && pbr) ok = pbr_frame_init(f);
     if (ok) {
-        rp_device_parallel_for(scene->device, f->tiles_x * f->tiles_y, render_tile, f);
-        ok = !atomic_load(&f->failed);
-        if (ok && pbr) pbr_frame_finish(f);
+        /* Instant radiosity filters each sample's image across tiles: one pass of tiles a sample. */
+        for (int pass = 0; ok && pass < f->passes; pass++) {
+            f->pass = pass;
+            rp_device_parallel_for(scene->device, f->tiles_x * f->tiles_y, render_tile, f);
+            ok = !atomic_load(&f->failed);
+            if (ok && pbr) pbr_frame_finish(f);
+        }
         if (ok && f->desc.progress)
-            f->desc.progress(f->desc.progress_user, f->tiles_x * f->tiles_y, f->tiles_x * f->tiles_y,
+            f->desc.progress(f->desc.progress_user, f->tiles_x * f->tiles_y * (uint32_t)f->passes,
+                             f->tiles_x * f->tiles_y * (uint32_t)f->passes,
                              atomic_load(&f->rays_done));
     }
     if (stats) {

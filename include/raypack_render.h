@@ -235,6 +235,10 @@ typedef struct rp_render_desc {
     bool count_work;            /* true: fill rp_render_stats.work (packet tracing only) */
     int sample_start;           /* first sample index: a frame renders samples [sample_start, sample_start + spp), so callers can accumulate frames progressively; 0: from the first */
     int region[4];              /* x0, y0, x1, y1 of the pixels to render (others untouched); all 0: the whole image */
+    rp_ray *bounce_rays;        /* path tracing, when not NULL (2 * width * height rays, the caller's):
+                                 * sample sample_start's bounce rays of depth d = 1, 2 (leaving the
+                                 * primary hit, then the next), pixel (x, y)'s at [(d - 1) * width *
+                                 * height + y * width + x]; tfar < 0 where the path had no such ray */
 } rp_render_desc;
 
 typedef struct rp_render_stats {

@@ -224,6 +224,9 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
         if (ok && pbr) ok = pbr_thread_init(f, &f->threads[i]);
     }
     if (ok && pbr) ok = pbr_frame_init(f);
+    if (ok && dd.bounce_rays && dd.integrator == RP_INTEGRATOR_PATH)
+        for (size_t i = 0; i < 2 * (size_t)dd.width * (size_t)dd.height; i++)
+            render_ray_init(&dd.bounce_rays[i], v3_make(0, 0, 0), v3_make(0, 0, 1), -1.0f);
     if (ok) {
         /* Instant radiosity filters each sample's image across tiles: one pass of tiles a sample. */
         for (int pass = 0; ok && pass < f->passes; pass++) {

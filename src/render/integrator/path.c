@@ -163,12 +163,18 @@ static void path_block(const render_frame *f, render_thread *th, int bx, int by,
                                .prim_id = p->prim_id[q], .geom_id = p->geom_id[q], .inst_id = p->inst_id[q]};
         }
     th->rays[RP_RAY_PRIMARY] += count;
+    rp_ray *record = sample == (uint32_t)f->desc.sample_start ? f->desc.bounce_rays : NULL;
+    size_t wh = (size_t)f->desc.width * (size_t)f->desc.height;
     while (count) {
         uint32_t nshadow = 0, next = 0;
         for (uint32_t i = 0; i < count; i++) {
             pbr_path st = pt->paths[i];
             rp_rayhit rh = pt->bounce[i];
-            if (path_vertex(f, th, &st, &rh, &pt->bounce[next], &nshadow)) pt->paths[next++] = st;
+            if (!path_vertex(f, th, &st, &rh, &pt->bounce[next], &nshadow)) continue;
+            if (record && st.depth <= 2) /* the bounce ray just made, for raypack bench */
+                record[(size_t)(st.depth - 1) * wh + (size_t)(y0 + (int)st.pixel / tw) * (size_t)f->desc.width +
+                       (size_t)(x0 + (int)st.pixel % tw)] = pt->bounce[next].ray;
+            pt->paths[next++] = st;
         }
         if (nshadow) {
             rp_occluded_array(f->s->scene, pt->shadow, nshadow, RP_QUERY_INCOHERENT);

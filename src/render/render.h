@@ -148,6 +148,12 @@ static inline void render_ray_init(rp_ray *r, v3 org, v3 dir, float tfar) {
 }
 
 void camera_ray(const render_camera *c, float x, float y, rp_ray *ray);
+/* Lanes of the largest packet (32 x 32). */
+#define RENDER_LANES_MAX 1024
+/* camera_ray's rays of sample s into the first count lanes of packet p, lane q the one of pixel
+ * (bx + li[q], by + lj[q]) (tnear 0, tfar inf, no hit yet). */
+void camera_rays_n(const render_camera *c, int bx, int by, int s, uint32_t count, const uint8_t *li,
+                   const uint8_t *lj, rp_rayhit_n *p);
 /* A camera framing the bounds of a committed scene (camera.c). */
 rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b);
 
@@ -305,6 +311,12 @@ typedef struct whitted_slot {
     v3 org_r, dir_r, org_t, dir_t;
 } whitted_slot;
 
+/* What a light brings a Whitted slot, but the highlight's powf (whitted.c). */
+typedef struct whitted_light_term {
+    v3 intensity, term;
+    float rv; /* cos of the mirrored light direction and the eye; > 0: a highlight */
+} whitted_light_term;
+
 /* One depth of the packet tracer: the packet of rays at that depth and their slots. */
 typedef struct whitted_level {
     rp_rayhit_n rh;
@@ -324,7 +336,7 @@ typedef struct render_thread {
     whitted_level **levels;  /* max_depth + 1, each made on first use */
     rp_rayhit_n shadow;      /* the shadow packet and its per-ray light contributions */
     int32_t *shadow_valid;
-    v3 *shadow_contrib;
+    struct whitted_light_term *shadow_term;
     rp_counters_n *work;     /* RP_RAY_KIND_COUNT, or NULL when work is not counted */
     struct pbr_thread *pbr;  /* the physically based integrators' buffers (integrator/pbr.c) */
 } render_thread;
@@ -343,6 +355,7 @@ typedef struct render_frame {
     int passes, pass;          /* passes over the tiles (instant radiosity's spp, else 1); the current one */
     int rx0, ry0, rx1, ry1;    /* the region rendered (desc.region, or the whole image); tiles start at its corner */
     uint32_t tile;             /* tile side in pixels (a multiple of the packet side) */
+    uint8_t lane_i[RENDER_LANES_MAX], lane_j[RENDER_LANES_MAX]; /* pixel (i, j) of lane q of an n x n packet */
     bool packets;              /* Whitted in n x n packets */
     rp_traversal traversal[RP_RAY_KIND_COUNT];
     render_thread *threads;

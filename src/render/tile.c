@@ -103,14 +103,15 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
     }
     float inv = 1.0f / (float)spp;
     /* Instant radiosity's pixels come from its discontinuity buffer, after every tile. */
-    for (int i = 0; d->integrator != RP_INTEGRATOR_IR && i < n; i++) {
-        int x = x0 + i % tw, y = y0 + i / tw;
-        float *out = f->pixels + ((size_t)y * (size_t)d->width + (size_t)x) * (size_t)f->channels;
-        if (f->channels == 1) {
-            out[0] = th->accum[3 * i];
-        } else {
-            for (int k = 0; k < 3; k++) out[k] = spp == 1 ? th->accum[3 * i + k] : th->accum[3 * i + k] * inv;
-        }
+    for (int y = y0; d->integrator != RP_INTEGRATOR_IR && y < y1; y++) {
+        const float *a = th->accum + 3 * (y - y0) * tw;
+        float *out = f->pixels + ((size_t)y * (size_t)d->width + (size_t)x0) * (size_t)f->channels;
+        if (f->channels == 1)
+            for (int i = 0; i < tw; i++) out[i] = a[3 * i];
+        else if (spp == 1)
+            memcpy(out, a, (size_t)tw * 3 * sizeof *out);
+        else
+            for (int i = 0; i < 3 * tw; i++) out[i] = a[i] * inv;
     }
     uint64_t rays_after = 0;
     for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays_after += th->rays[k];
@@ -166,6 +167,12 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     f->s = scene;
     f->desc = dd;
     f->packets = packets;
+    for (uint32_t n = (uint32_t)(dd.packet > 0 ? dd.packet : 4), j = 0; j < n; j++)
+        for (uint32_t i = 0; i < n; i++) {
+            uint32_t q = rp_packet_n_index(n, i, j);
+            f->lane_i[q] = (uint8_t)i;
+            f->lane_j[q] = (uint8_t)j;
+        }
     choose_traversal(&dd, f->traversal);
     f->channels = rp_render_channels(&f->desc);
     f->pixels = pixels;

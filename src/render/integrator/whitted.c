@@ -86,10 +86,11 @@ static void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_h
     }
 }
 
-/* The shadow ray of a lit slot towards a light and the light it brings when unoccluded (Phong lobe
- * of the material); false when the light cannot reach the point, so no ray is needed. */
+/* The shadow ray of a lit slot towards a light and what the light brings when unoccluded (Phong
+ * lobe of the material, whitted_light_contrib); false when the light cannot reach the point, so no
+ * ray is needed. */
 static bool whitted_light(const render_frame *f, const whitted_slot *o, const rp_light_source *light, rp_ray *sr,
-                          v3 *contrib) {
+                          whitted_light_term *lt) {
     v3 pos = v3_make(0, 0, 0), intensity = pos;
     bool inverse_square = false;
     switch (light->type) {
@@ -113,15 +114,23 @@ static bool whitted_light(const render_frame *f, const whitted_slot *o, const rp
     if (cos_s <= 0.0f || v3_dot(o->ng, l) <= 0.0f) return false;
     render_ray_init(sr, o->org, l, dist * (1.0f - 1e-5f) - eps);
     if (inverse_square) intensity = v3_scale(intensity, 1.0f / (dist * dist));
-    v3 term = v3_scale(o->kd, cos_s);
+    lt->intensity = intensity;
+    lt->term = v3_scale(o->kd, cos_s);
+    lt->rv = 0.0f;
     if (o->highlight) {
         /* Phong: reflect the light direction about the shading normal, compare with the eye. */
         v3 r = v3_sub(v3_scale(o->ns, 2.0f * cos_s), l);
-        float rv = -v3_dot(r, o->dir);
-        if (rv > 0.0f) term = v3_add(term, v3_scale(v3_load(o->m->ks), powf(rv, o->m->ns)));
+        lt->rv = -v3_dot(r, o->dir);
     }
-    *contrib = v3_mul(intensity, term);
     return true;
+}
+
+/* The light of whitted_light's term, once its shadow ray found the light unoccluded (the highlight's
+ * powf only then: most of a kitchen's shadow rays are occluded). */
+static v3 whitted_light_contrib(const whitted_slot *o, const whitted_light_term *lt) {
+    v3 term = lt->term;
+    if (lt->rv > 0.0f) term = v3_add(term, v3_scale(v3_load(o->m->ks), powf(lt->rv, o->m->ns)));
+    return v3_mul(lt->intensity, term);
 }
 
 /* ---- the reference tracer: one ray at a time, depth first ---- */
@@ -136,12 +145,12 @@ v3 whitted_shade(const render_frame *f, render_thread *th, const rp_ray *ray, co
     if (!o.lit) return o.color;
     for (size_t i = 0; i < f->light_count; i++) {
         rp_ray sr;
-        v3 contrib;
-        if (!whitted_light(f, &o, &f->lights[i], &sr, &contrib)) continue;
+        whitted_light_term lt;
+        if (!whitted_light(f, &o, &f->lights[i], &sr, &lt)) continue;
         th->rays[RP_RAY_SHADOW]++;
         rp_occluded1(f->s->scene, &sr);
         if (sr.tfar < 0.0f) continue;
-        o.direct = v3_add(o.direct, contrib);
+        o.direct = v3_add(o.direct, whitted_light_contrib(&o, &lt));
     }
     v3 c = v3_add(o.color, o.direct);
     if (o.has_r)
@@ -230,7 +239,7 @@ static void packet_shadows(const render_frame *f, render_thread *th, whitted_lev
             th->shadow_valid[q] = 0;
             if (!lv->valid[q] || !lv->slots[q].lit) continue;
             rp_ray sr;
-            if (!whitted_light(f, &lv->slots[q], light, &sr, &th->shadow_contrib[q])) continue;
+            if (!whitted_light(f, &lv->slots[q], light, &sr, &th->shadow_term[q])) continue;
             packet_set_ray(sp, q, v3_make(sr.org_x, sr.org_y, sr.org_z), v3_make(sr.dir_x, sr.dir_y, sr.dir_z),
                            sr.tfar);
             th->shadow_valid[q] = -1;
@@ -253,8 +262,10 @@ static void packet_shadows(const render_frame *f, render_thread *th, whitted_lev
         sp->valid = th->shadow_valid;
         rp_occluded_n(f->s->scene, &qd, sp);
         for (uint32_t q = 0; q < nn; q++)
-            if (th->shadow_valid[q] && !(sp->tfar[q] < 0.0f))
-                lv->slots[q].direct = v3_add(lv->slots[q].direct, th->shadow_contrib[q]);
+            if (th->shadow_valid[q] && !(sp->tfar[q] < 0.0f)) {
+                whitted_slot *o = &lv->slots[q];
+                o->direct = v3_add(o->direct, whitted_light_contrib(o, &th->shadow_term[q]));
+            }
     }
 }
 
@@ -321,21 +332,16 @@ static bool packet_trace(const render_frame *f, render_thread *th, int level, rp
 
 uint64_t whitted_primary_rays(const render_frame *f, whitted_level *lv, int bx, int by, int x0, int y0, int tw,
                               int tile_h, int s) {
-    uint32_t n = (uint32_t)f->desc.packet;
+    uint32_t n = (uint32_t)f->desc.packet, nn = n * n;
+    /* Rays past the image's edge are made too (the frustum code ignores them) but not live. */
+    camera_rays_n(&f->cam, bx, by, s, nn, f->lane_i, f->lane_j, &lv->rh);
+    int xe = x0 + tw - bx, ye = y0 + tile_h - by;
     uint64_t live = 0;
-    for (uint32_t j = 0; j < n; j++)
-        for (uint32_t i = 0; i < n; i++) {
-            uint32_t q = rp_packet_n_index(n, i, j);
-            int x = bx + (int)i, y = by + (int)j;
-            float ox, oy;
-            render_sample_offset(x, y, s, &ox, &oy);
-            /* Rays past the image's edge are made too (the frustum code ignores them) but not live. */
-            rp_ray r;
-            camera_ray(&f->cam, (float)x + ox, (float)y + oy, &r);
-            packet_set_ray(&lv->rh, q, v3_make(r.org_x, r.org_y, r.org_z), v3_make(r.dir_x, r.dir_y, r.dir_z), r.tfar);
-            lv->valid[q] = x < x0 + tw && y < y0 + tile_h ? -1 : 0;
-            live += lv->valid[q] != 0;
-        }
+    for (uint32_t q = 0; q < nn; q++) {
+        bool in = f->lane_i[q] < xe && f->lane_j[q] < ye;
+        lv->valid[q] = in ? -1 : 0;
+        live += in;
+    }
     return live;
 }
 
@@ -348,16 +354,14 @@ bool whitted_block(const render_frame *f, render_thread *th, int bx, int by, int
     whitted_primary_rays(f, lv, bx, by, x0, y0, tw, tile_h, s);
     for (uint32_t q = 0; q < n * n; q++) lv->weight[q] = 1.0f;
     if (!packet_trace(f, th, 0, RP_RAY_PRIMARY)) return false;
-    for (uint32_t j = 0; j < n; j++)
-        for (uint32_t i = 0; i < n; i++) {
-            uint32_t q = rp_packet_n_index(n, i, j);
-            if (!lv->valid[q]) continue;
-            int k = (by + (int)j - y0) * tw + (bx + (int)i - x0);
-            v3 c = lv->slots[q].color;
-            th->accum[3 * k + 0] += c.x;
-            th->accum[3 * k + 1] += c.y;
-            th->accum[3 * k + 2] += c.z;
-        }
+    for (uint32_t q = 0; q < n * n; q++) {
+        if (!lv->valid[q]) continue;
+        int k = (by + f->lane_j[q] - y0) * tw + (bx + f->lane_i[q] - x0);
+        v3 c = lv->slots[q].color;
+        th->accum[3 * k + 0] += c.x;
+        th->accum[3 * k + 1] += c.y;
+        th->accum[3 * k + 2] += c.z;
+    }
     return true;
 }
 
@@ -366,9 +370,9 @@ bool whitted_thread_init(const render_frame *f, render_thread *th) {
     uint32_t n = (uint32_t)f->desc.packet, nn = n * n;
     th->levels = calloc((size_t)f->desc.max_depth + 1, sizeof *th->levels);
     th->shadow_valid = calloc(nn, sizeof *th->shadow_valid);
-    th->shadow_contrib = calloc(nn, sizeof *th->shadow_contrib);
+    th->shadow_term = calloc(nn, sizeof *th->shadow_term);
     if (f->desc.count_work) th->work = calloc(RP_RAY_KIND_COUNT, sizeof *th->work);
-    return th->levels && th->shadow_valid && th->shadow_contrib && (!f->desc.count_work || th->work) &&
+    return th->levels && th->shadow_valid && th->shadow_term && (!f->desc.count_work || th->work) &&
            rp_rayhit_n_alloc(f->s->device, n, &th->shadow);
 }
 
@@ -385,6 +389,6 @@ void whitted_thread_free(const render_frame *f, render_thread *th) {
     free(th->levels);
     if (th->shadow.n) rp_rayhit_n_free(f->s->device, &th->shadow);
     free(th->shadow_valid);
-    free(th->shadow_contrib);
+    free(th->shadow_term);
     free(th->work);
 }

@@ -317,6 +317,18 @@ typedef struct whitted_light_term {
     float rv; /* cos of the mirrored light direction and the eye; > 0: a highlight */
 } whitted_light_term;
 
+/* The lit slots of a level and their way to one light, lane by lane (whitted.c, packet_shadows);
+ * each array 64 bytes longer than the lanes, so that the streams do not share L1 sets. */
+#define WHITTED_SOA (RENDER_LANES_MAX + 16)
+typedef struct whitted_shadow_soa {
+    float ox[WHITTED_SOA], oy[WHITTED_SOA], oz[WHITTED_SOA]; /* shading point */
+    float nx[WHITTED_SOA], ny[WHITTED_SOA], nz[WHITTED_SOA]; /* shading normal */
+    float gx[WHITTED_SOA], gy[WHITTED_SOA], gz[WHITTED_SOA]; /* geometric normal */
+    float ex[WHITTED_SOA], ey[WHITTED_SOA], ez[WHITTED_SOA]; /* the ray's direction */
+    float dist[WHITTED_SOA], cs[WHITTED_SOA], rv[WHITTED_SOA]; /* to the light, its cos, the highlight's */
+    int32_t lit[WHITTED_SOA];
+} whitted_shadow_soa;
+
 /* One depth of the packet tracer: the packet of rays at that depth and their slots. */
 typedef struct whitted_level {
     rp_rayhit_n rh;
@@ -336,7 +348,7 @@ typedef struct render_thread {
     whitted_level **levels;  /* max_depth + 1, each made on first use */
     rp_rayhit_n shadow;      /* the shadow packet and its per-ray light contributions */
     int32_t *shadow_valid;
-    struct whitted_light_term *shadow_term;
+    struct whitted_shadow_soa *shadow_soa; /* the shadow pass's per-lane arrays (whitted.c) */
     rp_counters_n *work;     /* RP_RAY_KIND_COUNT, or NULL when work is not counted */
     struct pbr_thread *pbr;  /* the physically based integrators' buffers (integrator/pbr.c) */
 } render_thread;

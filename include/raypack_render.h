@@ -210,6 +210,13 @@ typedef enum rp_ray_kind {
 typedef void (*rp_render_progress_fn)(void *user, uint32_t tiles_done, uint32_t tiles_total,
                                       uint64_t rays);
 
+/* Where the physically based integrators' per-pixel numbers come from; both are functions of
+ * (pixel, sample index, dimension). */
+typedef enum rp_sampler_type {
+    RP_SAMPLER_PCG = 0,  /* hashed PCG, independent per dimension */
+    RP_SAMPLER_SOBOL = 1 /* Owen-scrambled Sobol, padded in 4D (Burley 2020): lower error per sample */
+} rp_sampler_type;
+
 typedef struct rp_render_desc {
     int width, height;          /* 0: 512 */
     int spp;                    /* samples per pixel, 0: 1; sample 0 is the pixel centre, the others
@@ -239,6 +246,7 @@ typedef struct rp_render_desc {
                                  * sample sample_start's bounce rays of depth d = 1, 2 (leaving the
                                  * primary hit, then the next), pixel (x, y)'s at [(d - 1) * width *
                                  * height + y * width + x]; tfar < 0 where the path had no such ray */
+    rp_sampler_type sampler;    /* direct, path, ao, ir: the pixels' numbers; 0: PCG */
 } rp_render_desc;
 
 typedef struct rp_render_stats {

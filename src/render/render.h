@@ -191,10 +191,14 @@ static inline void render_sample_offset(int x, int y, int sample, float *ox, flo
 /* The random numbers of one pixel sample: dimension d of sample `sample` of pixel (x, y) is a hashed
  * PCG output of the four, so it depends on nothing else (thread, tile order, other pixels). */
 typedef struct render_sampler {
-    uint32_t key;  /* hash of (x, y, sample) */
-    uint32_t dim;  /* next dimension */
+    uint32_t key;    /* hash of (x, y, sample); Sobol: of (x, y) */
+    uint32_t dim;    /* next dimension */
+    uint32_t index;  /* Sobol: the sample index */
+    bool sobol;      /* scrambled Sobol (sampler.c) instead of hashed PCG */
 } render_sampler;
 render_sampler sampler_start(uint32_t x, uint32_t y, uint32_t sample);
+/* A pixel's sampler of the kind desc.sampler names (PCG: sampler_start). */
+render_sampler sampler_start_pixel(rp_sampler_type type, uint32_t x, uint32_t y, uint32_t sample);
 /* The next dimension's number in [0, 1). */
 float sampler_1d(render_sampler *s);
 /* Dimension d's number without advancing. */

@@ -16,8 +16,9 @@
  * of the neighbours and so smooths the interleaving's structured noise without blurring across
  * edges. The filter needs one surface per pixel, so a frame renders its samples one pass at a
  * time (tile.c): each pass's primary rays are spread over the pixels as the path tracer's are,
- * its image is filtered, and the frame is the mean of the filtered images. Transport: VPLs are deposited on diffuse (Lambert and plastic base)
- * surfaces; mirrors and glass do not receive VPLs, and a pixel that sees one follows its delta
+ * its image is filtered, and the frame is the mean of the filtered images. Transport: VPLs are
+ * deposited on diffuse (Lambert and plastic base) surfaces; mirrors and glass do not receive VPLs,
+ * and a pixel that sees one follows its delta
  * chain (one lobe per bounce, up to max_depth) to the surface that gathers. The environment and
  * directional lights give infinite VPLs (a direction and its radiance over its density) and light
  * paths that enter from a disk of the scene's bounding radius. */
@@ -212,7 +213,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                 for (int i = 0; i < P; i++) {
                     uint32_t q = rp_packet_n_index((uint32_t)P, (uint32_t)i, (uint32_t)j);
                     int x = x0 + bx + i, y = y0 + by + j;
-                    render_sampler rng = sampler_start((uint32_t)x, (uint32_t)y, sample);
+                    render_sampler rng = sampler_start_pixel(f->desc.sampler, (uint32_t)x, (uint32_t)y, sample);
                     rp_ray r;
                     camera_ray(&f->cam, (float)x + sampler_at(&rng, 0), (float)y + sampler_at(&rng, 1), &r);
                     packet_set_ray(&pt->prim, q, v3_make(r.org_x, r.org_y, r.org_z), v3_make(r.dir_x, r.dir_y, r.dir_z),
@@ -254,7 +255,8 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                     bool hit_surface = true;
                     /* Mirrors and glass: follow the delta chain (one lobe per bounce, chosen from the
                      * pixel's numbers) to the diffuse surface that gathers the VPLs. */
-                    render_sampler rng = sampler_start((uint32_t)(x0 + lx), (uint32_t)(y0 + ly), sample);
+                    render_sampler rng =
+                        sampler_start_pixel(f->desc.sampler, (uint32_t)(x0 + lx), (uint32_t)(y0 + ly), sample);
                     rng.dim = 2;
                     for (int k = 0; bsdf_is_delta(&bsdf) && k < f->desc.max_depth; k++) {
                         v3 t, b;

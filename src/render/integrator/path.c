@@ -133,7 +133,7 @@ static void path_block(const render_frame *f, render_thread *th, int bx, int by,
         for (uint32_t i = 0; i < n; i++) {
             uint32_t q = rp_packet_n_index(n, i, j);
             int x = bx + (int)i, y = by + (int)j;
-            render_sampler rng = sampler_start((uint32_t)x, (uint32_t)y, sample);
+            render_sampler rng = sampler_start_pixel(f->desc.sampler, (uint32_t)x, (uint32_t)y, sample);
             rp_ray r;
             camera_ray(&f->cam, (float)x + sampler_at(&rng, 0), (float)y + sampler_at(&rng, 1), &r);
             packet_set_ray(&pt->prim, q, v3_make(r.org_x, r.org_y, r.org_z), v3_make(r.dir_x, r.dir_y, r.dir_z), r.tfar);
@@ -155,7 +155,7 @@ static void path_block(const render_frame *f, render_thread *th, int bx, int by,
             st->pixel = (uint32_t)((y - y0) * tw + (x - x0));
             st->depth = 0;
             st->specular = true;
-            st->rng = sampler_start((uint32_t)x, (uint32_t)y, sample);
+            st->rng = sampler_start_pixel(f->desc.sampler, (uint32_t)x, (uint32_t)y, sample);
             rp_rayhit *rh = &pt->bounce[count++];
             render_ray_init(&rh->ray, v3_make(p->org_x[q], p->org_y[q], p->org_z[q]),
                             v3_make(p->dir_x[q], p->dir_y[q], p->dir_z[q]), p->tfar[q]);

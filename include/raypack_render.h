@@ -216,7 +216,7 @@ typedef struct rp_ir_desc {
     float clamp;      /* the geometry term's distance is at least clamp times the scene's bounding
                        * radius (cos cos / max(d, c)^2, which bounds the spikes near a VPL); 0:
                        * 0.02; negative: no clamping (unbiased) */
-    int depth;        /* bounces of the light paths; 0: max_depth */
+    int depth;        /* bounces of the light paths; 0: max_depth - 1 (reflections as path counts them) */
 } rp_ir_desc;
 
 typedef enum rp_aov {
@@ -238,6 +238,13 @@ typedef enum rp_ray_kind {
 /* Called while a frame renders, never by two threads at once; rays counts all kinds so far. */
 typedef void (*rp_render_progress_fn)(void *user, uint32_t tiles_done, uint32_t tiles_total,
                                       uint64_t rays);
+
+/* Where the physically based integrators' per-pixel numbers come from; both are functions of
+ * (pixel, sample index, dimension). */
+typedef enum rp_sampler_type {
+    RP_SAMPLER_PCG = 0,  /* hashed PCG, independent per dimension */
+    RP_SAMPLER_SOBOL = 1 /* Owen-scrambled Sobol, padded in 4D (Burley 2020): lower error per sample */
+} rp_sampler_type;
 
 typedef struct rp_render_desc {
     int width, height;          /* 0: 512 */
@@ -268,6 +275,11 @@ typedef struct rp_render_desc {
     bool count_work;            /* true: fill rp_render_stats.work (packet tracing only) */
     int sample_start;           /* first sample index: a frame renders samples [sample_start, sample_start + spp), so callers can accumulate frames progressively; 0: from the first */
     int region[4];              /* x0, y0, x1, y1 of the pixels to render (others untouched); all 0: the whole image */
+    rp_ray *bounce_rays;        /* path tracing, when not NULL (2 * width * height rays, the caller's):
+                                 * sample sample_start's bounce rays of depth d = 1, 2 (leaving the
+                                 * primary hit, then the next), pixel (x, y)'s at [(d - 1) * width *
+                                 * height + y * width + x]; tfar < 0 where the path had no such ray */
+    rp_sampler_type sampler;    /* direct, path, ao, ir: the pixels' numbers; 0: PCG */
 } rp_render_desc;
 
 typedef struct rp_render_stats {

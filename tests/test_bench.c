@@ -274,7 +274,8 @@ static bool log_says_no_embree(const char *log) {
     return found;
 }
 
-static const char *kinds[4] = {"primary", "shadow", "reflection", "diffuse"};
+/* bounce1, bounce2: the path tracer's bounce rays of depth 1 and 2 (bench_path.c) */
+static const char *kinds[6] = {"primary", "shadow", "reflection", "diffuse", "bounce1", "bounce2"};
 
 /* Plain bench: every ray set has rays, no mismatches and a positive single-ray median. */
 static void check_plain_json(const jvalue *root, const char *what) {
@@ -284,7 +285,7 @@ static void check_plain_json(const jvalue *root, const char *what) {
     CHECKF(json_num(build, "raypack_ms") >= 0, "%s: build.raypack_ms", what);
     CHECKF(json_num(build, "raypack_bytes") > 0, "%s: build.raypack_bytes", what);
     const jvalue *rays = json_get(root, "rays");
-    for (int k = 0; k < 4; k++) {
+    for (int k = 0; k < 6; k++) {
         const jvalue *r = json_get(rays, kinds[k]);
         CHECKF(r != NULL, "%s: rays.%s", what, kinds[k]);
         CHECKF(json_num(r, "count") > 0 || k == 1, "%s: rays.%s.count", what, kinds[k]);
@@ -307,7 +308,7 @@ static void check_vs_json(const jvalue *root, const char *what) {
     for (size_t i = 0; i < sizeof build_keys / sizeof build_keys[0]; i++)
         CHECKF(json_num(build, build_keys[i]) >= 0, "%s: build.%s", what, build_keys[i]);
     const jvalue *rays = json_get(root, "rays");
-    for (int k = 0; k < 4; k++) {
+    for (int k = 0; k < 6; k++) {
         const jvalue *r = json_get(rays, kinds[k]);
         CHECKF(r != NULL, "%s: rays.%s", what, kinds[k]);
         CHECKF(json_num(r, "count") > 0 || k == 1, "%s: rays.%s.count", what, kinds[k]);

@@ -199,6 +199,9 @@ int main(void) {
         snprintf(args, sizeof args, "bench --render '%s' --frames 1 --width 16 --height 16 --threads 2", original);
         EXPECT(args, 0, "ir ");
         EXPECT("bench --render", 2, "expected at least one SCENE");
+        snprintf(args, sizeof args, "bench --render '%s' --integrators eyelight --kernels --frames 2 --width 32 "
+                 "--height 32 --threads 1 --eye 0,1,3 --look 0,1,0 --fov 50", original);
+        EXPECT(args, 0, "kernel/frame");
         snprintf(args, sizeof args, "render --integrator path --width 16 --height 16 -o '%s/room.png'", tmp);
         EXPECT(args, 0, "scene");
     }

@@ -365,17 +365,22 @@ int main(void) {
             free(b);
         }
         free(img[0]);
-        /* Path tracing and unclamped, unfiltered instant radiosity converge to the same image: the mean
-         * and each 8 x 8 block's mean agree within the stated errors (both truncated at 8 bounces). */
+        /* Path tracing and unclamped, unfiltered instant radiosity converge to the same image (both
+         * up to 8 reflections; IR's primary rays spread over the pixel like the path tracer's): the
+         * image means and every 8 x 8 block's mean agree within the stated errors; and 4 VPLs a set
+         * (a light path or two) give the same mean as 256 (no bias from how a set is filled). */
         if (!small) {
-            int w = 64, hh = 64;
+            int w = 64, hh = 64, nb = 0, far = 0;
             rp_render_desc pd = {.width = w, .height = hh, .spp = 256, .integrator = RP_INTEGRATOR_PATH, .max_depth = 8};
-            rp_render_desc id = {.width = w, .height = hh, .spp = 16, .integrator = RP_INTEGRATOR_IR, .max_depth = 8,
-                                 .ir = {.interleave = 1, .vpls = 256, .filter = 1, .clamp = -1.0f, .depth = 7}};
-            float *pt = render(s, &pd), *ir = render(s, &id);
-            CHECK(pt && ir);
-            if (pt && ir) {
-                double mp = mean_of(pt, w * hh, 3), mi = mean_of(ir, w * hh, 3), worst = 0.0;
+            rp_render_desc id = {.width = w, .height = hh, .spp = 32, .integrator = RP_INTEGRATOR_IR, .max_depth = 8,
+                                 .ir = {.interleave = 4, .vpls = 256, .filter = 1, .clamp = -1.0f}};
+            rp_render_desc id4 = id;
+            id4.spp = 256;
+            id4.ir.vpls = 4;
+            float *pt = render(s, &pd), *ir = render(s, &id), *ir4 = render(s, &id4);
+            CHECK(pt && ir && ir4);
+            if (pt && ir && ir4) {
+                double mp = mean_of(pt, w * hh, 3), mi = mean_of(ir, w * hh, 3), m4 = mean_of(ir4, w * hh, 3), worst = 0.0;
                 for (int by = 0; by < hh; by += 8)
                     for (int bx = 0; bx < w; bx += 8) {
                         double sp = 0, si = 0;
@@ -385,19 +390,27 @@ int main(void) {
                                     sp += pt[(y * w + x) * 3 + c];
                                     si += ir[(y * w + x) * 3 + c];
                                 }
-                        if (sp > 0.05 * 64 * 3 * mp) worst = fmax(worst, fabs(si / sp - 1.0));
+                        if (!(sp > 0.05 * 64 * 3 * mp)) continue; /* the black outside the box */
+                        double e = fabs(si / sp - 1.0);
+                        worst = fmax(worst, e);
+                        nb++;
+                        far += e > 0.03;
                     }
-                printf("cornell_original: path mean %.4f, instant radiosity mean %.4f, worst 8x8 block %.3f\n", mp, mi,
-                       worst);
-                /* Stated error: unclamped IR has infinite variance near concave corners (1/d^2 of VPLs
-                 * beside the shading point), so at 4096 VPLs a pixel its typical estimate still lies
-                 * below the mean: measured -14% over the image, 28% in the worst block. The test
-                 * guards those figures (a broken VPL weight is off by factors). */
-                CHECKF(fabs(mi / mp - 1.0) < 0.20, "IR mean %.4f vs path %.4f: more than 20%% apart", mi, mp);
-                CHECKF(worst < 0.40, "an 8x8 block of IR is %.1f%% off the path traced one", 100 * worst);
+                printf("cornell_original: path mean %.4f, instant radiosity mean %.4f (4 VPLs a set: %.4f), "
+                       "worst of %d 8x8 blocks %.3f, %d blocks off by more than 3%%\n", mp, mi, m4, nb, worst, far);
+                /* Stated error, from the noise left at these sample counts (measured: means within
+                 * 0.5%, worst block 5.5%, 3 of 36 blocks beyond 3%; unclamped VPLs beside a concave
+                 * corner have a large variance). Before IR spread its primary rays, its mean was 14%
+                 * below (pixel centres miss the light's edges); filling sets to the brim lost 6% of the
+                 * indirect light at 4 VPLs a set. */
+                CHECKF(fabs(mi / mp - 1.0) < 0.02, "IR mean %.4f vs path %.4f: more than 2%% apart", mi, mp);
+                CHECKF(fabs(m4 / mi - 1.0) < 0.03, "IR mean with 4 VPLs a set %.4f vs 256: %.4f", m4, mi);
+                CHECKF(nb >= 30 && worst < 0.08, "an 8x8 block of IR is %.1f%% off the path traced one", 100 * worst);
+                CHECKF(far <= nb / 6, "%d of %d 8x8 blocks of IR are more than 3%% off", far, nb);
             }
             free(pt);
             free(ir);
+            free(ir4);
         }
         rp_render_scene_release(s);
         rp_scene_data_free(&d);

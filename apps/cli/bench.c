@@ -30,6 +30,8 @@ const char *bench_kind_name(bench_kind kind) {
     case BENCH_SHADOW: return "shadow";
     case BENCH_REFLECTION: return "reflection";
     case BENCH_DIFFUSE: return "diffuse";
+    case BENCH_BOUNCE1: return "bounce1";
+    case BENCH_BOUNCE2: return "bounce2";
     case BENCH_KIND_COUNT: break;
     }
     return "?";
@@ -590,6 +592,8 @@ static rp_frustum_kind set_frustum(bench_kind kind) {
     case BENCH_SHADOW: return RP_FRUSTUM_SHADOW;
     case BENCH_REFLECTION:
     case BENCH_DIFFUSE:
+    case BENCH_BOUNCE1:
+    case BENCH_BOUNCE2:
     case BENCH_KIND_COUNT: break;
     }
     return RP_FRUSTUM_SECONDARY;
@@ -1026,7 +1030,8 @@ static void usage(FILE *f) {
     fprintf(f,
             "usage: raypack bench [SCENE] [options]\n"
             "  Times raypack's query modes (single rays, 4/8/16-wide packets, ray arrays) on\n"
-            "  primary, shadow, reflection and diffuse rays; no SCENE: a generated sphere field.\n"
+            "  primary, shadow, reflection and diffuse rays and the path tracer's bounce rays of\n"
+            "  depth 1 and 2 (bounce1, bounce2); no SCENE: a generated sphere field.\n"
             "  --vs embree        raypack against Embree on the same rays, in one process, and\n"
             "                     each best mode with the engines' calls skipped (the harness alone)\n"
             "  --grid             the experiment grid of Overbeck et al. 2008 (sec. 5): masked,\n"
@@ -1171,8 +1176,10 @@ static bool load_scene(bench_ctx *ctx) {
         if (data.sphere_count || data.cone_count)
             printf("note: %zu spheres and %zu cones of the scene are not benchmarked (triangles only)\n",
                    data.sphere_count, data.cone_count);
-        rp_scene_data_free(&data);
-        if (!ok) {
+        ctx->data = malloc(sizeof *ctx->data); /* kept for the path-traced sets */
+        if (ctx->data) *ctx->data = data;
+        else rp_scene_data_free(&data);
+        if (!ok || !ctx->data) {
             fprintf(stderr, "raypack bench: out of memory\n");
             return false;
         }
@@ -1229,7 +1236,8 @@ rp_scene *bench_build_raypack(bench_ctx *ctx, double *wall_ms, rp_scene_stats *s
     return scene;
 }
 
-/* Generates the four ray sets; the secondary ones start at raypack's single-ray primary hits. */
+/* Generates the ray sets; shadow, reflection and diffuse rays start at raypack's single-ray
+ * primary hits, bounce1 and bounce2 come from a path-traced frame. */
 static bool make_ray_sets(bench_ctx *ctx) {
     for (int k = 0; k < BENCH_KIND_COUNT; k++)
         if (!bench_rays_alloc(&ctx->sets[k], (bench_kind)k, ctx->opts.width, ctx->opts.height) ||
@@ -1241,8 +1249,9 @@ static bool make_ray_sets(bench_ctx *ctx) {
     bench_raypack_modes(ctx, &ctx->sets[BENCH_PRIMARY], single, 1);
     bench_trace_set(ctx, ctx->opts.threads, &single[0], &ctx->sets[BENCH_PRIMARY],
                     &ctx->ref[BENCH_PRIMARY]);
+    if (!bench_make_path_sets(ctx)) return false;
     for (int k = BENCH_SHADOW; k < BENCH_KIND_COUNT; k++) {
-        make_secondary(ctx, &ctx->sets[k]);
+        if (k <= BENCH_DIFFUSE) make_secondary(ctx, &ctx->sets[k]);
         bench_raypack_modes(ctx, &ctx->sets[k], single, 1);
         bench_trace_set(ctx, ctx->opts.threads, &single[0], &ctx->sets[k], &ctx->ref[k]);
     }
@@ -1261,6 +1270,8 @@ static void teardown(bench_ctx *ctx) {
     if (ctx->scene) rp_scene_release(ctx->scene);
     if (ctx->device) rp_device_release(ctx->device);
     mesh_free(&ctx->mesh);
+    if (ctx->data) rp_scene_data_free(ctx->data);
+    free(ctx->data);
 }
 
 void bench_print_header(const bench_ctx *ctx) {

@@ -68,7 +68,9 @@ typedef enum bench_kind {
     BENCH_SHADOW = 1,
     BENCH_REFLECTION = 2,
     BENCH_DIFFUSE = 3,
-    BENCH_KIND_COUNT = 4
+    BENCH_BOUNCE1 = 4,       /* the path tracer's bounce rays of depth 1 and 2 (bench_path.c) */
+    BENCH_BOUNCE2 = 5,
+    BENCH_KIND_COUNT = 6
 } bench_kind;
 
 /* One ray; the same numbers go into rp_ray and RTCRay. */
@@ -188,6 +190,7 @@ typedef struct bench_ctx {
     bool have_camera, have_light; /* the file brought them */
     double load_ms;          /* rp_scene_data_load_ex on --threads threads; 0 for the built-in scene */
     size_t load_bytes;       /* text parsed, after decompression */
+    struct rp_scene_data *data;   /* the file's scene (materials for the path-traced sets), or NULL */
     rp_device *device;
     rp_scene *scene;         /* raypack's committed scene */
     bench_rays sets[BENCH_KIND_COUNT];
@@ -244,6 +247,8 @@ void bench_rays_free(bench_rays *set);
  * ray hit a triangle, from the hit point offset along the normal to the side the ray leaves to. */
 void bench_make_next(const bench_ctx *ctx, const bench_rays *parent, const bench_hits *parent_hits,
                      bench_rays *out, bench_next how);
+/* Fills the bounce1 and bounce2 sets from a path-traced frame of ctx's scene (bench_path.c). */
+bool bench_make_path_sets(bench_ctx *ctx);
 /* Builds raypack's scene over ctx->mesh on ctx->device; NULL (after a message) on error. */
 rp_scene *bench_build_raypack(bench_ctx *ctx, double *wall_ms, rp_scene_stats *stats);
 /* Generates the ray sets and raypack's single-ray reference hits (needs ctx->scene). */

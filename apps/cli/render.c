@@ -43,7 +43,7 @@ static void render_usage(FILE *out) {
             "                         based: radiance in the scene's units, lit only by the scene's\n"
             "                         emitters (MTL Ke; Ka > 1), point lights and --env\n"
             "  --engine stream        the stream tracer over a uniform grid (see --engine stream --help)\n"
-            "  --max-depth N          Whitted reflection/refraction depth; path: bounces, 0..64 [5]\n"
+            "  --max-depth N          Whitted reflection/refraction depth; path, ir: bounces, 0..64 [5]\n"
             "  --reflect-depth N      Whitted: reflection rays only from hits at depth < N (primary\n"
             "  --refract-depth N      0), the same for refraction; 0..64, either replaces --max-depth\n"
             "                         for its kind (Overbeck et al.'s fig. 1: 1 and 4)\n"
@@ -60,6 +60,8 @@ static void render_usage(FILE *out) {
             "  --env-scale R,G,B      multiplies --env; without --env, a constant environment\n"
             "  --exposure EV          PNG/PPM: multiply by 2^EV before the tone map [0]\n"
             "  --tonemap NAME         PNG/PPM: srgb (clamp) or aces (filmic) [srgb]\n"
+            "  --sampler NAME         direct, path, ao, ir: the pixels' numbers, pcg (hashed) or sobol\n"
+            "                         (Owen-scrambled, lower error per sample) [pcg]\n"
             "  --ir-interleave N      ir: N x N interleaved VPL sets, 1..16 [5]\n"
             "  --ir-vpls N            ir: VPLs per set (per pixel and sample), 1..4096 [16]\n"
             "  --ir-filter N          ir: discontinuity buffer side (odd; 1: off) [3]\n"
@@ -115,6 +117,7 @@ typedef struct render_options {
     bool stats, quiet;
     float time_s, exposure, ir_clamp, ao_distance;
     rp_tonemap tonemap;
+    rp_sampler_type sampler;
     const char *env;
     bool has_env_scale;
     float env_scale[3];
@@ -210,6 +213,13 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
                 fprintf(stderr, "raypack render: --tonemap expects srgb or aces, got '%s'\n", v);
                 return CLI_EXIT_USAGE;
             }
+        } else if (strcmp(a, "--sampler") == 0) {
+            VALUE();
+            if (strcmp(v, "pcg") != 0 && strcmp(v, "sobol") != 0) {
+                fprintf(stderr, "raypack render: --sampler expects pcg or sobol, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
+            o->sampler = v[0] == 's' ? RP_SAMPLER_SOBOL : RP_SAMPLER_PCG;
         } else if (strcmp(a, "--env") == 0) {
             VALUE();
             o->env = v;
@@ -699,6 +709,7 @@ int cli_render(int argc, char **argv) {
         /* counting costs a little, so only when it is reported */
         .count_work = o.stats || o.stats_json,
         .ir = {.interleave = o.ir_interleave, .vpls = o.ir_vpls, .filter = o.ir_filter, .clamp = o.ir_clamp},
+        .sampler = o.sampler,
         .ao_distance = o.ao_distance,
     };
     progress_state ps = {.start_ms = cli_now_ms(), .tty = isatty(2) != 0, .quiet = o.quiet, .last_quarter = 0};
@@ -882,6 +893,7 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
         .refract_depth = o.refract_depth < 0 ? 0 : (o.refract_depth == 0 ? -1 : o.refract_depth),
         .packet = o.packet, .traversal = o.traversal, .no_frustum = o.no_frustum,
         .ir = {.interleave = o.ir_interleave, .vpls = o.ir_vpls, .filter = o.ir_filter, .clamp = o.ir_clamp},
+        .sampler = o.sampler,
         .ao_distance = o.ao_distance,
     };
     out->scene_desc = (rp_render_scene_desc){.accel = {.accel = o.accel}, .environment = o.env,

@@ -29,6 +29,40 @@ void camera_ray(const render_camera *c, float x, float y, rp_ray *ray) {
     render_ray_init(ray, c->eye, d, INFINITY);
 }
 
+void camera_rays_n(const render_camera *c, int bx, int by, int s, uint32_t count, const uint8_t *li,
+                   const uint8_t *lj, rp_rayhit_n *p) {
+    float ox[RENDER_LANES_MAX], oy[RENDER_LANES_MAX];
+    for (uint32_t q = 0; q < count; q++) ox[q] = oy[q] = 0.5f; /* render_sample_offset of sample 0 */
+    for (uint32_t q = 0; s && q < count; q++) render_sample_offset(bx + li[q], by + lj[q], s, &ox[q], &oy[q]);
+    /* camera_ray's operations in its order, lane by lane, so that the loop vectorises (CMakeLists.txt
+     * compiles this file without errno and FP traps for that) and every ray is camera_ray's */
+    const float fx = c->f.x, fy = c->f.y, fz = c->f.z, rx = c->r.x, ry = c->r.y, rz = c->r.z;
+    const float ux = c->u.x, uy = c->u.y, uz = c->u.z, w = c->width, h = c->height;
+    const float th = c->tan_half, aspect = c->aspect, ex = c->eye.x, ey = c->eye.y, ez = c->eye.z;
+    float *restrict dx = p->dir_x, *restrict dy = p->dir_y, *restrict dz = p->dir_z;
+    for (uint32_t q = 0; q < count; q++) {
+        float x = (float)(bx + li[q]) + ox[q], y = (float)(by + lj[q]) + oy[q];
+        float a = (2.0f * x / w - 1.0f) * th * aspect;
+        float b = (1.0f - 2.0f * y / h) * th;
+        float vx = (fx + rx * a) + ux * b, vy = (fy + ry * a) + uy * b, vz = (fz + rz * a) + uz * b;
+        float l = sqrtf(vx * vx + vy * vy + vz * vz);
+        float inv = 1.0f / l;
+        bool ok = l > 0.0f; /* v3_normalize */
+        dx[q] = ok ? vx * inv : vx;
+        dy[q] = ok ? vy * inv : vy;
+        dz[q] = ok ? vz * inv : vz;
+    }
+    float *restrict o_x = p->org_x, *restrict o_y = p->org_y, *restrict o_z = p->org_z;
+    float *restrict tn = p->tnear, *restrict tf = p->tfar;
+    uint32_t *restrict g = p->geom_id, *restrict pr = p->prim_id, *restrict in = p->inst_id;
+    for (uint32_t q = 0; q < count; q++) o_x[q] = ex;
+    for (uint32_t q = 0; q < count; q++) o_y[q] = ey;
+    for (uint32_t q = 0; q < count; q++) o_z[q] = ez;
+    for (uint32_t q = 0; q < count; q++) tn[q] = 0.0f;
+    for (uint32_t q = 0; q < count; q++) tf[q] = INFINITY;
+    for (uint32_t q = 0; q < count; q++) g[q] = pr[q] = in[q] = RP_INVALID_ID;
+}
+
 /* Score of a view: primary hits on front faces minus hits on back faces, on a coarse grid. Closed
  * meshes score the same from every side; a room open on one side (the Cornell box) is seen through
  * its opening. */

@@ -178,6 +178,12 @@ static inline void render_ray_init(rp_ray *r, v3 org, v3 dir, float tfar) {
 }
 
 void camera_ray(const render_camera *c, float x, float y, rp_ray *ray);
+/* Lanes of the largest packet (32 x 32). */
+#define RENDER_LANES_MAX 1024
+/* camera_ray's rays of sample s into the first count lanes of packet p, lane q the one of pixel
+ * (bx + li[q], by + lj[q]) (tnear 0, tfar inf, no hit yet). */
+void camera_rays_n(const render_camera *c, int bx, int by, int s, uint32_t count, const uint8_t *li,
+                   const uint8_t *lj, rp_rayhit_n *p);
 /* A camera framing the bounds of a committed scene (camera.c). */
 rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b);
 
@@ -215,10 +221,14 @@ static inline void render_sample_offset(int x, int y, int sample, float *ox, flo
 /* The random numbers of one pixel sample: dimension d of sample `sample` of pixel (x, y) is a hashed
  * PCG output of the four, so it depends on nothing else (thread, tile order, other pixels). */
 typedef struct render_sampler {
-    uint32_t key;  /* hash of (x, y, sample) */
-    uint32_t dim;  /* next dimension */
+    uint32_t key;    /* hash of (x, y, sample); Sobol: of (x, y) */
+    uint32_t dim;    /* next dimension */
+    uint32_t index;  /* Sobol: the sample index */
+    bool sobol;      /* scrambled Sobol (sampler.c) instead of hashed PCG */
 } render_sampler;
 render_sampler sampler_start(uint32_t x, uint32_t y, uint32_t sample);
+/* A pixel's sampler of the kind desc.sampler names (PCG: sampler_start). */
+render_sampler sampler_start_pixel(rp_sampler_type type, uint32_t x, uint32_t y, uint32_t sample);
 /* The next dimension's number in [0, 1). */
 float sampler_1d(render_sampler *s);
 /* Dimension d's number without advancing. */
@@ -335,6 +345,24 @@ typedef struct whitted_slot {
     v3 org_r, dir_r, org_t, dir_t;
 } whitted_slot;
 
+/* What a light brings a Whitted slot, but the highlight's powf (whitted.c). */
+typedef struct whitted_light_term {
+    v3 intensity, term;
+    float rv; /* cos of the mirrored light direction and the eye; > 0: a highlight */
+} whitted_light_term;
+
+/* The lit slots of a level and their way to one light, lane by lane (whitted.c, packet_shadows);
+ * each array 64 bytes longer than the lanes, so that the streams do not share L1 sets. */
+#define WHITTED_SOA (RENDER_LANES_MAX + 16)
+typedef struct whitted_shadow_soa {
+    float ox[WHITTED_SOA], oy[WHITTED_SOA], oz[WHITTED_SOA]; /* shading point */
+    float nx[WHITTED_SOA], ny[WHITTED_SOA], nz[WHITTED_SOA]; /* shading normal */
+    float gx[WHITTED_SOA], gy[WHITTED_SOA], gz[WHITTED_SOA]; /* geometric normal */
+    float ex[WHITTED_SOA], ey[WHITTED_SOA], ez[WHITTED_SOA]; /* the ray's direction */
+    float dist[WHITTED_SOA], cs[WHITTED_SOA], rv[WHITTED_SOA]; /* to the light, its cos, the highlight's */
+    int32_t lit[WHITTED_SOA];
+} whitted_shadow_soa;
+
 /* One depth of the packet tracer: the packet of rays at that depth and their slots. */
 typedef struct whitted_level {
     rp_rayhit_n rh;
@@ -354,7 +382,7 @@ typedef struct render_thread {
     whitted_level **levels;  /* max_depth + 1, each made on first use */
     rp_rayhit_n shadow;      /* the shadow packet and its per-ray light contributions */
     int32_t *shadow_valid;
-    v3 *shadow_contrib;
+    struct whitted_shadow_soa *shadow_soa; /* the shadow pass's per-lane arrays (whitted.c) */
     rp_counters_n *work;     /* RP_RAY_KIND_COUNT, or NULL when work is not counted */
     struct pbr_thread *pbr;  /* the physically based integrators' buffers (integrator/pbr.c) */
 } render_thread;
@@ -370,10 +398,12 @@ typedef struct render_frame {
     int channels;
     float *pixels;
     uint32_t tiles_x, tiles_y;
+    int passes, pass;          /* passes over the tiles (instant radiosity's spp, else 1); the current one */
     int rx0, ry0, rx1, ry1;    /* the region rendered (desc.region, or the whole image); tiles start at its corner */
     int ox0, oy0, ox1, oy1;    /* the pixels written: the region, which instant radiosity renders with a
                                 * margin of its filter's radius around it */
     uint32_t tile;             /* tile side in pixels (a multiple of the packet side) */
+    uint8_t lane_i[RENDER_LANES_MAX], lane_j[RENDER_LANES_MAX]; /* pixel (i, j) of lane q of an n x n packet */
     bool packets;              /* Whitted in n x n packets */
     rp_traversal traversal[RP_RAY_KIND_COUNT];
     render_thread *threads;

@@ -44,7 +44,7 @@ static void report_progress(render_frame *f, uint32_t done) {
     if (!f->desc.progress) return;
     /* Skip the report rather than wait when another thread is in the callback. */
     if (atomic_flag_test_and_set_explicit(&f->reporting, memory_order_acquire)) return;
-    f->desc.progress(f->desc.progress_user, done, f->tiles_x * f->tiles_y,
+    f->desc.progress(f->desc.progress_user, done, f->tiles_x * f->tiles_y * (uint32_t)f->passes,
                      atomic_load_explicit(&f->rays_done, memory_order_relaxed));
     atomic_flag_clear_explicit(&f->reporting, memory_order_release);
 }
@@ -103,14 +103,15 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
     }
     float inv = 1.0f / (float)spp;
     /* Instant radiosity's pixels come from its discontinuity buffer, after every tile. */
-    for (int i = 0; d->integrator != RP_INTEGRATOR_IR && i < n; i++) {
-        int x = x0 + i % tw, y = y0 + i / tw;
-        float *out = f->pixels + ((size_t)y * (size_t)d->width + (size_t)x) * (size_t)f->channels;
-        if (f->channels == 1) {
-            out[0] = th->accum[3 * i];
-        } else {
-            for (int k = 0; k < 3; k++) out[k] = spp == 1 ? th->accum[3 * i + k] : th->accum[3 * i + k] * inv;
-        }
+    for (int y = y0; d->integrator != RP_INTEGRATOR_IR && y < y1; y++) {
+        const float *a = th->accum + 3 * (y - y0) * tw;
+        float *out = f->pixels + ((size_t)y * (size_t)d->width + (size_t)x0) * (size_t)f->channels;
+        if (f->channels == 1)
+            for (int i = 0; i < tw; i++) out[i] = a[3 * i];
+        else if (spp == 1)
+            memcpy(out, a, (size_t)tw * 3 * sizeof *out);
+        else
+            for (int i = 0; i < 3 * tw; i++) out[i] = a[i] * inv;
     }
     uint64_t rays_after = 0;
     for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays_after += th->rays[k];
@@ -181,6 +182,12 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     f->s = scene;
     f->desc = dd;
     f->packets = packets;
+    for (uint32_t n = (uint32_t)(dd.packet > 0 ? dd.packet : 4), j = 0; j < n; j++)
+        for (uint32_t i = 0; i < n; i++) {
+            uint32_t q = rp_packet_n_index(n, i, j);
+            f->lane_i[q] = (uint8_t)i;
+            f->lane_j[q] = (uint8_t)j;
+        }
     choose_traversal(&dd, f->traversal);
     f->channels = rp_render_channels(&f->desc);
     f->pixels = pixels;
@@ -219,6 +226,7 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     f->tile = ts;
     f->tiles_x = ((uint32_t)(f->rx1 - f->rx0) + ts - 1) / ts;
     f->tiles_y = ((uint32_t)(f->ry1 - f->ry0) + ts - 1) / ts;
+    f->passes = dd.integrator == RP_INTEGRATOR_IR ? dd.spp : 1;
     atomic_init(&f->tiles_done, 0u);
     atomic_init(&f->rays_done, 0u);
     atomic_flag_clear(&f->reporting);
@@ -238,12 +246,20 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
         if (ok && pbr) ok = pbr_thread_init(f, &f->threads[i]);
     }
     if (ok && pbr) ok = pbr_frame_init(f);
+    if (ok && dd.bounce_rays && dd.integrator == RP_INTEGRATOR_PATH)
+        for (size_t i = 0; i < 2 * (size_t)dd.width * (size_t)dd.height; i++)
+            render_ray_init(&dd.bounce_rays[i], v3_make(0, 0, 0), v3_make(0, 0, 1), -1.0f);
     if (ok) {
-        rp_device_parallel_for(scene->device, f->tiles_x * f->tiles_y, render_tile, f);
-        ok = !atomic_load(&f->failed);
-        if (ok && pbr) pbr_frame_finish(f);
+        /* Instant radiosity filters each sample's image across tiles: one pass of tiles a sample. */
+        for (int pass = 0; ok && pass < f->passes; pass++) {
+            f->pass = pass;
+            rp_device_parallel_for(scene->device, f->tiles_x * f->tiles_y, render_tile, f);
+            ok = !atomic_load(&f->failed);
+            if (ok && pbr) pbr_frame_finish(f);
+        }
         if (ok && f->desc.progress)
-            f->desc.progress(f->desc.progress_user, f->tiles_x * f->tiles_y, f->tiles_x * f->tiles_y,
+            f->desc.progress(f->desc.progress_user, f->tiles_x * f->tiles_y * (uint32_t)f->passes,
+                             f->tiles_x * f->tiles_y * (uint32_t)f->passes,
                              atomic_load(&f->rays_done));
     }
     if (stats) {

@@ -135,7 +135,7 @@ static void path_block(const render_frame *f, render_thread *th, int bx, int by,
         for (uint32_t i = 0; i < n; i++) {
             uint32_t q = rp_packet_n_index(n, i, j);
             int x = bx + (int)i, y = by + (int)j;
-            render_sampler rng = sampler_start((uint32_t)x, (uint32_t)y, sample);
+            render_sampler rng = sampler_start_pixel(f->desc.sampler, (uint32_t)x, (uint32_t)y, sample);
             rp_ray r;
             camera_ray(&f->cam, (float)x + sampler_at(&rng, 0), (float)y + sampler_at(&rng, 1), &r);
             packet_set_ray(&pt->prim, q, v3_make(r.org_x, r.org_y, r.org_z), v3_make(r.dir_x, r.dir_y, r.dir_z), r.tfar);
@@ -157,7 +157,7 @@ static void path_block(const render_frame *f, render_thread *th, int bx, int by,
             st->pixel = (uint32_t)((y - y0) * tw + (x - x0));
             st->depth = 0;
             st->specular = true;
-            st->rng = sampler_start((uint32_t)x, (uint32_t)y, sample);
+            st->rng = sampler_start_pixel(f->desc.sampler, (uint32_t)x, (uint32_t)y, sample);
             rp_rayhit *rh = &pt->bounce[count++];
             render_ray_init(&rh->ray, v3_make(p->org_x[q], p->org_y[q], p->org_z[q]),
                             v3_make(p->dir_x[q], p->dir_y[q], p->dir_z[q]), p->tfar[q]);
@@ -165,12 +165,18 @@ static void path_block(const render_frame *f, render_thread *th, int bx, int by,
                                .prim_id = p->prim_id[q], .geom_id = p->geom_id[q], .inst_id = p->inst_id[q]};
         }
     th->rays[RP_RAY_PRIMARY] += count;
+    rp_ray *record = sample == (uint32_t)f->desc.sample_start ? f->desc.bounce_rays : NULL;
+    size_t wh = (size_t)f->desc.width * (size_t)f->desc.height;
     while (count) {
         uint32_t nshadow = 0, next = 0;
         for (uint32_t i = 0; i < count; i++) {
             pbr_path st = pt->paths[i];
             rp_rayhit rh = pt->bounce[i];
-            if (path_vertex(f, th, &st, &rh, &pt->bounce[next], &nshadow)) pt->paths[next++] = st;
+            if (!path_vertex(f, th, &st, &rh, &pt->bounce[next], &nshadow)) continue;
+            if (record && st.depth <= 2) /* the bounce ray just made, for raypack bench */
+                record[(size_t)(st.depth - 1) * wh + (size_t)(y0 + (int)st.pixel / tw) * (size_t)f->desc.width +
+                       (size_t)(x0 + (int)st.pixel % tw)] = pt->bounce[next].ray;
+            pt->paths[next++] = st;
         }
         if (nshadow) {
             rp_occluded_array(f->s->scene, pt->shadow, nshadow, RP_QUERY_INCOHERENT);

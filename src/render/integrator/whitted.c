@@ -87,10 +87,11 @@ static void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_h
     }
 }
 
-/* The shadow ray of a lit slot towards a light and the light it brings when unoccluded (Phong lobe
- * of the material); false when the light cannot reach the point, so no ray is needed. */
+/* The shadow ray of a lit slot towards a light and what the light brings when unoccluded (Phong
+ * lobe of the material, whitted_light_contrib); false when the light cannot reach the point, so no
+ * ray is needed. */
 static bool whitted_light(const render_frame *f, const whitted_slot *o, const rp_light_source *light, rp_ray *sr,
-                          v3 *contrib) {
+                          whitted_light_term *lt) {
     v3 pos = v3_make(0, 0, 0), intensity = pos;
     bool inverse_square = false;
     switch (light->type) {
@@ -114,15 +115,23 @@ static bool whitted_light(const render_frame *f, const whitted_slot *o, const rp
     if (cos_s <= 0.0f || v3_dot(o->ng, l) <= 0.0f) return false;
     render_ray_init(sr, o->org, l, dist * (1.0f - 1e-5f) - eps);
     if (inverse_square) intensity = v3_scale(intensity, 1.0f / (dist * dist));
-    v3 term = v3_scale(o->kd, cos_s);
+    lt->intensity = intensity;
+    lt->term = v3_scale(o->kd, cos_s);
+    lt->rv = 0.0f;
     if (o->highlight) {
         /* Phong: reflect the light direction about the shading normal, compare with the eye. */
         v3 r = v3_sub(v3_scale(o->ns, 2.0f * cos_s), l);
-        float rv = -v3_dot(r, o->dir);
-        if (rv > 0.0f) term = v3_add(term, v3_scale(v3_load(o->m->ks), powf(rv, o->m->ns)));
+        lt->rv = -v3_dot(r, o->dir);
     }
-    *contrib = v3_mul(intensity, term);
     return true;
+}
+
+/* The light of whitted_light's term, once its shadow ray found the light unoccluded (the highlight's
+ * powf only then: most of a kitchen's shadow rays are occluded). */
+static v3 whitted_light_contrib(const whitted_slot *o, const whitted_light_term *lt) {
+    v3 term = lt->term;
+    if (lt->rv > 0.0f) term = v3_add(term, v3_scale(v3_load(o->m->ks), powf(lt->rv, o->m->ns)));
+    return v3_mul(lt->intensity, term);
 }
 
 /* ---- the reference tracer: one ray at a time, depth first ---- */
@@ -137,12 +146,12 @@ v3 whitted_shade(const render_frame *f, render_thread *th, const rp_ray *ray, co
     if (!o.lit) return o.color;
     for (size_t i = 0; i < f->light_count; i++) {
         rp_ray sr;
-        v3 contrib;
-        if (!whitted_light(f, &o, &f->lights[i], &sr, &contrib)) continue;
+        whitted_light_term lt;
+        if (!whitted_light(f, &o, &f->lights[i], &sr, &lt)) continue;
         th->rays[RP_RAY_SHADOW]++;
         rp_occluded1(f->s->scene, &sr);
         if (sr.tfar < 0.0f) continue;
-        o.direct = v3_add(o.direct, contrib);
+        o.direct = v3_add(o.direct, whitted_light_contrib(&o, &lt));
     }
     v3 c = v3_add(o.color, o.direct);
     if (o.has_r)
@@ -219,43 +228,79 @@ rp_query_n_desc whitted_packet_query(const render_frame *f, render_thread *th, w
     return q;
 }
 
+/* whitted_light's arithmetic towards the light at pos for every lane of a (see packet_shadows):
+ * the shadow packet's directions and ends, live where the light can reach the lit point; returns
+ * the live count. */
+static uint64_t shadow_lanes(uint32_t nn, whitted_shadow_soa *restrict a, v3 pos, float eps,
+                             float *restrict dx, float *restrict dy, float *restrict dz, float *restrict tfar,
+                             int32_t *restrict valid) {
+    const float px = pos.x, py = pos.y, pz = pos.z;
+    uint64_t live = 0;
+    for (uint32_t q = 0; q < nn; q++) {
+        float tx = px - a->ox[q], ty = py - a->oy[q], tz = pz - a->oz[q];
+        float d = sqrtf(tx * tx + ty * ty + tz * tz), inv = 1.0f / d;
+        float x = tx * inv, y = ty * inv, z = tz * inv;
+        float c = a->nx[q] * x + a->ny[q] * y + a->nz[q] * z, cg = a->gx[q] * x + a->gy[q] * y + a->gz[q] * z;
+        /* the mirrored light direction against the eye (Phong) */
+        float s2 = 2.0f * c;
+        a->rv[q] = -((a->nx[q] * s2 - x) * a->ex[q] + (a->ny[q] * s2 - y) * a->ey[q] + (a->nz[q] * s2 - z) * a->ez[q]);
+        a->dist[q] = d, a->cs[q] = c;
+        dx[q] = x, dy[q] = y, dz[q] = z, tfar[q] = d * (1.0f - 1e-5f) - eps;
+        int32_t ok = a->lit[q] & (d > eps && !(c <= 0.0f) && !(cg <= 0.0f));
+        valid[q] = -ok;
+        live += (uint64_t)ok;
+    }
+    return live;
+}
+
 /* Gathers the lights of every lit slot of a level: one shadow packet per light, aimed at the light
- * (slots that need no shadow ray are simply not live in it). */
+ * (slots that need no shadow ray are simply not live in it). whitted_light's arithmetic, lane by
+ * lane over the level's shading points in SoA (vectorised: CMakeLists.txt compiles this file
+ * without errno and FP traps), straight into the packet; the light each unoccluded ray brings
+ * (whitted_light_contrib) after the test. The same rays and sums as whitted_light's. */
 static void packet_shadows(const render_frame *f, render_thread *th, whitted_level *lv) {
     uint32_t nn = (uint32_t)f->desc.packet * (uint32_t)f->desc.packet;
     rp_rayhit_n *sp = &th->shadow;
+    whitted_shadow_soa *a = th->shadow_soa;
+    bool any = false;
+    for (uint32_t q = 0; q < nn; q++) {
+        const whitted_slot *o = &lv->slots[q];
+        bool lit = lv->valid[q] && o->lit;
+        any |= lit;
+        a->ox[q] = lit ? o->org.x : 0.0f, a->oy[q] = lit ? o->org.y : 0.0f, a->oz[q] = lit ? o->org.z : 0.0f;
+        a->nx[q] = lit ? o->ns.x : 0.0f, a->ny[q] = lit ? o->ns.y : 0.0f, a->nz[q] = lit ? o->ns.z : 0.0f;
+        a->gx[q] = lit ? o->ng.x : 0.0f, a->gy[q] = lit ? o->ng.y : 0.0f, a->gz[q] = lit ? o->ng.z : 0.0f;
+        a->ex[q] = lit ? o->dir.x : 0.0f, a->ey[q] = lit ? o->dir.y : 0.0f, a->ez[q] = lit ? o->dir.z : 0.0f;
+        a->lit[q] = lit;
+    }
+    if (!any) return;
+    /* Origins once per level: every light's rays of a slot leave its shading point. */
+    for (uint32_t q = 0; q < nn; q++) {
+        sp->org_x[q] = a->ox[q], sp->org_y[q] = a->oy[q], sp->org_z[q] = a->oz[q], sp->tnear[q] = 0.0f;
+        sp->geom_id[q] = sp->prim_id[q] = sp->inst_id[q] = RP_INVALID_ID;
+    }
+    float eps = ray_offset(f->s);
     for (size_t i = 0; i < f->light_count; i++) {
         const rp_light_source *light = &f->lights[i];
-        uint64_t live = 0;
-        for (uint32_t q = 0; q < nn; q++) {
-            th->shadow_valid[q] = 0;
-            if (!lv->valid[q] || !lv->slots[q].lit) continue;
-            rp_ray sr;
-            if (!whitted_light(f, &lv->slots[q], light, &sr, &th->shadow_contrib[q])) continue;
-            packet_set_ray(sp, q, v3_make(sr.org_x, sr.org_y, sr.org_z), v3_make(sr.dir_x, sr.dir_y, sr.dir_z),
-                           sr.tfar);
-            th->shadow_valid[q] = -1;
-            live++;
-        }
+        if (light->type != RP_LIGHT_SOURCE_POINT) continue; /* Whitted sees the files' point lights only */
+        v3 pos = v3_load(light->point.position), intensity = v3_load(light->point.intensity);
+        uint64_t live = shadow_lanes(nn, a, pos, eps, sp->dir_x, sp->dir_y, sp->dir_z, sp->tfar, th->shadow_valid);
         if (!live) continue;
         th->rays[RP_RAY_SHADOW] += live;
         rp_query_n_desc qd = whitted_packet_query(f, th, lv, RP_RAY_SHADOW);
-        switch (light->type) {
-        case RP_LIGHT_SOURCE_POINT:
-            for (int k = 0; k < 3; k++) qd.point[k] = light->point.position[k];
-            break;
-        case RP_LIGHT_SOURCE_SPOT:
-        case RP_LIGHT_SOURCE_DIRECTIONAL:
-        case RP_LIGHT_SOURCE_TRIANGLE:
-        case RP_LIGHT_SOURCE_ENVIRONMENT:
-            qd.frustum = RP_FRUSTUM_NONE;
-            break;
-        }
+        for (int k = 0; k < 3; k++) qd.point[k] = light->point.position[k];
         sp->valid = th->shadow_valid;
         rp_occluded_n(f->s->scene, &qd, sp);
-        for (uint32_t q = 0; q < nn; q++)
-            if (th->shadow_valid[q] && !(sp->tfar[q] < 0.0f))
-                lv->slots[q].direct = v3_add(lv->slots[q].direct, th->shadow_contrib[q]);
+        for (uint32_t q = 0; q < nn; q++) {
+            if (!th->shadow_valid[q] || sp->tfar[q] < 0.0f) continue;
+            whitted_slot *o = &lv->slots[q];
+            float d = a->dist[q];
+            whitted_light_term lt = {
+                .intensity = light->point.inverse_square ? v3_scale(intensity, 1.0f / (d * d)) : intensity,
+                .term = v3_scale(o->kd, a->cs[q]),
+                .rv = o->highlight ? a->rv[q] : 0.0f};
+            o->direct = v3_add(o->direct, whitted_light_contrib(o, &lt));
+        }
     }
 }
 
@@ -322,21 +367,16 @@ static bool packet_trace(const render_frame *f, render_thread *th, int level, rp
 
 uint64_t whitted_primary_rays(const render_frame *f, whitted_level *lv, int bx, int by, int x0, int y0, int tw,
                               int tile_h, int s) {
-    uint32_t n = (uint32_t)f->desc.packet;
+    uint32_t n = (uint32_t)f->desc.packet, nn = n * n;
+    /* Rays past the image's edge are made too (the frustum code ignores them) but not live. */
+    camera_rays_n(&f->cam, bx, by, s, nn, f->lane_i, f->lane_j, &lv->rh);
+    int xe = x0 + tw - bx, ye = y0 + tile_h - by;
     uint64_t live = 0;
-    for (uint32_t j = 0; j < n; j++)
-        for (uint32_t i = 0; i < n; i++) {
-            uint32_t q = rp_packet_n_index(n, i, j);
-            int x = bx + (int)i, y = by + (int)j;
-            float ox, oy;
-            render_sample_offset(x, y, s, &ox, &oy);
-            /* Rays past the image's edge are made too (the frustum code ignores them) but not live. */
-            rp_ray r;
-            camera_ray(&f->cam, (float)x + ox, (float)y + oy, &r);
-            packet_set_ray(&lv->rh, q, v3_make(r.org_x, r.org_y, r.org_z), v3_make(r.dir_x, r.dir_y, r.dir_z), r.tfar);
-            lv->valid[q] = x < x0 + tw && y < y0 + tile_h ? -1 : 0;
-            live += lv->valid[q] != 0;
-        }
+    for (uint32_t q = 0; q < nn; q++) {
+        bool in = f->lane_i[q] < xe && f->lane_j[q] < ye;
+        lv->valid[q] = in ? -1 : 0;
+        live += in;
+    }
     return live;
 }
 
@@ -349,16 +389,14 @@ bool whitted_block(const render_frame *f, render_thread *th, int bx, int by, int
     whitted_primary_rays(f, lv, bx, by, x0, y0, tw, tile_h, s);
     for (uint32_t q = 0; q < n * n; q++) lv->weight[q] = 1.0f;
     if (!packet_trace(f, th, 0, RP_RAY_PRIMARY)) return false;
-    for (uint32_t j = 0; j < n; j++)
-        for (uint32_t i = 0; i < n; i++) {
-            uint32_t q = rp_packet_n_index(n, i, j);
-            if (!lv->valid[q]) continue;
-            int k = (by + (int)j - y0) * tw + (bx + (int)i - x0);
-            v3 c = lv->slots[q].color;
-            th->accum[3 * k + 0] += c.x;
-            th->accum[3 * k + 1] += c.y;
-            th->accum[3 * k + 2] += c.z;
-        }
+    for (uint32_t q = 0; q < n * n; q++) {
+        if (!lv->valid[q]) continue;
+        int k = (by + f->lane_j[q] - y0) * tw + (bx + f->lane_i[q] - x0);
+        v3 c = lv->slots[q].color;
+        th->accum[3 * k + 0] += c.x;
+        th->accum[3 * k + 1] += c.y;
+        th->accum[3 * k + 2] += c.z;
+    }
     return true;
 }
 
@@ -367,9 +405,9 @@ bool whitted_thread_init(const render_frame *f, render_thread *th) {
     uint32_t n = (uint32_t)f->desc.packet, nn = n * n;
     th->levels = calloc((size_t)f->desc.max_depth + 1, sizeof *th->levels);
     th->shadow_valid = calloc(nn, sizeof *th->shadow_valid);
-    th->shadow_contrib = calloc(nn, sizeof *th->shadow_contrib);
+    th->shadow_soa = aligned_alloc(64, sizeof *th->shadow_soa);
     if (f->desc.count_work) th->work = calloc(RP_RAY_KIND_COUNT, sizeof *th->work);
-    return th->levels && th->shadow_valid && th->shadow_contrib && (!f->desc.count_work || th->work) &&
+    return th->levels && th->shadow_valid && th->shadow_soa && (!f->desc.count_work || th->work) &&
            rp_rayhit_n_alloc(f->s->device, n, &th->shadow);
 }
 
@@ -386,6 +424,6 @@ void whitted_thread_free(const render_frame *f, render_thread *th) {
     free(th->levels);
     if (th->shadow.n) rp_rayhit_n_free(f->s->device, &th->shadow);
     free(th->shadow_valid);
-    free(th->shadow_contrib);
+    free(th->shadow_soa);
     free(th->work);
 }

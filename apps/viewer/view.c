@@ -12,6 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <time.h>
 
 #include "cli.h"
 
@@ -226,6 +227,7 @@ typedef struct viewer {
     view_camera cam, home;
     float *frame, *sum;         /* w * h * 3: the last rp_render output, the accumulated samples */
     uint32_t *disp;             /* w * h xRGB8888: what the window shows, when its surface is not that */
+    uint32_t *lines;            /* a row of w pixels per device thread, for reduced frames */
     uint32_t *out;              /* where this frame's pixels go: the window's surface itself or disp */
     int out_pitch;              /* in pixels */
     bool direct;                /* out is the window's surface */
@@ -247,6 +249,10 @@ typedef struct viewer {
     double fps, mrays, last_frame_ms;
     uint64_t total_rays;
     double total_render_ms, total_frame_ms;
+    /* the frame's phases after the first frame, in ms (view_phase) */
+    double phase_ms[5], phase_cpu[5]; /* wall and process CPU time */
+    double bytes;                 /* touched by the conversion, in total */
+    const char *srgb;             /* how the conversion runs (view_srgb_select) */
     int frames_done;
 } viewer;
 
@@ -485,46 +491,36 @@ typedef struct present_job {
 
 enum { BAND_ROWS = 16 };
 
-static inline uint32_t xrgb(const float *c) {
-    return 0xFF000000u | (uint32_t)view_srgb8(c[0]) << 16 | (uint32_t)view_srgb8(c[1]) << 8 | (uint32_t)view_srgb8(c[2]);
-}
-
 static void present_band(void *user, uint32_t index, uint32_t thread) {
-    (void)thread;
     const present_job *j = user;
     viewer *v = j->v;
     int y0 = (int)index * BAND_ROWS, y1 = y0 + BAND_ROWS < v->h ? y0 + BAND_ROWS : v->h;
     if (j->accumulate) {
-        /* as the tile renderer sums samples, then scales by 1/spp (but for one); the first sample
-         * is already in sum (step swapped the buffers) */
-        float inv = 1.0f / (float)j->samples;
-        for (int y = y0; y < y1; y++) {
-            float *restrict sum = v->sum + (size_t)y * (size_t)v->w * 3;
-            const float *restrict add = v->frame + (size_t)y * (size_t)v->w * 3;
-            uint32_t *restrict out = v->out + (size_t)y * (size_t)v->out_pitch;
-            if (j->samples == 1) {
-                for (int x = 0; x < v->w; x++) out[x] = xrgb(sum + 3 * x);
-                continue;
-            }
-            for (int x = 0; x < v->w; x++) {
-                float c[3];
-                for (int k = 0; k < 3; k++) {
-                    sum[3 * x + k] += add[3 * x + k];
-                    c[k] = sum[3 * x + k] * inv;
-                }
-                out[x] = xrgb(c);
-            }
-        }
+        /* as the tile renderer sums samples, then scales by 1/spp (by 1: the sum itself); the first
+         * sample is already in sum (step swapped the buffers) */
+        float inv = j->samples == 1 ? 1.0f : 1.0f / (float)j->samples;
+        for (int y = y0; y < y1; y++)
+            view_srgb_pixels(v->sum + (size_t)y * (size_t)v->w * 3,
+                             j->samples == 1 ? NULL : v->frame + (size_t)y * (size_t)v->w * 3, inv,
+                             v->out + (size_t)y * (size_t)v->out_pitch, v->w);
         return;
     }
+    /* a reduced frame: each of its rows converted once, into the thread's line, then each pixel
+     * widened to scale x scale */
+    uint32_t *line = v->lines + (size_t)thread * (size_t)v->w;
     for (int y = y0; y < y1; y++) {
-        const float *row = v->frame + (size_t)(y / j->scale) * (size_t)j->fw * 3;
         uint32_t *out = v->out + (size_t)y * (size_t)v->out_pitch;
-        for (int x = 0; x < v->w;) {
-            int fx = x / j->scale;
-            uint32_t p = xrgb(row + (size_t)fx * 3);
-            for (int e = (fx + 1) * j->scale < v->w ? (fx + 1) * j->scale : v->w; x < e; x++) out[x] = p;
+        if (y > y0 && y / j->scale == (y - 1) / j->scale) {
+            memcpy(out, out - v->out_pitch, (size_t)v->w * sizeof *out);
+            continue;
         }
+        float *row = v->frame + (size_t)(y / j->scale) * (size_t)j->fw * 3;
+        if (j->scale == 1) {
+            view_srgb_pixels(row, NULL, 1.0f, out, v->w);
+            continue;
+        }
+        view_srgb_pixels(row, NULL, 1.0f, line, j->fw);
+        for (int x = 0; x < v->w; x++) out[x] = line[x / j->scale];
     }
 }
 
@@ -636,13 +632,28 @@ static int motion_scale(const viewer *v) {
     return s < 1 ? 1 : (s > v->opt.max_scale ? v->opt.max_scale : s);
 }
 
+/* Where a frame's time goes, on the main thread: events (input and motion), render (rp_render,
+ * on a thread of its own, while the main thread shows the previous frame: show, overlapped),
+ * convert (accumulate and encode into the window's pixels), overlay. */
+enum { PHASE_EVENTS, PHASE_RENDER, PHASE_SHOW, PHASE_CONVERT, PHASE_OVERLAY, PHASE_COUNT };
+static const char *const phase_name[PHASE_COUNT] = {"events", "render", "show (overlapped)", "convert", "overlay"};
+
+/* The process's CPU time: on a loaded machine it counts the work, where the wall clock counts the
+ * waits for a core too. */
+static double cpu_ms(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
 /* One frame: input, motion, maybe a render, the window. False on a fatal error. */
 static bool step(viewer *v, view_script *script, int frame, double dt) {
-    double t0 = cli_now_ms();
+    double t0 = cli_now_ms(), u0 = cpu_ms();
     view_script_push(script, frame);
     SDL_Event e;
     while (SDL_PollEvent(&e)) handle_event(v, &e);
     fly(v, dt);
+    double events_ms = cli_now_ms() - t0, u1 = cpu_ms(), u2 = u1, u3 = u1, u4 = u1;
     bool moved = v->camera_moved;
     v->camera_moved = false;
     if (moved || v->reset) v->samples = 0;
@@ -653,7 +664,7 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
     int fw = (v->w + scale - 1) / scale, fh = (v->h + scale - 1) / scale;
     present_job job = {.v = v, .fw = fw, .fh = fh, .scale = scale};
     uint64_t rays = 0;
-    double render_ms = 0.0, convert_ms = 0.0, show_ms = 0.0;
+    double render_ms = 0.0, convert_ms = 0.0, show_ms = 0.0, overlay_ms = 0.0, bytes = 0.0;
     if (render) {
         rp_camera cam = view_camera_get(&v->cam);
         render_call rc = {.scene = v->scene, .desc = v->desc, .cam = cam, .pixels = v->frame};
@@ -675,6 +686,7 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         show_ms = cli_now_ms() - s0;
         if (threaded) pthread_join(th, NULL);
         else render_main(&rc);
+        u2 = cpu_ms();
         if (!rc.ok) {
             fprintf(stderr, "raypack view: rendering failed (out of memory?)\n");
             return false;
@@ -698,9 +710,16 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         double c0 = cli_now_ms();
         if (!target(v)) return false;
         rp_device_parallel_for(v->dev, (uint32_t)((v->h + BAND_ROWS - 1) / BAND_ROWS), present_band, &job);
+        double c1 = cli_now_ms();
+        u3 = cpu_ms();
+        convert_ms = c1 - c0;
+        /* floats read (and the sum written back), pixels written */
+        double px = (double)v->w * (double)v->h, fpx = (double)fw * (double)fh;
+        bytes = job.accumulate ? (job.samples == 1 ? 16.0 * px : 40.0 * px) : 12.0 * fpx + 4.0 * px;
         if (v->overlay) overlay_text(v, fw, fh);
+        overlay_ms = cli_now_ms() - c1;
+        u4 = cpu_ms();
         v->pending = true;
-        convert_ms = cli_now_ms() - c0;
     } else if (v->pending || v->redraw) {
         /* nothing new: show what is pending, or send the surface again */
         if (!v->pending) v->pending = true;
@@ -717,12 +736,19 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         v->total_frame_ms += frame_ms;
         v->total_render_ms += render_ms;
         v->total_rays += rays;
+        double phase[PHASE_COUNT] = {events_ms, render_ms, show_ms, convert_ms, overlay_ms};
+        /* CPU: the render thread's and the main thread's showing together; the rest is events */
+        double cpu[PHASE_COUNT] = {cpu_ms() - u0 - (u4 - u1), u2 - u1, 0.0, u3 - u2, u4 - u3};
+        for (int k = 0; k < PHASE_COUNT; k++) v->phase_ms[k] += phase[k];
+        for (int k = 0; k < PHASE_COUNT; k++) v->phase_cpu[k] += cpu[k];
+        v->bytes += bytes;
     }
     v->last_frame_ms = frame_ms;
     if (v->opt.log)
-        printf("frame %d: %dx%d scale %d samples %d moved %d render %.2f ms convert %.2f ms show %.2f ms frame %.2f "
-               "ms\n",
-               frame, fw, fh, scale, v->samples, moved ? 1 : 0, render_ms, convert_ms, show_ms, frame_ms);
+        printf("frame %d: %dx%d scale %d samples %d moved %d render %.2f ms convert %.2f ms show %.2f ms events %.2f "
+               "ms overlay %.2f ms frame %.2f ms\n",
+               frame, fw, fh, scale, v->samples, moved ? 1 : 0, render_ms, convert_ms, show_ms, events_ms, overlay_ms,
+               frame_ms);
     v->frames_done++;
     return true;
 }
@@ -731,6 +757,7 @@ static void viewer_free(viewer *v) {
     free(v->frame);
     free(v->sum);
     free(v->disp);
+    free(v->lines);
     if (v->win) SDL_DestroyWindow(v->win);
     rp_render_scene_release(v->scene);
     if (v->dev) rp_device_release(v->dev);
@@ -775,7 +802,8 @@ static bool viewer_init(viewer *v) {
     v->frame = malloc(n * 3 * sizeof(float));
     v->sum = malloc(n * 3 * sizeof(float));
     v->disp = calloc(n, sizeof(uint32_t));
-    if (!v->frame || !v->sum || !v->disp) {
+    v->lines = malloc((size_t)rp_device_thread_count(v->dev) * (size_t)v->w * sizeof(uint32_t));
+    if (!v->frame || !v->sum || !v->disp || !v->lines) {
         fprintf(stderr, "raypack view: out of memory for a %dx%d window\n", v->w, v->h);
         return false;
     }
@@ -828,6 +856,7 @@ int cli_view(int argc, char **argv) {
     v.spp_max = v.setup.spp > 0 ? v.setup.spp : 1024;
     v.deterministic = script != NULL || v.opt.frames > 0;
     view_srgb_init();
+    v.srgb = view_srgb_select(v.setup.isa);
 
     int status = CLI_EXIT_FAILURE;
     /* The window's surface is X11's own shared-memory image, not a texture of an OpenGL renderer:
@@ -842,8 +871,9 @@ int cli_view(int argc, char **argv) {
         return CLI_EXIT_FAILURE;
     }
     if (viewer_init(&v)) {
-        printf("view: %s, %dx%d, %d threads, speed %.9g\n", v.setup.scene ? v.setup.scene : "built-in room", v.w,
-               v.h, rp_device_thread_count(v.dev), (double)v.cam.speed);
+        printf("view: %s, %dx%d, %d threads, speed %.9g, sRGB by %s\n",
+               v.setup.scene ? v.setup.scene : "built-in room", v.w, v.h, rp_device_thread_count(v.dev),
+               (double)v.cam.speed, v.srgb);
         view_camera_print(&v.cam, stdout);
         print_settings(&v);
         status = CLI_EXIT_OK;
@@ -876,6 +906,25 @@ int cli_view(int argc, char **argv) {
                v.frames_done, v.samples, wall, wall > 0.0 ? v.frames_done * 1e3 / wall : 0.0,
                (unsigned long long)v.total_rays, in_render, v.total_render_ms, in_frames, v.total_frame_ms,
                in_render > 0.0 ? 100.0 * (1.0 - in_frames / in_render) : 0.0);
+        /* per phase: ms a frame and share of the frame time; show overlaps render */
+        int nf = v.frames_done - 1;
+        if (nf > 0 && v.total_frame_ms > 0.0) {
+            printf("phases: ms a frame (share of frame time):");
+            double rest = v.total_frame_ms;
+            for (int k = 0; k < PHASE_COUNT; k++) {
+                printf(" %s %.3f (%.1f%%)", phase_name[k], v.phase_ms[k] / nf, 100.0 * v.phase_ms[k] / v.total_frame_ms);
+                if (k != PHASE_SHOW) rest -= v.phase_ms[k];
+            }
+            printf(" other %.3f (%.1f%%); convert touched %.1f MB a frame\n", rest / nf, 100.0 * rest / v.total_frame_ms,
+                   v.bytes / nf / 1e6);
+            /* the same in CPU time, where the render phase holds what the main thread spent showing */
+            double all = 0.0;
+            for (int k = 0; k < PHASE_COUNT; k++) all += v.phase_cpu[k];
+            printf("phases: CPU ms a frame: events and other %.3f, render and show %.3f, convert %.3f, overlay %.3f; "
+                   "the window's share of the process's CPU time %.1f%%\n",
+                   v.phase_cpu[PHASE_EVENTS] / nf, v.phase_cpu[PHASE_RENDER] / nf, v.phase_cpu[PHASE_CONVERT] / nf,
+                   v.phase_cpu[PHASE_OVERLAY] / nf, all > 0.0 ? 100.0 * (1.0 - v.phase_cpu[PHASE_RENDER] / all) : 0.0);
+        }
         fflush(stdout);
     }
     viewer_free(&v);

@@ -85,6 +85,13 @@ void view_srgb_init(void);
 /* The same by the formula: rp_image_write's encode_srgb8, operation for operation. */
 uint8_t view_srgb8_formula(float v);
 
+/* Chooses how view_srgb_pixels runs: isa is an rp_device_desc.isa code (0 the widest the CPU has,
+ * 1 or 4 scalar, 8 AVX2, 16 AVX-512), capped by the CPU. Returns its name. Call after view_srgb_init. */
+const char *view_srgb_select(int isa);
+/* n pixels of 3 floats: sum += add (when add is not NULL), then out = 0xFF000000 | the codes of
+ * sum * inv as xRGB8888, exactly view_srgb8 per channel (inv 1: sum itself). */
+void view_srgb_pixels(float *sum, const float *add, float inv, uint32_t *out, int n);
+
 /* The 8-bit sRGB code of a linear value, equal to what rp_image_write stores in a PNG. Branch-free
  * but for the table's check: clamping to [0, 1] maps negatives and NaN to 0 as the formula does. */
 static inline uint32_t view_srgb8(float v) {

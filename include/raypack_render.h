@@ -209,6 +209,10 @@ typedef enum rp_ray_kind {
 /* Called while a frame renders, never by two threads at once; rays counts all kinds so far. */
 typedef void (*rp_render_progress_fn)(void *user, uint32_t tiles_done, uint32_t tiles_total,
                                       uint64_t rays);
+/* Called on device thread `thread` (in [0, rp_device_thread_count)) once per tile, when the tile's
+ * pixels [x0, x1) x [y0, y1) are final, while other tiles render (instant radiosity's: after every
+ * tile, whose filter reads neighbours); lets a caller consume a tile while it is in cache. */
+typedef void (*rp_render_tile_fn)(void *user, int x0, int y0, int x1, int y1, uint32_t thread);
 
 typedef struct rp_render_desc {
     int width, height;          /* 0: 512 */
@@ -235,6 +239,8 @@ typedef struct rp_render_desc {
     bool count_work;            /* true: fill rp_render_stats.work (packet tracing only) */
     int sample_start;           /* first sample index: a frame renders samples [sample_start, sample_start + spp), so callers can accumulate frames progressively; 0: from the first */
     int region[4];              /* x0, y0, x1, y1 of the pixels to render (others untouched); all 0: the whole image */
+    rp_render_tile_fn tile_done; /* NULL: none */
+    void *tile_user;
 } rp_render_desc;
 
 typedef struct rp_render_stats {

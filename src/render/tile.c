@@ -112,11 +112,21 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
             for (int k = 0; k < 3; k++) out[k] = spp == 1 ? th->accum[3 * i + k] : th->accum[3 * i + k] * inv;
         }
     }
+    if (d->tile_done && d->integrator != RP_INTEGRATOR_IR) d->tile_done(d->tile_user, x0, y0, x1, y1, thread);
     uint64_t rays_after = 0;
     for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays_after += th->rays[k];
     atomic_fetch_add_explicit(&f->rays_done, rays_after - rays_before, memory_order_relaxed);
     uint32_t done = atomic_fetch_add_explicit(&f->tiles_done, 1u, memory_order_relaxed) + 1u;
     report_progress(f, done);
+}
+
+/* Instant radiosity's tiles, final only once its filter has run over the whole frame. */
+static void finished_tile(void *user, uint32_t index, uint32_t thread) {
+    const render_frame *f = user;
+    int ts = (int)f->tile;
+    int x0 = f->rx0 + (int)(index % f->tiles_x) * ts, y0 = f->ry0 + (int)(index / f->tiles_x) * ts;
+    f->desc.tile_done(f->desc.tile_user, x0, y0, x0 + ts < f->rx1 ? x0 + ts : f->rx1, y0 + ts < f->ry1 ? y0 + ts : f->ry1,
+                      thread);
 }
 
 /* Traversal per ray kind. AUTO lets the core choose per packet from its coherence. */
@@ -227,6 +237,8 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
         rp_device_parallel_for(scene->device, f->tiles_x * f->tiles_y, render_tile, f);
         ok = !atomic_load(&f->failed);
         if (ok && pbr) pbr_frame_finish(f);
+        if (ok && f->desc.tile_done && f->desc.integrator == RP_INTEGRATOR_IR)
+            rp_device_parallel_for(scene->device, f->tiles_x * f->tiles_y, finished_tile, f);
         if (ok && f->desc.progress)
             f->desc.progress(f->desc.progress_user, f->tiles_x * f->tiles_y, f->tiles_x * f->tiles_y,
                              atomic_load(&f->rays_done));

@@ -358,6 +358,41 @@ static void test_errors(const char *scene) {
     CHECKF(rc == 0 && camera_line(0, &c0) && camera_line(1, &c1) && c1.eye[2] != c0.eye[2], "exit %d:\n%s", rc, output);
 }
 
+/* Resizing the window (through the script, which asks the window system as a window manager would):
+ * the image follows the new size, the accumulation restarts, and the screenshot has the window's
+ * size and equals `raypack render` at that size with the printed camera. */
+static void test_resize(const char *scene, const char *script, int frames, int w, int h) {
+    char args[8192], shot[1024], ref[1024];
+    snprintf(shot, sizeof shot, "%s/resize.ppm", tmp);
+    snprintf(ref, sizeof ref, "%s/resize_ref.ppm", tmp);
+    remove(shot);
+    snprintf(args, sizeof args,
+             "view '%s' --width 96 --height 72 --threads 2 --frames %d --no-overlay --log --screenshot '%s' --script '%s'",
+             scene, frames, shot, script);
+    int rc = run(true, args);
+    CHECKF(rc == 0, "exit %d:\n%s", rc, output);
+    char want[64];
+    snprintf(want, sizeof want, "window: %dx%d\n", w, h);
+    CHECKF(strstr(output, want) != NULL, "no '%s' in:\n%s", want, output);
+    /* the frame after the resize renders at the new size, from its first sample */
+    const char *at = strstr(output, want);
+    snprintf(want, sizeof want, "%dx%d scale 1 samples 1 ", w, h);
+    CHECKF(at && strstr(at, want), "no full-size first sample after the resize:\n%s", output);
+    const char *s = strstr(output, "screenshot: ");
+    int sw = 0, sh = 0, spp = 0;
+    cam c;
+    bool ok = s && sscanf(strstr(s, "("), "(%dx%d, %d samples", &sw, &sh, &spp) == 3 && camera_line(-1, &c);
+    CHECKF(ok && sw == w && sh == h && spp >= 1, "screenshot %dx%d (%d samples), want %dx%d:\n%s", sw, sh, spp, w, h,
+           output);
+    if (!ok) return;
+    snprintf(args, sizeof args, "render '%s' --width %d --height %d --threads 1 --spp %d %s -o '%s' --quiet", scene, w,
+             h, spp, c.flags, ref);
+    rc = run(false, args);
+    CHECKF(rc == 0, "render exit %d:\n%s", rc, output);
+    CHECKF(same_file(shot, ref), "after resizing to %dx%d (%s) the window's pixels differ from raypack render's", w, h,
+           script);
+}
+
 /* Every shared scene opens, renders, moves and saves. */
 static void test_scenes(void) {
     static const char *const all[] = {"cornell_box/cornell_box.obj", "spd_teapot.nff.gz",
@@ -440,6 +475,9 @@ int main(void) {
     test_screenshot(cornell, "--aov normal", "", 3, 1);
     test_overlay(cornell);
     test_resolution(cornell);
+    test_resize(cornell, "2 resize 120 90", 6, 120, 90);
+    /* while moving, then smaller, then wider than it was; the reduced frames follow too */
+    test_resize(cornell, "0 down w; 2 resize 64 40; 4 up w; 4 resize 130 70", 8, 130, 70);
     test_scenes();
     return RP_TEST_END();
 }

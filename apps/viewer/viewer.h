@@ -46,6 +46,8 @@ void view_camera_print(const view_camera *c, FILE *f);
 /* ---- scripted input ---- */
 
 typedef struct view_script view_script;
+/* SDL_USEREVENT codes the script pushes: resize (data1, data2: the new width and height). */
+enum { VIEW_EVENT_RESIZE = 1 };
 /* Parses a script: items separated by ';' or new lines, each "FRAME ACTION [ARGS]" (see
  * view_script.c); `origin` names the source in errors. Returns NULL after printing why. */
 view_script *view_script_parse(const char *text, const char *origin);

@@ -393,7 +393,16 @@ static void test_resize(const char *scene, const char *script, int frames, int w
            script);
 }
 
-/* Every shared scene opens, renders, moves and saves. */
+/* The --log line of frame f: size, scale, samples, moved; false when missing. */
+static bool frame_line(int f, int *w, int *h, int *scale, int *samples, int *moved) {
+    char key[32];
+    snprintf(key, sizeof key, "frame %d: ", f);
+    const char *l = strstr(output, key);
+    return l && sscanf(l + strlen(key), "%dx%d scale %d samples %d moved %d", w, h, scale, samples, moved) == 5;
+}
+
+/* Every shared scene opens, renders, moves and saves; with a budget no full frame meets (--fps
+ * 1000), moving frames drop the resolution and still ones come back to the window's. */
 static void test_scenes(void) {
     static const char *const all[] = {"cornell_box/cornell_box.obj", "spd_teapot.nff.gz",
                                       "stanford_bunny_bun_zipper.ply.gz", "dabrovic_sponza.obj.gz",
@@ -409,12 +418,26 @@ static void test_scenes(void) {
         snprintf(shot, sizeof shot, "%s/scene%zu.png", tmp, i);
         remove(shot);
         snprintf(args, sizeof args,
-                 "view '%s' --width 64 --height 48 --threads 2 --frames 4 --screenshot '%s' --script '0 down w; 1 up w; "
-                 "1 press left 32 24; 2 move 40 24; 2 release left 40 24'",
+                 "view '%s' --width 320 --height 240 --threads 2 --fps 1000 --frames 6 --log --screenshot '%s' --script "
+                 "'0 down w; 2 up w; 2 press left 160 120; 3 move 180 120; 3 release left 180 120'",
                  scene, shot);
         int rc = run(true, args);
         struct stat st;
         CHECKF(rc == 0 && stat(shot, &st) == 0 && st.st_size > 0, "%s: exit %d:\n%s", all[i], rc, output);
+        /* frames 1 (flying) and 3 (orbiting) move with an estimate of a full frame's time: reduced;
+         * 4 and 5 are still: full resolution, accumulating */
+        for (int f = 1; f < 6; f++) {
+            int w = 0, h = 0, scale = 0, samples = -1, moved = -1;
+            bool ok = frame_line(f, &w, &h, &scale, &samples, &moved);
+            CHECKF(ok, "%s: no line for frame %d:\n%s", all[i], f, output);
+            if (!ok || f == 2) continue;
+            if (f == 1 || f == 3)
+                CHECKF(moved == 1 && scale > 1 && w == (320 + scale - 1) / scale && h == (240 + scale - 1) / scale,
+                       "%s: frame %d (moving): %dx%d scale %d moved %d", all[i], f, w, h, scale, moved);
+            else
+                CHECKF(moved == 0 && scale == 1 && w == 320 && h == 240 && samples == f - 3,
+                       "%s: frame %d (still): %dx%d scale %d samples %d", all[i], f, w, h, scale, samples);
+        }
     }
 }
 

@@ -239,6 +239,10 @@ typedef struct rp_render_desc {
     bool count_work;            /* true: fill rp_render_stats.work (packet tracing only) */
     int sample_start;           /* first sample index: a frame renders samples [sample_start, sample_start + spp), so callers can accumulate frames progressively; 0: from the first */
     int region[4];              /* x0, y0, x1, y1 of the pixels to render (others untouched); all 0: the whole image */
+    /* true: pixels hold a sum of earlier samples; the frame's samples are added to it in order and
+     * the sum is written back unscaled, so frames of samples [0, k), [k, m), ... leave the sum a
+     * single [0, m) render adds up (its mean is the sum / m). Not with instant radiosity. */
+    bool accumulate;
     rp_render_tile_fn tile_done; /* NULL: none */
     void *tile_user;
 } rp_render_desc;
@@ -256,7 +260,8 @@ RP_API int rp_render_channels(const rp_render_desc *desc);
 /* Renders a frame into pixels (width * height * rp_render_channels floats, linear, top row first)
  * on the device's threads; with desc.region only the pixels inside it are written, each exactly as
  * the whole frame would have it. stats may be NULL. Returns false on bad arguments (a packet size
- * other than 4, 8, 16 or 32, a region not inside the image, a region with instant radiosity) or out of memory. */
+ * other than 4, 8, 16 or 32, a region not inside the image, a region or accumulate with instant
+ * radiosity) or out of memory. */
 RP_API bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels,
                       rp_render_stats *stats);
 

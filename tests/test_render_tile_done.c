@@ -2,7 +2,9 @@
  * integrator kind, on an image that is not a whole number of tiles, with and without a region, the
  * callback covers each rendered pixel exactly once, from a device thread index, and the pixels it
  * sees are already the final ones (instant radiosity's after its filter); the image equals a
- * render without the callback. */
+ * render without the callback. rp_render_desc.accumulate: frames of samples [0, 1), [1, 3), [3, 7)
+ * added into one sum, divided by 7 as rp_render divides, equal one 7-sample render bit for bit, for
+ * every integrator but instant radiosity, which refuses it. */
 #include <stdatomic.h>
 #include <stdbool.h>
 
@@ -79,6 +81,32 @@ int main(void) {
             CHECK(atomic_load(&s.bad_thread) == 0 && atomic_load(&s.bad_rect) == 0);
             CHECKF(memcmp(plain, with, sizeof plain) == 0, "integrator %d: the callback changed the image", (int)kinds[k]);
         }
+    /* progressive sums */
+    static const rp_integrator_type sums[] = {RP_INTEGRATOR_WHITTED, RP_INTEGRATOR_EYELIGHT, RP_INTEGRATOR_DIRECT,
+                                              RP_INTEGRATOR_PATH, RP_INTEGRATOR_AO};
+    static float sum[W * H * 3];
+    for (size_t k = 0; k < sizeof sums / sizeof sums[0]; k++) {
+        rp_render_desc d = {.width = W, .height = H, .spp = 7, .integrator = sums[k], .max_depth = 3};
+        CHECK(rp_render(scene, &d, plain, NULL));
+        static const int from[4] = {0, 1, 3, 7};
+        bool ok = true;
+        for (int f = 0; f < 3; f++) {
+            d.sample_start = from[f];
+            d.spp = from[f + 1] - from[f];
+            d.accumulate = f > 0;
+            ok = ok && rp_render(scene, &d, sum, NULL);
+        }
+        CHECK(ok);
+        int wrong = 0;
+        for (int i = 0; i < W * H * 3; i++) {
+            float mean = sum[i] * (1.0f / 7.0f);
+            wrong += memcmp(&mean, &plain[i], sizeof mean) != 0;
+        }
+        CHECKF(wrong == 0, "integrator %d: %d channels of the accumulated frames differ from one 7-sample render",
+               (int)sums[k], wrong);
+    }
+    rp_render_desc ir = {.width = W, .height = H, .integrator = RP_INTEGRATOR_IR, .accumulate = true};
+    CHECK(!rp_render(scene, &ir, sum, NULL));
     rp_render_scene_release(scene);
     rp_default_scene_free(&data);
     rp_device_release(dev);

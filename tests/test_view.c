@@ -496,6 +496,16 @@ int main(void) {
                     "0 down w; 2 up w; 3 press right 40 30; 4 move 50 36; 5 release right 50 36", 9, -1);
     test_screenshot(cornell, "--spp 3", "0 down a; 1 up a", 8, 3);
     test_screenshot(cornell, "--aov normal", "", 3, 1);
+    /* the physically based integrators: path and direct lighting accumulate inside rp_render,
+     * instant radiosity's frames are added by the viewer; after motion too */
+    char buf2[512];
+    const char *original = rp_test_scene("cornell_original/CornellBox-Original.obj", buf2, sizeof buf2);
+    CHECK(original != NULL);
+    if (original) {
+        test_screenshot(original, "--integrator path --max-depth 3", "", 4, 4);
+        test_screenshot(original, "--integrator direct", "0 down d; 2 up d", 5, -1);
+        test_screenshot(original, "--integrator ir", "", 3, 3);
+    }
     test_overlay(cornell);
     test_resolution(cornell);
     test_resize(cornell, "2 resize 120 90", 6, 120, 90);

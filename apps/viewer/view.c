@@ -507,7 +507,8 @@ static double cpu_ms(void) {
 typedef struct present_job {
     viewer *v;
     int fw, fh, scale;     /* the frame's size and its divisor */
-    bool accumulate;       /* add the frame into sum and show sum / samples */
+    bool accumulate;       /* show sum / samples */
+    bool add;              /* the frame is added into sum here (else rp_render adds it: accumulate) */
     int samples;           /* after this frame */
     pthread_mutex_t lock;  /* guards free, waiting and count */
     pthread_cond_t freed;
@@ -518,18 +519,17 @@ typedef struct present_job {
 } present_job;
 
 /* Converts the frame's pixels [x0, x1) x [y0, y1) into the window's: the accumulated mean (with
- * add, the frame is added into the sum first), or a reduced frame's pixels widened to scale x scale
- * blocks; `line` holds a row of the window. */
+ * add and j->add, the frame is added into the sum first), or a reduced frame's pixels widened to
+ * scale x scale blocks; `line` holds a row of the window. */
 static void present_rect(const present_job *j, int x0, int y0, int x1, int y1, bool add, uint32_t *line) {
     viewer *v = j->v;
     int n = x1 - x0;
     if (j->accumulate) {
-        /* as the tile renderer sums samples, then scales by 1/spp (by 1: the sum itself); the first
-         * sample was rendered into sum */
+        /* as the tile renderer sums samples, then scales by 1/spp (by 1: the sum itself) */
         float inv = j->samples == 1 ? 1.0f : 1.0f / (float)j->samples;
         for (int y = y0; y < y1; y++) {
             size_t at = (size_t)y * (size_t)v->w + (size_t)x0;
-            view_srgb_pixels(v->sum + at * 3, add && j->samples > 1 ? v->frame + at * 3 : NULL, inv,
+            view_srgb_pixels(v->sum + at * 3, add && j->add ? v->frame + at * 3 : NULL, inv,
                              v->out + (size_t)y * (size_t)v->out_pitch + (size_t)x0, n);
         }
         return;
@@ -580,7 +580,7 @@ static void present_tile(void *user, int x0, int y0, int x1, int y1, uint32_t th
     pthread_mutex_unlock(&j->lock);
     if (now) {
         present_rect(j, x0, y0, x1, y1, true, line);
-    } else if (j->accumulate && j->samples > 1) {
+    } else if (j->accumulate && j->add) {
         /* add the frame now, while it is in cache; the pixels come later, from the sum */
         for (int y = y0; y < y1; y++) {
             size_t at = (size_t)y * (size_t)j->v->w + (size_t)x0;
@@ -801,9 +801,14 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         pthread_mutex_init(&job.lock, NULL);
         pthread_cond_init(&job.freed, NULL);
         rp_camera cam = view_camera_get(&v->cam);
-        /* the first sample goes straight into the sum */
+        /* still frames render into the sum, which rp_render continues (accumulate) from the second
+         * sample on; instant radiosity, whose pixels come from a filter over the whole frame,
+         * renders each sample apart and its tiles are added here */
+        bool ir = v->desc.integrator == RP_INTEGRATOR_IR;
+        job.add = job.accumulate && ir && job.samples > 1;
         render_call rc = {.scene = v->scene, .desc = v->desc, .cam = cam,
-                          .pixels = job.accumulate && job.samples == 1 ? v->sum : v->frame};
+                          .pixels = job.accumulate && !job.add ? v->sum : v->frame};
+        rc.desc.accumulate = job.accumulate && !ir && job.samples > 1;
         rc.desc.width = fw;
         rc.desc.height = fh;
         rc.desc.camera = &rc.cam;
@@ -844,9 +849,9 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         v->full_ms = render_ms * ((double)v->w * (double)v->h) / ((double)fw * (double)fh);
         v->scale = scale;
         if (scale == 1) v->samples++;
-        /* floats read (and the sum written back), pixels written */
+        /* what the encoding reads (the sum, and the frame it adds) and writes (the sum, the pixels) */
         double px = (double)v->w * (double)v->h, fpx = (double)fw * (double)fh;
-        bytes = job.accumulate ? (job.samples == 1 ? 16.0 * px : 40.0 * px) : 12.0 * fpx + 4.0 * px;
+        bytes = job.add ? 40.0 * px : job.accumulate ? 16.0 * px : 12.0 * fpx + 4.0 * px;
         if (v->overlay) overlay_text(v, fw, fh);
         overlay_ms = cli_now_ms() - c1;
 
@@ -1078,7 +1083,7 @@ int cli_view(int argc, char **argv) {
                 printf(" %s %.3f (%.1f%%)", phase_name[k], v.phase_ms[k] / nf, 100.0 * v.phase_ms[k] / v.total_frame_ms);
                 if (k != PHASE_SHOW && k != PHASE_LATE) rest -= v.phase_ms[k];
             }
-            printf(" other %.3f (%.1f%%); convert touched %.1f MB a frame\n", rest / nf, 100.0 * rest / v.total_frame_ms,
+            printf(" other %.3f (%.1f%%); encoding touched %.1f MB a frame\n", rest / nf, 100.0 * rest / v.total_frame_ms,
                    v.bytes / nf / 1e6);
             /* on a shared machine a thread preempted inside a short phase inflates its mean: the
              * median and the minimum over frames tell more */

@@ -61,7 +61,14 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
     int first = d->integrator == RP_INTEGRATOR_AOV ? 0 : d->sample_start; /* AOVs: the pixel centre */
     uint64_t rays_before = 0;
     for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays_before += th->rays[k];
-    memset(th->accum, 0, (size_t)n * 3 * sizeof(float));
+    if (d->accumulate) { /* the sum so far, which this frame's samples continue */
+        for (int i = 0; i < n; i++) {
+            const float *in = f->pixels + ((size_t)(y0 + i / tw) * (size_t)d->width + (size_t)(x0 + i % tw)) * (size_t)f->channels;
+            for (int k = 0; k < 3; k++) th->accum[3 * i + k] = in[f->channels == 1 ? 0 : k];
+        }
+    } else {
+        memset(th->accum, 0, (size_t)n * 3 * sizeof(float));
+    }
     bool pbr = f->pbr != NULL;
     if (pbr && !pbr_tile(f, th, x0, y0, x1, y1)) {
         atomic_store(&f->failed, true);
@@ -109,7 +116,7 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
         if (f->channels == 1) {
             out[0] = th->accum[3 * i];
         } else {
-            for (int k = 0; k < 3; k++) out[k] = spp == 1 ? th->accum[3 * i + k] : th->accum[3 * i + k] * inv;
+            for (int k = 0; k < 3; k++) out[k] = spp == 1 || d->accumulate ? th->accum[3 * i + k] : th->accum[3 * i + k] * inv;
         }
     }
     if (d->tile_done && d->integrator != RP_INTEGRATOR_IR) d->tile_done(d->tile_user, x0, y0, x1, y1, thread);
@@ -167,6 +174,7 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
         return false;
     /* instant radiosity's discontinuity buffer filters across tiles: whole frames only */
     if (!whole && dd.integrator == RP_INTEGRATOR_IR) return false;
+    if (dd.accumulate && dd.integrator == RP_INTEGRATOR_IR) return false;
     render_frame *f = calloc(1, sizeof *f);
     if (!f) return false;
     f->rx0 = whole ? 0 : rg[0];

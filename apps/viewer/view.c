@@ -54,6 +54,8 @@ static void view_usage(FILE *out) {
             "  --no-overlay         no text over the image\n"
             "  --log                print a line per frame (size, samples, motion, each phase's time)\n"
             "  --max-scale S        lowest resolution during motion is 1/S of the window's, 1..32 [16]\n"
+            "  --compare            after each full-size frame, render it again with rp_render alone (not\n"
+            "                       shown) and report the window's cost against that in CPU time\n"
             "\n"
             "keys: W/S A/D Q/E fly (Shift: 4x faster), right mouse button: look, left button: orbit\n"
             "  about the point under the cursor, wheel: fly speed, - and =: field of view, P: print the\n"
@@ -68,7 +70,7 @@ typedef struct view_options {
     int frames, max_scale;
     float fps;
     const char *screenshot, *events, *script;
-    bool overlay, log;
+    bool overlay, log, compare;
 } view_options;
 
 /* Splits argv into the viewer's own flags and the render flags (left in rargv for cli_render_parse). */
@@ -109,6 +111,8 @@ static int parse_view_options(int argc, char **argv, view_options *o, char **rar
             o->script = v;
         } else if (strcmp(a, "--no-overlay") == 0) {
             o->overlay = false;
+        } else if (strcmp(a, "--compare") == 0) {
+            o->compare = true;
         } else if (strcmp(a, "--log") == 0) {
             o->log = true;
         } else if (strcmp(a, "-o") == 0 || strcmp(a, "--output") == 0 || strcmp(a, "--stats") == 0 ||
@@ -259,6 +263,9 @@ typedef struct viewer {
     double cpu_render, cpu_convert, cpu_all; /* process CPU time: the render phase, converting, all */
     double bytes;                 /* touched by the conversion, in total */
     const char *srgb;             /* how the conversion runs (view_srgb_select) */
+    float *scratch;               /* --compare: where rp_render alone renders */
+    double cmp_view_cpu, cmp_ref_cpu; /* --compare: process CPU of the viewer's frames, of rp_render alone */
+    int cmp_frames;
     int frames_done;
 } viewer;
 
@@ -750,6 +757,8 @@ static bool follow_window_size(viewer *v) {
         fprintf(stderr, "raypack view: out of memory for a %dx%d window\n", w, h);
         return false;
     }
+    free(v->scratch); /* --compare's, made again at the new size */
+    v->scratch = NULL;
     v->full_ms *= (double)n / ((double)v->w * (double)v->h);
     v->w = w;
     v->h = h;
@@ -893,6 +902,25 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         v->bytes += bytes;
     }
     v->last_frame_ms = frame_ms;
+    if (v->opt.compare && render && scale == 1 && v->frames_done > 0) {
+        /* the same frame (settings, camera, samples) by rp_render alone, right after the viewer's:
+         * the machine's load drifts alike for both */
+        double c0 = cpu_ms();
+        float *px = v->scratch ? v->scratch : (v->scratch = malloc((size_t)v->w * (size_t)v->h * 3 * sizeof(float)));
+        rp_render_desc d = v->desc;
+        rp_camera cam = view_camera_get(&v->cam);
+        d.width = v->w;
+        d.height = v->h;
+        d.camera = &cam;
+        d.max_depth = v->depth == 0 ? -1 : v->depth;
+        d.spp = 1;
+        d.sample_start = v->samples - 1;
+        if (px && rp_render(v->scene, &d, px, NULL)) {
+            v->cmp_ref_cpu += cpu_ms() - c0;
+            v->cmp_view_cpu += c0 - u0;
+            v->cmp_frames++;
+        }
+    }
     if (v->opt.log)
         printf("frame %d: %dx%d scale %d samples %d moved %d render %.2f ms (tiles %.2f) show %.2f ms late %.2f ms "
                "events %.2f ms overlay %.2f ms frame %.2f ms\n",
@@ -908,6 +936,7 @@ static void viewer_free(viewer *v) {
     free(v->disp);
     free(v->lines);
     free(v->phase_log);
+    free(v->scratch);
     if (v->win) SDL_DestroyWindow(v->win);
     rp_render_scene_release(v->scene);
     if (v->dev) rp_device_release(v->dev);
@@ -1102,6 +1131,11 @@ int cli_view(int argc, char **argv) {
                    v.cpu_all / nf, v.cpu_render / nf, v.cpu_convert / nf,
                    v.cpu_all > 0.0 ? 100.0 * (1.0 - pure / v.cpu_all) : 0.0);
         }
+        if (v.cmp_frames > 0)
+            printf("compare: %d full-size frames: viewer %.3f ms CPU a frame, rp_render alone %.3f: the window costs "
+                   "%.1f%% (the display server's CPU time not included)\n",
+                   v.cmp_frames, v.cmp_view_cpu / v.cmp_frames, v.cmp_ref_cpu / v.cmp_frames,
+                   100.0 * (v.cmp_view_cpu / v.cmp_ref_cpu - 1.0));
         fflush(stdout);
     }
     viewer_free(&v);

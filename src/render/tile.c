@@ -61,10 +61,13 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
     int first = d->integrator == RP_INTEGRATOR_AOV ? 0 : d->sample_start; /* AOVs: the pixel centre */
     uint64_t rays_before = 0;
     for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays_before += th->rays[k];
-    if (d->accumulate) { /* the sum so far, which this frame's samples continue */
-        for (int i = 0; i < n; i++) {
-            const float *in = f->pixels + ((size_t)(y0 + i / tw) * (size_t)d->width + (size_t)(x0 + i % tw)) * (size_t)f->channels;
-            for (int k = 0; k < 3; k++) th->accum[3 * i + k] = in[f->channels == 1 ? 0 : k];
+    if (d->accumulate) { /* the sum so far, which this frame's samples continue: row by row */
+        for (int y = y0; y < y1; y++) {
+            const float *in = f->pixels + ((size_t)y * (size_t)d->width + (size_t)x0) * (size_t)f->channels;
+            float *acc = th->accum + (size_t)(y - y0) * (size_t)tw * 3;
+            if (f->channels == 3) memcpy(acc, in, (size_t)tw * 3 * sizeof(float));
+            else
+                for (int x = 0; x < tw; x++) acc[3 * x] = acc[3 * x + 1] = acc[3 * x + 2] = in[x];
         }
     } else {
         memset(th->accum, 0, (size_t)n * 3 * sizeof(float));

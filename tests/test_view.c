@@ -344,6 +344,12 @@ static void test_errors(const char *scene) {
     CHECKF(rc == 2 && strstr(output, "option of raypack render"), "exit %d:\n%s", rc, output);
     rc = run(false, "view /nonexistent/scene.obj --frames 1");
     CHECKF(rc == 1 && strstr(output, "/nonexistent/scene.obj"), "exit %d:\n%s", rc, output);
+    /* --compare renders each full-size frame after the first again, and reports both CPU times */
+    snprintf(args, sizeof args, "view '%s' --width 64 --height 48 --threads 2 --frames 4 --compare", scene);
+    rc = run(true, args);
+    float view_ms = number_after("full-size frames: viewer "), ref_ms = number_after("rp_render alone ");
+    CHECKF(rc == 0 && strstr(output, "compare: 3 full-size frames") && view_ms > 0.0f && ref_ms > 0.0f, "exit %d:\n%s",
+           rc, output);
     /* a script file works as --script does */
     char path[1024];
     snprintf(path, sizeof path, "%s/events.txt", tmp);

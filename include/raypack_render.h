@@ -238,6 +238,10 @@ typedef enum rp_ray_kind {
 /* Called while a frame renders, never by two threads at once; rays counts all kinds so far. */
 typedef void (*rp_render_progress_fn)(void *user, uint32_t tiles_done, uint32_t tiles_total,
                                       uint64_t rays);
+/* Called on device thread `thread` (in [0, rp_device_thread_count)) once per tile, when the tile's
+ * pixels [x0, x1) x [y0, y1) are final, while other tiles render (instant radiosity's: after every
+ * tile, whose filter reads neighbours); lets a caller consume a tile while it is in cache. */
+typedef void (*rp_render_tile_fn)(void *user, int x0, int y0, int x1, int y1, uint32_t thread);
 
 /* Where the physically based integrators' per-pixel numbers come from; both are functions of
  * (pixel, sample index, dimension). */
@@ -280,6 +284,12 @@ typedef struct rp_render_desc {
                                  * primary hit, then the next), pixel (x, y)'s at [(d - 1) * width *
                                  * height + y * width + x]; tfar < 0 where the path had no such ray */
     rp_sampler_type sampler;    /* direct, path, ao, ir: the pixels' numbers; 0: PCG */
+    /* true: pixels hold a sum of earlier samples; the frame's samples are added to it in order and
+     * the sum is written back unscaled, so frames of samples [0, k), [k, m), ... leave the sum a
+     * single [0, m) render adds up (its mean is the sum / m). Not with instant radiosity. */
+    bool accumulate;
+    rp_render_tile_fn tile_done; /* NULL: none */
+    void *tile_user;
 } rp_render_desc;
 
 typedef struct rp_render_stats {
@@ -295,8 +305,9 @@ RP_API int rp_render_channels(const rp_render_desc *desc);
 /* Renders a frame into pixels (width * height * rp_render_channels floats, linear, top row first)
  * on the device's threads; with desc.region only the pixels inside it are written, each exactly as
  * the whole frame would have it. stats may be NULL. Returns false on bad arguments (a packet size
- * other than 4, 8, 16 or 32, a region not inside the image) or out of memory. Instant radiosity renders a
- * region's margin of its filter radius too (its discontinuity buffer reads those neighbours). */
+ * other than 4, 8, 16 or 32, a region not inside the image, accumulate with instant radiosity)
+ * or out of memory. Instant radiosity renders a region's margin of its filter radius too (its
+ * discontinuity buffer reads those neighbours). */
 RP_API bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels,
                       rp_render_stats *stats);
 

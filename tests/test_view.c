@@ -344,6 +344,12 @@ static void test_errors(const char *scene) {
     CHECKF(rc == 2 && strstr(output, "option of raypack render"), "exit %d:\n%s", rc, output);
     rc = run(false, "view /nonexistent/scene.obj --frames 1");
     CHECKF(rc == 1 && strstr(output, "/nonexistent/scene.obj"), "exit %d:\n%s", rc, output);
+    /* --compare renders each full-size frame after the first again, and reports both CPU times */
+    snprintf(args, sizeof args, "view '%s' --width 64 --height 48 --threads 2 --frames 4 --compare", scene);
+    rc = run(true, args);
+    float view_ms = number_after("full-size frames: viewer "), ref_ms = number_after("rp_render alone ");
+    CHECKF(rc == 0 && strstr(output, "compare: 3 full-size frames") && view_ms > 0.0f && ref_ms > 0.0f, "exit %d:\n%s",
+           rc, output);
     /* a script file works as --script does */
     char path[1024];
     snprintf(path, sizeof path, "%s/events.txt", tmp);
@@ -358,7 +364,51 @@ static void test_errors(const char *scene) {
     CHECKF(rc == 0 && camera_line(0, &c0) && camera_line(1, &c1) && c1.eye[2] != c0.eye[2], "exit %d:\n%s", rc, output);
 }
 
-/* Every shared scene opens, renders, moves and saves. */
+/* Resizing the window (through the script, which asks the window system as a window manager would):
+ * the image follows the new size, the accumulation restarts, and the screenshot has the window's
+ * size and equals `raypack render` at that size with the printed camera. */
+static void test_resize(const char *scene, const char *script, int frames, int w, int h) {
+    char args[8192], shot[1024], ref[1024];
+    snprintf(shot, sizeof shot, "%s/resize.ppm", tmp);
+    snprintf(ref, sizeof ref, "%s/resize_ref.ppm", tmp);
+    remove(shot);
+    snprintf(args, sizeof args,
+             "view '%s' --width 96 --height 72 --threads 2 --frames %d --no-overlay --log --screenshot '%s' --script '%s'",
+             scene, frames, shot, script);
+    int rc = run(true, args);
+    CHECKF(rc == 0, "exit %d:\n%s", rc, output);
+    char want[64];
+    snprintf(want, sizeof want, "window: %dx%d\n", w, h);
+    CHECKF(strstr(output, want) != NULL, "no '%s' in:\n%s", want, output);
+    /* the frame after the resize renders at the new size, from its first sample */
+    const char *at = strstr(output, want);
+    snprintf(want, sizeof want, "%dx%d scale 1 samples 1 ", w, h);
+    CHECKF(at && strstr(at, want), "no full-size first sample after the resize:\n%s", output);
+    const char *s = strstr(output, "screenshot: ");
+    int sw = 0, sh = 0, spp = 0;
+    cam c;
+    bool ok = s && sscanf(strstr(s, "("), "(%dx%d, %d samples", &sw, &sh, &spp) == 3 && camera_line(-1, &c);
+    CHECKF(ok && sw == w && sh == h && spp >= 1, "screenshot %dx%d (%d samples), want %dx%d:\n%s", sw, sh, spp, w, h,
+           output);
+    if (!ok) return;
+    snprintf(args, sizeof args, "render '%s' --width %d --height %d --threads 1 --spp %d %s -o '%s' --quiet", scene, w,
+             h, spp, c.flags, ref);
+    rc = run(false, args);
+    CHECKF(rc == 0, "render exit %d:\n%s", rc, output);
+    CHECKF(same_file(shot, ref), "after resizing to %dx%d (%s) the window's pixels differ from raypack render's", w, h,
+           script);
+}
+
+/* The --log line of frame f: size, scale, samples, moved; false when missing. */
+static bool frame_line(int f, int *w, int *h, int *scale, int *samples, int *moved) {
+    char key[32];
+    snprintf(key, sizeof key, "frame %d: ", f);
+    const char *l = strstr(output, key);
+    return l && sscanf(l + strlen(key), "%dx%d scale %d samples %d moved %d", w, h, scale, samples, moved) == 5;
+}
+
+/* Every shared scene opens, renders, moves and saves; with a budget no full frame meets (--fps
+ * 1000), moving frames drop the resolution and still ones come back to the window's. */
 static void test_scenes(void) {
     static const char *const all[] = {"cornell_box/cornell_box.obj", "spd_teapot.nff.gz",
                                       "stanford_bunny_bun_zipper.ply.gz", "dabrovic_sponza.obj.gz",
@@ -374,12 +424,26 @@ static void test_scenes(void) {
         snprintf(shot, sizeof shot, "%s/scene%zu.png", tmp, i);
         remove(shot);
         snprintf(args, sizeof args,
-                 "view '%s' --width 64 --height 48 --threads 2 --frames 4 --screenshot '%s' --script '0 down w; 1 up w; "
-                 "1 press left 32 24; 2 move 40 24; 2 release left 40 24'",
+                 "view '%s' --width 320 --height 240 --threads 2 --fps 1000 --frames 6 --log --screenshot '%s' --script "
+                 "'0 down w; 2 up w; 2 press left 160 120; 3 move 180 120; 3 release left 180 120'",
                  scene, shot);
         int rc = run(true, args);
         struct stat st;
         CHECKF(rc == 0 && stat(shot, &st) == 0 && st.st_size > 0, "%s: exit %d:\n%s", all[i], rc, output);
+        /* frames 1 (flying) and 3 (orbiting) move with an estimate of a full frame's time: reduced;
+         * 4 and 5 are still: full resolution, accumulating */
+        for (int f = 1; f < 6; f++) {
+            int w = 0, h = 0, scale = 0, samples = -1, moved = -1;
+            bool ok = frame_line(f, &w, &h, &scale, &samples, &moved);
+            CHECKF(ok, "%s: no line for frame %d:\n%s", all[i], f, output);
+            if (!ok || f == 2) continue;
+            if (f == 1 || f == 3)
+                CHECKF(moved == 1 && scale > 1 && w == (320 + scale - 1) / scale && h == (240 + scale - 1) / scale,
+                       "%s: frame %d (moving): %dx%d scale %d moved %d", all[i], f, w, h, scale, moved);
+            else
+                CHECKF(moved == 0 && scale == 1 && w == 320 && h == 240 && samples == f - 3,
+                       "%s: frame %d (still): %dx%d scale %d samples %d", all[i], f, w, h, scale, samples);
+        }
     }
 }
 
@@ -438,8 +502,21 @@ int main(void) {
                     "0 down w; 2 up w; 3 press right 40 30; 4 move 50 36; 5 release right 50 36", 9, -1);
     test_screenshot(cornell, "--spp 3", "0 down a; 1 up a", 8, 3);
     test_screenshot(cornell, "--aov normal", "", 3, 1);
+    /* the physically based integrators: path and direct lighting accumulate inside rp_render,
+     * instant radiosity's frames are added by the viewer; after motion too */
+    char buf2[512];
+    const char *original = rp_test_scene("cornell_original/CornellBox-Original.obj", buf2, sizeof buf2);
+    CHECK(original != NULL);
+    if (original) {
+        test_screenshot(original, "--integrator path --max-depth 3", "", 4, 4);
+        test_screenshot(original, "--integrator direct", "0 down d; 2 up d", 5, -1);
+        test_screenshot(original, "--integrator ir", "", 3, 3);
+    }
     test_overlay(cornell);
     test_resolution(cornell);
+    test_resize(cornell, "2 resize 120 90", 6, 120, 90);
+    /* while moving, then smaller, then wider than it was; the reduced frames follow too */
+    test_resize(cornell, "0 down w; 2 resize 64 40; 4 up w; 4 resize 130 70", 8, 130, 70);
     test_scenes();
     return RP_TEST_END();
 }

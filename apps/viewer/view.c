@@ -8,10 +8,12 @@
 #include <SDL.h>
 #include <errno.h>
 #include <pthread.h>
+#include <stdatomic.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <time.h>
 
 #include "cli.h"
 
@@ -47,24 +49,28 @@ static void view_usage(FILE *out) {
             "  --events FILE        scripted input: SDL events pushed at given frames (see --script)\n"
             "  --script TEXT        the same inline: items 'FRAME ACTION [ARGS]' separated by ';':\n"
             "                       down KEY, up KEY, key KEY (both), press|release left|middle|right X Y,\n"
-            "                       move X Y, wheel N, quit; keys by SDL name (w, F12, Escape, -)\n"
+            "                       move X Y, wheel N, resize W H, quit; keys by SDL name (w, F12,\n"
+            "                       Escape, -)\n"
             "  --no-overlay         no text over the image\n"
-            "  --log                print a line per frame (size, samples, times, motion)\n"
+            "  --log                print a line per frame (size, samples, motion, each phase's time)\n"
             "  --max-scale S        lowest resolution during motion is 1/S of the window's, 1..32 [16]\n"
+            "  --compare            after each full-size frame, render it again with rp_render alone (not\n"
+            "                       shown) and report the window's cost against that in CPU time\n"
             "\n"
             "keys: W/S A/D Q/E fly (Shift: 4x faster), right mouse button: look, left button: orbit\n"
             "  about the point under the cursor, wheel: fly speed, - and =: field of view, P: print the\n"
             "  camera as flags, F12: screenshot, I: integrator, T: traversal, K: packet size (then\n"
             "  single rays), F: frusta on/off, , and .: max depth, O: overlay, R: the scene's camera,\n"
             "  H: this list, Escape: quit. With --frames or a script, motion per frame is fixed\n"
-            "  (speed / fps) so that runs repeat exactly.\n");
+            "  (speed / fps) so that runs repeat exactly. The window can be resized: the image takes\n"
+            "  its new size pixel for pixel and the accumulation restarts.\n");
 }
 
 typedef struct view_options {
     int frames, max_scale;
     float fps;
     const char *screenshot, *events, *script;
-    bool overlay, log;
+    bool overlay, log, compare;
 } view_options;
 
 /* Splits argv into the viewer's own flags and the render flags (left in rargv for cli_render_parse). */
@@ -105,6 +111,8 @@ static int parse_view_options(int argc, char **argv, view_options *o, char **rar
             o->script = v;
         } else if (strcmp(a, "--no-overlay") == 0) {
             o->overlay = false;
+        } else if (strcmp(a, "--compare") == 0) {
+            o->compare = true;
         } else if (strcmp(a, "--log") == 0) {
             o->log = true;
         } else if (strcmp(a, "-o") == 0 || strcmp(a, "--output") == 0 || strcmp(a, "--stats") == 0 ||
@@ -226,6 +234,7 @@ typedef struct viewer {
     view_camera cam, home;
     float *frame, *sum;         /* w * h * 3: the last rp_render output, the accumulated samples */
     uint32_t *disp;             /* w * h xRGB8888: what the window shows, when its surface is not that */
+    uint32_t *lines;            /* a row of w pixels per device thread, for reduced frames */
     uint32_t *out;              /* where this frame's pixels go: the window's surface itself or disp */
     int out_pitch;              /* in pixels */
     bool direct;                /* out is the window's surface */
@@ -247,6 +256,16 @@ typedef struct viewer {
     double fps, mrays, last_frame_ms;
     uint64_t total_rays;
     double total_render_ms, total_frame_ms;
+    /* the frame's phases after the first frame, in ms (view_phase) */
+    double phase_ms[6];           /* wall time per phase */
+    float *phase_log;             /* per frame after the first: the phases and the frame, for medians */
+    int phase_frames, phase_cap;
+    double cpu_render, cpu_convert, cpu_all; /* process CPU time: the render phase, converting, all */
+    double bytes;                 /* touched by the conversion, in total */
+    const char *srgb;             /* how the conversion runs (view_srgb_select) */
+    float *scratch;               /* --compare: where rp_render alone renders */
+    double cmp_view_cpu, cmp_ref_cpu; /* --compare: process CPU of the viewer's frames, of rp_render alone */
+    int cmp_frames;
     int frames_done;
     bool playing;               /* space: an animated scene's time runs (frame 0 until then) */
     double anim_t;
@@ -460,6 +479,10 @@ static void handle_event(viewer *v, const SDL_Event *e) {
         fflush(stdout);
         break;
     }
+    case SDL_USEREVENT:
+        if (e->user.code == VIEW_EVENT_RESIZE)
+            SDL_SetWindowSize(v->win, (int)(intptr_t)e->user.data1, (int)(intptr_t)e->user.data2);
+        break;
     case SDL_WINDOWEVENT:
         if (e->window.event == SDL_WINDOWEVENT_EXPOSED) v->redraw = true;
         /* keys released elsewhere never come back as key-up events (scripted keys are not affected) */
@@ -484,55 +507,117 @@ static void fly(viewer *v, double dt) {
 
 /* ---- from the render buffer to the window's pixels, in bands of rows on the device's threads ---- */
 
+/* The process's CPU time: on a loaded machine they count the work, where
+ * the wall clock counts the waits for a core too. */
+static double cpu_ms(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+/* A frame's way into the window's pixels. The tile renderer calls present_tile on its threads as
+ * tiles finish, while the tile is in cache; a tile that finishes while the window still sends the
+ * last frame (flush, on the main thread) waits in a list, which the main thread converts once the
+ * window is done with its pixels. */
 typedef struct present_job {
     viewer *v;
     int fw, fh, scale;     /* the frame's size and its divisor */
-    bool accumulate;       /* add the frame into sum and show sum / samples */
+    bool accumulate;       /* show sum / samples */
+    bool add;              /* the frame is added into sum here (else rp_render adds it: accumulate) */
     int samples;           /* after this frame */
+    pthread_mutex_t lock;  /* guards free, waiting and count */
+    pthread_cond_t freed;
+    atomic_bool free;      /* the window's pixels may be written (set under lock) */
+    int (*waiting)[4];     /* tiles to convert once they are */
+    int count, cap;
+    double *busy_ms;       /* per device thread (8 apart): time in present_tile */
 } present_job;
 
-enum { BAND_ROWS = 16 };
-
-static inline uint32_t xrgb(const float *c) {
-    return 0xFF000000u | (uint32_t)view_srgb8(c[0]) << 16 | (uint32_t)view_srgb8(c[1]) << 8 | (uint32_t)view_srgb8(c[2]);
-}
-
-static void present_band(void *user, uint32_t index, uint32_t thread) {
-    (void)thread;
-    const present_job *j = user;
+/* Converts the frame's pixels [x0, x1) x [y0, y1) into the window's: the accumulated mean (with
+ * add and j->add, the frame is added into the sum first), or a reduced frame's pixels widened to
+ * scale x scale blocks; `line` holds a row of the window. */
+static void present_rect(const present_job *j, int x0, int y0, int x1, int y1, bool add, uint32_t *line) {
     viewer *v = j->v;
-    int y0 = (int)index * BAND_ROWS, y1 = y0 + BAND_ROWS < v->h ? y0 + BAND_ROWS : v->h;
+    int n = x1 - x0;
     if (j->accumulate) {
-        /* as the tile renderer sums samples, then scales by 1/spp (but for one); the first sample
-         * is already in sum (step swapped the buffers) */
-        float inv = 1.0f / (float)j->samples;
+        /* as the tile renderer sums samples, then scales by 1/spp (by 1: the sum itself) */
+        float inv = j->samples == 1 ? 1.0f : 1.0f / (float)j->samples;
         for (int y = y0; y < y1; y++) {
-            float *restrict sum = v->sum + (size_t)y * (size_t)v->w * 3;
-            const float *restrict add = v->frame + (size_t)y * (size_t)v->w * 3;
-            uint32_t *restrict out = v->out + (size_t)y * (size_t)v->out_pitch;
-            if (j->samples == 1) {
-                for (int x = 0; x < v->w; x++) out[x] = xrgb(sum + 3 * x);
-                continue;
-            }
-            for (int x = 0; x < v->w; x++) {
-                float c[3];
-                for (int k = 0; k < 3; k++) {
-                    sum[3 * x + k] += add[3 * x + k];
-                    c[k] = sum[3 * x + k] * inv;
-                }
-                out[x] = xrgb(c);
-            }
+            size_t at = (size_t)y * (size_t)v->w + (size_t)x0;
+            view_srgb_pixels(v->sum + at * 3, add && j->add ? v->frame + at * 3 : NULL, inv,
+                             v->out + (size_t)y * (size_t)v->out_pitch + (size_t)x0, n);
         }
         return;
     }
+    int s = j->scale;
     for (int y = y0; y < y1; y++) {
-        const float *row = v->frame + (size_t)(y / j->scale) * (size_t)j->fw * 3;
-        uint32_t *out = v->out + (size_t)y * (size_t)v->out_pitch;
-        for (int x = 0; x < v->w;) {
-            int fx = x / j->scale;
-            uint32_t p = xrgb(row + (size_t)fx * 3);
-            for (int e = (fx + 1) * j->scale < v->w ? (fx + 1) * j->scale : v->w; x < e; x++) out[x] = p;
+        float *row = v->frame + ((size_t)y * (size_t)j->fw + (size_t)x0) * 3;
+        if (s == 1) {
+            view_srgb_pixels(row, NULL, 1.0f, v->out + (size_t)y * (size_t)v->out_pitch + (size_t)x0, n);
+            continue;
         }
+        view_srgb_pixels(row, NULL, 1.0f, line, n);
+        int ox0 = x0 * s, ox1 = x1 * s < v->w ? x1 * s : v->w, oy0 = y * s, oy1 = (y + 1) * s < v->h ? (y + 1) * s : v->h;
+        uint32_t *out = v->out + (size_t)oy0 * (size_t)v->out_pitch;
+        for (int x = ox0; x < ox1; x++) out[x] = line[x / s - x0];
+        for (int oy = oy0 + 1; oy < oy1; oy++)
+            memcpy(v->out + (size_t)oy * (size_t)v->out_pitch + ox0, out + ox0, (size_t)(ox1 - ox0) * sizeof *out);
+    }
+}
+
+/* rp_render_desc.tile_done. */
+static void present_tile(void *user, int x0, int y0, int x1, int y1, uint32_t thread) {
+    present_job *j = user;
+    double t0 = cli_now_ms();
+    uint32_t *line = j->v->lines + (size_t)thread * (size_t)j->v->w;
+    if (atomic_load_explicit(&j->free, memory_order_acquire)) { /* the usual case: no lock */
+        present_rect(j, x0, y0, x1, y1, true, line);
+        j->busy_ms[8 * thread] += cli_now_ms() - t0;
+        return;
+    }
+    pthread_mutex_lock(&j->lock);
+    bool now = atomic_load_explicit(&j->free, memory_order_relaxed);
+    if (!now && j->count == j->cap) { /* grow the list; out of memory: wait for the window */
+        int cap = j->cap ? 2 * j->cap : 256;
+        int (*w)[4] = realloc(j->waiting, (size_t)cap * sizeof *w);
+        if (w) {
+            j->waiting = w;
+            j->cap = cap;
+        } else {
+            while (!atomic_load_explicit(&j->free, memory_order_relaxed)) pthread_cond_wait(&j->freed, &j->lock);
+            now = true;
+        }
+    }
+    if (!now) {
+        int *t = j->waiting[j->count++];
+        t[0] = x0, t[1] = y0, t[2] = x1, t[3] = y1;
+    }
+    pthread_mutex_unlock(&j->lock);
+    if (now) {
+        present_rect(j, x0, y0, x1, y1, true, line);
+    } else if (j->accumulate && j->add) {
+        /* add the frame now, while it is in cache; the pixels come later, from the sum */
+        for (int y = y0; y < y1; y++) {
+            size_t at = (size_t)y * (size_t)j->v->w + (size_t)x0;
+            view_srgb_pixels(j->v->sum + at * 3, j->v->frame + at * 3, 1.0f, line, x1 - x0);
+        }
+    }
+    j->busy_ms[8 * thread] += cli_now_ms() - t0;
+}
+
+/* The window is done with its pixels: tiles from now on convert themselves, and the main thread
+ * converts those that waited. */
+static void present_release(present_job *j) {
+    pthread_mutex_lock(&j->lock);
+    atomic_store_explicit(&j->free, true, memory_order_release);
+    int n = j->count;
+    pthread_cond_broadcast(&j->freed);
+    pthread_mutex_unlock(&j->lock);
+    /* the list no longer grows: present_tile appends only while free is false */
+    uint32_t *line = j->v->lines + (size_t)rp_device_thread_count(j->v->dev) * (size_t)j->v->w;
+    for (int i = 0; i < n; i++) {
+        const int *t = j->waiting[i];
+        present_rect(j, t[0], t[1], t[2], t[3], false, line);
     }
 }
 
@@ -644,9 +729,58 @@ static int motion_scale(const viewer *v) {
     return s < 1 ? 1 : (s > v->opt.max_scale ? v->opt.max_scale : s);
 }
 
+/* Where a frame's time goes: events (input and motion); render (rp_render on a thread of its own,
+ * less tiles: the device threads' time converting finished tiles, shared out); meanwhile, on the
+ * main thread, show (the last frame to the display server) and late (tiles that finished during
+ * show); then overlay. Show and late overlap the rendering. */
+enum { PHASE_EVENTS, PHASE_RENDER, PHASE_TILES, PHASE_SHOW, PHASE_LATE, PHASE_OVERLAY, PHASE_COUNT };
+static const char *const phase_name[PHASE_COUNT] = {"events", "render", "tiles", "show (overlapped)",
+                                                    "late tiles (overlapped)", "overlay"};
+
+
+/* Follows the window's size (a user or the script resized it): the film takes the window's size
+ * pixel for pixel, and the accumulation restarts. False when out of memory. */
+static bool follow_window_size(viewer *v) {
+    SDL_Surface *s = SDL_GetWindowSurface(v->win);
+    if (!s) {
+        fprintf(stderr, "raypack view: no window surface: %s\n", SDL_GetError());
+        return false;
+    }
+    if (s->w == v->w && s->h == v->h) return true;
+    int w = s->w, h = s->h;
+    size_t n = (size_t)w * (size_t)h;
+    if (w < 1 || h < 1 || (double)w * (double)h > 8192.0 * 8192.0) {
+        fprintf(stderr, "raypack view: cannot follow the window to %dx%d\n", w, h);
+        return false;
+    }
+    float *frame = realloc(v->frame, n * 3 * sizeof(float)), *sum = frame ? realloc(v->sum, n * 3 * sizeof(float)) : NULL;
+    if (frame) v->frame = frame;
+    if (sum) v->sum = sum;
+    uint32_t *disp = sum ? realloc(v->disp, n * sizeof(uint32_t)) : NULL;
+    if (disp) v->disp = disp;
+    uint32_t *lines = disp ? realloc(v->lines, ((size_t)rp_device_thread_count(v->dev) + 1) * (size_t)w * sizeof(uint32_t))
+                           : NULL;
+    if (lines) v->lines = lines;
+    if (!lines) {
+        fprintf(stderr, "raypack view: out of memory for a %dx%d window\n", w, h);
+        return false;
+    }
+    free(v->scratch); /* --compare's, made again at the new size */
+    v->scratch = NULL;
+    v->full_ms *= (double)n / ((double)v->w * (double)v->h);
+    v->w = w;
+    v->h = h;
+    v->samples = 0;
+    v->pending = false; /* the last frame had the old size */
+    v->redraw = true;
+    printf("window: %dx%d\n", w, h);
+    fflush(stdout);
+    return true;
+}
+
 /* One frame: input, motion, maybe a render, the window. False on a fatal error. */
 static bool step(viewer *v, view_script *script, int frame, double dt) {
-    double t0 = cli_now_ms();
+    double t0 = cli_now_ms(), u0 = cpu_ms();
     view_script_push(script, frame);
     SDL_Event e;
     while (SDL_PollEvent(&e)) handle_event(v, &e);
@@ -663,6 +797,8 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         }
         v->camera_moved = true;
     }
+    if (!follow_window_size(v)) return false;
+    double events_ms = cli_now_ms() - t0, u1 = cpu_ms(), u2 = u1;
     bool moved = v->camera_moved;
     v->camera_moved = false;
     if (moved || v->reset) v->samples = 0;
@@ -673,28 +809,64 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
     int fw = (v->w + scale - 1) / scale, fh = (v->h + scale - 1) / scale;
     present_job job = {.v = v, .fw = fw, .fh = fh, .scale = scale};
     uint64_t rays = 0;
-    double render_ms = 0.0, convert_ms = 0.0, show_ms = 0.0;
+    double render_ms = 0.0, tiles_ms = 0.0, late_ms = 0.0, show_ms = 0.0, overlay_ms = 0.0, bytes = 0.0;
+    double busy_sum = 0.0; /* thread time in present_tile */
     if (render) {
+        if (scale == 1) {
+            job.accumulate = true;
+            job.samples = v->samples + 1;
+        }
+        if (!target(v)) return false;
+        /* a surface in another format is converted from disp when shown: show the last frame first */
+        if (!v->direct && !flush(v)) return false;
+        atomic_init(&job.free, !v->pending);
+        int nthreads = rp_device_thread_count(v->dev);
+        double busy[8 * 16] = {0};
+        job.busy_ms = nthreads <= 16 ? busy : calloc(8 * (size_t)nthreads, sizeof(double));
+        if (!job.busy_ms) {
+            fprintf(stderr, "raypack view: out of memory\n");
+            return false;
+        }
+        pthread_mutex_init(&job.lock, NULL);
+        pthread_cond_init(&job.freed, NULL);
         rp_camera cam = view_camera_get(&v->cam);
-        render_call rc = {.scene = v->scene, .desc = v->desc, .cam = cam, .pixels = v->frame};
+        /* still frames render into the sum, which rp_render continues (accumulate) from the second
+         * sample on; instant radiosity, whose pixels come from a filter over the whole frame,
+         * renders each sample apart and its tiles are added here */
+        bool ir = v->desc.integrator == RP_INTEGRATOR_IR;
+        job.add = job.accumulate && ir && job.samples > 1;
+        render_call rc = {.scene = v->scene, .desc = v->desc, .cam = cam,
+                          .pixels = job.accumulate && !job.add ? v->sum : v->frame};
+        rc.desc.accumulate = job.accumulate && !ir && job.samples > 1;
         rc.desc.width = fw;
         rc.desc.height = fh;
         rc.desc.camera = &rc.cam;
         rc.desc.max_depth = v->depth == 0 ? -1 : v->depth;
         rc.desc.spp = 1;
         rc.desc.sample_start = scale == 1 ? v->samples : 0;
+        rc.desc.tile_done = present_tile;
+        rc.desc.tile_user = &job;
         /* the window shows the last frame while this one renders: its round trip to the display
          * server overlaps the rendering instead of adding to it */
         pthread_t th;
         bool threaded = pthread_create(&th, NULL, render_main, &rc) == 0;
         double s0 = cli_now_ms();
-        if (!flush(v)) {
-            if (threaded) pthread_join(th, NULL);
-            return false;
-        }
+        bool shown = flush(v);
         show_ms = cli_now_ms() - s0;
+        double c0 = cli_now_ms();
+        present_release(&job);
+        late_ms = cli_now_ms() - c0;
         if (threaded) pthread_join(th, NULL);
         else render_main(&rc);
+        u2 = cpu_ms();
+        double c1 = cli_now_ms();
+        for (int k = 0; k < nthreads; k++) busy_sum += job.busy_ms[8 * k];
+        tiles_ms = busy_sum / nthreads; /* the frame's wall time it took: the threads share it out */
+        if (job.busy_ms != busy) free(job.busy_ms);
+        free(job.waiting);
+        pthread_mutex_destroy(&job.lock);
+        pthread_cond_destroy(&job.freed);
+        if (!shown) return false;
         if (!rc.ok) {
             fprintf(stderr, "raypack view: rendering failed (out of memory?)\n");
             return false;
@@ -705,22 +877,14 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         v->mrays = render_ms > 0.0 ? (double)rays / (render_ms * 1e3) : 0.0;
         v->full_ms = render_ms * ((double)v->w * (double)v->h) / ((double)fw * (double)fh);
         v->scale = scale;
-        if (scale == 1) {
-            v->samples++;
-            if (v->samples == 1) { /* the frame is the sum of one sample */
-                float *t = v->sum;
-                v->sum = v->frame;
-                v->frame = t;
-            }
-            job.accumulate = true;
-            job.samples = v->samples;
-        }
-        double c0 = cli_now_ms();
-        if (!target(v)) return false;
-        rp_device_parallel_for(v->dev, (uint32_t)((v->h + BAND_ROWS - 1) / BAND_ROWS), present_band, &job);
+        if (scale == 1) v->samples++;
+        /* what the encoding reads (the sum, and the frame it adds) and writes (the sum, the pixels) */
+        double px = (double)v->w * (double)v->h, fpx = (double)fw * (double)fh;
+        bytes = job.add ? 40.0 * px : job.accumulate ? 16.0 * px : 12.0 * fpx + 4.0 * px;
         if (v->overlay) overlay_text(v, fw, fh);
+        overlay_ms = cli_now_ms() - c1;
+
         v->pending = true;
-        convert_ms = cli_now_ms() - c0;
     } else if (v->pending || v->redraw) {
         /* nothing new: show what is pending, or send the surface again */
         if (!v->pending) v->pending = true;
@@ -735,14 +899,53 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
     }
     if (v->frames_done > 0) { /* the first frame also maps the window: the summary leaves it out */
         v->total_frame_ms += frame_ms;
-        v->total_render_ms += render_ms;
+        v->total_render_ms += render_ms - tiles_ms;
         v->total_rays += rays;
+        double phase[PHASE_COUNT] = {events_ms, render_ms - tiles_ms, tiles_ms, show_ms, late_ms, overlay_ms};
+        for (int k = 0; k < PHASE_COUNT; k++) v->phase_ms[k] += phase[k];
+        if (v->phase_frames == v->phase_cap && v->phase_cap < (1 << 20)) {
+            int grow = v->phase_cap ? 2 * v->phase_cap : 256;
+            float *p = realloc(v->phase_log, (size_t)grow * (PHASE_COUNT + 1) * sizeof *p);
+            if (p) {
+                v->phase_log = p;
+                v->phase_cap = grow;
+            }
+        }
+        if (v->phase_frames < v->phase_cap) {
+            float *p = v->phase_log + (size_t)v->phase_frames++ * (PHASE_COUNT + 1);
+            for (int k = 0; k < PHASE_COUNT; k++) p[k] = (float)phase[k];
+            p[PHASE_COUNT] = (float)frame_ms;
+        }
+        v->cpu_render += u2 - u1;
+        v->cpu_convert += busy_sum + late_ms;
+        v->cpu_all += cpu_ms() - u0;
+        v->bytes += bytes;
     }
     v->last_frame_ms = frame_ms;
+    if (v->opt.compare && render && scale == 1 && v->frames_done > 0) {
+        /* the same frame (settings, camera, samples) by rp_render alone, right after the viewer's:
+         * the machine's load drifts alike for both */
+        double c0 = cpu_ms();
+        float *px = v->scratch ? v->scratch : (v->scratch = malloc((size_t)v->w * (size_t)v->h * 3 * sizeof(float)));
+        rp_render_desc d = v->desc;
+        rp_camera cam = view_camera_get(&v->cam);
+        d.width = v->w;
+        d.height = v->h;
+        d.camera = &cam;
+        d.max_depth = v->depth == 0 ? -1 : v->depth;
+        d.spp = 1;
+        d.sample_start = v->samples - 1;
+        if (px && rp_render(v->scene, &d, px, NULL)) {
+            v->cmp_ref_cpu += cpu_ms() - c0;
+            v->cmp_view_cpu += c0 - u0;
+            v->cmp_frames++;
+        }
+    }
     if (v->opt.log)
-        printf("frame %d: %dx%d scale %d samples %d moved %d render %.2f ms convert %.2f ms show %.2f ms frame %.2f "
-               "ms\n",
-               frame, fw, fh, scale, v->samples, moved ? 1 : 0, render_ms, convert_ms, show_ms, frame_ms);
+        printf("frame %d: %dx%d scale %d samples %d moved %d render %.2f ms (tiles %.2f) show %.2f ms late %.2f ms "
+               "events %.2f ms overlay %.2f ms frame %.2f ms\n",
+               frame, fw, fh, scale, v->samples, moved ? 1 : 0, render_ms, tiles_ms, show_ms, late_ms, events_ms,
+               overlay_ms, frame_ms);
     v->frames_done++;
     return true;
 }
@@ -751,6 +954,9 @@ static void viewer_free(viewer *v) {
     free(v->frame);
     free(v->sum);
     free(v->disp);
+    free(v->lines);
+    free(v->phase_log);
+    free(v->scratch);
     if (v->win) SDL_DestroyWindow(v->win);
     rp_render_scene_release(v->scene);
     if (v->dev) rp_device_release(v->dev);
@@ -796,13 +1002,15 @@ static bool viewer_init(viewer *v) {
     v->frame = malloc(n * 3 * sizeof(float));
     v->sum = malloc(n * 3 * sizeof(float));
     v->disp = calloc(n, sizeof(uint32_t));
-    if (!v->frame || !v->sum || !v->disp) {
+    /* a row per device thread and one for the main thread */
+    v->lines = malloc(((size_t)rp_device_thread_count(v->dev) + 1) * (size_t)v->w * sizeof(uint32_t));
+    if (!v->frame || !v->sum || !v->disp || !v->lines) {
         fprintf(stderr, "raypack view: out of memory for a %dx%d window\n", v->w, v->h);
         return false;
     }
     char title[300];
     snprintf(title, sizeof title, "raypack view - %s", v->setup.scene ? v->setup.scene : "built-in room");
-    v->win = SDL_CreateWindow(title, SDL_WINDOWPOS_UNDEFINED, SDL_WINDOWPOS_UNDEFINED, v->w, v->h, 0);
+    v->win = SDL_CreateWindow(title, SDL_WINDOWPOS_UNDEFINED, SDL_WINDOWPOS_UNDEFINED, v->w, v->h, SDL_WINDOW_RESIZABLE);
     if (!v->win) {
         fprintf(stderr, "raypack view: cannot open a %dx%d window: %s\n", v->w, v->h, SDL_GetError());
         return false;
@@ -814,6 +1022,23 @@ static bool viewer_init(viewer *v) {
         return false;
     }
     return true;
+}
+
+static int compare_float(const void *a, const void *b) {
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* Median and minimum of column k of n rows of `stride` floats. */
+static void column_stats(const float *rows, int n, int stride, int k, double *median, double *min) {
+    *median = *min = 0.0;
+    float *c = n > 0 ? malloc((size_t)n * sizeof *c) : NULL;
+    if (!c) return;
+    for (int i = 0; i < n; i++) c[i] = rows[(size_t)i * (size_t)stride + (size_t)k];
+    qsort(c, (size_t)n, sizeof *c, compare_float);
+    *median = n % 2 ? c[n / 2] : 0.5 * ((double)c[n / 2 - 1] + (double)c[n / 2]);
+    *min = c[0];
+    free(c);
 }
 
 int cli_view(int argc, char **argv) {
@@ -849,6 +1074,7 @@ int cli_view(int argc, char **argv) {
     v.spp_max = v.setup.spp > 0 ? v.setup.spp : 1024;
     v.deterministic = script != NULL || v.opt.frames > 0;
     view_srgb_init();
+    v.srgb = view_srgb_select(v.setup.isa);
 
     int status = CLI_EXIT_FAILURE;
     /* The window's surface is X11's own shared-memory image, not a texture of an OpenGL renderer:
@@ -863,8 +1089,9 @@ int cli_view(int argc, char **argv) {
         return CLI_EXIT_FAILURE;
     }
     if (viewer_init(&v)) {
-        printf("view: %s, %dx%d, %d threads, speed %.9g\n", v.setup.scene ? v.setup.scene : "built-in room", v.w,
-               v.h, rp_device_thread_count(v.dev), (double)v.cam.speed);
+        printf("view: %s, %dx%d, %d threads, speed %.9g, sRGB by %s\n",
+               v.setup.scene ? v.setup.scene : "built-in room", v.w, v.h, rp_device_thread_count(v.dev),
+               (double)v.cam.speed, v.srgb);
         view_camera_print(&v.cam, stdout);
         print_settings(&v);
         status = CLI_EXIT_OK;
@@ -897,6 +1124,39 @@ int cli_view(int argc, char **argv) {
                v.frames_done, v.samples, wall, wall > 0.0 ? v.frames_done * 1e3 / wall : 0.0,
                (unsigned long long)v.total_rays, in_render, v.total_render_ms, in_frames, v.total_frame_ms,
                in_render > 0.0 ? 100.0 * (1.0 - in_frames / in_render) : 0.0);
+        /* per phase: ms a frame and share of the frame time; show overlaps render */
+        int nf = v.frames_done - 1;
+        if (nf > 0 && v.total_frame_ms > 0.0) {
+            printf("phases: ms a frame (share of frame time):");
+            double rest = v.total_frame_ms;
+            for (int k = 0; k < PHASE_COUNT; k++) {
+                printf(" %s %.3f (%.1f%%)", phase_name[k], v.phase_ms[k] / nf, 100.0 * v.phase_ms[k] / v.total_frame_ms);
+                if (k != PHASE_SHOW && k != PHASE_LATE) rest -= v.phase_ms[k];
+            }
+            printf(" other %.3f (%.1f%%); encoding touched %.1f MB a frame\n", rest / nf, 100.0 * rest / v.total_frame_ms,
+                   v.bytes / nf / 1e6);
+            /* on a shared machine a thread preempted inside a short phase inflates its mean: the
+             * median and the minimum over frames tell more */
+            printf("phases: median (min) ms:");
+            for (int k = 0; k <= PHASE_COUNT; k++) {
+                double med, lo;
+                column_stats(v.phase_log, v.phase_frames, PHASE_COUNT + 1, k, &med, &lo);
+                printf(" %s %.3f (%.3f)", k < PHASE_COUNT ? phase_name[k] : "frame", med, lo);
+            }
+            printf("\n");
+            /* process CPU time (the display server's is not in it): the render phase holds the
+             * conversion (the threads' time in it) and the main thread's showing */
+            double pure = v.cpu_render - v.cpu_convert;
+            printf("phases: CPU ms a frame: all %.3f, render phase %.3f, of which converting %.3f; the window's share "
+                   "of the process's CPU time %.1f%%\n",
+                   v.cpu_all / nf, v.cpu_render / nf, v.cpu_convert / nf,
+                   v.cpu_all > 0.0 ? 100.0 * (1.0 - pure / v.cpu_all) : 0.0);
+        }
+        if (v.cmp_frames > 0)
+            printf("compare: %d full-size frames: viewer %.3f ms CPU a frame, rp_render alone %.3f: the window costs "
+                   "%.1f%% (the display server's CPU time not included)\n",
+                   v.cmp_frames, v.cmp_view_cpu / v.cmp_frames, v.cmp_ref_cpu / v.cmp_frames,
+                   100.0 * (v.cmp_view_cpu / v.cmp_ref_cpu - 1.0));
         fflush(stdout);
     }
     viewer_free(&v);

@@ -5,6 +5,8 @@
  *   F press BUTTON X Y | F release BUTTON X Y   mouse button left, middle or right at pixel (X, Y)
  *   F move X Y                            mouse moved to (X, Y), the buttons held as pressed
  *   F wheel N                             scroll N steps (negative: towards the user)
+ *   F resize W H                          resize the window to W x H pixels (as a user dragging its
+ *                                         border would: the viewer follows the window's new size)
  *   F quit                                close the window
  * Events of frame F are queued before frame F handles its input (frame 0 is the first). */
 #include "viewer.h"
@@ -21,6 +23,7 @@ typedef enum script_kind {
     SCRIPT_BUTTON_UP,
     SCRIPT_MOVE,
     SCRIPT_WHEEL,
+    SCRIPT_RESIZE,
     SCRIPT_QUIT
 } script_kind;
 
@@ -110,11 +113,15 @@ static bool parse_item(view_script *s, char **w, int n, const char *origin, int 
     } else if (strcmp(a, "wheel") == 0) {
         if (n != 3 || !parse_int(w[2], -1000, 1000, &it.wheel)) FAIL("'wheel' expects a step count");
         it.kind = SCRIPT_WHEEL;
+    } else if (strcmp(a, "resize") == 0) {
+        if (n != 4 || !parse_int(w[2], 1, 16384, &it.x) || !parse_int(w[3], 1, 16384, &it.y))
+            FAIL("'resize' expects a width and a height in pixels, 1..16384");
+        it.kind = SCRIPT_RESIZE;
     } else if (strcmp(a, "quit") == 0) {
         if (n != 2) FAIL("'quit' takes no arguments");
         it.kind = SCRIPT_QUIT;
     } else {
-        FAIL("unknown action '%s' (expected down, up, key, press, release, move, wheel or quit)", a);
+        FAIL("unknown action '%s' (expected down, up, key, press, release, move, wheel, resize or quit)", a);
     }
 #undef FAIL
     if (!add(s, it)) {
@@ -225,6 +232,12 @@ void view_script_push(view_script *s, int frame) {
             e.type = SDL_MOUSEWHEEL;
             e.wheel.y = it->wheel;
             e.wheel.direction = SDL_MOUSEWHEEL_NORMAL;
+            break;
+        case SCRIPT_RESIZE: /* the viewer asks the window system, as a window manager would */
+            e.type = SDL_USEREVENT;
+            e.user.code = VIEW_EVENT_RESIZE;
+            e.user.data1 = (void *)(intptr_t)it->x;
+            e.user.data2 = (void *)(intptr_t)it->y;
             break;
         case SCRIPT_QUIT:
             e.type = SDL_QUIT;

@@ -46,6 +46,8 @@ void view_camera_print(const view_camera *c, FILE *f);
 /* ---- scripted input ---- */
 
 typedef struct view_script view_script;
+/* SDL_USEREVENT codes the script pushes: resize (data1, data2: the new width and height). */
+enum { VIEW_EVENT_RESIZE = 1 };
 /* Parses a script: items separated by ';' or new lines, each "FRAME ACTION [ARGS]" (see
  * view_script.c); `origin` names the source in errors. Returns NULL after printing why. */
 view_script *view_script_parse(const char *text, const char *origin);
@@ -84,6 +86,13 @@ extern bool view_srgb_exact; /* false: the table could not be built, use the for
 void view_srgb_init(void);
 /* The same by the formula: rp_image_write's encode_srgb8, operation for operation. */
 uint8_t view_srgb8_formula(float v);
+
+/* Chooses how view_srgb_pixels runs: isa is an rp_device_desc.isa code (0 the widest the CPU has,
+ * 1 or 4 scalar, 8 AVX2, 16 AVX-512), capped by the CPU. Returns its name. Call after view_srgb_init. */
+const char *view_srgb_select(int isa);
+/* n pixels of 3 floats: sum += add (when add is not NULL), then out = 0xFF000000 | the codes of
+ * sum * inv as xRGB8888, exactly view_srgb8 per channel (inv 1: sum itself). */
+void view_srgb_pixels(float *sum, const float *add, float inv, uint32_t *out, int n);
 
 /* The 8-bit sRGB code of a linear value, equal to what rp_image_write stores in a PNG. Branch-free
  * but for the table's check: clamping to [0, 1] maps negatives and NaN to 0 as the formula does. */

@@ -61,7 +61,17 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
     int first = d->integrator == RP_INTEGRATOR_AOV ? 0 : d->sample_start; /* AOVs: the pixel centre */
     uint64_t rays_before = 0;
     for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays_before += th->rays[k];
-    memset(th->accum, 0, (size_t)n * 3 * sizeof(float));
+    if (d->accumulate) { /* the sum so far, which this frame's samples continue: row by row */
+        for (int y = y0; y < y1; y++) {
+            const float *in = f->pixels + ((size_t)y * (size_t)d->width + (size_t)x0) * (size_t)f->channels;
+            float *acc = th->accum + (size_t)(y - y0) * (size_t)tw * 3;
+            if (f->channels == 3) memcpy(acc, in, (size_t)tw * 3 * sizeof(float));
+            else
+                for (int x = 0; x < tw; x++) acc[3 * x] = acc[3 * x + 1] = acc[3 * x + 2] = in[x];
+        }
+    } else {
+        memset(th->accum, 0, (size_t)n * 3 * sizeof(float));
+    }
     bool pbr = f->pbr != NULL;
     if (pbr && !pbr_tile(f, th, x0, y0, x1, y1)) {
         atomic_store(&f->failed, true);
@@ -102,22 +112,33 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
         }
     }
     float inv = 1.0f / (float)spp;
-    /* Instant radiosity's pixels come from its discontinuity buffer, after every tile. */
+    /* Instant radiosity's pixels come from its discontinuity buffer, after every tile. Row by row:
+     * a division and a modulo per pixel cost a cheap scene's frame some percent. */
     for (int y = y0; d->integrator != RP_INTEGRATOR_IR && y < y1; y++) {
-        const float *a = th->accum + 3 * (y - y0) * tw;
+        const float *acc = th->accum + (size_t)(y - y0) * (size_t)tw * 3;
         float *out = f->pixels + ((size_t)y * (size_t)d->width + (size_t)x0) * (size_t)f->channels;
         if (f->channels == 1)
-            for (int i = 0; i < tw; i++) out[i] = a[3 * i];
-        else if (spp == 1)
-            memcpy(out, a, (size_t)tw * 3 * sizeof *out);
+            for (int x = 0; x < tw; x++) out[x] = acc[3 * x];
+        else if (spp == 1 || d->accumulate)
+            memcpy(out, acc, (size_t)tw * 3 * sizeof(float));
         else
-            for (int i = 0; i < 3 * tw; i++) out[i] = a[i] * inv;
+            for (int i = 0; i < 3 * tw; i++) out[i] = acc[i] * inv;
     }
+    if (d->tile_done && d->integrator != RP_INTEGRATOR_IR) d->tile_done(d->tile_user, x0, y0, x1, y1, thread);
     uint64_t rays_after = 0;
     for (int k = 0; k < RP_RAY_KIND_COUNT; k++) rays_after += th->rays[k];
     atomic_fetch_add_explicit(&f->rays_done, rays_after - rays_before, memory_order_relaxed);
     uint32_t done = atomic_fetch_add_explicit(&f->tiles_done, 1u, memory_order_relaxed) + 1u;
     report_progress(f, done);
+}
+
+/* Instant radiosity's tiles, final only once its filter has run over the whole frame. */
+static void finished_tile(void *user, uint32_t index, uint32_t thread) {
+    const render_frame *f = user;
+    int ts = (int)f->tile;
+    int x0 = f->rx0 + (int)(index % f->tiles_x) * ts, y0 = f->ry0 + (int)(index / f->tiles_x) * ts;
+    f->desc.tile_done(f->desc.tile_user, x0, y0, x0 + ts < f->rx1 ? x0 + ts : f->rx1, y0 + ts < f->ry1 ? y0 + ts : f->ry1,
+                      thread);
 }
 
 /* Traversal per ray kind. AUTO lets the core choose per packet from its coherence. */
@@ -163,6 +184,7 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     if (!whole && !(rg[0] >= 0 && rg[1] >= 0 && rg[0] < rg[2] && rg[1] < rg[3] && rg[2] <= dd.width &&
                     rg[3] <= dd.height))
         return false;
+    if (dd.accumulate && dd.integrator == RP_INTEGRATOR_IR) return false;
     render_frame *f = calloc(1, sizeof *f);
     if (!f) return false;
     f->ox0 = f->rx0 = whole ? 0 : rg[0];
@@ -257,6 +279,8 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
             ok = !atomic_load(&f->failed);
             if (ok && pbr) pbr_frame_finish(f);
         }
+        if (ok && f->desc.tile_done && f->desc.integrator == RP_INTEGRATOR_IR)
+            rp_device_parallel_for(scene->device, f->tiles_x * f->tiles_y, finished_tile, f);
         if (ok && f->desc.progress)
             f->desc.progress(f->desc.progress_user, f->tiles_x * f->tiles_y * (uint32_t)f->passes,
                              f->tiles_x * f->tiles_y * (uint32_t)f->passes,

@@ -238,6 +238,7 @@ static const char gltf[] =
 
 int main(int argc, char **argv) {
     (void)argc;
+    (void)argv;
 #if !LSAN
     /* glibc counts blocks parked in its per-thread cache as in use: without the cache, the bytes in
      * use before and after a load are equal exactly when it gave everything back */

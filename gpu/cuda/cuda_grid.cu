@@ -5,6 +5,7 @@
 #include <stdio.h>
 
 #include "cuda_grid.h"
+#include "cuda_tri.cuh"
 
 struct rp_cuda_grid {
     rp_cuda_grid_src g;      /* device pointers in offsets, items, tris */
@@ -20,49 +21,6 @@ struct dev_grid {
     const uint32_t *offsets, *items;
     const float *tris;
 };
-
-/* tri_intersect_ref (geometry/triangle.c), line for line. */
-__device__ static bool tri_ref(const float o[3], const float d[3], float tnear, float tfar, const float *v0,
-                               const float *v1, const float *v2, float *t, float *u, float *v) {
-    int kz = 0;
-    float a = fabsf(d[0]);
-    if (fabsf(d[1]) > a) kz = 1, a = fabsf(d[1]);
-    if (fabsf(d[2]) > a) kz = 2;
-    int kx = kz == 2 ? 0 : kz + 1, ky = kx == 2 ? 0 : kx + 1;
-    if (d[kz] < 0.0f) {
-        int s = kx;
-        kx = ky, ky = s;
-    }
-    float sx = d[kx] / d[kz], sy = d[ky] / d[kz], sz = 1.0f / d[kz];
-    float ax = v0[kx] - o[kx], ay = v0[ky] - o[ky], az = v0[kz] - o[kz];
-    float bx = v1[kx] - o[kx], by = v1[ky] - o[ky], bz = v1[kz] - o[kz];
-    float cx = v2[kx] - o[kx], cy = v2[ky] - o[ky], cz = v2[kz] - o[kz];
-    float Ax = ax - sx * az, Ay = ay - sy * az;
-    float Bx = bx - sx * bz, By = by - sy * bz;
-    float Cx = cx - sx * cz, Cy = cy - sy * cz;
-    float U = Cx * By - Cy * Bx, V = Ax * Cy - Ay * Cx, W = Bx * Ay - By * Ax;
-    if (U == 0.0f || V == 0.0f || W == 0.0f) {
-        U = (float)((double)Cx * (double)By - (double)Cy * (double)Bx);
-        V = (float)((double)Ax * (double)Cy - (double)Ay * (double)Cx);
-        W = (float)((double)Bx * (double)Ay - (double)By * (double)Ax);
-    }
-    float m1 = V < W ? V : W, mn = U < m1 ? U : m1;
-    float M1 = V > W ? V : W, mx = U > M1 ? U : M1;
-    if (mn < 0.0f && mx > 0.0f) return false;
-    float det = U + V + W;
-    if (det == 0.0f) return false;
-    float e1x = bx - ax, e1y = by - ay, e1z = bz - az;
-    float e2x = cx - ax, e2y = cy - ay, e2z = cz - az;
-    float nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
-    float na = nx * ax + ny * ay + nz * az;
-    float nd = nx * sx + ny * sy + nz;
-    if (nd == 0.0f) return false;
-    float tt = (na * sz) / nd;
-    float rcp = 1.0f / det;
-    if (!(tt >= tnear && tt <= tfar)) return false;
-    *t = tt, *u = V * rcp, *v = W * rcp;
-    return true;
-}
 
 __device__ static float axis_exit(const dev_grid &g, const int *cell, const int *step, const float *o,
                                   const float *r, int a) {
@@ -98,6 +56,7 @@ __global__ static void intersect_kernel(dev_grid g, rp_cuda_ray *rays, size_t n)
         float c = floorf((p - g.lo[a]) * g.inv_cell[a]);
         cell[a] = !(c >= 0.0f) ? 0 : (c > (float)(g.res[a] - 1) ? g.res[a] - 1 : (int)c);
     }
+    const wt_ray wr = wt_setup(make_float3(o[0], o[1], o[2]), make_float3(d[0], d[1], d[2]));
     uint32_t mb[MAILBOX];
     for (int i = 0; i < MAILBOX; i++) mb[i] = 0xFFFFFFFFu;
     float ht = ray.tfar, hu = 0.0f, hv = 0.0f;
@@ -112,7 +71,9 @@ __global__ static void intersect_kernel(dev_grid g, rp_cuda_ray *rays, size_t n)
             uint32_t geom = __float_as_uint(tr[9]), prim = __float_as_uint(tr[10]), mask = __float_as_uint(tr[11]);
             if (!(mask & ray.mask)) continue;
             float t, u, v;
-            if (!tri_ref(o, d, ray.tnear, ht, tr, tr + 3, tr + 6, &t, &u, &v)) continue;
+            if (!wt_test(wr, ray.tnear, ht, make_float3(tr[0], tr[1], tr[2]), make_float3(tr[3], tr[4], tr[5]),
+                         make_float3(tr[6], tr[7], tr[8]), &t, &u, &v))
+                continue;
             if (t < ht || htri == 0xFFFFFFFFu || geom < hgeom || (geom == hgeom && prim < hprim))
                 ht = t, hu = u, hv = v, htri = i, hgeom = geom, hprim = prim;
         }
@@ -127,12 +88,10 @@ __global__ static void intersect_kernel(dev_grid g, rp_cuda_ray *rays, size_t n)
     }
     if (htri == 0xFFFFFFFFu) return;
     const float *tr = g.tris + 16 * (size_t)htri;
-    float e1[3], e2[3];
-    for (int k = 0; k < 3; k++) e1[k] = tr[3 + k] - tr[k], e2[k] = tr[6 + k] - tr[k];
+    float3 ng = wt_normal(make_float3(tr[0], tr[1], tr[2]), make_float3(tr[3], tr[4], tr[5]),
+                          make_float3(tr[6], tr[7], tr[8]));
     ray.tfar = ht, ray.u = hu, ray.v = hv, ray.geom = hgeom, ray.prim = hprim;
-    ray.ng[0] = e1[1] * e2[2] - e1[2] * e2[1];
-    ray.ng[1] = e1[2] * e2[0] - e1[0] * e2[2];
-    ray.ng[2] = e1[0] * e2[1] - e1[1] * e2[0];
+    ray.ng[0] = ng.x, ray.ng[1] = ng.y, ray.ng[2] = ng.z;
     rays[id] = ray;
 }
 

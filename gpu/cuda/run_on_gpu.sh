@@ -1,36 +1,57 @@
 #!/bin/sh
-# Builds raypack with the CUDA backend, runs the CUDA test and the benchmarks on a GPU machine and
-# writes every result into one folder. Well under 15 minutes on a 16-core H200 machine.
-#   gpu/cuda/run_on_gpu.sh [RESULTS_DIR] [SCENES_DIR]
-# RESULTS_DIR defaults to $OUT, else ./gpu_results; SCENES_DIR to $RP_SCENES, else ../shared/scenes.
+# The GPU checks and benchmark of gpu/cuda, in two steps: the GPU machine has the CUDA driver but
+# not the Debian libraries behind raypack's loaders (assimp, libarchive, OpenEXR, ...), and not the
+# shared scenes. So the programs are built here, linked against the core and the static CUDA runtime
+# alone, and the scenes travel as raw meshes (gpu_mesh_dump, cuda_mesh.h).
+#
+#   gpu/cuda/run_on_gpu.sh prepare [DIR]          here: builds test_cuda_bvh and writes DIR (default
+#                                                 .gpu): the program and the meshes of the shared scenes
+#   gpu/cuda/run_on_gpu.sh run [DIR] [RESULTS]    on the GPU machine: nvidia-smi, then test_cuda_bvh on
+#                                                 every mesh (checks against the CPU, then Mrays/s), all
+#                                                 output into RESULTS (default $OUT, else gpu_results)
+#
+# With the session's device tool: prepare, then run `sh gpu/cuda/run_on_gpu.sh run .gpu $OUT` with
+# .gpu carried (add it to .git/info/exclude). It takes about a minute there.
 set -u
 cd "$(dirname "$0")/../.."
-RES=${1:-${OUT:-gpu_results}}
-SCENES=${2:-${RP_SCENES:-$(pwd)/../shared/scenes}}
-mkdir -p "$RES"
-RES=$(cd "$RES" && pwd)
-log() { echo "== $*" | tee -a "$RES/summary.txt"; }
-log "raypack CUDA run $(date -u +%FT%TZ) on $(hostname)"
-nvidia-smi > "$RES/nvidia-smi.txt" 2>&1 || log "nvidia-smi failed"
-/usr/local/cuda/bin/nvcc --version > "$RES/nvcc.txt" 2>&1
-B=build/gpu
-log "configure"
-timeout 300 cmake -S . -B $B -DCMAKE_BUILD_TYPE=Release -DRP_WERROR=ON -DRP_SCENES_DIR="$SCENES" \
-    > "$RES/configure.txt" 2>&1 || { log "configure failed (see configure.txt)"; exit 1; }
-log "build"
-timeout 600 cmake --build $B -j"$(nproc)" --target test_cuda_grid test_grid test_stream raypack_cli \
-    > "$RES/build.txt" 2>&1 || { log "build failed (see build.txt)"; exit 1; }
-export RP_SCENES="$SCENES"
-log "test_cuda_grid"
-timeout 300 $B/gpu/cuda/test_cuda_grid > "$RES/test_cuda_grid.txt" 2>&1; echo "exit $?" >> "$RES/test_cuda_grid.txt"
-tail -3 "$RES/test_cuda_grid.txt" | tee -a "$RES/summary.txt"
-log "test_cuda_grid --bench"
-timeout 300 $B/gpu/cuda/test_cuda_grid --bench > "$RES/bench_cuda_grid.txt" 2>&1
-tail -4 "$RES/bench_cuda_grid.txt" | tee -a "$RES/summary.txt"
-log "CPU tests (grid, stream)"
-timeout 300 $B/tests/test_grid > "$RES/test_grid.txt" 2>&1; tail -1 "$RES/test_grid.txt" | tee -a "$RES/summary.txt"
-timeout 300 $B/tests/test_stream > "$RES/test_stream.txt" 2>&1; tail -1 "$RES/test_stream.txt" | tee -a "$RES/summary.txt"
-log "bench --stream --purcell (bunny)"
-timeout 300 $B/raypack bench "$SCENES/stanford_bunny_bun_zipper.ply.gz" --stream --purcell > "$RES/bench_stream_bunny.txt" 2>&1
-cat "$RES/bench_stream_bunny.txt" >> "$RES/summary.txt"
-log "done $(date -u +%FT%TZ)"
+step=${1:-}
+DIR=${2:-.gpu}
+case "$step" in
+prepare)
+    SCENES=${RP_SCENES:-$(pwd)/../shared/scenes}
+    B=build/release
+    cmake --preset release > /dev/null && cmake --build --preset release -j "$(nproc)" --target test_cuda_bvh gpu_mesh_dump || exit 1
+    mkdir -p "$DIR"
+    cp $B/gpu/cuda/test_cuda_bvh "$DIR/"
+    dump() { $B/gpu/cuda/gpu_mesh_dump "$SCENES/$1" "$DIR/$2.rpmesh" ${3:-} || exit 1; }
+    # the conference from inside (issue 27's goals), and the other scenes from their own cameras
+    dump conference_geom.obj.gz conference "--eye 1500,350,500 --look 0,150,-400 --up 0,1,0 --fov 60"
+    dump stanford_bunny_bun_zipper.ply.gz bunny
+    dump dabrovic_sponza.obj.gz sponza "--eye -14,3,0 --look 10,5,0 --up 0,1,0 --fov 70"
+    dump bart_kitchen.tar.gz kitchen
+    dump bart_museum5.tar.gz museum
+    dump spd_rings_s5.nff.gz rings
+    du -sh "$DIR"
+    ;;
+run)
+    RES=${3:-${OUT:-gpu_results}}
+    mkdir -p "$RES"
+    {
+        echo "== raypack GPU run $(date -u +%FT%TZ) on $(hostname)"
+        nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.max.sm,memory.total --format=csv 2>&1
+        echo "== checks and speed, 2048x2048, best of 10"
+        "$DIR/test_cuda_bvh" --size 2048x2048 --repeats 10 "$DIR"/conference.rpmesh "$DIR"/bunny.rpmesh \
+            "$DIR"/sponza.rpmesh "$DIR"/kitchen.rpmesh "$DIR"/museum.rpmesh "$DIR"/rings.rpmesh
+        echo "exit $?"
+        echo "== CTest's size, 512x512"
+        "$DIR/test_cuda_bvh" --size 512x512 --repeats 3 "$DIR"/bunny.rpmesh "$DIR"/conference.rpmesh
+        echo "exit $?"
+        echo "== done $(date -u +%FT%TZ)"
+    } > "$RES/gpu_run.txt" 2>&1
+    cat "$RES/gpu_run.txt"
+    ;;
+*)
+    echo "usage: gpu/cuda/run_on_gpu.sh prepare [DIR] | run [DIR] [RESULTS]" >&2
+    exit 2
+    ;;
+esac

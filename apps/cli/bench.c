@@ -1041,6 +1041,8 @@ static void usage(FILE *f) {
             "  --accel-grid       every acceleration structure (bvh, kdtree, bih): build time,\n"
             "                     memory and Mrays/s of single rays, SIMD rays and 16x16 packets\n"
             "                     per ray kind, on the same rays (repeats 3)\n"
+            "  --engine cuda      the CUDA BVH kernels (gpu/cuda) on the same sets, checked against\n"
+            "                     raypack's single rays, kernel time by CUDA events (docs/gpu.md)\n"
             "  --accel KIND       the structure of plain bench and --grid: bvh, kdtree or bih\n"
             "  --threads N        tracing threads (default 2); plain bench also times 1 thread\n"
             "  --isa NAME         raypack's kernels: auto (the widest the CPU has), scalar, sse,\n"
@@ -1091,6 +1093,10 @@ static int parse_args(int argc, char **argv, bench_opts *o) {
             ok = strcmp(val, "embree") == 0;
             if (!ok) fprintf(stderr, "raypack bench: --vs takes 'embree', got '%s'\n", val);
             o->vs_embree = ok;
+        } else if (strcmp(a, "--engine") == 0) {
+            ok = strcmp(val, "cuda") == 0;
+            if (!ok) fprintf(stderr, "raypack bench: --engine takes 'cuda' (or 'stream', alone), got '%s'\n", val);
+            o->cuda = ok;
         } else if (strcmp(a, "--threads") == 0) {
             ok = cli_parse_int(cmd, a, val, 1, CLI_MAX_THREADS, &o->threads);
         } else if (strcmp(a, "--isa") == 0) {
@@ -1639,6 +1645,16 @@ int cli_bench(int argc, char **argv) {
         fprintf(stderr, "raypack bench: --accel-grid is a run of its own\n");
         return CLI_EXIT_USAGE;
     }
+    if (ctx.opts.cuda && (ctx.opts.grid || ctx.opts.accel_grid || ctx.opts.vs_embree)) {
+        fprintf(stderr, "raypack bench: --engine cuda is a run of its own\n");
+        return CLI_EXIT_USAGE;
+    }
+#if !defined(RP_HAVE_CUDA)
+    if (ctx.opts.cuda) {
+        fprintf(stderr, "raypack bench: --engine cuda: raypack was built without CUDA (nvcc not found)\n");
+        return CLI_EXIT_USAGE;
+    }
+#endif
     if ((ctx.opts.grid || ctx.opts.accel_grid) && !ctx.opts.repeats_set) ctx.opts.repeats = 3;
 #if !defined(RP_HAVE_EMBREE)
     if (ctx.opts.vs_embree) {
@@ -1655,6 +1671,13 @@ int cli_bench(int argc, char **argv) {
 #if defined(RP_HAVE_EMBREE)
     if (ctx.opts.vs_embree) {
         rc = bench_vs_embree(&ctx);
+        teardown(&ctx);
+        return rc;
+    }
+#endif
+#if defined(RP_HAVE_CUDA)
+    if (ctx.opts.cuda) {
+        rc = bench_vs_cuda(&ctx);
         teardown(&ctx);
         return rc;
     }

@@ -31,6 +31,7 @@ typedef struct bench_opts {
     const char *scene_path;  /* NULL: the generated sphere field */
     const char *json_path;   /* NULL: no JSON */
     bool vs_embree;
+    bool cuda;               /* --engine cuda: the GPU kernels on the same sets (bench_cuda.c) */
     bool grid;               /* --grid: the experiment grid of Overbeck et al. 2008, sec. 5 */
     bool accel_grid;         /* --accel-grid: every acceleration structure on the same rays */
     rp_accel_type accel;     /* --accel: the structure raypack's scene is built with */
@@ -260,6 +261,11 @@ void bench_print_header(const bench_ctx *ctx);
 int bench_accel_grid(bench_ctx *ctx);
 /* `raypack bench --grid`: the paper's experiment grid (bench_grid.c); returns the exit code. */
 int bench_grid(bench_ctx *ctx);
+
+#if defined(RP_HAVE_CUDA)
+/* `raypack bench --engine cuda`: the CUDA BVH kernels on the bench's sets (bench_cuda.c). */
+int bench_vs_cuda(bench_ctx *ctx);
+#endif
 
 #if defined(RP_HAVE_EMBREE)
 /* `raypack bench --vs embree`: both engines on the same rays; returns the exit code. */

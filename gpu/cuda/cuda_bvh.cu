@@ -6,6 +6,7 @@
 #include <cuda_runtime.h>
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "cuda_bvh.h"
@@ -434,13 +435,17 @@ extern "C" void rp_cuda_bvh_free(rp_cuda_bvh *b) {
     if (!b) return;
     cudaFree(b->nodes);
     cudaFree(b->tris);
-    delete b;
+    free(b);
 }
 
 extern "C" size_t rp_cuda_bvh_bytes(const rp_cuda_bvh *b) { return b ? b->bytes : 0; }
 
 extern "C" rp_cuda_bvh *rp_cuda_bvh_upload(const rp_cuda_bvh_src *src, char *err, size_t err_size) {
-    rp_cuda_bvh *b = new rp_cuda_bvh();
+    rp_cuda_bvh *b = (rp_cuda_bvh *)calloc(1, sizeof(rp_cuda_bvh));
+    if (!b) {
+        fail(err, err_size, "BVH upload", cudaErrorMemoryAllocation);
+        return NULL;
+    }
     b->node_count = src->node_count, b->tri_count = src->tri_count;
     size_t nb = (size_t)src->node_count * 64, tb = (size_t)(src->tri_count ? src->tri_count : 1) * 48;
     b->bytes = nb + tb;
@@ -460,11 +465,15 @@ extern "C" void rp_cuda_batch_free(rp_cuda_batch *q) {
     cudaFree(q->rays);
     cudaFree(q->hits);
     cudaFree(q->counter);
-    delete q;
+    free(q);
 }
 
 extern "C" rp_cuda_batch *rp_cuda_batch_new(const rp_cuda_bvh_ray *rays, size_t n, char *err, size_t err_size) {
-    rp_cuda_batch *q = new rp_cuda_batch();
+    rp_cuda_batch *q = (rp_cuda_batch *)calloc(1, sizeof(rp_cuda_batch));
+    if (!q) {
+        fail(err, err_size, "ray upload", cudaErrorMemoryAllocation);
+        return NULL;
+    }
     q->n = n;
     size_t m = n ? n : 1;
     cudaError_t e;

@@ -3,6 +3,7 @@
 #include <cuda_runtime.h>
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 
 #include "cuda_grid.h"
 #include "cuda_tri.cuh"
@@ -111,11 +112,15 @@ extern "C" void rp_cuda_grid_free(rp_cuda_grid *g) {
     cudaFree(g->d_offsets);
     cudaFree(g->d_items);
     cudaFree(g->d_tris);
-    delete g;
+    free(g);
 }
 
 extern "C" rp_cuda_grid *rp_cuda_grid_upload(const rp_cuda_grid_src *src, char *err, size_t err_size) {
-    rp_cuda_grid *g = new rp_cuda_grid();
+    rp_cuda_grid *g = (rp_cuda_grid *)calloc(1, sizeof(rp_cuda_grid));
+    if (!g) {
+        fail(err, err_size, "upload", cudaErrorMemoryAllocation);
+        return NULL;
+    }
     g->g = *src;
     size_t ob = ((size_t)src->voxel_count + 1) * 4, ib = (src->item_count ? src->item_count : 1) * 4,
            tb = (size_t)(src->tri_count ? src->tri_count : 1) * 64;

@@ -263,16 +263,19 @@ static void dump(const char *log) {
     fclose(f);
 }
 
-/* True when the log says raypack was built without Embree. */
-static bool log_says_no_embree(const char *log) {
+/* True when a line of the log holds text. */
+static bool log_contains(const char *log, const char *text) {
     FILE *f = fopen(log, "r");
     if (!f) return false;
     char line[512];
     bool found = false;
-    while (!found && fgets(line, sizeof line, f)) found = strstr(line, "built without Embree") != NULL;
+    while (!found && fgets(line, sizeof line, f)) found = strstr(line, text) != NULL;
     fclose(f);
     return found;
 }
+
+/* True when the log says raypack was built without Embree. */
+static bool log_says_no_embree(const char *log) { return log_contains(log, "built without Embree"); }
 
 /* bounce1, bounce2: the path tracer's bounce rays of depth 1 and 2 (bench_path.c) */
 static const char *kinds[6] = {"primary", "shadow", "reflection", "diffuse", "bounce1", "bounce2"};
@@ -509,6 +512,43 @@ static void bad_rays_case(const char *cli, const char *scene, int size) {
     if (rc != 0 || !parsed) dump(log);
 }
 
+/* --engine cuda: on a GPU every kernel's hits equal raypack's single rays on every set (exit 0,
+ * JSON); without a GPU the GPU layout is still made from the committed scene before the bench says
+ * there is no device (exit 1); without nvcc at build time it is a usage error (exit 2). */
+static void cuda_case(const char *cli, const char *scene, int size) {
+    char json[1024], log[1024], cmd[8192];
+    snprintf(json, sizeof json, "%s/bench_cuda.json", tmp_dir());
+    snprintf(log, sizeof log, "%s/bench_cuda.log", tmp_dir());
+    remove(json);
+    snprintf(cmd, sizeof cmd, "'%s' bench '%s' --engine cuda --width %d --height %d --repeats 1 --json '%s'", cli,
+             scene, size, size, json);
+    int rc = run(cmd, log);
+    if (log_contains(log, "built without CUDA")) {
+        CHECKF(rc == 2, "cuda: `%s` exited with %d", cmd, rc);
+        return;
+    }
+    if (log_contains(log, "no CUDA device found")) {
+        CHECKF(rc == 1 && log_contains(log, "the GPU layout was made"), "cuda: `%s` exited with %d", cmd, rc);
+        if (rc != 1) dump(log);
+        return;
+    }
+    CHECKF(rc == 0, "cuda: `%s` exited with %d", cmd, rc);
+    jvalue root;
+    bool parsed = rc == 0 && json_load(json, &root);
+    CHECKF(parsed, "cuda: %s is not valid JSON", json);
+    if (parsed) {
+        for (int k = 0; k < 6; k++) {
+            const jvalue *set = json_get(json_get(&root, "rays"), kinds[k]);
+            CHECKF(json_num(set, "count") > 0 && json_num(set, "mismatches") == 0 && json_num(set, "bit_mismatches") == 0,
+                   "cuda: rays.%s", kinds[k]);
+            CHECKF(json_num(json_get(json_get(set, "kernels"), "simple"), "mrays") > 0, "cuda: rays.%s.kernels.simple",
+                   kinds[k]);
+        }
+        json_free(&root);
+    }
+    if (rc != 0 || !parsed) dump(log);
+}
+
 int main(void) {
     char cli[PATH_MAX + 64];
     if (!find_cli(cli, sizeof cli)) {
@@ -533,6 +573,7 @@ int main(void) {
 
     if (cornell) grid_case(cli, cornell, small ? 16 : 48);
     if (cornell) bad_rays_case(cli, cornell, small ? 32 : 64);
+    if (cornell) cuda_case(cli, cornell, small ? 32 : 64);
 
     /* Usage errors and missing files fail. */
     char cmd[sizeof cli + 128], log[1024];

@@ -26,8 +26,8 @@ static size_t to_bench_hits(const bench_rays *set, const rp_cuda_bvh_hit *h, con
                             bench_hits *out) {
     size_t bits = 0;
     for (size_t i = 0; i < set->slots; i++) {
-        out->t[i] = set->occlusion ? (h[i].t == -INFINITY ? -INFINITY : INFINITY)
-                                   : (h[i].geom == RP_INVALID_ID ? INFINITY : h[i].t);
+        /* an occlusion query leaves tfar where nothing blocks the ray, as rp_occluded1 does */
+        out->t[i] = set->occlusion ? h[i].t : (h[i].geom == RP_INVALID_ID ? INFINITY : h[i].t);
         out->prim[i] = set->occlusion ? RP_INVALID_ID : h[i].prim;
         if (set->valid[i])
             bits += memcmp(&out->t[i], &ref->t[i], sizeof(float)) != 0 || out->prim[i] != ref->prim[i];

@@ -1687,5 +1687,25 @@ int cli_bench(int argc, char **argv) {
     return rc;
 }
 
+FILE *bench_json_begin(const bench_ctx *ctx, rp_atomic_file **af) {
+    char werr[512];
+    *af = rp_atomic_open(ctx->opts.json_path, werr, sizeof werr);
+    if (!*af) {
+        fprintf(stderr, "raypack bench: %s\n", werr);
+        return NULL;
+    }
+    FILE *f = rp_atomic_stream(*af);
+    fprintf(f, "{\"scene\": ");
+    bench_json_string(f, ctx->scene_name);
+    return f;
+}
+
+bool bench_json_end(rp_atomic_file *af) {
+    char werr[512];
+    if (rp_atomic_commit(af, werr, sizeof werr)) return true;
+    fprintf(stderr, "raypack bench: %s\n", werr);
+    return false;
+}
+
 /* Used by bench_embree.c. */
 bool bench_make_ray_sets(bench_ctx *ctx) { return make_ray_sets(ctx); }

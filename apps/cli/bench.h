@@ -225,6 +225,12 @@ double bench_now_ms(void);
 void bench_set_ftz(void);
 /* Writes a JSON string literal. */
 void bench_json_string(FILE *f, const char *s);
+struct rp_atomic_file;
+/* --json: opens ctx's JSON output (a temporary file until bench_json_end renames it into place) and
+ * writes `{"scene": NAME`; NULL, after a message, when it cannot. */
+FILE *bench_json_begin(const bench_ctx *ctx, struct rp_atomic_file **af);
+/* Commits what bench_json_begin opened; false, after a message, when the write failed. */
+bool bench_json_end(struct rp_atomic_file *af);
 
 /* raypack's query modes for a set of ctx (single, packet4/8/16, array with each hint, then 16x16
  * and 8x8 large packets with auto traversal and the set's frustum); returns the count. */

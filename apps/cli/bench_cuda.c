@@ -37,15 +37,9 @@ static size_t to_bench_hits(const bench_rays *set, const rp_cuda_bvh_hit *h, con
 
 static bool write_json(const bench_ctx *ctx, const char *device, const rp_cuda_bvh_src *src, double convert_ms,
                        const cuda_result *res) {
-    char werr[512];
-    rp_atomic_file *af = rp_atomic_open(ctx->opts.json_path, werr, sizeof werr);
-    if (!af) {
-        fprintf(stderr, "raypack bench: %s\n", werr);
-        return false;
-    }
-    FILE *f = rp_atomic_stream(af);
-    fprintf(f, "{\"scene\": ");
-    bench_json_string(f, ctx->scene_name);
+    rp_atomic_file *af;
+    FILE *f = bench_json_begin(ctx, &af);
+    if (!f) return false;
     fprintf(f, ", \"engine\": \"cuda\", \"device\": ");
     bench_json_string(f, device);
     fprintf(f, ", \"triangles\": %zu, \"width\": %d, \"height\": %d, \"repeats\": %d,\n"
@@ -64,11 +58,7 @@ static bool write_json(const bench_ctx *ctx, const char *device, const rp_cuda_b
         fprintf(f, "}}");
     }
     fprintf(f, "\n }\n}\n");
-    if (!rp_atomic_commit(af, werr, sizeof werr)) {
-        fprintf(stderr, "raypack bench: %s\n", werr);
-        return false;
-    }
-    return true;
+    return bench_json_end(af);
 }
 
 int bench_vs_cuda(bench_ctx *ctx) {

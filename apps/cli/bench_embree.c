@@ -370,15 +370,9 @@ static void write_stat(FILE *f, bench_stat s) {
 /* --json: the shape of the issue (scene, threads, build, rays.{primary,...}) plus detail. */
 static bool emb_write_json(const bench_ctx *ctx, const emb_build_result *b,
                            const emb_set_result *res) {
-    char werr[512];
-    rp_atomic_file *af = rp_atomic_open(ctx->opts.json_path, werr, sizeof werr);
-    if (!af) {
-        fprintf(stderr, "raypack bench: %s\n", werr);
-        return false;
-    }
-    FILE *f = rp_atomic_stream(af);
-    fprintf(f, "{\"scene\": ");
-    bench_json_string(f, ctx->scene_name);
+    rp_atomic_file *af;
+    FILE *f = bench_json_begin(ctx, &af);
+    if (!f) return false;
     fprintf(f, ", \"triangles\": %zu, \"threads\": %d, \"width\": %d, \"height\": %d, "
                "\"repeats\": %d, \"isa\": \"%s\", \"embree_version\": \"%s\",\n",
             ctx->mesh.triangle_count, ctx->opts.threads, ctx->opts.width, ctx->opts.height,
@@ -424,11 +418,7 @@ static bool emb_write_json(const bench_ctx *ctx, const emb_build_result *b,
                 r->rp_harness.median, r->emb_harness.median, tracing_ratio(r), ratio);
     }
     fprintf(f, "\n }\n}\n");
-    if (!rp_atomic_commit(af, werr, sizeof werr)) {
-        fprintf(stderr, "raypack bench: %s\n", werr);
-        return false;
-    }
-    return true;
+    return bench_json_end(af);
 }
 
 /* The tables on the terminal: builds, every mode of both engines, then the best of each. */

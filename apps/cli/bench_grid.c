@@ -378,15 +378,9 @@ static void grid_json_counters(FILE *f, const rp_counters_n *c) {
 /* --json: levels (per ray type: seconds, Mrays/s, counters), recursion types, table 2. */
 static bool grid_write_json(const grid_run *g) {
     const bench_ctx *ctx = g->ctx;
-    char werr[512];
-    rp_atomic_file *af = rp_atomic_open(ctx->opts.json_path, werr, sizeof werr);
-    if (!af) {
-        fprintf(stderr, "raypack bench: %s\n", werr);
-        return false;
-    }
-    FILE *f = rp_atomic_stream(af);
-    fprintf(f, "{\"scene\": ");
-    bench_json_string(f, ctx->scene_name);
+    rp_atomic_file *af;
+    FILE *f = bench_json_begin(ctx, &af);
+    if (!f) return false;
     fprintf(f, ", \"triangles\": %zu, \"threads\": %d, \"width\": %d, \"height\": %d, \"repeats\": %d, "
                "\"simd_width\": %d, \"isa\": \"%s\", \"mismatches\": 0,\n \"levels\": {",
             ctx->mesh.triangle_count, ctx->opts.threads, ctx->opts.width, ctx->opts.height, ctx->opts.repeats,
@@ -442,11 +436,7 @@ static bool grid_write_json(const grid_run *g) {
         fprintf(f, "}}");
     }
     fprintf(f, "\n }\n}\n");
-    if (!rp_atomic_commit(af, werr, sizeof werr)) {
-        fprintf(stderr, "raypack bench: %s\n", werr);
-        return false;
-    }
-    return true;
+    return bench_json_end(af);
 }
 
 int bench_grid(bench_ctx *ctx) {

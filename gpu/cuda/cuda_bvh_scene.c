@@ -2,14 +2,16 @@
  * leaves ranges of tri4 blocks) converted to the CUDA layout of cuda_bvh.h (tinybvh's ConvertFrom:
  * the builder stays the CPU's, only the layout changes). A node's children are numbered when it is
  * written and the left subtree is walked first, so siblings are adjacent and a leaf's triangles
- * follow its parent's other leaves'. */
+ * follow its parent's other leaves'. Also the grid's arrays for the CUDA grid. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "accel/grid/grid.h"
 #include "core/core.h"
 #include "cuda_bvh.h"
+#include "cuda_grid.h"
 
 static void put_u32(float *f, uint32_t u) { memcpy(f, &u, sizeof u); }
 
@@ -112,4 +114,25 @@ void rp_cuda_bvh_src_free(rp_cuda_bvh_src *src) {
     free(src->nodes);
     free(src->tris);
     memset(src, 0, sizeof *src);
+}
+
+rp_cuda_grid *rp_cuda_grid_from_grid(const grid *g, char *err, size_t err_size) {
+    float *tris = malloc(((size_t)g->tri_count + 1) * 16 * sizeof(float));
+    if (!tris) {
+        fail(err, err_size, "out of memory");
+        return NULL;
+    }
+    for (uint32_t i = 0; i < g->tri_count; i++) {
+        memcpy(&tris[16 * (size_t)i], g->tris[i].v, 9 * sizeof(float));
+        memcpy(&tris[16 * (size_t)i + 9], &g->tris[i].geom, 3 * sizeof(uint32_t));
+    }
+    rp_cuda_grid_src src = {.voxel_count = g->voxel_count, .tri_count = g->tri_count, .item_count = g->item_count,
+                            .offsets = g->offsets, .items = g->items, .tris = tris};
+    for (int a = 0; a < 3; a++) {
+        src.lo[a] = g->lo[a], src.hi[a] = g->hi[a], src.cell[a] = g->cell[a];
+        src.inv_cell[a] = g->inv_cell[a], src.res[a] = g->res[a];
+    }
+    rp_cuda_grid *cg = rp_cuda_grid_upload(&src, err, err_size);
+    free(tris);
+    return cg;
 }

@@ -39,6 +39,10 @@ rp_cuda_grid *rp_cuda_grid_upload(const rp_cuda_grid_src *src, char *err, size_t
 int rp_cuda_grid_intersect(rp_cuda_grid *g, rp_cuda_ray *rays, size_t n, float *kernel_ms, char *err,
                            size_t err_size);
 void rp_cuda_grid_free(rp_cuda_grid *g);
+/* Copies a grid built on the CPU (accel/grid/grid.h) to device 0: rp_cuda_grid_upload of its arrays.
+ * C side (cuda_bvh_scene.c). */
+struct grid;
+rp_cuda_grid *rp_cuda_grid_from_grid(const struct grid *g, char *err, size_t err_size);
 
 #ifdef __cplusplus
 }

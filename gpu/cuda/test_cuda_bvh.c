@@ -188,31 +188,13 @@ static double best_of(const float *ms, int n) {
     return b;
 }
 
-/* The grid's arrays as the CUDA grid takes them (test_cuda_grid.c does the same). */
-static rp_cuda_grid *upload_grid(const grid *g, char *err, size_t err_size) {
-    float *tris = malloc(((size_t)g->tri_count + 1) * 16 * sizeof(float));
-    for (uint32_t i = 0; i < g->tri_count; i++) {
-        memcpy(&tris[16 * i], g->tris[i].v, 9 * sizeof(float));
-        memcpy(&tris[16 * i + 9], &g->tris[i].geom, 3 * sizeof(uint32_t));
-    }
-    rp_cuda_grid_src src = {.voxel_count = g->voxel_count, .tri_count = g->tri_count, .item_count = g->item_count,
-                            .offsets = g->offsets, .items = g->items, .tris = tris};
-    for (int a = 0; a < 3; a++) {
-        src.lo[a] = g->lo[a], src.hi[a] = g->hi[a], src.cell[a] = g->cell[a];
-        src.inv_cell[a] = g->inv_cell[a], src.res[a] = g->res[a];
-    }
-    rp_cuda_grid *cg = rp_cuda_grid_upload(&src, err, err_size);
-    free(tris);
-    return cg;
-}
-
 /* The GPU grid on the primary set, against the CPU's hits. */
 static void grid_check(rp_scene *scene, const ray_set *p, const char *name, int repeats) {
     char err[512] = "";
     grid *g = grid_build_scene(scene, NULL, err, sizeof err);
     CHECKF(g != NULL, "%s: grid: %s", name, err);
     if (!g) return;
-    rp_cuda_grid *cg = upload_grid(g, err, sizeof err);
+    rp_cuda_grid *cg = rp_cuda_grid_from_grid(g, err, sizeof err);
     CHECKF(cg != NULL, "%s: %s", name, err);
     rp_cuda_ray *rays = calloc(p->n ? p->n : 1, sizeof *rays);
     float best = INFINITY;
@@ -341,30 +323,19 @@ static void run_mesh(rp_device *dev, const char *path, int w, int h, int repeats
     CHECKF(ok, "%s: %s", name, err);
     rp_cuda_bvh *gb = ok && gpu ? rp_cuda_bvh_upload(&src, err, sizeof err) : NULL;
     CHECKF(gb != NULL || !gpu, "%s: %s", name, err);
-    if (ok && !gpu) {
-        printf("%s: %llu triangles, GPU layout %u nodes, %u triangles, depth %u\n", name,
-               (unsigned long long)m.triangle_count, src.node_count, src.tri_count, src.depth);
-        ray_set sets[3];
-        make_primary(&m, w, h, &sets[0]);
-        cpu_trace(dev, scene, &sets[0]);
-        make_next(&sets[0], &m, true, &sets[1]);
-        make_next(&sets[0], &m, false, &sets[2]);
-        for (int s = 1; s < 3; s++) cpu_trace(dev, scene, &sets[s]);
-        emulated_check(&src, sets, 3, name);
-        for (int s = 0; s < 3; s++) free(sets[s].rays), free(sets[s].ref);
-    }
-    if (gb) {
+    if (ok && (gb || !gpu)) {
         printf("%s: %llu triangles, CPU BVH build %.0f ms (%d threads), GPU layout %u nodes, %u triangles, depth %u, "
                "%.1f MiB\n",
                name, (unsigned long long)m.triangle_count, build_s * 1e3, rp_device_thread_count(dev), src.node_count,
-               src.tri_count, src.depth, (double)rp_cuda_bvh_bytes(gb) / 1048576.0);
+               src.tri_count, src.depth, (double)(src.node_count * 64ull + src.tri_count * 48ull) / 1048576.0);
         ray_set sets[3];
         make_primary(&m, w, h, &sets[0]);
         cpu_trace(dev, scene, &sets[0]);
         make_next(&sets[0], &m, true, &sets[1]);
         make_next(&sets[0], &m, false, &sets[2]);
         for (int s = 1; s < 3; s++) cpu_trace(dev, scene, &sets[s]);
-        for (int s = 0; s < 3; s++) {
+        if (!gb) emulated_check(&src, sets, 3, name);
+        for (int s = 0; gb && s < 3; s++) {
             ray_set *set = &sets[s];
             rp_cuda_batch *q = rp_cuda_batch_new(set->rays, set->n, err, sizeof err);
             CHECKF(q != NULL, "%s: %s", name, err);
@@ -388,8 +359,10 @@ static void run_mesh(rp_device *dev, const char *path, int w, int h, int repeats
             free(hits);
             rp_cuda_batch_free(q);
         }
-        grid_check(scene, &sets[0], name, repeats < 5 ? repeats : 5);
-        frame_check(dev, scene, gb, &m, w, h, name, repeats);
+        if (gb) {
+            grid_check(scene, &sets[0], name, repeats < 5 ? repeats : 5);
+            frame_check(dev, scene, gb, &m, w, h, name, repeats);
+        }
         for (int s = 0; s < 3; s++) free(sets[s].rays), free(sets[s].ref);
     }
     rp_cuda_bvh_free(gb);

@@ -38,18 +38,7 @@ static void run_scene(rp_device *dev, const char *file, const rp_camera *cam_in,
     CHECKF(g != NULL, "%s: %s", file, err);
     if (g) {
         rp_scene *scene = rp_render_scene_core(rs);
-        float *tris = malloc(((size_t)g->tri_count + 1) * 16 * sizeof(float));
-        for (uint32_t i = 0; i < g->tri_count; i++) {
-            memcpy(&tris[16 * i], g->tris[i].v, 9 * sizeof(float));
-            memcpy(&tris[16 * i + 9], &g->tris[i].geom, 3 * sizeof(uint32_t));
-        }
-        rp_cuda_grid_src src = {.voxel_count = g->voxel_count, .tri_count = g->tri_count,
-                                .item_count = g->item_count, .offsets = g->offsets, .items = g->items, .tris = tris};
-        for (int a = 0; a < 3; a++) {
-            src.lo[a] = g->lo[a], src.hi[a] = g->hi[a], src.cell[a] = g->cell[a];
-            src.inv_cell[a] = g->inv_cell[a], src.res[a] = g->res[a];
-        }
-        rp_cuda_grid *cg = rp_cuda_grid_upload(&src, err, sizeof err);
+        rp_cuda_grid *cg = rp_cuda_grid_from_grid(g, err, sizeof err);
         CHECKF(cg != NULL, "%s: %s", file, err);
         size_t n = (size_t)w * (size_t)h, nr = n / 4;
         rp_rayhit *ref = malloc((n + nr) * sizeof(rp_rayhit));
@@ -107,7 +96,7 @@ static void run_scene(rp_device *dev, const char *file, const rp_camera *cam_in,
                    ms > 0.0f ? (double)n / (ms * 1e3) : 0.0, (double)ms, (double)n / grid_s * 1e-6,
                    (double)n / bvh_s * 1e-6);
         printf("\n");
-        free(ref), free(rays), free(px), free(tris);
+        free(ref), free(rays), free(px);
         rp_cuda_grid_free(cg);
     }
     grid_free(g);

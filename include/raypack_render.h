@@ -311,6 +311,13 @@ RP_API int rp_render_channels(const rp_render_desc *desc);
 RP_API bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels,
                       rp_render_stats *stats);
 
+/* The primary rays of a width x height image through the pixels' centres (sample 0), as rp_render
+ * makes them, row by row from the top-left pixel into out (width * height rays, the caller's). */
+RP_API void rp_render_primary_rays(const rp_camera *camera, int width, int height, rp_ray *out);
+/* The eye-light integrator's value of a primary ray and its hit: |cos| between the geometric normal
+ * and the ray, 0 on a miss (the pixel is this grey). */
+RP_API float rp_render_eyelight(const rp_rayhit *rayhit);
+
 /* ---- film --------------------------------------------------------------------------------------- */
 
 typedef enum rp_tonemap {

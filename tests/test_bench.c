@@ -549,6 +549,43 @@ static void cuda_case(const char *cli, const char *scene, int size) {
     if (rc != 0 || !parsed) dump(log);
 }
 
+/* True when two files hold the same bytes. */
+static bool same_bytes(const char *a, const char *b) {
+    FILE *fa = fopen(a, "rb"), *fb = fopen(b, "rb");
+    bool same = fa && fb;
+    for (int ca = 0, cb = 0; same && ca != EOF; same = ca == cb) ca = fgetc(fa), cb = fgetc(fb);
+    if (fa) fclose(fa);
+    if (fb) fclose(fb);
+    return same;
+}
+
+/* render --engine cuda: on a GPU the eye-light image is the CPU's, byte for byte; without one it
+ * says so (exit 1); without nvcc at build time it is a usage error (exit 2). Not bench's, but it
+ * shares its runner and the CUDA cases. */
+static void cuda_render_case(const char *cli, const char *scene, int size) {
+    char gpu[1024], cpu[1024], log[1024], cmd[8192];
+    snprintf(gpu, sizeof gpu, "%s/render_cuda.png", tmp_dir());
+    snprintf(cpu, sizeof cpu, "%s/render_cpu.png", tmp_dir());
+    snprintf(log, sizeof log, "%s/render_cuda.log", tmp_dir());
+    remove(gpu);
+    snprintf(cmd, sizeof cmd, "'%s' render '%s' --engine cuda --integrator eyelight --width %d --height %d -o '%s'",
+             cli, scene, size, size, gpu);
+    int rc = run(cmd, log);
+    if (log_contains(log, "built without CUDA")) {
+        CHECKF(rc == 2, "cuda render: `%s` exited with %d", cmd, rc);
+        return;
+    }
+    if (log_contains(log, "no CUDA device found")) {
+        CHECKF(rc == 1, "cuda render: `%s` exited with %d", cmd, rc);
+        return;
+    }
+    CHECKF(rc == 0, "cuda render: `%s` exited with %d", cmd, rc);
+    snprintf(cmd, sizeof cmd, "'%s' render '%s' --integrator eyelight --width %d --height %d -o '%s' -q", cli, scene,
+             size, size, cpu);
+    CHECKF(run(cmd, log) == 0, "cuda render: `%s` failed", cmd);
+    CHECKF(same_bytes(gpu, cpu), "cuda render: %s differs from the CPU's %s", gpu, cpu);
+}
+
 int main(void) {
     char cli[PATH_MAX + 64];
     if (!find_cli(cli, sizeof cli)) {
@@ -574,6 +611,7 @@ int main(void) {
     if (cornell) grid_case(cli, cornell, small ? 16 : 48);
     if (cornell) bad_rays_case(cli, cornell, small ? 32 : 64);
     if (cornell) cuda_case(cli, cornell, small ? 32 : 64);
+    if (cornell) cuda_render_case(cli, cornell, small ? 32 : 96);
 
     /* Usage errors and missing files fail. */
     char cmd[sizeof cli + 128], log[1024];

@@ -26,6 +26,8 @@ int cli_bench(int argc, char **argv);
 
 /* The stream engine (apps/cli/stream_cli.c): render --engine stream, bench --stream. */
 int cli_stream_render(int argc, char **argv);
+/* `raypack render --engine cuda` (cuda_cli.c; without CUDA it says so and returns 2). */
+int cli_cuda_render(int argc, char **argv);
 int cli_stream_bench(int argc, char **argv);
 /* True when argv holds flag (followed by value, unless value is NULL). */
 bool cli_stream_wanted(int argc, char **argv, const char *flag, const char *value);
@@ -68,6 +70,10 @@ typedef struct cli_render_setup {
     float anim_time;
     uint32_t lights[CLI_MAX_LIGHTS]; /* --lights */
     int light_count;            /* -1: all */
+    const char *output;         /* -o (default raypack.png), checked writable */
+    float exposure;             /* --exposure, for 8-bit outputs */
+    rp_tonemap tonemap;         /* --tonemap, for 8-bit outputs */
+    bool quiet;                 /* -q */
 } cli_render_setup;
 /* Parses argv (argv[0] the command's name) as `raypack render` does, into out; sets *help for -h.
  * Returns CLI_EXIT_OK, or the exit status after printing why. */

@@ -43,6 +43,8 @@ static void render_usage(FILE *out) {
             "                         based: radiance in the scene's units, lit only by the scene's\n"
             "                         emitters (MTL Ke; Ka > 1), point lights and --env\n"
             "  --engine stream        the stream tracer over a uniform grid (see --engine stream --help)\n"
+            "  --engine cuda          eye light (--integrator eyelight) with the primary rays traced by the\n"
+            "                         CUDA BVH kernels: the CPU's image, byte for byte (docs/gpu.md)\n"
             "  --max-depth N          Whitted reflection/refraction depth; path, ir: bounces, 0..64 [5]\n"
             "  --reflect-depth N      Whitted: reflection rays only from hits at depth < N (primary\n"
             "  --refract-depth N      0), the same for refraction; 0..64, either replaces --max-depth\n"
@@ -561,6 +563,7 @@ static void json_work(FILE *f, const rp_render_stats *rs) {
 }
 
 int cli_render(int argc, char **argv) {
+    if (cli_stream_wanted(argc, argv, "--engine", "cuda")) return cli_cuda_render(argc, argv);
     if (cli_stream_wanted(argc, argv, "--engine", NULL)) return cli_stream_render(argc, argv);
     for (int i = 1; i < argc; i++)
         if (strcmp(argv[i], "--mpi") == 0) {
@@ -913,6 +916,10 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
     memcpy(out->look, o.look, sizeof o.look);
     memcpy(out->up, o.up, sizeof o.up);
     out->fov = o.fov;
+    out->output = o.output;
+    out->exposure = o.exposure;
+    out->tonemap = o.tonemap;
+    out->quiet = o.quiet;
     return CLI_EXIT_OK;
 }
 

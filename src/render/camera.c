@@ -29,6 +29,14 @@ void camera_ray(const render_camera *c, float x, float y, rp_ray *ray) {
     render_ray_init(ray, c->eye, d, INFINITY);
 }
 
+void rp_render_primary_rays(const rp_camera *camera, int width, int height, rp_ray *out) {
+    render_camera c;
+    camera_setup(camera, width, height, &c);
+    for (int y = 0; y < height; y++)
+        for (int x = 0; x < width; x++)
+            camera_ray(&c, (float)x + 0.5f, (float)y + 0.5f, &out[(size_t)y * (size_t)width + (size_t)x]);
+}
+
 void camera_rays_n(const render_camera *c, int bx, int by, int s, uint32_t count, const uint8_t *li,
                    const uint8_t *lj, rp_rayhit_n *p) {
     float ox[RENDER_LANES_MAX], oy[RENDER_LANES_MAX];

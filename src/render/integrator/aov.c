@@ -39,6 +39,8 @@ v3 eyelight_shade(const rp_rayhit *rh) {
     return v3_make(c, c, c);
 }
 
+float rp_render_eyelight(const rp_rayhit *rayhit) { return eyelight_shade(rayhit).x; }
+
 bool eyelight_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
                     int s) {
     const rp_render_desc *d = &f->desc;

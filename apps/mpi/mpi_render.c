@@ -64,7 +64,12 @@ static void mpi_usage(FILE *out) {
             "  --mpi-timeout S        seconds a client may stay silent while it holds tiles (then its\n"
             "                         tiles go to the others), and the limit of the start-up handshake [10]\n"
             "  --frames N             render a sequence of N frames, 1..100000, written as FILE_0000.EXT...\n"
-            "                         [1]; the camera orbits the look point about the up axis\n"
+            "                         [1]. An animated scene (BART AFF) plays its animation: frame i at\n"
+            "                         `raypack animate --frames N`'s time, the camera on the scene's path\n"
+            "                         (every rank moves the scene before the frame's tiles). A still scene's\n"
+            "                         camera orbits the look point about the up axis\n"
+            "  --anim-time T          animated scenes: every frame holds the scene at time T (as `raypack\n"
+            "                         render --anim-time T`), and the camera orbits or moves as for a still one\n"
             "  --orbit DEG            degrees the eye turns over the sequence [360]\n"
             "  --to-eye X,Y,Z  --to-look X,Y,Z\n"
             "                         instead of the orbit, move the camera in a straight line to this\n"
@@ -182,6 +187,11 @@ static int parse_mpi_options(int argc, char **argv, mpir_options *o, bool *help)
         } else if (strcmp(a, "--orbit") == 0) {
             VALUE();
             if (!cli_parse_float(MPIR_CMD, a, v, -36000.0, 36000.0, false, &o->orbit)) return CLI_EXIT_USAGE;
+            o->has_orbit = true;
+        } else if (strcmp(a, "--anim-time") == 0) {
+            VALUE();
+            if (!cli_parse_float(MPIR_CMD, a, v, -1e30, 1e30, true, &o->anim_time)) return CLI_EXIT_USAGE;
+            o->has_anim_time = true;
         } else if (strcmp(a, "--mpi-tile") == 0) {
             VALUE();
             if (!cli_parse_int(MPIR_CMD, a, v, 16, 1024, &o->tile)) return CLI_EXIT_USAGE;

@@ -287,15 +287,17 @@ static rp_camera frame_camera(const mpir_options *o, const rp_camera *base, int 
     return c;
 }
 
-/* The scene's camera now (an animated scene's: on its path at the current time) with --eye, --look,
- * --up and --fov in its place, as `raypack render` and `raypack animate` take it. */
-static rp_camera base_camera(const mpir_options *o, rp_render_scene *scene) {
-    rp_camera cam = rp_render_scene_default_camera(scene);
-    if (o->has_eye) memcpy(cam.pinhole.eye, o->eye, sizeof o->eye);
-    if (o->has_look) memcpy(cam.pinhole.look, o->look, sizeof o->look);
-    if (o->has_up) memcpy(cam.pinhole.up, o->up, sizeof o->up);
-    if (o->has_fov) cam.pinhole.fov_deg = o->fov;
-    return cam;
+/* The options that choose the image size and the camera, in `raypack render`'s terms, so that the
+ * sizes and cameras are its own (cli_render_size, cli_render_camera: an animated scene's camera on
+ * its path at the current time, --eye, --look, --up and --fov in its place, as in render and
+ * animate). */
+static cli_render_setup view_setup(const mpir_options *o) {
+    cli_render_setup v = {.width = o->width, .height = o->height, .has_eye = o->has_eye, .has_look = o->has_look,
+                          .has_up = o->has_up, .has_fov = o->has_fov, .fov = o->fov};
+    memcpy(v.eye, o->eye, sizeof v.eye);
+    memcpy(v.look, o->look, sizeof v.look);
+    memcpy(v.up, o->up, sizeof v.up);
+    return v;
 }
 
 /* The client of a hello, if it is one of this job's ranks of this build; NULL after printing why
@@ -356,6 +358,15 @@ static bool server_listen(server *s, rendezvous_msg *rv, int *lfd, MPI_Request *
         ok = MPI_Isend(rv, (int)sizeof *rv, MPI_BYTE, c + 1, TAG_RENDEZVOUS, MPI_COMM_WORLD, &(*reqs)[c]) == MPI_SUCCESS;
     if (!ok) fprintf(stderr, "raypack render: cannot send the clients rank 0's address\n");
     return ok;
+}
+
+/* A client whose connection failed before it was ready (sending it the scene, or reading its
+ * ready): a warning, and the job goes on without it. */
+static void lost_at_start(server *s, client *cl) {
+    fprintf(stderr, "raypack render: warning: rank %d (pid %d on %s) was lost during start-up (%s)\n", cl->rank,
+            cl->hello.pid, cl->hello.host, cl->conn.err);
+    mpir_conn_close(&cl->conn);
+    s->lost_client = true;
 }
 
 /* Start-up, second part: the clients' connections and hellos, then (with --mpi-bcast) the scene
@@ -460,10 +471,7 @@ static bool server_start(server *s, mpir_scene *rs, const rendezvous_msg *rvp, i
                 break;
             }
             if (rc < 0) {
-                fprintf(stderr, "raypack render: warning: rank %d (pid %d on %s) was lost during start-up (%s)\n",
-                        cl->rank, cl->hello.pid, cl->hello.host, cl->conn.err);
-                mpir_conn_close(&cl->conn);
-                s->lost_client = true;
+                lost_at_start(s, cl);
                 lost++;
                 continue;
             }
@@ -477,10 +485,7 @@ static bool server_start(server *s, mpir_scene *rs, const rendezvous_msg *rvp, i
             int rc = mpir_conn_read(&cl->conn);
             if (rc == 0) continue;
             if (rc < 0) {
-                fprintf(stderr, "raypack render: warning: rank %d (pid %d on %s) was lost during start-up (%s)\n",
-                        cl->rank, cl->hello.pid, cl->hello.host, cl->conn.err);
-                mpir_conn_close(&cl->conn);
-                s->lost_client = true;
+                lost_at_start(s, cl);
                 lost++;
                 continue;
             }
@@ -587,18 +592,9 @@ int mpir_server_run(const mpir_options *o, int size) {
         free(reqs);
         return status;
     }
-    /* image size: the rule of `raypack render` */
-    int sw = rs.data.camera.width > 0 ? rs.data.camera.width : 512;
-    int sh = rs.data.camera.height > 0 ? rs.data.camera.height : 512;
-    int wd = o->width, ht = o->height;
-    if (!wd && !ht) {
-        wd = sw;
-        ht = sh;
-    } else if (!ht) {
-        ht = (int)fmax(1.0, floor((double)wd * sh / sw + 0.5));
-    } else if (!wd) {
-        wd = (int)fmax(1.0, floor((double)ht * sw / sh + 0.5));
-    }
+    const cli_render_setup view = view_setup(o);
+    int wd, ht;
+    cli_render_size(&view, &rs.data, &wd, &ht);
     s.width = wd;
     s.height = ht;
     s.tiles_x = (wd + o->tile - 1) / o->tile;
@@ -657,7 +653,7 @@ int mpir_server_run(const mpir_options *o, int size) {
             fprintf(stderr, "raypack render: frame %d: %s\n", f, err);
             goto done;
         }
-        rp_camera base = base_camera(o, rs.scene);
+        rp_camera base = cli_render_camera(&view, rs.scene);
         rp_camera fc = play ? base : frame_camera(o, &base, f);
         s.proto_job = (job_msg){.frame = (uint32_t)f, .width = wd, .height = ht, .spp = o->spp,
                                 .animated = anim != NULL, .anim_time = ft,

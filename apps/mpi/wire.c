@@ -152,19 +152,22 @@ static bool get(reader *r, void *dst, size_t n, const char *what) {
     return true;
 }
 
-/* Reads an optional array of `expect` elements (or any count when expect is SIZE_MAX, returned in
- * *count); NULL in *dst when the sender had none. */
-static bool get_array(reader *r, void **dst, size_t elem, size_t expect, size_t *count, const char *what) {
+/* Reads an array of `expect` elements (or any count when expect is SIZE_MAX, returned in *count).
+ * An optional one (always false) may be absent: NULL in *dst when the sender had none. One that
+ * every animated scene has (always) is allocated even empty, one element more, as the loader does:
+ * the renderer indexes those without a NULL check. */
+static bool get_array_of(reader *r, void **dst, size_t elem, size_t expect, size_t *count, bool always,
+                         const char *what) {
     uint64_t n = 0;
     *dst = NULL;
     if (!get(r, &n, sizeof n, what)) return false;
     if (count) *count = (size_t)n;
-    if (n == 0) return true;
+    if (n == 0 && !always) return true;
     if ((expect != SIZE_MAX && n != expect) || n > r->left / elem) {
         r->what = what;
         return false;
     }
-    *dst = malloc((size_t)n * elem);
+    *dst = malloc(((size_t)n + (always ? 1 : 0)) * elem);
     if (!*dst) {
         r->what = "memory";
         return false;
@@ -172,24 +175,12 @@ static bool get_array(reader *r, void **dst, size_t elem, size_t expect, size_t 
     return get(r, *dst, (size_t)n * elem, what);
 }
 
-/* An array every animated scene has, even of no elements (the loader allocates one more than it
- * needs, and the renderer indexes these without a NULL check): `expect` elements (SIZE_MAX: any
- * count, returned in *count). */
+static bool get_array(reader *r, void **dst, size_t elem, size_t expect, size_t *count, const char *what) {
+    return get_array_of(r, dst, elem, expect, count, false, what);
+}
+
 static bool get_anim_array(reader *r, void **dst, size_t elem, size_t expect, size_t *count, const char *what) {
-    uint64_t n = 0;
-    *dst = NULL;
-    if (!get(r, &n, sizeof n, what)) return false;
-    if (count) *count = (size_t)n;
-    if ((expect != SIZE_MAX && n != expect) || n > r->left / elem) {
-        r->what = what;
-        return false;
-    }
-    *dst = malloc(((size_t)n + 1) * elem);
-    if (!*dst) {
-        r->what = "memory";
-        return false;
-    }
-    return get(r, *dst, (size_t)n * elem, what);
+    return get_array_of(r, dst, elem, expect, count, true, what);
 }
 
 static bool nodes_below(const int32_t *node, size_t n, size_t limit) {

@@ -259,6 +259,10 @@ int main(void) {
     rc = run_mpi("", 3, args);
     CHECKF(rc != 0 && rc != 124 && strstr(output, "--orbit moves the camera of a still scene"),
            "--orbit on an animation: exit %d:\n%s", rc, output);
+    /* ... and --anim-time on a still scene (the built-in room) is refused too */
+    rc = run_mpi("", 1, "--mpi --anim-time 1 --width 16 --height 16 -o /dev/null.png");
+    CHECKF(rc != 0 && rc != 124 && strstr(output, "--anim-time: the scene is not animated"),
+           "--anim-time on a still scene: exit %d:\n%s", rc, output);
 
     /* BART's museum played for 3 frames with -np 3, each rank loading the file and with
      * --mpi-bcast (the animation on the wire): every frame equals `raypack render --anim-time T` at

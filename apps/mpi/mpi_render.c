@@ -4,7 +4,10 @@
  * dynamically, keeping one tile queued ahead on every client so that none waits for its next job;
  * clients send finished tiles back compressed (wire.c), and the server writes the image through the
  * same rp_image_write as `raypack render`. A pixel's value depends only on the pixel (the
- * deterministic sampler), so the image is bit-identical to the single process for any N.
+ * deterministic sampler), so the image is bit-identical to the single process for any N. A BART
+ * animation plays under --frames: each job carries its frame's time (`raypack animate`'s rule,
+ * rp_anim_frame_time), and every rank moves its copy of the scene there (rp_render_scene_set_time)
+ * before it renders the frame's first tile; --mpi-bcast sends the animation with the scene.
  *
  * Transport and faults, with Open MPI 4.1 (no ULFM): MPI starts the ranks and carries one message,
  * rank 0's TCP address and a token, to each client; scenes (--mpi-bcast), tiles and results travel

@@ -218,6 +218,10 @@ RP_API void rp_scene_data_free(rp_scene_data *scene);
 RP_API bool rp_scene_data_set_time(rp_scene_data *scene, float time);
 /* Time of frame i of the animation (start + i (end - start) / (frames - 1)); start for a still scene. */
 RP_API float rp_scene_data_frame_time(const rp_scene_data *scene, int frame);
+/* Time of frame i of count spread evenly over the animation's range, first and last included
+ * (start + i (end - start) / (count - 1); start when count <= 1): `raypack animate --frames`'s rule,
+ * shared by every command that renders a sequence. 0 for NULL. */
+RP_API float rp_anim_frame_time(const rp_animation_data *anim, int frame, int count);
 /* Value of one track at time t: xyz for translation and scale, a unit quaternion (x, y, z, w) for
  * rotation (BART: squad through the keys with Kochanek-Bartels tangents of the quaternion logs). */
 RP_API void rp_anim_track_eval(const rp_animation_data *anim, rp_anim_track track, rp_anim_channel channel,

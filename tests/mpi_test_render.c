@@ -1,8 +1,10 @@
 /* `mpirun raypack render --mpi` on localhost (registered as test_mpi_render when MPI is found):
  * the image of -np 1..4 (Whitted, path tracing, instant radiosity; direct and AO with -np 3), of
- * --mpi-bcast (also when only rank 0 can read the scene), PNG output and a 3-frame orbit are
- * byte-identical to the single-process `raypack render` of the same camera; a client killed
- * mid-frame (by itself, and with kill -9 from outside at two moments), hanging mid-frame or dying
+ * --mpi-bcast (also when only rank 0 can read the scene), PNG output, a 3-frame orbit and 3 frames
+ * of BART's museum played (each rank loading it, and with --mpi-bcast) are byte-identical to the
+ * single-process `raypack render` of the same camera and animation time (and to `raypack animate`'s
+ * frames); a client killed mid-frame (by itself, and with kill -9 from outside at two moments, the
+ * second mid-animation), hanging mid-frame or dying
  * during start-up loses no frame and changes no pixel; rank 0's death ends the job without a hang;
  * a client that never answers, one of another protocol (also protocol 1, which spoke MPI) and one
  * whose scene is broken end the job with a clear message from rank 0 within the time-out. Every
@@ -62,44 +64,60 @@ static int run_mpi(const char *extra, int np, const char *args) {
 }
 
 static const char *SIZE = "--width 200 --height 150 --mpi-tile 32";
+/* An orbit of the (animated) scene held at one time: the camera moves, the scene does not. */
+static const char *ORBIT = "--orbit 60 --anim-time 1";
 
 static void file_in_tmp(char *buf, size_t size, const char *name) { snprintf(buf, size, "%s/%s", tmp, name); }
 
-/* The orbit's frames against single-process renders of the cameras rank 0 printed. */
-static void check_frames(const char *prefix, int frames, const char *what) {
+/* A sequence's frames (PREFIX_0000.pfm...) against single-process renders of scene at the size
+ * given, each at the animation time rank 0 printed for it (when it printed one) and, unless the
+ * camera follows the scene's path (follow), with the camera it printed. */
+static void check_frames_of(const char *scene, const char *size, const char *prefix, int frames, bool follow,
+                            const char *what) {
     const char *p = output;
     for (int f = 0; f < frames; f++) {
-        char tag[32], eye[128], look[128], up[128], fov[64];
+        char tag[32], eye[128], look[128], up[128], fov[64], when[96] = "";
         snprintf(tag, sizeof tag, "frame    %d:", f);
         const char *line = strstr(p, tag);
         const char *cam = line ? strstr(line, "camera eye ") : NULL;
         CHECKF(cam && sscanf(cam, "camera eye %127s look %127s up %127s fov %63s", eye, look, up, fov) == 4,
                "%s: no camera for frame %d in:\n%s", what, f, output);
         if (!cam) return;
+        const char *at = strstr(line, "anim time ");
+        if (at && at < cam) snprintf(when, sizeof when, "--anim-time %.40s", at + 10);
+        char *cut = strchr(when, ' ');
+        if (cut) cut = strchr(cut + 1, ' ');
+        if (cut) *cut = '\0'; /* "--anim-time T" */
         char saved[sizeof output];
         memcpy(saved, output, sizeof output);
-        char ref[1200], got[1200], cmd[8192];
-        snprintf(ref, sizeof ref, "%s/orbit_ref_%d.pfm", tmp, f);
+        char ref[1200], got[1200], cmd[8192], camera[700] = "";
+        snprintf(ref, sizeof ref, "%s/%s_ref_%d.pfm", tmp, prefix, f);
         snprintf(got, sizeof got, "%s/%s_%04d.pfm", tmp, prefix, f);
-        snprintf(cmd, sizeof cmd, "'%s' render '%s' --width 200 --height 150 --eye %s --look %s --up %s --fov %s -o '%s' --quiet",
-                 exe, kitchen, eye, look, up, fov, ref);
+        if (!follow) snprintf(camera, sizeof camera, "--eye %s --look %s --up %s --fov %s", eye, look, up, fov);
+        snprintf(cmd, sizeof cmd, "'%s' render '%s' %s %s %s -o '%s' --quiet", exe, scene, size, when, camera, ref);
         CHECK(run(cmd) == 0);
-        CHECKF(same_file(ref, got), "%s: frame %d differs from the single process (%s, %s)", what, f, got, ref);
+        CHECKF(same_file(ref, got), "%s: frame %d differs from the single process (%s, %s: %s)", what, f, got, ref, cmd);
         memcpy(output, saved, sizeof output);
         p = cam;
     }
 }
 
-/* A -np 3 orbit of frames, where the client `rank` is killed with SIGKILL from outside when rank 0
- * prints a line starting with `trigger`: the job still writes every frame, each identical. */
-static void outside_kill(const char *trigger, int rank, int frames, const char *prefix) {
+/* The orbit's (or the animation's) frames of the kitchen at 200x150. */
+static void check_frames(const char *prefix, int frames, bool follow, const char *what) {
+    check_frames_of(kitchen, "--width 200 --height 150", prefix, frames, follow, what);
+}
+
+/* A -np 3 sequence of frames (an orbit of the scene held at one time, or its animation: play),
+ * where the client `rank` is killed with SIGKILL from outside when rank 0 prints a line starting
+ * with `trigger`: the job still writes every frame, each identical. */
+static void outside_kill(const char *trigger, int rank, int frames, bool play, const char *prefix) {
     char got[1200], args[8192], pidline[64], name[64];
     snprintf(name, sizeof name, "%s.pfm", prefix);
     file_in_tmp(got, sizeof got, name);
     snprintf(args, sizeof args,
              "timeout -k 5 90 '%s' --oversubscribe --enable-recovery -np 3 '%s' render '%s' --mpi %s --frames %d "
-             "--orbit 60 -o '%s' --mpi-timeout 2 2>&1",
-             mpirun, exe, kitchen, SIZE, frames, got);
+             "%s -o '%s' --mpi-timeout 2 2>&1",
+             mpirun, exe, kitchen, SIZE, frames, play ? "" : ORBIT, got);
     snprintf(pidline, sizeof pidline, "client   rank %d: pid %%d", rank);
     FILE *p = popen(args, "r");
     CHECK(p != NULL);
@@ -123,7 +141,8 @@ static void outside_kill(const char *trigger, int rank, int frames, const char *
     snprintf(lost, sizeof lost, "rank %d (pid", rank);
     CHECKF(killed && WIFEXITED(st) && WEXITSTATUS(st) == 0 && strstr(output, lost),
            "kill -9 from outside at '%s': killed %d, status %d:\n%s", trigger, killed, st, output);
-    check_frames(prefix, frames, "orbit with a client killed from outside");
+    check_frames(prefix, frames, play, play ? "animation with a client killed from outside"
+                                             : "orbit with a client killed from outside");
 }
 
 int main(void) {
@@ -232,9 +251,53 @@ int main(void) {
 
     /* A 3-frame orbit: every frame equals the single process at that frame's camera. */
     file_in_tmp(got, sizeof got, "orbit.pfm");
+    snprintf(args, sizeof args, "'%s' --mpi %s --frames 3 %s -o '%s'", kitchen, SIZE, ORBIT, got);
+    CHECKF(run_mpi("", 3, args) == 0 && strstr(output, "every frame at time 1"), "orbit:\n%s", output);
+    check_frames("orbit", 3, false, "orbit");
+    /* An animated scene without --anim-time plays: an orbit there is refused. */
     snprintf(args, sizeof args, "'%s' --mpi %s --frames 3 --orbit 60 -o '%s'", kitchen, SIZE, got);
-    CHECKF(run_mpi("", 3, args) == 0, "orbit:\n%s", output);
-    check_frames("orbit", 3, "orbit");
+    rc = run_mpi("", 3, args);
+    CHECKF(rc != 0 && rc != 124 && strstr(output, "--orbit moves the camera of a still scene"),
+           "--orbit on an animation: exit %d:\n%s", rc, output);
+    /* ... and --anim-time on a still scene (the built-in room) is refused too */
+    rc = run_mpi("", 1, "--mpi --anim-time 1 --width 16 --height 16 -o /dev/null.png");
+    CHECKF(rc != 0 && rc != 124 && strstr(output, "--anim-time: the scene is not animated"),
+           "--anim-time on a still scene: exit %d:\n%s", rc, output);
+
+    /* BART's museum played for 3 frames with -np 3, each rank loading the file and with
+     * --mpi-bcast (the animation on the wire): every frame equals `raypack render --anim-time T` at
+     * the time rank 0 printed, with the scene's own (moving) camera, and `raypack animate`'s frame. */
+    char museum_buf[1024];
+    const char *museum = rp_test_scene("bart_museum5.tar.gz", museum_buf, sizeof museum_buf);
+    CHECK(museum != NULL);
+    if (museum) {
+        char pattern[1200], mine[1200], theirs[1200];
+        static const char *const MSIZE = "--width 96 --height 72";
+        file_in_tmp(pattern, sizeof pattern, "museum_anim_%04d.pfm");
+        snprintf(args, sizeof args, "'%s' animate '%s' --frames 3 %s -o '%s' --quiet", exe, museum, MSIZE, pattern);
+        CHECK(run(args) == 0);
+        static const char *const how[] = {"", "--mpi-bcast"};
+        for (int i = 0; i < 2; i++) {
+            const char *prefix = i ? "museum_bcast" : "museum";
+            char name[64];
+            snprintf(name, sizeof name, "%s.pfm", prefix);
+            file_in_tmp(got, sizeof got, name);
+            snprintf(args, sizeof args, "'%s' --mpi %s %s --mpi-tile 16 --frames 3 -o '%s'", museum, how[i], MSIZE, got);
+            rc = run_mpi("", 3, args);
+            CHECKF(rc == 0 && strstr(output, "3 frames of the animation") && strstr(output, "anim time 5 "),
+                   "museum animation %s: exit %d:\n%s", how[i], rc, output);
+            check_frames_of(museum, MSIZE, prefix, 3, true, i ? "museum animation, --mpi-bcast" : "museum animation");
+            for (int j = 0; j < 3; j++) {
+                snprintf(mine, sizeof mine, "%s/%s_%04d.pfm", tmp, prefix, j);
+                snprintf(theirs, sizeof theirs, pattern, j);
+                CHECKF(same_file(mine, theirs), "museum animation %s: frame %d differs from raypack animate's", how[i], j);
+            }
+        }
+        /* the animation moved: its first and last frames differ */
+        snprintf(mine, sizeof mine, "%s/museum_0000.pfm", tmp);
+        snprintf(theirs, sizeof theirs, "%s/museum_0002.pfm", tmp);
+        CHECK(!same_file(mine, theirs));
+    }
 
     /* A client kills itself (SIGKILL) holding two tiles mid-frame: they go to the others. */
     file_in_tmp(got, sizeof got, "killed.pfm");
@@ -258,8 +321,8 @@ int main(void) {
     /* kill -9 from outside: as soon as rank 0 has named its clients (frame 0 starting), and after
      * frame 1 of a sequence (tiles in flight both ways). Rank 0 sees the connection close and hands
      * the tiles on; every frame equals the single process. */
-    outside_kill("client   rank 2:", 2, 3, "orbitk");
-    outside_kill("frame    1:", 1, 4, "orbitk1");
+    outside_kill("client   rank 2:", 2, 3, false, "orbitk");
+    outside_kill("frame    1:", 1, 4, true, "animk1"); /* mid-animation */
 
     /* Rank 0 dies mid-frame: the job ends (under --enable-recovery the clients give up after 4
      * time-outs of silence), nothing hangs. */
@@ -276,8 +339,9 @@ int main(void) {
     rc = run_mpi("-x RAYPACK_MPI_TEST_STALL=2", 3, args);
     CHECKF(rc != 0 && rc != 124 && strstr(output, "rank 2 did not answer within 2.0 s") && elapsed_s < 30.0,
            "silent client: exit %d after %.1f s:\n%s", rc, elapsed_s, output);
-    rc = run_mpi("-x RAYPACK_MPI_TEST_PROTOCOL=1:99", 3, args);
-    CHECKF(rc != 0 && rc != 124 && strstr(output, "rank 1 (pid") && strstr(output, "protocol 99") &&
+    /* (protocol 2: the one before the animation went on the wire) */
+    rc = run_mpi("-x RAYPACK_MPI_TEST_PROTOCOL=1:2", 3, args);
+    CHECKF(rc != 0 && rc != 124 && strstr(output, "rank 1 (pid") && strstr(output, "protocol 2 ") &&
            strstr(output, "run the same build on every rank"), "another protocol: exit %d:\n%s", rc, output);
     /* a client of protocol 1 (all over MPI) says hello there: rank 0 names it */
     rc = run_mpi("-x RAYPACK_MPI_TEST_PROTOCOL1=2", 3, args);

@@ -142,6 +142,10 @@ static void test_aff_time(void) {
         return;
     }
     CHECK(near(rp_scene_data_frame_time(&s, 2), 1.0, 1e-6) && near(rp_scene_data_frame_time(&s, 4), 2.0, 1e-6));
+    /* another count over the same range (animate --frames, render --mpi --frames), and the ends */
+    CHECK(near(rp_anim_frame_time(a, 1, 3), 0.5 * ((double)a->start + a->end), 1e-6) &&
+          rp_anim_frame_time(a, 0, 3) == a->start && near(rp_anim_frame_time(a, 2, 3), a->end, 1e-6) &&
+          rp_anim_frame_time(a, 5, 1) == a->start && rp_anim_frame_time(NULL, 1, 3) == 0.0f);
     CHECK(a->tri_node[0] == 0 && a->tri_node[1] == 1 && a->tri_node[2] == -1 && a->tri_tpa[2] == 1);
     /* t 0 (the start, as loaded): everything at rest, 10 up */
     const float *p = s.positions + 3 * s.indices[0];

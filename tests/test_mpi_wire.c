@@ -1,8 +1,9 @@
 /* The MPI renderer's byte formats (apps/mpi/wire.c), without MPI: every shared scene kind (meshes
- * with normals, texcoords and textures, spheres, cones) survives wire_scene_pack/unpack array for
- * array and renders the same image; truncated and corrupted messages are refused with a message
- * (never a crash); tiles of real pixels and of odd floats (NaN, infinities, denormals) come back
- * bit for bit, and broken compressed tiles are refused. */
+ * with normals, texcoords and textures, spheres, cones, BART animations) survives
+ * wire_scene_pack/unpack array for array and renders the same image (an animation at two more
+ * times); truncated and corrupted messages are refused with a message (never a crash); tiles of
+ * real pixels and of odd floats (NaN, infinities, denormals) come back bit for bit, and broken
+ * compressed tiles are refused. */
 #include <math.h>
 #include <stdint.h>
 
@@ -19,23 +20,77 @@ static bool same(const void *a, const void *b, size_t n) {
     return memcmp(a, b, n) == 0;
 }
 
-static float *render(const rp_scene_data *data) {
+/* The image of data, or of frames images at the animation's times t[] (the render scene moved there
+ * with rp_render_scene_set_time, as the MPI ranks do), one after the other in one buffer. */
+static float *render_times(rp_scene_data *data, const float *t, int frames) {
     rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
     char err[256] = "";
     rp_render_scene *rs = dev ? rp_render_scene_new(dev, data, NULL, err, sizeof err) : NULL;
     CHECKF(rs != NULL, "%s", err);
     float *px = NULL;
     if (rs) {
-        px = malloc(sizeof(float) * W * H * 3);
-        rp_render_desc d = {.width = W, .height = H};
-        CHECK(rp_render(rs, &d, px, NULL));
+        int n = frames > 0 ? frames : 1;
+        px = malloc(sizeof(float) * W * H * 3 * (size_t)n);
+        for (int f = 0; px && f < n; f++) {
+            if (frames > 0) CHECK(rp_render_scene_set_time(rs, data, t[f], NULL));
+            rp_camera cam = rp_render_scene_default_camera(rs);
+            rp_render_desc d = {.width = W, .height = H, .camera = &cam};
+            CHECK(rp_render(rs, &d, px + (size_t)f * W * H * 3, NULL));
+        }
         rp_render_scene_release(rs);
     }
     if (dev) rp_device_release(dev);
     return px;
 }
 
-static void check_scene(const char *name, const rp_scene_data *s) {
+static float *render(rp_scene_data *data) { return render_times(data, NULL, 0); }
+
+/* n bytes the same, where an empty array may be NULL on one side (the loader allocates some anyway). */
+static bool same_n(const void *a, const void *b, size_t n) { return n == 0 || same(a, b, n); }
+
+/* The animation's arrays, one by one. */
+static void check_animation(const char *name, const rp_scene_data *s, const rp_scene_data *u) {
+    const rp_animation_data *a = s->animation, *b = u->animation;
+    CHECKF(!a == !b, "%s: animation %s", name, a ? "lost" : "appeared");
+    if (!a || !b) return;
+    CHECK(a->start == b->start && a->end == b->end && a->frames == b->frames && a->time == b->time);
+    CHECK(a->node_count == b->node_count && a->key_count == b->key_count && a->vis_count == b->vis_count &&
+          a->tpa_count == b->tpa_count);
+    CHECK(same_n(a->camera, b->camera, sizeof a->camera) && same_n(&a->rest_camera, &b->rest_camera, sizeof a->rest_camera));
+    CHECK(same_n(a->nodes, b->nodes, a->node_count * sizeof *a->nodes));
+    CHECK(same_n(a->keys, b->keys, a->key_count * sizeof *a->keys));
+    CHECK(same_n(a->vis_times, b->vis_times, a->vis_count * 4) && same_n(a->vis_values, b->vis_values, a->vis_count));
+    CHECK(same_n(a->tpas, b->tpas, a->tpa_count * sizeof *a->tpas));
+    size_t keys = 0;
+    for (size_t i = 0; i < a->tpa_count; i++)
+        if (a->tpas[i].first + a->tpas[i].count > keys) keys = a->tpas[i].first + a->tpas[i].count;
+    CHECK(same_n(a->tpa_keys, b->tpa_keys, 19 * keys * sizeof(float)));
+    CHECK(same_n(a->tri_node, b->tri_node, s->triangle_count * 4) && same_n(a->tri_tpa, b->tri_tpa, s->triangle_count));
+    CHECK(same_n(a->sphere_node, b->sphere_node, s->sphere_count * 4) && same_n(a->cone_node, b->cone_node, s->cone_count * 4));
+    CHECK(same_n(a->light_node, b->light_node, s->light_count * 4));
+    CHECK(same_n(a->vertex_node, b->vertex_node, s->vertex_count * 4) &&
+          same_n(a->normal_node, b->normal_node, s->normal_count * 4));
+    CHECK(same_n(a->rest_positions, b->rest_positions, 3 * s->vertex_count * 4));
+    CHECK(!a->rest_normals == !b->rest_normals &&
+          (!a->rest_normals || same_n(a->rest_normals, b->rest_normals, 3 * s->normal_count * 4)));
+    CHECK(same_n(a->rest_spheres, b->rest_spheres, s->sphere_count * sizeof *a->rest_spheres));
+    CHECK(same_n(a->rest_cones, b->rest_cones, s->cone_count * sizeof *a->rest_cones));
+    CHECK(same_n(a->rest_lights, b->rest_lights, s->light_count * sizeof *a->rest_lights));
+}
+
+/* A corrupted animation (made so before packing) is refused naming what is wrong. */
+static void check_bad_animation(const char *name, rp_scene_data *s, const char *what) {
+    uint8_t *buf = NULL;
+    size_t size = 0;
+    rp_scene_data u;
+    char err[512] = "";
+    CHECK(wire_scene_pack(s, &buf, &size));
+    CHECKF(buf && !wire_scene_unpack(buf, size, &u, err, sizeof err) && strstr(err, what), "%s: %s: got '%s'", name,
+           what, err);
+    free(buf);
+}
+
+static void check_scene(const char *name, rp_scene_data *s) {
     uint8_t *buf = NULL;
     size_t size = 0;
     CHECK(wire_scene_pack(s, &buf, &size));
@@ -66,12 +121,47 @@ static void check_scene(const char *name, const rp_scene_data *s) {
     }
     CHECK(u.camera.valid == s->camera.valid && same(u.camera.eye, s->camera.eye, sizeof u.camera.eye) &&
           u.camera.width == s->camera.width && u.has_background == s->has_background);
+    check_animation(name, s, &u);
     float *a = render(s), *b = render(&u);
     CHECKF(a && b && memcmp(a, b, sizeof(float) * W * H * 3) == 0, "%s: the unpacked scene renders differently",
            name);
     free(a);
     free(b);
+    if (s->animation && u.animation) {
+        /* a client's frames: the unpacked animation moves as the loaded one (then back to the start) */
+        const rp_animation_data *an = s->animation;
+        float t[3] = {rp_anim_frame_time(an, 1, 3), an->end, an->start};
+        a = render_times(s, t, 3);
+        b = render_times(&u, t, 3);
+        CHECKF(a && b && memcmp(a, b, sizeof(float) * W * H * 3 * 3) == 0,
+               "%s: the unpacked animation renders differently at t %g or %g", name, (double)t[0], (double)t[1]);
+        CHECKF(a && memcmp(a, a + W * H * 3, sizeof(float) * W * H * 3) != 0, "%s: nothing moved from t %g to %g", name,
+               (double)t[0], (double)t[1]);
+        free(a);
+        free(b);
+    }
     rp_scene_data_free(&u);
+    if (s->animation) {
+        rp_animation_data *an = s->animation;
+        if (an->node_count) {
+            int32_t keep = an->nodes[0].parent;
+            an->nodes[0].parent = 0; /* its own parent */
+            check_bad_animation(name, s, "animation block parents");
+            an->nodes[0].parent = keep;
+        }
+        if (s->triangle_count) {
+            int32_t keep = an->tri_node[0];
+            an->tri_node[0] = (int32_t)an->node_count;
+            check_bad_animation(name, s, "animation block indices");
+            an->tri_node[0] = keep;
+        }
+        if (an->tpa_count) {
+            uint32_t keep = an->tpas[0].vertex;
+            an->tpas[0].vertex = (uint32_t)s->vertex_count - 2;
+            check_bad_animation(name, s, "tpa triangles");
+            an->tpas[0].vertex = keep;
+        }
+    }
 
     /* Truncated anywhere: refused, with the reason. */
     int refused = 0, cuts = 0;
@@ -84,13 +174,17 @@ static void check_scene(const char *name, const rp_scene_data *s) {
     CHECKF(refused == cuts, "%s: %d of %d truncations refused", name, refused, cuts);
     /* A vertex index past the positions (the last index of the first triangle). */
     if (s->triangle_count) {
-        size_t at = 24 + 8 + 3 * s->vertex_count * 4 + 8 + (s->normals ? 3 * s->normal_count * 4 : 0) + 8 +
+        size_t at = 36 + 8 + 3 * s->vertex_count * 4 + 8 + (s->normals ? 3 * s->normal_count * 4 : 0) + 8 +
                     (s->texcoords ? 2 * s->texcoord_count * 4 : 0) + 8;
         uint32_t big = (uint32_t)s->vertex_count;
         memcpy(buf + at + 8, &big, 4);
         CHECKF(!wire_scene_unpack(buf, size, &u, err, sizeof err) && strstr(err, "indices"), "%s: bad index: %s",
                name, err);
     }
+    /* a message of format 1 (no animation): named, not misread */
+    uint32_t v1 = 1;
+    memcpy(buf + 4, &v1, 4);
+    CHECKF(!wire_scene_unpack(buf, size, &u, err, sizeof err) && strstr(err, "format 1;"), "%s: format 1: %s", name, err);
     buf[0] ^= 0xff;
     CHECK(!wire_scene_unpack(buf, size, &u, err, sizeof err) && strstr(err, "not a raypack scene"));
     free(buf);

@@ -222,8 +222,7 @@ int cli_animate(int argc, char **argv) {
     uint64_t rays = 0;
     int done_frames = 0;
     for (int i = first; i <= last; i++) {
-        float t = count > 1 ? anim->start + (float)((double)i * ((double)anim->end - anim->start) / (count - 1)) : anim->start;
-        if (fps > 0.0f) t = anim->start + (float)((double)i / fps);
+        float t = fps > 0.0f ? anim->start + (float)((double)i / fps) : rp_anim_frame_time(anim, i, count);
         rp_render_update_stats us;
         if (!rp_render_scene_set_time(scene, &data, t, &us)) {
             fprintf(stderr, "raypack animate: updating the scene to time %g failed\n", (double)t);

@@ -139,7 +139,7 @@ int mpir_client_run(const mpir_options *o, int rank, bool *no_finalize) {
         const void *body = NULL;
         char jerr[512] = "";
         rp_render_stats rst;
-        if ((int)job.frame != frame && !mpir_scene_frame(&rs, o, (int)job.frame, jerr, sizeof jerr)) {
+        if ((int)job.frame != frame && job.animated && !mpir_scene_frame(&rs, job.anim_time, jerr, sizeof jerr)) {
             /* reported below as the tile's error */
         } else if (mpir_tile_render(&w, rs.scene, &job, &rst)) {
             frame = (int)job.frame;

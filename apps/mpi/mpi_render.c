@@ -4,7 +4,10 @@
  * dynamically, keeping one tile queued ahead on every client so that none waits for its next job;
  * clients send finished tiles back compressed (wire.c), and the server writes the image through the
  * same rp_image_write as `raypack render`. A pixel's value depends only on the pixel (the
- * deterministic sampler), so the image is bit-identical to the single process for any N.
+ * deterministic sampler), so the image is bit-identical to the single process for any N. A BART
+ * animation plays under --frames: each job carries its frame's time (`raypack animate`'s rule,
+ * rp_anim_frame_time), and every rank moves its copy of the scene there (rp_render_scene_set_time)
+ * before it renders the frame's first tile; --mpi-bcast sends the animation with the scene.
  *
  * Transport and faults, with Open MPI 4.1 (no ULFM): MPI starts the ranks and carries one message,
  * rank 0's TCP address and a token, to each client; scenes (--mpi-bcast), tiles and results travel
@@ -64,7 +67,12 @@ static void mpi_usage(FILE *out) {
             "  --mpi-timeout S        seconds a client may stay silent while it holds tiles (then its\n"
             "                         tiles go to the others), and the limit of the start-up handshake [10]\n"
             "  --frames N             render a sequence of N frames, 1..100000, written as FILE_0000.EXT...\n"
-            "                         [1]; the camera orbits the look point about the up axis\n"
+            "                         [1]. An animated scene (BART AFF) plays its animation: frame i at\n"
+            "                         `raypack animate --frames N`'s time, the camera on the scene's path\n"
+            "                         (every rank moves the scene before the frame's tiles). A still scene's\n"
+            "                         camera orbits the look point about the up axis\n"
+            "  --anim-time T          animated scenes: every frame holds the scene at time T (as `raypack\n"
+            "                         render --anim-time T`), and the camera orbits or moves as for a still one\n"
             "  --orbit DEG            degrees the eye turns over the sequence [360]\n"
             "  --to-eye X,Y,Z  --to-look X,Y,Z\n"
             "                         instead of the orbit, move the camera in a straight line to this\n"
@@ -182,6 +190,11 @@ static int parse_mpi_options(int argc, char **argv, mpir_options *o, bool *help)
         } else if (strcmp(a, "--orbit") == 0) {
             VALUE();
             if (!cli_parse_float(MPIR_CMD, a, v, -36000.0, 36000.0, false, &o->orbit)) return CLI_EXIT_USAGE;
+            o->has_orbit = true;
+        } else if (strcmp(a, "--anim-time") == 0) {
+            VALUE();
+            if (!cli_parse_float(MPIR_CMD, a, v, -1e30, 1e30, true, &o->anim_time)) return CLI_EXIT_USAGE;
+            o->has_anim_time = true;
         } else if (strcmp(a, "--mpi-tile") == 0) {
             VALUE();
             if (!cli_parse_int(MPIR_CMD, a, v, 16, 1024, &o->tile)) return CLI_EXIT_USAGE;

@@ -17,8 +17,9 @@
 #define MPIR_CMD "render"
 
 /* Bumped whenever a message below changes; the handshake refuses a client of another protocol.
- * Protocol 1 sent every message over MPI; 2 uses MPI only to tell clients rank 0's address. */
-#define MPIR_PROTOCOL 2u
+ * Protocol 1 sent every message over MPI; 2 uses MPI only to tell clients rank 0's address; 3 adds
+ * the frame's animation time to jobs and the animation to the broadcast scene (wire format 2). */
+#define MPIR_PROTOCOL 3u
 #define MPIR_MAGIC 0x4d435052u /* "RPCM" */
 
 /* TAG_RENDEZVOUS is the one MPI message (rank 0 to each client); the others are frames on the
@@ -68,6 +69,8 @@ typedef struct job_msg {
     rp_camera camera;
     rp_ir_desc ir;
     float ao_distance;
+    int32_t animated;   /* 1: the scene is animated; a rank moves it to anim_time before the frame's tiles */
+    float anim_time;
 } job_msg;
 
 /* Client -> server: a finished tile (followed by its compressed floats) or an error (its text). */
@@ -89,6 +92,10 @@ typedef struct mpir_options {
     float eye[3], look[3], up[3], fov, to_eye[3], to_look[3];
     int frames;
     float orbit;
+    bool has_orbit;
+    /* animated scenes: the time every frame holds (else frame f of K is at `raypack animate`'s time) */
+    bool has_anim_time;
+    float anim_time;
     bool bcast, quiet;
     int tile;
     float timeout_s;
@@ -109,6 +116,7 @@ typedef struct mpir_scene {
     bool builtin;
     rp_device *device;
     rp_render_scene *scene;
+    rp_render_update_stats update; /* of the last mpir_scene_frame of an animated scene */
 } mpir_scene;
 
 typedef struct mpir_tile_worker {
@@ -125,11 +133,11 @@ typedef struct mpir_tile_worker {
 bool mpir_scene_load(mpir_scene *s, const char *path, char *err, size_t err_size);
 /* Makes the device and commits the render scene of s->data; false with a message in err. */
 bool mpir_scene_build(mpir_scene *s, const mpir_options *o, int threads, char *err, size_t err_size);
-/* The per-frame scene update, on rank 0 and every client before frame `frame` of a sequence renders
- * (a client calls it when its first tile of that frame comes). This is where an animated scene
- * (BART's animation, evaluated by the loader and scene layer) moves to the frame's time and is
- * refitted; nothing moves yet, so it returns true. False with a message in err. */
-bool mpir_scene_frame(mpir_scene *s, const mpir_options *o, int frame, char *err, size_t err_size);
+/* The per-frame scene update, on rank 0 and every client before a frame's tiles render (a client
+ * calls it when its first tile of that frame comes): an animated scene (BART's) moves to the frame's
+ * time with rp_render_scene_set_time (instances placed, `tpa` refits, lights, camera path); a still
+ * one stays. False with a message in err. */
+bool mpir_scene_frame(mpir_scene *s, float time, char *err, size_t err_size);
 /* Frees what load and build made. */
 void mpir_scene_free(mpir_scene *s);
 /* Renders job's region and leaves its floats in w->tile, row by row; false when out of memory. */

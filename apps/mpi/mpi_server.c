@@ -287,6 +287,19 @@ static rp_camera frame_camera(const mpir_options *o, const rp_camera *base, int 
     return c;
 }
 
+/* The options that choose the image size and the camera, in `raypack render`'s terms, so that the
+ * sizes and cameras are its own (cli_render_size, cli_render_camera: an animated scene's camera on
+ * its path at the current time, --eye, --look, --up and --fov in its place, as in render and
+ * animate). */
+static cli_render_setup view_setup(const mpir_options *o) {
+    cli_render_setup v = {.width = o->width, .height = o->height, .has_eye = o->has_eye, .has_look = o->has_look,
+                          .has_up = o->has_up, .has_fov = o->has_fov, .fov = o->fov};
+    memcpy(v.eye, o->eye, sizeof v.eye);
+    memcpy(v.look, o->look, sizeof v.look);
+    memcpy(v.up, o->up, sizeof v.up);
+    return v;
+}
+
 /* The client of a hello, if it is one of this job's ranks of this build; NULL after printing why
  * not. *fatal: the client is ours but cannot take part (another build), which ends the job. */
 static client *check_hello(server *s, const mpir_conn *pc, const rendezvous_msg *rv, bool *fatal) {
@@ -345,6 +358,15 @@ static bool server_listen(server *s, rendezvous_msg *rv, int *lfd, MPI_Request *
         ok = MPI_Isend(rv, (int)sizeof *rv, MPI_BYTE, c + 1, TAG_RENDEZVOUS, MPI_COMM_WORLD, &(*reqs)[c]) == MPI_SUCCESS;
     if (!ok) fprintf(stderr, "raypack render: cannot send the clients rank 0's address\n");
     return ok;
+}
+
+/* A client whose connection failed before it was ready (sending it the scene, or reading its
+ * ready): a warning, and the job goes on without it. */
+static void lost_at_start(server *s, client *cl) {
+    fprintf(stderr, "raypack render: warning: rank %d (pid %d on %s) was lost during start-up (%s)\n", cl->rank,
+            cl->hello.pid, cl->hello.host, cl->conn.err);
+    mpir_conn_close(&cl->conn);
+    s->lost_client = true;
 }
 
 /* Start-up, second part: the clients' connections and hellos, then (with --mpi-bcast) the scene
@@ -449,10 +471,7 @@ static bool server_start(server *s, mpir_scene *rs, const rendezvous_msg *rvp, i
                 break;
             }
             if (rc < 0) {
-                fprintf(stderr, "raypack render: warning: rank %d (pid %d on %s) was lost during start-up (%s)\n",
-                        cl->rank, cl->hello.pid, cl->hello.host, cl->conn.err);
-                mpir_conn_close(&cl->conn);
-                s->lost_client = true;
+                lost_at_start(s, cl);
                 lost++;
                 continue;
             }
@@ -466,10 +485,7 @@ static bool server_start(server *s, mpir_scene *rs, const rendezvous_msg *rvp, i
             int rc = mpir_conn_read(&cl->conn);
             if (rc == 0) continue;
             if (rc < 0) {
-                fprintf(stderr, "raypack render: warning: rank %d (pid %d on %s) was lost during start-up (%s)\n",
-                        cl->rank, cl->hello.pid, cl->hello.host, cl->conn.err);
-                mpir_conn_close(&cl->conn);
-                s->lost_client = true;
+                lost_at_start(s, cl);
                 lost++;
                 continue;
             }
@@ -556,24 +572,29 @@ int mpir_server_run(const mpir_options *o, int size) {
         return CLI_EXIT_FAILURE;
     }
     double load_ms = cli_now_ms() - t0;
-
-    rp_camera cam = rp_render_scene_default_camera(rs.scene);
-    if (o->has_eye) memcpy(cam.pinhole.eye, o->eye, sizeof o->eye);
-    if (o->has_look) memcpy(cam.pinhole.look, o->look, sizeof o->look);
-    if (o->has_up) memcpy(cam.pinhole.up, o->up, sizeof o->up);
-    if (o->has_fov) cam.pinhole.fov_deg = o->fov;
-    /* image size: the rule of `raypack render` */
-    int sw = rs.data.camera.width > 0 ? rs.data.camera.width : 512;
-    int sh = rs.data.camera.height > 0 ? rs.data.camera.height : 512;
-    int wd = o->width, ht = o->height;
-    if (!wd && !ht) {
-        wd = sw;
-        ht = sh;
-    } else if (!ht) {
-        ht = (int)fmax(1.0, floor((double)wd * sh / sw + 0.5));
-    } else if (!wd) {
-        wd = (int)fmax(1.0, floor((double)ht * sw / sh + 0.5));
+    const rp_animation_data *anim = rs.data.animation;
+    int frames = o->frames > 0 ? o->frames : 1;
+    /* An animated sequence follows the scene's camera path; the orbit is for a still scene (or one
+     * held at --anim-time), so asking for both is a mistake, not a choice to guess at. */
+    bool play = anim && !o->has_anim_time;
+    const char *moved = o->has_orbit ? "--orbit" : o->has_to_eye ? "--to-eye" : o->has_to_look ? "--to-look" : NULL;
+    if (o->has_anim_time && !anim) {
+        fprintf(stderr, "raypack render: --anim-time: the scene is not animated (no AFF keyframes, tpa or camera path)\n");
+        status = CLI_EXIT_USAGE;
+    } else if (play && frames > 1 && moved) {
+        fprintf(stderr, "raypack render: %s moves the camera of a still scene, but %s is animated: its frames follow "
+                        "the animation and its camera path (hold it with --anim-time T to move the camera)\n", moved,
+                o->scene);
+        status = CLI_EXIT_USAGE;
     }
+    if (status == CLI_EXIT_USAGE) {
+        mpir_scene_free(&rs);
+        free(reqs);
+        return status;
+    }
+    const cli_render_setup view = view_setup(o);
+    int wd, ht;
+    cli_render_size(&view, &rs.data, &wd, &ht);
     s.width = wd;
     s.height = ht;
     s.tiles_x = (wd + o->tile - 1) / o->tile;
@@ -615,15 +636,27 @@ int mpir_server_run(const mpir_options *o, int size) {
         }
         fflush(stdout); /* who the clients are, before the frames: a supervisor (or the kill test) reads it */
     }
-    int frames = o->frames > 0 ? o->frames : 1;
+    if (!o->quiet && anim) {
+        if (play)
+            printf("anim     %d frame%s of the animation over [%.9g, %.9g] (as raypack animate --frames %d), the camera "
+                   "on its path\n", frames, frames == 1 ? "" : "s", (double)anim->start, (double)anim->end, frames);
+        else
+            printf("anim     every frame at time %.9g\n", (double)o->anim_time);
+        fflush(stdout);
+    }
     double total_ms = 0.0;
     for (int f = 0; f < frames; f++) {
-        if (!mpir_scene_frame(&rs, o, f, err, sizeof err)) {
+        /* every rank moves the scene to the frame's time before its tiles: here, and each client
+         * when the frame's first tile reaches it */
+        float ft = o->has_anim_time ? o->anim_time : rp_anim_frame_time(anim, f, frames);
+        if (!mpir_scene_frame(&rs, ft, err, sizeof err)) {
             fprintf(stderr, "raypack render: frame %d: %s\n", f, err);
             goto done;
         }
-        rp_camera fc = frame_camera(o, &cam, f);
+        rp_camera base = cli_render_camera(&view, rs.scene);
+        rp_camera fc = play ? base : frame_camera(o, &base, f);
         s.proto_job = (job_msg){.frame = (uint32_t)f, .width = wd, .height = ht, .spp = o->spp,
+                                .animated = anim != NULL, .anim_time = ft,
                                 .integrator = (int32_t)o->integrator, .packet = o->packet, .camera = fc,
                                 .raw_planes = o->raw_planes, .ao_distance = o->ao_distance,
                                 .ir = {.interleave = o->ir_interleave, .vpls = o->ir_vpls, .filter = o->ir_filter,
@@ -669,10 +702,14 @@ int mpir_server_run(const mpir_options *o, int size) {
                 in += s.clients[c].bytes_in;
                 out += s.clients[c].bytes_out;
             }
-            printf("frame    %d: %s, %.1f ms, received %.1f KiB (%.2f of the raw floats), sent %.1f KiB; camera "
+            char when[96] = "";
+            if (anim)
+                snprintf(when, sizeof when, "anim time %.9g (rank 0's update %.3f ms); ", (double)ft,
+                         rs.update.update_ms);
+            printf("frame    %d: %s, %.1f ms, received %.1f KiB (%.2f of the raw floats), sent %.1f KiB; %scamera "
                    "eye %.9g,%.9g,%.9g look %.9g,%.9g,%.9g up %.9g,%.9g,%.9g fov %.9g\n",
                    f, path, frame_ms, (double)in / 1024.0,
-                   (double)in / ((double)wd * ht * 3 * sizeof(float)), (double)out / 1024.0, fc.pinhole.eye[0],
+                   (double)in / ((double)wd * ht * 3 * sizeof(float)), (double)out / 1024.0, when, fc.pinhole.eye[0],
                    fc.pinhole.eye[1], fc.pinhole.eye[2], fc.pinhole.look[0], fc.pinhole.look[1], fc.pinhole.look[2],
                    fc.pinhole.up[0], fc.pinhole.up[1], fc.pinhole.up[2], fc.pinhole.fov_deg);
             if (size > 1) {

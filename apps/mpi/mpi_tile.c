@@ -35,9 +35,11 @@ bool mpir_scene_build(mpir_scene *rs, const mpir_options *o, int threads, char *
     return rs->scene != NULL;
 }
 
-bool mpir_scene_frame(mpir_scene *rs, const mpir_options *o, int frame, char *err, size_t err_size) {
-    (void)rs, (void)o, (void)frame, (void)err, (void)err_size;
-    return true;
+bool mpir_scene_frame(mpir_scene *rs, float time, char *err, size_t err_size) {
+    if (!rs->data.animation) return true;
+    if (rp_render_scene_set_time(rs->scene, &rs->data, time, &rs->update)) return true;
+    snprintf(err, err_size, "moving the animated scene to time %.9g failed (out of memory?)", (double)time);
+    return false;
 }
 
 bool mpir_scene_load(mpir_scene *rs, const char *path, char *err, size_t err_size) {

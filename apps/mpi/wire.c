@@ -1,5 +1,6 @@
 /* Byte formats of the MPI renderer (see wire.h). A scene is a header (magic, format version, the
- * sizes of the structs it carries) followed by each array as a 64-bit count and its bytes. */
+ * sizes of the structs it carries) followed by each array as a 64-bit count and its bytes, and for
+ * an animated scene its rp_animation_data (format 2 on). */
 #include "wire.h"
 
 #include <stdio.h>
@@ -8,7 +9,9 @@
 #include <zlib.h>
 
 #define WIRE_MAGIC 0x43535052u /* "RPSC" */
-#define WIRE_VERSION 1u
+/* 1: the flat arrays only; 2: and the animation (an animated scene sent as format 1 stood still at
+ * its start on every client) */
+#define WIRE_VERSION 2u
 
 typedef struct writer {
     uint8_t *buf;
@@ -41,11 +44,58 @@ static void put_array(writer *w, const void *p, size_t count, size_t elem) {
     if (p) put(w, p, count * elem);
 }
 
+/* The struct sizes a message's arrays are made of: the ends must agree on every layout. */
+enum { WIRE_STRUCTS = 7 };
+static void struct_sizes(uint32_t out[WIRE_STRUCTS]) {
+    const uint32_t sizes[WIRE_STRUCTS] = {(uint32_t)sizeof(rp_material_data), (uint32_t)sizeof(rp_texture_data),
+                                          (uint32_t)sizeof(rp_light_data),    (uint32_t)sizeof(rp_camera_data),
+                                          (uint32_t)sizeof(rp_anim_node),     (uint32_t)sizeof(rp_anim_key),
+                                          (uint32_t)sizeof(rp_anim_tpa)};
+    memcpy(out, sizes, sizeof sizes);
+}
+
+/* Floats of tpa_keys: 19 per key, up to the last key a `tpa` names (the loader keeps no count). */
+static size_t tpa_key_floats(const rp_animation_data *a) {
+    size_t keys = 0;
+    for (size_t i = 0; i < a->tpa_count; i++)
+        if ((size_t)a->tpas[i].first + a->tpas[i].count > keys) keys = (size_t)a->tpas[i].first + a->tpas[i].count;
+    return 19 * keys;
+}
+
+/* Everything rp_scene_data_set_time and the instanced render scene read, so that a client's frames
+ * at any time equal rank 0's. */
+static void put_animation(writer *w, const rp_scene_data *s) {
+    const rp_animation_data *a = s->animation;
+    put(w, &a->start, sizeof a->start);
+    put(w, &a->end, sizeof a->end);
+    put(w, &a->frames, sizeof a->frames);
+    put(w, &a->time, sizeof a->time);
+    put(w, a->camera, sizeof a->camera);
+    put(w, &a->rest_camera, sizeof a->rest_camera);
+    put_array(w, a->nodes, a->node_count, sizeof(rp_anim_node));
+    put_array(w, a->keys, a->key_count, sizeof(rp_anim_key));
+    put_array(w, a->vis_times, a->vis_count, sizeof(float));
+    put_array(w, a->vis_values, a->vis_count, 1);
+    put_array(w, a->tpas, a->tpa_count, sizeof(rp_anim_tpa));
+    put_array(w, a->tpa_keys, tpa_key_floats(a), sizeof(float));
+    put_array(w, a->tri_node, s->triangle_count, sizeof(int32_t));
+    put_array(w, a->sphere_node, s->sphere_count, sizeof(int32_t));
+    put_array(w, a->cone_node, s->cone_count, sizeof(int32_t));
+    put_array(w, a->light_node, s->light_count, sizeof(int32_t));
+    put_array(w, a->vertex_node, s->vertex_count, sizeof(int32_t));
+    put_array(w, a->normal_node, s->normal_count, sizeof(int32_t));
+    put_array(w, a->tri_tpa, s->triangle_count, 1);
+    put_array(w, a->rest_positions, 3 * s->vertex_count, sizeof(float));
+    put_array(w, a->rest_normals, 3 * s->normal_count, sizeof(float));
+    put_array(w, a->rest_spheres, s->sphere_count, sizeof(rp_sphere_data));
+    put_array(w, a->rest_cones, s->cone_count, sizeof(rp_cone_data));
+    put_array(w, a->rest_lights, s->light_count, sizeof(rp_light_data));
+}
+
 bool wire_scene_pack(const rp_scene_data *s, uint8_t **out, size_t *size) {
     writer w = {0};
-    uint32_t head[6] = {WIRE_MAGIC, WIRE_VERSION, (uint32_t)sizeof(rp_material_data),
-                        (uint32_t)sizeof(rp_texture_data), (uint32_t)sizeof(rp_light_data),
-                        (uint32_t)sizeof(rp_camera_data)};
+    uint32_t head[2 + WIRE_STRUCTS] = {WIRE_MAGIC, WIRE_VERSION};
+    struct_sizes(head + 2);
     put(&w, head, sizeof head);
     put_array(&w, s->positions, 3 * s->vertex_count, sizeof(float));
     put_array(&w, s->normals, 3 * s->normal_count, sizeof(float));
@@ -72,6 +122,9 @@ bool wire_scene_pack(const rp_scene_data *s, uint8_t **out, size_t *size) {
     put(&w, &bg, 1);
     put_u64(&w, s->file_bytes);
     put(&w, &s->parse_ms, sizeof s->parse_ms);
+    uint8_t animated = s->animation != NULL;
+    put(&w, &animated, 1);
+    if (animated) put_animation(&w, s);
     if (w.failed) {
         free(w.buf);
         return false;
@@ -99,24 +152,130 @@ static bool get(reader *r, void *dst, size_t n, const char *what) {
     return true;
 }
 
-/* Reads an optional array of `expect` elements (or any count when expect is SIZE_MAX, returned in
- * *count); NULL in *dst when the sender had none. */
-static bool get_array(reader *r, void **dst, size_t elem, size_t expect, size_t *count, const char *what) {
+/* Reads an array of `expect` elements (or any count when expect is SIZE_MAX, returned in *count).
+ * An optional one (always false) may be absent: NULL in *dst when the sender had none. One that
+ * every animated scene has (always) is allocated even empty, one element more, as the loader does:
+ * the renderer indexes those without a NULL check. */
+static bool get_array_of(reader *r, void **dst, size_t elem, size_t expect, size_t *count, bool always,
+                         const char *what) {
     uint64_t n = 0;
     *dst = NULL;
     if (!get(r, &n, sizeof n, what)) return false;
     if (count) *count = (size_t)n;
-    if (n == 0) return true;
+    if (n == 0 && !always) return true;
     if ((expect != SIZE_MAX && n != expect) || n > r->left / elem) {
         r->what = what;
         return false;
     }
-    *dst = malloc((size_t)n * elem);
+    *dst = malloc(((size_t)n + (always ? 1 : 0)) * elem);
     if (!*dst) {
         r->what = "memory";
         return false;
     }
     return get(r, *dst, (size_t)n * elem, what);
+}
+
+static bool get_array(reader *r, void **dst, size_t elem, size_t expect, size_t *count, const char *what) {
+    return get_array_of(r, dst, elem, expect, count, false, what);
+}
+
+static bool get_anim_array(reader *r, void **dst, size_t elem, size_t expect, size_t *count, const char *what) {
+    return get_array_of(r, dst, elem, expect, count, true, what);
+}
+
+static bool nodes_below(const int32_t *node, size_t n, size_t limit) {
+    for (size_t i = 0; node && i < n; i++)
+        if (node[i] < -1 || node[i] >= (int64_t)limit) return false;
+    return true;
+}
+
+static bool track_ok(rp_anim_track t, size_t keys) { return (size_t)t.first + t.count <= keys; }
+
+/* The animation after the flat arrays (s's counts are known); NULL in r->what when it fits and
+ * every index in it points inside what it indexes. */
+static void get_animation(reader *r, rp_scene_data *s) {
+    rp_animation_data *a = calloc(1, sizeof *a);
+    if (!a) {
+        r->what = "memory";
+        return;
+    }
+    s->animation = a; /* rp_scene_data_free frees it, and what came of it, on failure */
+    get(r, &a->start, sizeof a->start, "animation range");
+    get(r, &a->end, sizeof a->end, "animation range");
+    get(r, &a->frames, sizeof a->frames, "animation range");
+    get(r, &a->time, sizeof a->time, "animation time");
+    get(r, a->camera, sizeof a->camera, "camera path");
+    get(r, &a->rest_camera, sizeof a->rest_camera, "camera path");
+    void *p;
+    size_t n = 0;
+    get_anim_array(r, &p, sizeof(rp_anim_node), SIZE_MAX, &a->node_count, "animation blocks");
+    a->nodes = p;
+    get_array(r, &p, sizeof(rp_anim_key), SIZE_MAX, &a->key_count, "animation keys");
+    a->keys = p;
+    get_array(r, &p, sizeof(float), SIZE_MAX, &a->vis_count, "visibility keys");
+    a->vis_times = p;
+    get_array(r, &p, 1, a->vis_count, NULL, "visibility keys");
+    a->vis_values = p;
+    get_array(r, &p, sizeof(rp_anim_tpa), SIZE_MAX, &a->tpa_count, "tpa triangles");
+    a->tpas = p;
+    get_array(r, &p, sizeof(float), SIZE_MAX, &n, "tpa keys");
+    a->tpa_keys = p;
+    if (r->what) return;
+    if (n != tpa_key_floats(a)) r->what = "tpa keys";
+    get_anim_array(r, &p, sizeof(int32_t), s->triangle_count, NULL, "triangle blocks");
+    a->tri_node = p;
+    get_anim_array(r, &p, sizeof(int32_t), s->sphere_count, NULL, "sphere blocks");
+    a->sphere_node = p;
+    get_anim_array(r, &p, sizeof(int32_t), s->cone_count, NULL, "cone blocks");
+    a->cone_node = p;
+    get_anim_array(r, &p, sizeof(int32_t), s->light_count, NULL, "light blocks");
+    a->light_node = p;
+    get_anim_array(r, &p, sizeof(int32_t), s->vertex_count, NULL, "vertex blocks");
+    a->vertex_node = p;
+    get_anim_array(r, &p, sizeof(int32_t), s->normal_count, NULL, "normal blocks");
+    a->normal_node = p;
+    get_anim_array(r, &p, 1, s->triangle_count, NULL, "tpa flags");
+    a->tri_tpa = p;
+    get_anim_array(r, &p, sizeof(float), 3 * s->vertex_count, NULL, "rest positions");
+    a->rest_positions = p;
+    get_array(r, &p, sizeof(float), 3 * s->normal_count, NULL, "rest normals");
+    a->rest_normals = p;
+    if (!r->what && !a->rest_normals != !s->normals) r->what = "rest normals";
+    get_anim_array(r, &p, sizeof(rp_sphere_data), s->sphere_count, NULL, "rest spheres");
+    a->rest_spheres = p;
+    get_anim_array(r, &p, sizeof(rp_cone_data), s->cone_count, NULL, "rest cones");
+    a->rest_cones = p;
+    get_anim_array(r, &p, sizeof(rp_light_data), s->light_count, NULL, "rest lights");
+    a->rest_lights = p;
+    if (r->what) return;
+    /* what the loader guarantees and set_time and the render scene rely on */
+    for (size_t i = 0; !r->what && i < a->node_count; i++) {
+        rp_anim_node *nd = &a->nodes[i];
+        nd->name[sizeof nd->name - 1] = '\0';
+        if (nd->parent < -1 || nd->parent >= (int64_t)i) r->what = "animation block parents";
+        else if (!track_ok(nd->track[0], a->key_count) || !track_ok(nd->track[1], a->key_count) ||
+                 !track_ok(nd->track[2], a->key_count))
+            r->what = "animation block keys";
+        else if ((size_t)nd->vis_first + nd->vis_count > a->vis_count) r->what = "visibility keys";
+    }
+    if (!r->what && (!track_ok(a->camera[0], a->key_count) || !track_ok(a->camera[1], a->key_count)))
+        r->what = "camera path";
+    size_t tpa_keys = n / 19;
+    for (size_t i = 0; !r->what && i < a->tpa_count; i++) {
+        const rp_anim_tpa *t = &a->tpas[i];
+        if (t->triangle >= s->triangle_count || (size_t)t->vertex + 3 > s->vertex_count ||
+            (a->rest_normals && (size_t)t->normal + 3 > s->normal_count) || t->count == 0 ||
+            (size_t)t->first + t->count > tpa_keys)
+            r->what = "tpa triangles";
+    }
+    if (r->what) return;
+    if (!nodes_below(a->tri_node, s->triangle_count, a->node_count) ||
+        !nodes_below(a->sphere_node, s->sphere_count, a->node_count) ||
+        !nodes_below(a->cone_node, s->cone_count, a->node_count) ||
+        !nodes_below(a->light_node, s->light_count, a->node_count) ||
+        !nodes_below(a->vertex_node, s->vertex_count, a->node_count) ||
+        !nodes_below(a->normal_node, s->normal_count, a->node_count))
+        r->what = "animation block indices";
 }
 
 static bool indices_below(const uint32_t *idx, size_t n, size_t limit) {
@@ -128,16 +287,23 @@ static bool indices_below(const uint32_t *idx, size_t n, size_t limit) {
 bool wire_scene_unpack(const uint8_t *buf, size_t size, rp_scene_data *s, char *err, size_t err_size) {
     memset(s, 0, sizeof *s);
     reader r = {.p = buf, .left = size};
-    uint32_t head[6];
-    if (!get(&r, head, sizeof head, "header") || head[0] != WIRE_MAGIC) {
+    uint32_t head[2 + WIRE_STRUCTS], want[WIRE_STRUCTS];
+    if (!get(&r, head, 2 * sizeof(uint32_t), "header") || head[0] != WIRE_MAGIC) {
         snprintf(err, err_size, "not a raypack scene message (%zu bytes)", size);
         return false;
     }
-    if (head[1] != WIRE_VERSION || head[2] != sizeof(rp_material_data) || head[3] != sizeof(rp_texture_data) ||
-        head[4] != sizeof(rp_light_data) || head[5] != sizeof(rp_camera_data)) {
-        snprintf(err, err_size, "scene message of format %u (structs %u/%u/%u/%u bytes); this build reads format %u "
-                                "(%zu/%zu/%zu/%zu)", head[1], head[2], head[3], head[4], head[5], WIRE_VERSION,
-                 sizeof(rp_material_data), sizeof(rp_texture_data), sizeof(rp_light_data), sizeof(rp_camera_data));
+    /* the version first: another format's header may be of another length */
+    if (head[1] != WIRE_VERSION) {
+        snprintf(err, err_size, "scene message of format %u; this build reads format %u (run the same build on every "
+                                "rank)", head[1], WIRE_VERSION);
+        return false;
+    }
+    struct_sizes(want);
+    if (!get(&r, head + 2, sizeof want, "header") || memcmp(head + 2, want, sizeof want) != 0) {
+        snprintf(err, err_size, "scene message of format %u with structs of other sizes (material, texture, light, "
+                                "camera, block, key, tpa: %u/%u/%u/%u/%u/%u/%u bytes; here %u/%u/%u/%u/%u/%u/%u)",
+                 head[1], head[2], head[3], head[4], head[5], head[6], head[7], head[8], want[0], want[1], want[2],
+                 want[3], want[4], want[5], want[6]);
         return false;
     }
     size_t n = 0, tris = 0;
@@ -199,6 +365,9 @@ bool wire_scene_unpack(const uint8_t *buf, size_t size, rp_scene_data *s, char *
     get(&r, &fb, sizeof fb, "file size");
     s->file_bytes = (size_t)fb;
     get(&r, &s->parse_ms, sizeof s->parse_ms, "parse time");
+    uint8_t animated = 0;
+    if (get(&r, &animated, 1, "animation flag") && animated > 1) r.what = "animation flag";
+    if (animated == 1 && !r.what) get_animation(&r, s);
     if (!r.what && r.left) r.what = "trailing bytes";
     /* The renderer trusts a loader's indices; these came over the wire, so check them. */
     if (!r.what) {

@@ -11,8 +11,9 @@
 
 #include "raypack_io.h"
 
-/* Serializes every array of scene into one malloc'ed buffer (*out, *size; the caller frees it).
- * False when out of memory. */
+/* Serializes every array of scene, and its animation (rp_scene_data.animation: blocks, keys,
+ * visibility, `tpa` keys, the camera path, the rest copies), into one malloc'ed buffer (*out, *size;
+ * the caller frees it). False when out of memory. */
 bool wire_scene_pack(const rp_scene_data *scene, uint8_t **out, size_t *size);
 /* Rebuilds a scene from wire_scene_pack's bytes into out (free it with rp_scene_data_free). Checks
  * every count against the bytes there are and every index against the array it points into; on a

@@ -312,11 +312,15 @@ bool rp_scene_data_set_time(rp_scene_data *s, float t) {
     return true;
 }
 
+float rp_anim_frame_time(const rp_animation_data *a, int frame, int count) {
+    if (!a) return 0.0f;
+    if (count <= 1) return a->start;
+    return a->start + (float)((double)frame * ((double)a->end - a->start) / (count - 1));
+}
+
 float rp_scene_data_frame_time(const rp_scene_data *s, int frame) {
     const rp_animation_data *a = s ? s->animation : NULL;
-    if (!a) return 0.0f;
-    if (a->frames <= 1) return a->start;
-    return a->start + (float)((double)frame * ((double)a->end - a->start) / (a->frames - 1));
+    return rp_anim_frame_time(a, frame, a ? a->frames : 1);
 }
 
 bool rp_scene_data_keep_lights(rp_scene_data *s, const uint32_t *keep, size_t count) {

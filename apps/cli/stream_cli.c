@@ -269,9 +269,9 @@ static bool load(const char *cmd, const stream_opts *o, int default_w, int defau
 }
 
 static void print_grid(const grid *g) {
-    printf("grid     %dx%dx%d voxels, %u full, %u triangles, %zu references, %.2f MiB, build %.1f ms\n", g->res[0],
-           g->res[1], g->res[2], g->nonempty, g->tri_count, g->item_count, (double)grid_bytes(g) / 1048576.0,
-           g->build_ms);
+    printf("grid     %dx%dx%d voxels, %u full, %u triangles, %u other primitives, %zu references, %.2f MiB, build %.1f ms\n",
+           g->res[0], g->res[1], g->res[2], g->nonempty, g->tri_count, g->prim_count, g->item_count,
+           (double)grid_bytes(g) / 1048576.0, g->build_ms);
 }
 
 int cli_stream_render(int argc, char **argv) {

@@ -148,8 +148,8 @@ static void check_file(rp_device *dev, const char *file, uint32_t nrays, bool al
             check_grid(scene, file, &(grid_desc){.density = 20.0f}, nrays / 2);
             check_grid(scene, file, &(grid_desc){.min_dim = 64}, nrays / 2);
         }
-        rp_render_scene_release(rs);
     }
+    rp_render_scene_release(rs);
     rp_scene_data_free(&d);
 }
 

@@ -7,6 +7,12 @@
  * tests every intersecting ray against one triangle of its voxel, as the paper's fragment programs
  * do, so the pass counts and per-ray statistics are the paper's (table 2, fig. 6).
  *
+ * The shading kernel either shades eye light / the paper's shadow caster, or runs one of the
+ * renderer's integrators (Whitted, path, direct, AO) through the renderer's own shading functions:
+ * each depth's shadow, reflection, refraction and bounce rays are streams of their own through the
+ * same traversal and intersection passes, so the image is rp_render's bit for bit (the grid's hits
+ * are the BVH's) and the statistics are kept per ray kind.
+ *
  * Passes are run on one thread in ray order: every number, image and hit is deterministic. */
 #ifndef RP_STREAM_H
 #define RP_STREAM_H

@@ -4,7 +4,9 @@
  * from inside the box in random directions, rays from outside aimed at random triangles, short
  * segments and rays whose tnear is past their first hit; for Cleary-Wyvill grids of several
  * densities and the paper's rule. Also: the CSR lists are consistent, a voxel lists every triangle
- * whose box it lies in the middle of, and the work counters are deterministic. */
+ * whose box it lies in the middle of, and the work counters are deterministic. Cones (user
+ * primitives, bart_museum5 built flat) too, through the core's callbacks; bart_kitchen built flat;
+ * an instanced scene is refused with a message. */
 #include <math.h>
 #include <stdint.h>
 
@@ -27,6 +29,12 @@ static void make_ray(const grid *g, rp_ray *r, uint32_t i) {
     for (int a = 0; a < 3; a++) lo[a] = g->lo[a], hi[a] = g->hi[a];
     if (i % 3 == 0) {
         for (int a = 0; a < 3; a++) o[a] = lo[a] + (hi[a] - lo[a]) * rng_f(), d[a] = rng_f() * 2.0f - 1.0f;
+    } else if (g->prim_count && i % 5 == 1) { /* aimed at a sphere or user primitive's box centre */
+        const float *b = &g->prim_box[6 * (rng_u32() % g->prim_count)];
+        for (int a = 0; a < 3; a++) {
+            o[a] = lo[a] - (hi[a] - lo[a]) * 0.5f + (hi[a] - lo[a]) * 2.0f * rng_f();
+            d[a] = 0.5f * (b[a] + b[3 + a]) - o[a];
+        }
     } else {
         const grid_tri *t = &g->tris[rng_u32() % g->tri_count];
         float b1 = rng_f(), b2 = rng_f();
@@ -53,7 +61,7 @@ static void check_grid(rp_scene *scene, const char *name, const grid_desc *gd, u
     /* CSR consistency */
     bool csr = g->offsets[0] == 0 && g->offsets[g->voxel_count] == g->item_count;
     for (uint32_t c = 0; c < g->voxel_count && csr; c++) csr = g->offsets[c] <= g->offsets[c + 1];
-    for (size_t k = 0; k < g->item_count && csr; k++) csr = g->items[k] < g->tri_count;
+    for (size_t k = 0; k < g->item_count && csr; k++) csr = g->items[k] < g->tri_count + g->prim_count;
     CHECKF(csr, "%s: CSR arrays inconsistent", name);
     /* the voxel holding a triangle's centroid lists it */
     uint32_t missing = 0;
@@ -71,7 +79,7 @@ static void check_grid(rp_scene *scene, const char *name, const grid_desc *gd, u
     }
     CHECKF(missing == 0, "%s: %u triangles missing from their centroid's voxel", name, missing);
 
-    uint32_t bad = 0, bad_occ = 0, hits = 0;
+    uint32_t bad = 0, bad_occ = 0, hits = 0, prim_hits = 0;
     grid_work w1 = {0}, w2 = {0};
     rng_state = 12345;
     for (uint32_t i = 0; i < nrays; i++) {
@@ -91,6 +99,11 @@ static void check_grid(rp_scene *scene, const char *name, const grid_desc *gd, u
                     (double)a.ray.tfar, b.hit.geom_id, b.hit.prim_id, (double)b.ray.tfar);
         bad += !same;
         hits += a.hit.geom_id != RP_INVALID_ID;
+        for (uint32_t k = 0; k < g->prim_count && a.hit.geom_id != RP_INVALID_ID; k++)
+            if (g->prims[k].geom == a.hit.geom_id && g->prims[k].prim == a.hit.prim_id) {
+                prim_hits++;
+                break;
+            }
         rp_ray oa = r, ob = r;
         rp_occluded1(scene, &oa);
         grid_occluded1(g, &ob, NULL);
@@ -101,14 +114,17 @@ static void check_grid(rp_scene *scene, const char *name, const grid_desc *gd, u
     CHECKF(bad_occ == 0, "%s: %u of %u occlusion answers differ from rp_occluded1", name, bad_occ, nrays);
     CHECKF(hits > nrays / 3, "%s: only %u of %u rays hit (rays not aimed?)", name, hits, nrays);
     CHECK(w1.voxels == w2.voxels && w1.tests == w2.tests && w1.voxels > 0);
+    CHECKF(g->prim_count == 0 || prim_hits > 0, "%s: %u of %u rays hit its %u primitives", name, prim_hits,
+           nrays, g->prim_count);
     printf("%s: grid %dx%dx%d (%u triangles, %zu refs, %u of %u voxels full, %.1f MB): %u rays, %u hits, "
-           "%.1f voxels and %.1f tests per ray\n",
+           "%.1f voxels and %.1f tests per ray; %u primitives, %u hits on them\n",
            name, g->res[0], g->res[1], g->res[2], g->tri_count, g->item_count, g->nonempty, g->voxel_count,
-           (double)grid_bytes(g) / 1048576.0, nrays, hits, (double)w1.voxels / nrays, (double)w1.tests / nrays);
+           (double)grid_bytes(g) / 1048576.0, nrays, hits, (double)w1.voxels / nrays, (double)w1.tests / nrays,
+           g->prim_count, prim_hits);
     grid_free(g);
 }
 
-static void check_file(rp_device *dev, const char *file, uint32_t nrays, bool all_desc) {
+static void check_file(rp_device *dev, const char *file, uint32_t nrays, bool all_desc, bool flat) {
     char buf[512], err[512] = "";
     const char *path = rp_test_scene(file, buf, sizeof buf);
     CHECKF(path != NULL, "%s", file);
@@ -117,9 +133,14 @@ static void check_file(rp_device *dev, const char *file, uint32_t nrays, bool al
     bool ok = rp_scene_data_load(path, &d, err, sizeof err);
     CHECKF(ok, "%s", err);
     if (!ok) return;
-    rp_render_scene *rs = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
+    rp_render_scene *rs = rp_render_scene_new(dev, &d, &(rp_render_scene_desc){.flatten_animation = flat}, err, sizeof err);
     CHECKF(rs != NULL, "%s: %s", file, err);
-    if (rs) {
+    if (rs && d.animation && !flat) {
+        /* instanced: refused, and said why */
+        grid *g = grid_build_scene(rp_render_scene_core(rs), NULL, err, sizeof err);
+        CHECKF(g == NULL && strstr(err, "instances"), "%s: an instanced scene gave a grid (%s)", file, err);
+        grid_free(g);
+    } else if (rs) {
         rp_scene *scene = rp_render_scene_core(rs);
         check_grid(scene, file, &(grid_desc){0}, nrays);
         if (all_desc) {
@@ -127,8 +148,8 @@ static void check_file(rp_device *dev, const char *file, uint32_t nrays, bool al
             check_grid(scene, file, &(grid_desc){.density = 20.0f}, nrays / 2);
             check_grid(scene, file, &(grid_desc){.min_dim = 64}, nrays / 2);
         }
-        rp_render_scene_release(rs);
     }
+    rp_render_scene_release(rs);
     rp_scene_data_free(&d);
 }
 
@@ -137,9 +158,13 @@ int main(void) {
     CHECK(dev != NULL);
     if (!dev) return RP_TEST_END();
     uint32_t n = rp_test_sanitized() ? 3000 : 30000;
-    check_file(dev, "stanford_bunny_bun_zipper.ply.gz", n, true);
-    check_file(dev, "cornell_box/cornell_box.obj", n, true);
-    check_file(dev, "conference_geom.obj.gz", n, false);
+    check_file(dev, "stanford_bunny_bun_zipper.ply.gz", n, true, false);
+    check_file(dev, "cornell_box/cornell_box.obj", n, true, false);
+    check_file(dev, "conference_geom.obj.gz", n, false, false);
+    /* NFF cones (museum) through the core's callbacks; the kitchen flat (instanced it has 6 instances) */
+    check_file(dev, "bart_museum5.tar.gz", n, true, true);
+    check_file(dev, "bart_kitchen.tar.gz", n, false, true);
+    check_file(dev, "bart_museum5.tar.gz", n, false, false);
     /* a scene that is not committed is refused */
     rp_scene *s = rp_scene_new(dev, NULL);
     char err[128] = "";

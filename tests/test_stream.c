@@ -4,7 +4,12 @@
  * equals the packet renderer's --integrator eyelight image value for value; the statistics are
  * deterministic, their sums hold (passes = traversal + intersection + other), no ray does more
  * steps or tests than there were passes of that kind, the per-ray work equals the single-ray grid
- * loop's and does not depend on the oracle (20% rule, naive); shadow shading traces shadow rays. */
+ * loop's and does not depend on the oracle (20% rule, naive); shadow shading traces shadow rays.
+ * Whitted on cornell_box, spd_teapot, bart_museum5 (its cones through the grid) and bart_kitchen
+ * (refraction), and path
+ * tracing, direct lighting and AO on cornell_original: the stream's image equals rp_render's bit
+ * for bit, with both schedulers, with as many rays of each kind as rp_render traced, and the
+ * statistics per ray kind add up to the totals. */
 #include <math.h>
 #include <stdint.h>
 
@@ -137,6 +142,82 @@ static void check_file(rp_device *dev, const char *file, int w, int h) {
     rp_scene_data_free(&d);
 }
 
+/* The renderer's integrator on the stream against rp_render (the packet renderer) with the same
+ * desc: every value bit for bit, for both schedulers; the statistics per ray kind add up to the
+ * totals and are the same twice. */
+static void check_integrator(rp_device *dev, const char *file, rp_integrator_type integrator, int w, int h, int spp,
+                             int want_kind) {
+    char buf[512], err[512] = "";
+    const char *path = rp_test_scene(file, buf, sizeof buf);
+    CHECKF(path != NULL, "%s", file);
+    if (!path) return;
+    rp_scene_data d;
+    bool ok = rp_scene_data_load(path, &d, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (!ok) return;
+    /* flat, as the stream engine builds animated scenes */
+    rp_render_scene *rs = rp_render_scene_new(dev, &d, &(rp_render_scene_desc){.flatten_animation = true}, err, sizeof err);
+    CHECKF(rs != NULL, "%s: %s", file, err);
+    grid *g = rs ? grid_build_scene(rp_render_scene_core(rs), NULL, err, sizeof err) : NULL;
+    CHECKF(g != NULL, "%s: %s", file, err);
+    size_t n = (size_t)w * (size_t)h;
+    float *px = malloc(n * 3 * sizeof(float)), *ref = malloc(n * 3 * sizeof(float));
+    if (g && px && ref) {
+        rp_camera cam = rp_render_scene_default_camera(rs);
+        rp_render_desc rd = {.width = w, .height = h, .integrator = integrator, .spp = spp, .camera = &cam};
+        rp_render_stats rst;
+        CHECK(rp_render(rs, &rd, ref, &rst));
+        for (int wave = 0; wave < 2; wave++) {
+            stream_desc sd = {.width = w, .height = h, .camera = &cam, .render = &rd, .wavefront = wave == 1};
+            stream_stats st, st2;
+            CHECKF(stream_render(rs, g, &sd, px, NULL, &st, err, sizeof err), "%s: %s", file, err);
+            size_t diff = 0, lit = 0;
+            for (size_t i = 0; i < n * 3; i++) diff += !same_f(px[i], ref[i]), lit += ref[i] > 0.0f;
+            CHECKF(diff == 0 && lit > n / 4, "%s (integrator %d, %s): %zu of %zu values differ from rp_render's, %zu lit",
+                   file, (int)integrator, wave ? "wavefront" : "multipass", diff, n * 3, lit);
+            /* sums: passes, and the kinds against the totals */
+            CHECK(st.passes == st.traversal_passes + st.intersection_passes + st.other_passes);
+            uint64_t rays = 0, voxels = 0, tests = 0, trav = 0, isect = 0;
+            uint32_t maxv = 0, maxt = 0;
+            for (int k = 0; k < RP_RAY_KIND_COUNT; k++) {
+                const stream_kind_stats *ks = &st.kind[k];
+                rays += ks->rays, voxels += ks->voxels, tests += ks->tests;
+                trav += ks->traversal_passes, isect += ks->intersection_passes;
+                maxv = ks->max_voxels > maxv ? ks->max_voxels : maxv, maxt = ks->max_tests > maxt ? ks->max_tests : maxt;
+                CHECK(ks->hits <= ks->rays && (ks->rays == 0) == (ks->batches == 0));
+            }
+            CHECKF(rays == st.rays && voxels == st.voxels && tests == st.tests && trav == st.traversal_passes &&
+                       isect == st.intersection_passes && maxv == st.max_voxels && maxt == st.max_tests,
+                   "%s: the kinds' statistics do not add up to the totals", file);
+            CHECK(st.kind[RP_RAY_PRIMARY].rays == n * (size_t)spp && st.eye_rays == n * (size_t)spp);
+            /* the same rays of each kind as the packet renderer traced */
+            for (int k = 0; k < RP_RAY_KIND_COUNT; k++)
+                CHECKF(st.kind[k].rays == rst.rays[k], "%s: %llu rays of kind %d, rp_render %llu", file,
+                       (unsigned long long)st.kind[k].rays, k, (unsigned long long)rst.rays[k]);
+            CHECK(st.kind[RP_RAY_SHADOW].rays == st.shadow_rays && st.kind[RP_RAY_SHADOW].hits == st.shadow_blocked &&
+                  st.shadow_rays > 0);
+            CHECKF(want_kind < 0 || st.kind[want_kind].rays > 0, "%s: no rays of kind %d", file, want_kind);
+            CHECK(st.simd_efficiency > 0.0 && st.simd_efficiency <= 1.0 && st.work <= st.slots);
+            CHECK(stream_render(rs, g, &sd, px, NULL, &st2, err, sizeof err));
+            st2.ms = st.ms;
+            CHECKF(memcmp(&st, &st2, sizeof st) == 0, "%s: statistics differ between two runs", file);
+            if (!wave)
+                printf("%s integrator %d %dx%d %d spp: %llu rays (primary %llu, shadow %llu, reflection %llu, "
+                       "refraction %llu, bounce %llu); passes %llu = %llu + %llu + %llu; same as rp_render\n",
+                       file, (int)integrator, w, h, spp, (unsigned long long)st.rays,
+                       (unsigned long long)st.kind[0].rays, (unsigned long long)st.kind[1].rays,
+                       (unsigned long long)st.kind[2].rays, (unsigned long long)st.kind[3].rays,
+                       (unsigned long long)st.kind[4].rays, (unsigned long long)st.passes,
+                       (unsigned long long)st.traversal_passes, (unsigned long long)st.intersection_passes,
+                       (unsigned long long)st.other_passes);
+        }
+    }
+    free(px), free(ref);
+    grid_free(g);
+    rp_render_scene_release(rs);
+    rp_scene_data_free(&d);
+}
+
 int main(void) {
     rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
     CHECK(dev != NULL);
@@ -145,6 +226,21 @@ int main(void) {
     check_file(dev, "stanford_bunny_bun_zipper.ply.gz", small ? 40 : 96, small ? 30 : 72);
     check_file(dev, "cornell_box/cornell_box.obj", small ? 32 : 64, small ? 32 : 64);
     check_file(dev, "conference_geom.obj.gz", small ? 40 : 80, small ? 30 : 60);
+    /* Whitted (shadow, reflection and refraction streams) and path tracing (shadow and bounce
+     * streams), direct lighting and AO, against the packet renderer */
+    check_integrator(dev, "cornell_box/cornell_box.obj", RP_INTEGRATOR_WHITTED, small ? 24 : 48, small ? 24 : 48, 1,
+                     RP_RAY_SHADOW);
+    check_integrator(dev, "spd_teapot.nff.gz", RP_INTEGRATOR_WHITTED, small ? 32 : 64, small ? 24 : 48, 2,
+                     RP_RAY_REFLECTION);
+    check_integrator(dev, "bart_museum5.tar.gz", RP_INTEGRATOR_WHITTED, small ? 32 : 64, small ? 24 : 48, 1,
+                     RP_RAY_REFLECTION);
+    /* glass: refraction streams */
+    check_integrator(dev, "bart_kitchen.tar.gz", RP_INTEGRATOR_WHITTED, small ? 24 : 48, small ? 18 : 36, 1,
+                     RP_RAY_REFRACTION);
+    check_integrator(dev, "cornell_original/CornellBox-Original.obj", RP_INTEGRATOR_PATH, small ? 16 : 32,
+                     small ? 16 : 32, small ? 2 : 4, RP_RAY_BOUNCE);
+    check_integrator(dev, "cornell_original/CornellBox-Original.obj", RP_INTEGRATOR_DIRECT, 16, 16, 2, RP_RAY_BOUNCE);
+    check_integrator(dev, "cornell_original/CornellBox-Original.obj", RP_INTEGRATOR_AO, 16, 16, 2, RP_RAY_SHADOW);
     rp_device_release(dev);
     return RP_TEST_END();
 }

@@ -1,7 +1,9 @@
 // rp-test: labels=cli timeout=300
 /* `raypack render --engine stream` and `raypack bench --stream [--purcell]`: the stream engine's
  * image (PFM) equals `--integrator eyelight`'s value for value; the bench checks the grid's hits
- * against the BVH's and prints the statistics and the paper's table; bad input exits 2 (usage) or
+ * against the BVH's and prints the statistics and the paper's table; Whitted (cornell_box, spd_teapot,
+ * bart_museum5), path tracing and AO (cornell_original) on the stream write the packet renderer's
+ * PFM and PNG byte for byte, with statistics per ray kind; bad input exits 2 (usage) or
  * 1 (a scene that cannot be loaded) with a message. The binary is build/<preset>/raypack, or $RP_CLI. */
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -12,6 +14,37 @@
 #include "rp_test.h"
 
 static char tmp[1024];
+
+/* The two files hold the same bytes. */
+static bool same_file(const char *a, const char *b) {
+    FILE *fa = fopen(a, "rb"), *fb = fopen(b, "rb");
+    bool same = fa && fb;
+    while (same) {
+        int ca = fgetc(fa), cb = fgetc(fb);
+        same = ca == cb;
+        if (ca == EOF || cb == EOF) break;
+    }
+    if (fa) fclose(fa);
+    if (fb) fclose(fb);
+    return same;
+}
+
+/* `render --engine stream FLAGS` and `render FLAGS` (the packet renderer) write the same PFM and
+ * PNG bytes; the stream's statistics name the ray kinds it traced. */
+static void check_same(const char *scene, const char *flags, const char *kind_line) {
+    char args[4096], a[1200], b[1200];
+    static const char *exts[] = {"pfm", "png"};
+    for (int e = 0; e < 2; e++) {
+        snprintf(a, sizeof a, "%s/stream.%s", tmp, exts[e]);
+        snprintf(b, sizeof b, "%s/packet.%s", tmp, exts[e]);
+        snprintf(args, sizeof args, "render '%s' --engine stream %s --stats -o '%s'", scene, flags, a);
+        EXPECT(args, 0, kind_line);
+        CHECKF(strstr(output, "passes   total") != NULL, "%s %s: no statistics", scene, flags);
+        snprintf(args, sizeof args, "render '%s' %s -q -o '%s'", scene, flags, b);
+        EXPECT(args, 0, "");
+        CHECKF(same_file(a, b), "%s %s: the stream's %s differs from the packet renderer's", scene, flags, exts[e]);
+    }
+}
 
 static float *read_pfm(const char *path, int *w, int *h) {
     int c = 0;
@@ -67,6 +100,26 @@ int main(void) {
     free(a), free(b);
     snprintf(args, sizeof args, "render '%s' --engine stream --shading shadow --width 40 -o '%s/shadow.png'", cornell, tmp);
     EXPECT(args, 0, "shadow shading");
+
+    /* the renderer's integrators on the stream: the packet renderer's files byte for byte */
+    char b3[512], b4[512], b5[512];
+    const char *original = rp_test_scene("cornell_original/CornellBox-Original.obj", b3, sizeof b3);
+    const char *teapot = rp_test_scene("spd_teapot.nff.gz", b4, sizeof b4);
+    const char *museum = rp_test_scene("bart_museum5.tar.gz", b5, sizeof b5);
+    CHECK(original && teapot && museum);
+    if (original && teapot && museum) {
+        check_same(cornell, "--integrator whitted --width 40 --height 30", "\nshadow ");
+        check_same(teapot, "--integrator whitted --width 48 --height 36 --spp 2", "\nreflection ");
+        check_same(museum, "--integrator whitted --width 48 --height 36 --anim-flat", "\nreflection ");
+        check_same(original, "--integrator path --width 24 --height 24 --spp 3 --max-depth 4", "\nbounce ");
+        check_same(original, "--integrator ao --width 24 --height 24 --spp 2", "\nshadow ");
+    }
+    snprintf(args, sizeof args, "render '%s' --engine stream --integrator ir", cornell);
+    EXPECT(args, 2, "whitted, path, direct or ao");
+    snprintf(args, sizeof args, "render '%s' --engine stream --integrator path --spp 0", cornell);
+    EXPECT(args, 2, "--spp");
+    snprintf(args, sizeof args, "render '%s' --engine stream --integrator path --sampler halton", cornell);
+    EXPECT(args, 2, "--sampler expects pcg or sobol");
 
     /* bench: hits checked against the BVH, the statistics and the paper's table */
     snprintf(args, sizeof args, "bench '%s' --stream --purcell --width 64 --height 64", bunny);

@@ -4,6 +4,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 #include "accel/grid/grid.h"
 #include "cli.h"
@@ -25,6 +26,11 @@ typedef struct stream_opts {
     int width, height, threads, isa;
     bool has_eye, has_look, has_up, has_fov, stats, quiet, purcell;
     float eye[3], look[3], up[3], fov;
+    bool has_render;           /* --integrator other than eyelight: the renderer's integrator */
+    int max_depth, reflect_depth, refract_depth; /* -1: not given */
+    float exposure;
+    rp_tonemap tonemap;
+    rp_render_desc rd;
     stream_desc sd;
     grid_desc gd;
 } stream_opts;
@@ -38,6 +44,12 @@ static void usage(FILE *out, bool bench) {
             "  --width N, --height N   image size [the scene's, else 512; bench: 1024x1024]\n"
             "  --eye X,Y,Z --look X,Y,Z --up X,Y,Z --fov DEG   camera\n"
             "  --shading NAME          eyelight (ray casting, = --integrator eyelight) or shadow [eyelight]\n"
+            "  --integrator NAME       eyelight, whitted, path, direct or ao: the renderer's integrator with its\n"
+            "                          shading on the stream's rays; the image equals `render --integrator NAME`'s\n"
+            "  --spp N, --max-depth N, --reflect-depth N, --refract-depth N, --sampler pcg|sobol\n"
+            "                          as `render` takes them [1, 5, max depth, max depth, pcg]\n"
+            "  --exposure EV, --tonemap srgb|aces   PNG/PPM as `render` writes them [0, srgb]\n"
+            "  --anim-flat             accepted for `render`'s flags: animated scenes are always built flat\n"
             "  --density F             Cleary-Wyvill grid: about F voxels per triangle [4]\n"
             "  --min-dim N             the paper's rule instead: cubic voxels, N along the shortest side\n"
             "                          (--purcell uses 64, the paper's bunny grid)\n"
@@ -100,14 +112,54 @@ static int parse(const char *cmd, int argc, char **argv, stream_opts *o, bool be
             o->has_fov = true;
         } else if (strcmp(a, "--integrator") == 0 || strcmp(a, "--shading") == 0) {
             VALUE();
+            static const struct { const char *name; rp_integrator_type integrator; } integrators[] = {
+                {"whitted", RP_INTEGRATOR_WHITTED}, {"path", RP_INTEGRATOR_PATH},
+                {"direct", RP_INTEGRATOR_DIRECT},   {"ao", RP_INTEGRATOR_AO}};
+            bool known = false;
+            o->has_render = false;
             if (strcmp(v, "eyelight") == 0) {
-                o->sd.shading = STREAM_SHADE_EYELIGHT;
+                o->sd.shading = STREAM_SHADE_EYELIGHT, known = true;
             } else if (strcmp(a, "--shading") == 0 && strcmp(v, "shadow") == 0) {
-                o->sd.shading = STREAM_SHADE_SHADOW;
-            } else {
-                fprintf(stderr, "raypack %s: the stream engine shades eyelight or shadow, not '%s'\n", cmd, v);
+                o->sd.shading = STREAM_SHADE_SHADOW, known = true;
+            } else if (strcmp(a, "--integrator") == 0) {
+                for (size_t k = 0; k < sizeof integrators / sizeof integrators[0]; k++)
+                    if (strcmp(v, integrators[k].name) == 0)
+                        o->rd.integrator = integrators[k].integrator, o->has_render = known = true;
+            }
+            if (!known) {
+                fprintf(stderr,
+                        "raypack %s: the stream engine shades eyelight or shadow (--shading), or integrates "
+                        "eyelight, whitted, path, direct or ao (--integrator), not '%s'\n",
+                        cmd, v);
                 return CLI_EXIT_USAGE;
             }
+        } else if (strcmp(a, "--spp") == 0) {
+            VALUE();
+            if (!cli_parse_int(cmd, a, v, 1, 65536, &o->rd.spp)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--max-depth") == 0 || strcmp(a, "--reflect-depth") == 0 ||
+                   strcmp(a, "--refract-depth") == 0) {
+            VALUE();
+            int *dst = a[2] == 'm' ? &o->max_depth : (a[4] == 'f' && a[5] == 'l' ? &o->reflect_depth : &o->refract_depth);
+            if (!cli_parse_int(cmd, a, v, 0, 64, dst)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--sampler") == 0) {
+            VALUE();
+            if (strcmp(v, "pcg") != 0 && strcmp(v, "sobol") != 0) {
+                fprintf(stderr, "raypack %s: --sampler expects pcg or sobol, got '%s'\n", cmd, v);
+                return CLI_EXIT_USAGE;
+            }
+            o->rd.sampler = v[0] == 's' ? RP_SAMPLER_SOBOL : RP_SAMPLER_PCG;
+        } else if (strcmp(a, "--exposure") == 0) {
+            VALUE();
+            if (!cli_parse_float(cmd, a, v, -64.0, 64.0, false, &o->exposure)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--tonemap") == 0) {
+            VALUE();
+            if (strcmp(v, "srgb") != 0 && strcmp(v, "aces") != 0) {
+                fprintf(stderr, "raypack %s: --tonemap expects srgb or aces, got '%s'\n", cmd, v);
+                return CLI_EXIT_USAGE;
+            }
+            o->tonemap = v[0] == 'a' ? RP_TONEMAP_ACES : RP_TONEMAP_SRGB;
+        } else if (strcmp(a, "--anim-flat") == 0) {
+            /* the grid holds a flat scene: animated scenes are built flat anyway */
         } else if (strcmp(a, "--density") == 0) {
             VALUE();
             if (!cli_parse_float(cmd, a, v, 0.0, 1000.0, true, &o->gd.density)) return CLI_EXIT_USAGE;
@@ -133,6 +185,11 @@ static int parse(const char *cmd, int argc, char **argv, stream_opts *o, bool be
         fprintf(stderr, "raypack %s: the stream engine needs a SCENE\n", cmd);
         return CLI_EXIT_USAGE;
     }
+    /* rp_render_desc's depths as `render` sets them: 0 is the default (5), negative is none */
+    const int *in[3] = {&o->max_depth, &o->reflect_depth, &o->refract_depth};
+    int *out[3] = {&o->rd.max_depth, &o->rd.reflect_depth, &o->rd.refract_depth};
+    for (int k = 0; k < 3; k++) *out[k] = *in[k] < 0 ? 0 : (*in[k] == 0 ? -1 : *in[k]);
+    if (o->has_render) o->sd.render = &o->rd;
     return CLI_EXIT_OK;
 }
 
@@ -148,6 +205,18 @@ static void print_stats(const stream_stats *s) {
            (unsigned long long)s->other_passes);
     printf("max/ray  traversals %u, intersections %u; SIMD efficiency %.3f\n", s->max_voxels, s->max_tests,
            s->simd_efficiency);
+    static const char *kinds[RP_RAY_KIND_COUNT] = {"primary", "shadow", "reflection", "refraction", "bounce"};
+    for (int k = 0; k < RP_RAY_KIND_COUNT; k++) {
+        const stream_kind_stats *ks = &s->kind[k];
+        if (!ks->rays) continue;
+        double kr = (double)ks->rays;
+        printf("%-10s %llu rays, %llu %s, %llu streams; per ray voxels %.2f, tests %.2f; passes traversal %llu + "
+               "intersection %llu; max %u / %u\n",
+               kinds[k], (unsigned long long)ks->rays, (unsigned long long)ks->hits,
+               k == RP_RAY_SHADOW ? "blocked" : "hits", (unsigned long long)ks->batches, (double)ks->voxels / kr,
+               (double)ks->tests / kr, (unsigned long long)ks->traversal_passes,
+               (unsigned long long)ks->intersection_passes, ks->max_voxels, ks->max_tests);
+    }
 }
 
 /* Loads the scene, builds the render scene and the grid. */
@@ -175,7 +244,9 @@ static bool load(const char *cmd, const stream_opts *o, int default_w, int defau
         return false;
     }
     if (!(l->device = cli_device_new(cmd, o->threads, o->isa))) return false;
-    if (!(l->rs = rp_render_scene_new(l->device, &l->data, NULL, err, sizeof err))) {
+    /* flat: the grid holds one level of primitives, no instances */
+    rp_render_scene_desc sdesc = {.flatten_animation = true};
+    if (!(l->rs = rp_render_scene_new(l->device, &l->data, &sdesc, err, sizeof err))) {
         fprintf(stderr, "raypack %s: %s\n", cmd, err);
         return false;
     }
@@ -198,13 +269,13 @@ static bool load(const char *cmd, const stream_opts *o, int default_w, int defau
 }
 
 static void print_grid(const grid *g) {
-    printf("grid     %dx%dx%d voxels, %u full, %u triangles, %zu references, %.2f MiB, build %.1f ms\n", g->res[0],
-           g->res[1], g->res[2], g->nonempty, g->tri_count, g->item_count, (double)grid_bytes(g) / 1048576.0,
-           g->build_ms);
+    printf("grid     %dx%dx%d voxels, %u full, %u triangles, %u other primitives, %zu references, %.2f MiB, build %.1f ms\n",
+           g->res[0], g->res[1], g->res[2], g->nonempty, g->tri_count, g->prim_count, g->item_count,
+           (double)grid_bytes(g) / 1048576.0, g->build_ms);
 }
 
 int cli_stream_render(int argc, char **argv) {
-    stream_opts o = {.output = "raypack.png"};
+    stream_opts o = {.output = "raypack.png", .max_depth = -1, .reflect_depth = -1, .refract_depth = -1};
     int rc = parse("render", argc, argv, &o, false);
     if (rc) return rc < 0 ? CLI_EXIT_OK : rc;
     loaded l;
@@ -219,13 +290,23 @@ int cli_stream_render(int argc, char **argv) {
         fprintf(stderr, "raypack render: %s\n", px ? err : "out of memory");
         goto done;
     }
+    /* 8-bit outputs as `render` writes them: exposure, tone map, sRGB */
+    const char *dot = strrchr(o.output, '.');
+    if (dot && (strcasecmp(dot, ".png") == 0 || strcasecmp(dot, ".ppm") == 0))
+        rp_film_tonemap(px, (size_t)l.w * (size_t)l.h, 3, o.exposure, o.tonemap);
     if (!rp_image_write(o.output, l.w, l.h, 3, px, err, sizeof err)) {
         fprintf(stderr, "raypack render: %s\n", err);
         goto done;
     }
     if (!o.quiet) {
-        printf("image    %s: %dx%d, stream engine, %s shading\n", o.output, l.w, l.h,
-               o.sd.shading == STREAM_SHADE_SHADOW ? "shadow" : "eyelight");
+        static const char *names[] = {[RP_INTEGRATOR_WHITTED] = "whitted", [RP_INTEGRATOR_PATH] = "path",
+                                      [RP_INTEGRATOR_DIRECT] = "direct", [RP_INTEGRATOR_AO] = "ao"};
+        if (o.sd.render)
+            printf("image    %s: %dx%d, stream engine, %s integrator, %d spp\n", o.output, l.w, l.h,
+                   names[o.rd.integrator], o.rd.spp > 0 ? o.rd.spp : 1);
+        else
+            printf("image    %s: %dx%d, stream engine, %s shading\n", o.output, l.w, l.h,
+                   o.sd.shading == STREAM_SHADE_SHADOW ? "shadow" : "eyelight");
         if (o.stats) print_grid(l.g), print_stats(&st);
     }
     status = CLI_EXIT_OK;
@@ -250,7 +331,7 @@ static double time_rays(rp_scene *scene, const grid *g, rp_rayhit *rays, size_t 
 }
 
 int cli_stream_bench(int argc, char **argv) {
-    stream_opts o = {0};
+    stream_opts o = {.max_depth = -1, .reflect_depth = -1, .refract_depth = -1};
     int rc = parse("bench", argc, argv, &o, true);
     if (rc) return rc < 0 ? CLI_EXIT_OK : rc;
     if (o.purcell && !o.gd.min_dim && !(o.gd.density > 0.0f)) o.gd.min_dim = 64;

@@ -414,7 +414,21 @@ typedef struct render_frame {
     struct pbr_frame *pbr;     /* per-frame state of the physically based integrators */
 } render_frame;
 
+/* The desc as rp_render renders it (defaults and depths resolved), and the frame's camera, lights
+ * and background from f->s and f->desc (tile.c); the stream tracer (src/stream) shades with them. */
+rp_render_desc render_desc_resolve(const rp_render_scene *scene, const rp_render_desc *desc);
+void render_frame_view(render_frame *f);
+
 /* Whitted (integrator/whitted.c). */
+/* A hit's shading without the rays it spawns: ke + ambient, the lifted point for the shadow rays,
+ * the reflection and refraction rays with their weights (o->lit false on a miss). */
+void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_hit *hit, int depth, float weight,
+                     whitted_slot *o);
+/* The shadow ray of a lit slot towards a light and its term; false when none is needed. */
+bool whitted_light(const render_frame *f, const whitted_slot *o, const rp_light_source *light, rp_ray *sr,
+                   whitted_light_term *lt);
+/* What an unoccluded light brings (the highlight's powf included). */
+v3 whitted_light_contrib(const whitted_slot *o, const whitted_light_term *lt);
 v3 whitted_shade(const render_frame *f, render_thread *th, const rp_ray *ray, const rp_hit *hit, int depth,
                  float weight);
 /* Whitted radiance of one n x n block of a tile for sample s, added to the tile's accumulator. */

@@ -146,9 +146,9 @@ static void choose_traversal(const rp_render_desc *d, rp_traversal out[RP_RAY_KI
     for (int k = 0; k < RP_RAY_KIND_COUNT; k++) out[k] = d->traversal;
 }
 
-bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels, rp_render_stats *stats) {
-    if (!scene || !pixels) return false;
-    double t0 = now_ms();
+/* The desc as rp_render renders it: defaults, Whitted's depths per ray kind, direct lighting's one
+ * bounce, ambient occlusion's distance. */
+rp_render_desc render_desc_resolve(const rp_render_scene *scene, const rp_render_desc *desc) {
     rp_render_desc dd = rp_render_desc_defaults(desc);
     bool pbr = dd.integrator == RP_INTEGRATOR_DIRECT || dd.integrator == RP_INTEGRATOR_PATH ||
                dd.integrator == RP_INTEGRATOR_IR || dd.integrator == RP_INTEGRATOR_AO;
@@ -162,6 +162,46 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     dd.reflect_depth = depth_r > 0 ? depth_r : -1;
     dd.refract_depth = depth_t > 0 ? depth_t : -1;
     if (dd.integrator == RP_INTEGRATOR_AO && !(dd.ao_distance > 0.0f)) dd.ao_distance = 0.1f * scene->radius;
+    return dd;
+}
+
+/* The frame's camera, lights (a headlight when the scene has none) and background, from f->s and
+ * f->desc. */
+void render_frame_view(render_frame *f) {
+    rp_render_scene *scene = f->s;
+    rp_camera cam = f->desc.camera ? *f->desc.camera : rp_render_scene_default_camera(scene);
+    camera_setup(&cam, f->desc.width, f->desc.height, &f->cam);
+    f->lights = scene->lights;
+    f->light_count = scene->light_count;
+    if (f->light_count == 0) {
+        /* A scene without lights is lit from just above the eye, so that Whitted still shows it
+         * with some shadows. */
+        float dist = v3_length(v3_sub(v3_load(cam.pinhole.look), f->cam.eye));
+        v3 pos = v3_madd(f->cam.eye, f->cam.u, 0.25f * dist);
+        /* Inside a building the raised light could end up in a wall or on the floor above: then
+         * it sits at the eye itself. */
+        rp_ray probe;
+        render_ray_init(&probe, f->cam.eye, f->cam.u, 0.25f * dist);
+        rp_occluded1(scene->scene, &probe);
+        if (probe.tfar < 0.0f) pos = f->cam.eye;
+        f->headlight.type = RP_LIGHT_SOURCE_POINT;
+        f->headlight.point = (rp_point_light){.intensity = {1, 1, 1}};
+        f->headlight.point.position[0] = pos.x;
+        f->headlight.point.position[1] = pos.y;
+        f->headlight.point.position[2] = pos.z;
+        f->lights = &f->headlight;
+        f->light_count = 1;
+    }
+    const rp_scene_data *d = scene->data;
+    f->background = d->has_background ? v3_load(d->background) : v3_make(0, 0, 0);
+}
+
+bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels, rp_render_stats *stats) {
+    if (!scene || !pixels) return false;
+    double t0 = now_ms();
+    rp_render_desc dd = render_desc_resolve(scene, desc);
+    bool pbr = dd.integrator == RP_INTEGRATOR_DIRECT || dd.integrator == RP_INTEGRATOR_PATH ||
+               dd.integrator == RP_INTEGRATOR_IR || dd.integrator == RP_INTEGRATOR_AO;
     bool packets = (dd.integrator == RP_INTEGRATOR_WHITTED || dd.integrator == RP_INTEGRATOR_EYELIGHT) && dd.packet > 0;
     if ((packets || pbr) && dd.packet != 4 && dd.packet != 8 && dd.packet != 16 && dd.packet != 32) return false;
     switch (dd.traversal) {
@@ -213,31 +253,7 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     choose_traversal(&dd, f->traversal);
     f->channels = rp_render_channels(&f->desc);
     f->pixels = pixels;
-    rp_camera cam = f->desc.camera ? *f->desc.camera : rp_render_scene_default_camera(scene);
-    camera_setup(&cam, f->desc.width, f->desc.height, &f->cam);
-    f->lights = scene->lights;
-    f->light_count = scene->light_count;
-    if (f->light_count == 0) {
-        /* A scene without lights is lit from just above the eye, so that Whitted still shows it
-         * with some shadows. */
-        float dist = v3_length(v3_sub(v3_load(cam.pinhole.look), f->cam.eye));
-        v3 pos = v3_madd(f->cam.eye, f->cam.u, 0.25f * dist);
-        /* Inside a building the raised light could end up in a wall or on the floor above: then
-         * it sits at the eye itself. */
-        rp_ray probe;
-        render_ray_init(&probe, f->cam.eye, f->cam.u, 0.25f * dist);
-        rp_occluded1(scene->scene, &probe);
-        if (probe.tfar < 0.0f) pos = f->cam.eye;
-        f->headlight.type = RP_LIGHT_SOURCE_POINT;
-        f->headlight.point = (rp_point_light){.intensity = {1, 1, 1}};
-        f->headlight.point.position[0] = pos.x;
-        f->headlight.point.position[1] = pos.y;
-        f->headlight.point.position[2] = pos.z;
-        f->lights = &f->headlight;
-        f->light_count = 1;
-    }
-    const rp_scene_data *d = scene->data;
-    f->background = d->has_background ? v3_load(d->background) : v3_make(0, 0, 0);
+    render_frame_view(f);
     /* Packet blocks never straddle tiles: a tile is a whole number of packets. */
     uint32_t ts = (uint32_t)f->desc.tile_size;
     if (packets) {

@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "render/integrator/pbr.h"
 #include "render/render.h"
 #include "sys/sys.h"
 
@@ -83,9 +84,10 @@ static void enter_voxel(const grid *g, ray_stream *s, uint32_t i) {
 }
 
 /* Kernel: traversal setup (per-ray DDA setup and the first voxel). */
-static void kernel_setup(const grid *g, ray_stream *s) {
+static void kernel_setup(const grid *g, ray_stream *s, size_t first, size_t count) {
     s->active_count = 0;
-    for (size_t i = 0; i < s->count; i++) {
+    for (size_t i = first; i < first + count; i++) {
+        s->voxels[i] = s->tests[i] = 0;
         s->hit[i] = (grid_hit){.t = s->ray[i].tfar, .tri = UINT32_MAX};
         for (int k = 0; k < GRID_MAILBOX; k++) s->mailbox[i * GRID_MAILBOX + k] = UINT32_MAX;
         if (!(s->ray[i].tnear <= s->ray[i].tfar) || !grid_walk_setup(g, &s->ray[i], &s->walk[i])) {
@@ -157,8 +159,12 @@ static void run_wavefront(const grid *g, ray_stream *s, stream_stats *st) {
 
 /* The multipass loop: the oracle picks the pass, the pass runs its kernel on the rays in its state
  * (the others wait, as fragments killed by the stencil do). */
-static void run_passes(const grid *g, ray_stream *s, float oracle, bool wavefront, stream_stats *st) {
-    kernel_setup(g, s);
+static void run_passes(const grid *g, ray_stream *s, size_t first, size_t count, rp_ray_kind kind, float oracle,
+                       bool wavefront, stream_stats *st) {
+    if (count == 0) return;
+    stream_kind_stats *ks = &st->kind[kind];
+    uint64_t trav0 = st->traversal_passes, isect0 = st->intersection_passes;
+    kernel_setup(g, s, first, count);
     st->other_passes++;
     for (;;) {
         if (wavefront) {
@@ -191,14 +197,21 @@ static void run_passes(const grid *g, ray_stream *s, float oracle, bool wavefron
         else
             st->traversal_passes++;
         st->work += worked;
-        st->slots += s->count;
+        st->slots += count;
     }
-    for (size_t i = 0; i < s->count; i++) {
+    for (size_t i = first; i < first + count; i++) {
         st->voxels += s->voxels[i], st->tests += s->tests[i];
+        ks->voxels += s->voxels[i], ks->tests += s->tests[i];
         if (s->voxels[i] > st->max_voxels) st->max_voxels = s->voxels[i];
         if (s->tests[i] > st->max_tests) st->max_tests = s->tests[i];
+        if (s->voxels[i] > ks->max_voxels) ks->max_voxels = s->voxels[i];
+        if (s->tests[i] > ks->max_tests) ks->max_tests = s->tests[i];
+        ks->hits += s->hit[i].tri != UINT32_MAX;
     }
-    st->rays += s->count;
+    st->rays += count;
+    ks->rays += count, ks->batches++;
+    ks->traversal_passes += st->traversal_passes - trav0;
+    ks->intersection_passes += st->intersection_passes - isect0;
 }
 
 static void hit_of(const grid *g, const ray_stream *s, size_t i, rp_rayhit *rh) {
@@ -216,6 +229,288 @@ static float eyelight(const rp_rayhit *rh) {
     return c;
 }
 
+/* ---- the renderer's integrators on the stream ------------------------------------------------ */
+
+/* A stream whose rays are traced as closest hits (any-hit rays are shadow streams). */
+static bool stream_grow(ray_stream *s, size_t n, bool any) {
+    if (s->ray && n <= s->count) return true;
+    stream_free(s);
+    return stream_alloc(s, n, any);
+}
+
+/* rp_occluded1's answer for ray i of a traced any-hit stream: its tfar -inf when blocked, and a ray
+ * that was empty from the start (tnear > tfar) left as it was, as the core leaves it. */
+static bool shadow_passes(const ray_stream *s, size_t i) {
+    return s->hit[i].tri == UINT32_MAX && !(s->ray[i].tfar < 0.0f);
+}
+
+/* One level of the Whitted tree: its rays (reflection children first, then refraction children),
+ * the slot each one's shading left, and the parent slot it adds its radiance to. */
+typedef struct whitted_stream_level {
+    whitted_slot *slot;
+    uint32_t *parent;
+    float *weight;
+    size_t count, reflected; /* rays [0, reflected) are reflection rays, the rest refraction rays */
+} whitted_stream_level;
+
+typedef struct stream_ctx {
+    const grid *g;
+    const stream_desc *d;
+    render_frame *f;
+    render_thread th;
+    stream_stats *st;
+    ray_stream rays, shadow;
+    uint32_t *owner;          /* shadow ray -> the slot it lights */
+    whitted_light_term *term; /* shadow ray -> what its light brings */
+} stream_ctx;
+
+static void trace(stream_ctx *c, ray_stream *s, size_t first, size_t count, rp_ray_kind kind) {
+    run_passes(c->g, s, first, count, kind, c->d->oracle, c->d->wavefront, c->st);
+}
+
+/* Whitted's shading kernel on a level: whitted_surface per ray, then its shadow stream (one ray per
+ * lit slot and light, slot after slot, lights in order, so each slot sums its lights in the order
+ * the packet tracer does), then the lights that got through. */
+static bool whitted_level_shade(stream_ctx *c, whitted_stream_level *lv, int depth) {
+    const render_frame *f = c->f;
+    for (size_t k = 0; k < lv->count; k++) {
+        rp_rayhit rh;
+        hit_of(c->g, &c->rays, k, &rh);
+        c->st->shades += rh.hit.geom_id != RP_INVALID_ID;
+        if (depth == 0) c->st->eye_hits += rh.hit.geom_id != RP_INVALID_ID;
+        whitted_surface(f, &rh.ray, &rh.hit, depth, lv->weight[k], &lv->slot[k]);
+    }
+    c->st->other_passes++;
+    size_t lit = 0;
+    for (size_t k = 0; k < lv->count; k++) lit += lv->slot[k].lit;
+    size_t cap = lit * f->light_count;
+    if (cap) {
+        if (!stream_grow(&c->shadow, cap, true)) return false;
+        free(c->owner), free(c->term);
+        c->owner = malloc(cap * sizeof *c->owner), c->term = malloc(cap * sizeof *c->term);
+        if (!c->owner || !c->term) return false;
+    }
+    size_t ns = 0;
+    for (size_t k = 0; k < lv->count; k++) {
+        if (!lv->slot[k].lit) continue;
+        for (size_t i = 0; i < f->light_count; i++) {
+            if (!whitted_light(f, &lv->slot[k], &f->lights[i], &c->shadow.ray[ns], &c->term[ns])) continue;
+            c->owner[ns++] = (uint32_t)k;
+        }
+    }
+    trace(c, &c->shadow, 0, ns, RP_RAY_SHADOW);
+    for (size_t j = 0; j < ns; j++) {
+        c->st->shades++;
+        if (!shadow_passes(&c->shadow, j)) {
+            c->st->shadow_blocked++;
+            continue;
+        }
+        whitted_slot *o = &lv->slot[c->owner[j]];
+        o->direct = v3_add(o->direct, whitted_light_contrib(o, &c->term[j]));
+    }
+    c->st->shadow_rays += ns;
+    if (ns) c->st->other_passes++;
+    for (size_t k = 0; k < lv->count; k++)
+        if (lv->slot[k].lit) lv->slot[k].color = v3_add(lv->slot[k].color, lv->slot[k].direct);
+    return true;
+}
+
+static void whitted_level_free(whitted_stream_level *lv) {
+    free(lv->slot), free(lv->parent), free(lv->weight);
+    memset(lv, 0, sizeof *lv);
+}
+
+static bool whitted_level_alloc(whitted_stream_level *lv, size_t n) {
+    size_t m = n ? n : 1;
+    lv->slot = malloc(m * sizeof *lv->slot), lv->parent = malloc(m * sizeof *lv->parent);
+    lv->weight = malloc(m * sizeof *lv->weight);
+    lv->count = n;
+    return lv->slot && lv->parent && lv->weight;
+}
+
+/* One sample of Whitted over the image, level by level (breadth first, as the packet tracer goes
+ * through a packet): each level's rays a stream, the children's radiance folded into their
+ * parents from the deepest level up (reflection before refraction, as whitted_shade adds them). */
+static bool whitted_sample(stream_ctx *c, int sample, whitted_stream_level *levels) {
+    const render_frame *f = c->f;
+    int w = f->desc.width, h = f->desc.height;
+    size_t n = (size_t)w * (size_t)h;
+    int depth_max = f->desc.max_depth;
+    if (!whitted_level_alloc(&levels[0], n) || !stream_grow(&c->rays, n, false)) return false;
+    /* Kernel: eye-ray generation, the packet tracer's rays (render_sample_offset) */
+    for (size_t i = 0; i < n; i++) {
+        int x = (int)(i % (size_t)w), y = (int)(i / (size_t)w);
+        float ox, oy;
+        render_sample_offset(x, y, sample, &ox, &oy);
+        camera_ray(&f->cam, (float)x + ox, (float)y + oy, &c->rays.ray[i]);
+        levels[0].weight[i] = 1.0f;
+        levels[0].parent[i] = (uint32_t)i;
+    }
+    levels[0].reflected = n;
+    c->st->other_passes++;
+    c->st->eye_rays += n;
+    trace(c, &c->rays, 0, n, RP_RAY_PRIMARY);
+    int used = 1;
+    for (int depth = 0; depth <= depth_max; depth++) {
+        whitted_stream_level *lv = &levels[depth];
+        if (!whitted_level_shade(c, lv, depth)) return false;
+        size_t nr = 0, nt = 0;
+        for (size_t k = 0; k < lv->count; k++) nr += lv->slot[k].has_r, nt += lv->slot[k].has_t;
+        if (nr + nt == 0 || depth == depth_max) break;
+        whitted_stream_level *dn = &levels[depth + 1];
+        if (!whitted_level_alloc(dn, nr + nt) || !stream_grow(&c->rays, nr + nt, false)) return false;
+        used = depth + 2;
+        size_t r = 0, t = nr;
+        for (size_t k = 0; k < lv->count; k++) {
+            const whitted_slot *o = &lv->slot[k];
+            if (o->has_r) {
+                render_ray_init(&c->rays.ray[r], o->org_r, o->dir_r, INFINITY);
+                dn->weight[r] = o->w_r, dn->parent[r++] = (uint32_t)k;
+            }
+            if (o->has_t) {
+                render_ray_init(&c->rays.ray[t], o->org_t, o->dir_t, INFINITY);
+                dn->weight[t] = o->w_t, dn->parent[t++] = (uint32_t)k;
+            }
+        }
+        dn->reflected = nr;
+        trace(c, &c->rays, 0, nr, RP_RAY_REFLECTION);
+        trace(c, &c->rays, nr, nt, RP_RAY_REFRACTION);
+    }
+    /* Kernel: the children's radiance into their parents, deepest level first */
+    for (int l = used - 1; l > 0; l--) {
+        whitted_stream_level *lv = &levels[l], *up = &levels[l - 1];
+        for (size_t k = 0; k < lv->count; k++) {
+            whitted_slot *o = &up->slot[lv->parent[k]];
+            o->color = v3_add(o->color, v3_mul(k < lv->reflected ? o->mul_r : o->mul_t, lv->slot[k].color));
+        }
+        c->st->other_passes++;
+    }
+    for (size_t i = 0; i < n; i++) {
+        v3 col = levels[0].slot[i].color;
+        c->th.accum[3 * i + 0] += col.x, c->th.accum[3 * i + 1] += col.y, c->th.accum[3 * i + 2] += col.z;
+    }
+    for (int l = 0; l < used; l++) whitted_level_free(&levels[l]);
+    return true;
+}
+
+/* One sample of path tracing (direct lighting, AO) over the image: the eye stream, then per depth
+ * path_vertex on every live path (emission into the accumulator, the light sample's shadow ray into
+ * the shadow stream, the bounce into the next stream), the shadow stream, the bounce stream. Each
+ * pixel gets its terms in the packet renderer's order. */
+static bool path_sample(stream_ctx *c, uint32_t sample, pbr_path *paths) {
+    const render_frame *f = c->f;
+    int w = f->desc.width, h = f->desc.height;
+    size_t n = (size_t)w * (size_t)h;
+    if (!stream_grow(&c->rays, n, false) || !stream_grow(&c->shadow, n, true)) return false;
+    pbr_thread *pt = c->th.pbr;
+    pt->shadow = c->shadow.ray; /* path_vertex queues its shadow rays straight into the stream */
+    for (size_t i = 0; i < n; i++) {
+        uint32_t x = (uint32_t)(i % (size_t)w), y = (uint32_t)(i / (size_t)w);
+        pbr_path *p = &paths[i];
+        p->rng = sampler_start_pixel(f->desc.sampler, x, y, sample);
+        camera_ray(&f->cam, (float)x + sampler_at(&p->rng, 0), (float)y + sampler_at(&p->rng, 1), &c->rays.ray[i]);
+        p->beta = v3_make(1, 1, 1), p->pdf = 0.0f, p->pixel = (uint32_t)i, p->depth = 0, p->specular = true;
+    }
+    c->st->other_passes++;
+    c->st->eye_rays += n;
+    trace(c, &c->rays, 0, n, RP_RAY_PRIMARY);
+    size_t count = n;
+    rp_ray_kind kind = RP_RAY_PRIMARY;
+    while (count) {
+        uint32_t nshadow = 0;
+        size_t next = 0;
+        for (size_t i = 0; i < count; i++) {
+            rp_rayhit rh, nx;
+            hit_of(c->g, &c->rays, i, &rh);
+            c->st->shades += rh.hit.geom_id != RP_INVALID_ID;
+            if (kind == RP_RAY_PRIMARY) c->st->eye_hits += rh.hit.geom_id != RP_INVALID_ID;
+            pbr_path p = paths[i];
+            if (!path_vertex(f, &c->th, &p, &rh, &nx, &nshadow)) continue;
+            /* next <= i: the slot is read already */
+            c->rays.ray[next] = nx.ray;
+            paths[next++] = p;
+        }
+        c->st->other_passes++;
+        trace(c, &c->shadow, 0, nshadow, RP_RAY_SHADOW);
+        for (uint32_t k = 0; k < nshadow; k++) {
+            c->st->shades++;
+            if (shadow_passes(&c->shadow, k))
+                path_add_px(&c->th, pt->shadow_pixel[k], pt->shadow_L[k]);
+            else
+                c->st->shadow_blocked++;
+        }
+        c->st->shadow_rays += nshadow;
+        if (nshadow) c->st->other_passes++;
+        kind = RP_RAY_BOUNCE;
+        trace(c, &c->rays, 0, next, kind);
+        count = next;
+    }
+    return true;
+}
+
+/* The renderer's integrator d->render on the stream (see stream_desc.render). */
+static bool render_integrator(rp_render_scene *rs, const grid *g, const stream_desc *d, float *pixels,
+                              stream_stats *st, char *err, size_t err_size) {
+    rp_render_desc rd = *d->render;
+    rd.width = d->width, rd.height = d->height, rd.camera = d->camera;
+    rd.region[0] = rd.region[1] = rd.region[2] = rd.region[3] = 0;
+    rd.accumulate = false, rd.bounce_rays = NULL;
+    render_frame *f = calloc(1, sizeof *f);
+    stream_ctx c = {.g = g, .d = d, .f = f, .st = st};
+    size_t n = (size_t)d->width * (size_t)d->height;
+    bool whitted = false, ok = false;
+    whitted_stream_level *levels = NULL;
+    pbr_path *paths = NULL;
+    if (!f) goto oom;
+    f->s = rs;
+    f->desc = render_desc_resolve(rs, &rd);
+    switch (f->desc.integrator) {
+    case RP_INTEGRATOR_WHITTED: whitted = true; break;
+    case RP_INTEGRATOR_PATH:
+    case RP_INTEGRATOR_DIRECT:
+    case RP_INTEGRATOR_AO: break;
+    case RP_INTEGRATOR_EYELIGHT:
+    case RP_INTEGRATOR_AOV:
+    case RP_INTEGRATOR_IR:
+    default:
+        snprintf(err, err_size, "stream: the stream engine renders whitted, path, direct, ao or eyelight");
+        free(f);
+        return false;
+    }
+    render_frame_view(f);
+    c.th.accum = calloc(n * 3, sizeof(float));
+    if (!c.th.accum) goto oom;
+    if (whitted) {
+        levels = calloc((size_t)f->desc.max_depth + 1, sizeof *levels);
+        if (!levels) goto oom;
+        for (int s = 0; s < f->desc.spp; s++)
+            if (!whitted_sample(&c, f->desc.sample_start + s, levels)) goto oom;
+    } else {
+        c.th.pbr = calloc(1, sizeof *c.th.pbr);
+        paths = malloc(n * sizeof *paths);
+        if (!c.th.pbr || !paths) goto oom;
+        c.th.pbr->shadow_L = malloc(n * sizeof(v3));
+        c.th.pbr->shadow_pixel = malloc(n * sizeof(uint32_t));
+        if (!c.th.pbr->shadow_L || !c.th.pbr->shadow_pixel) goto oom;
+        for (int s = 0; s < f->desc.spp; s++)
+            if (!path_sample(&c, (uint32_t)(f->desc.sample_start + s), paths)) goto oom;
+    }
+    /* the tile renderer's mean: the sum itself for one sample, else times 1 / spp */
+    float inv = 1.0f / (float)f->desc.spp;
+    for (size_t i = 0; i < 3 * n; i++) pixels[i] = f->desc.spp == 1 ? c.th.accum[i] : c.th.accum[i] * inv;
+    ok = true;
+oom:
+    if (!ok) snprintf(err, err_size, "stream: out of memory for %zu rays", n);
+    if (levels)
+        for (int l = 0; l <= f->desc.max_depth; l++) whitted_level_free(&levels[l]);
+    free(levels), free(paths);
+    if (c.th.pbr) free(c.th.pbr->shadow_L), free(c.th.pbr->shadow_pixel);
+    free(c.th.pbr), free(c.th.accum), free(c.owner), free(c.term);
+    stream_free(&c.rays), stream_free(&c.shadow);
+    free(f);
+    return ok;
+}
+
 bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_in, float *pixels, rp_rayhit *hits,
                    stream_stats *stats, char *err, size_t err_size) {
     double t0 = sys_seconds();
@@ -226,6 +521,10 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
         return false;
     }
     size_t n = (size_t)d.width * (size_t)d.height;
+    if (d.render && d.render->integrator != RP_INTEGRATOR_EYELIGHT) {
+        if (!render_integrator(rs, g, &d, pixels, &st, err, err_size)) return false;
+        goto done;
+    }
     ray_stream eye;
     if (!stream_alloc(&eye, n, false)) {
         snprintf(err, err_size, "stream: out of memory for %zu rays", n);
@@ -238,7 +537,7 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
     for (size_t i = 0; i < n; i++)
         camera_ray(&rc, (float)(i % (size_t)d.width) + 0.5f, (float)(i / (size_t)d.width) + 0.5f, &eye.ray[i]);
     st.other_passes++;
-    run_passes(g, &eye, d.oracle, d.wavefront, &st);
+    run_passes(g, &eye, 0, n, RP_RAY_PRIMARY, d.oracle, d.wavefront, &st);
     st.eye_rays = n;
 
     /* Kernel: shading (one pass); with shadows it emits the shadow stream */
@@ -291,7 +590,7 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
     }
     st.other_passes++;
     if (shadows) {
-        run_passes(g, &shadow, d.oracle, d.wavefront, &st);
+        run_passes(g, &shadow, 0, n, RP_RAY_SHADOW, d.oracle, d.wavefront, &st);
         for (size_t i = 0; i < n; i++) {
             bool traced = shadow.ray[i].tfar >= 0.0f;
             if (!traced) continue;
@@ -305,10 +604,12 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
         st.other_passes++; /* the final shading pass */
         /* shadow rays that were not traced (misses, back-lit) are not rays of the frame */
         st.rays -= n - st.shadow_rays;
+        st.kind[RP_RAY_SHADOW].rays -= n - st.shadow_rays;
         free(kd_cos);
         stream_free(&shadow);
     }
     stream_free(&eye);
+done:
     st.passes = st.traversal_passes + st.intersection_passes + st.other_passes;
     st.simd_efficiency = st.slots ? (double)st.work / (double)st.slots : 0.0;
     st.ms = (sys_seconds() - t0) * 1e3;

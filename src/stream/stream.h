@@ -7,6 +7,12 @@
  * tests every intersecting ray against one triangle of its voxel, as the paper's fragment programs
  * do, so the pass counts and per-ray statistics are the paper's (table 2, fig. 6).
  *
+ * The shading kernel either shades eye light / the paper's shadow caster, or runs one of the
+ * renderer's integrators (Whitted, path, direct, AO) through the renderer's own shading functions:
+ * each depth's shadow, reflection, refraction and bounce rays are streams of their own through the
+ * same traversal and intersection passes, so the image is rp_render's bit for bit (the grid's hits
+ * are the BVH's) and the statistics are kept per ray kind.
+ *
  * Passes are run on one thread in ray order: every number, image and hit is deterministic. */
 #ifndef RP_STREAM_H
 #define RP_STREAM_H
@@ -34,11 +40,26 @@ typedef struct stream_desc {
                                  * 1e-9 or less: the naive oracle (intersect if any ray needs to) */
     bool wavefront;             /* the wavefront scheduler instead: per-kernel queues compacted
                                  * between passes, both kernels every iteration (oracle unused) */
+    /* When not NULL, the renderer's integrator instead of `shading`: Whitted, path, direct, AO or
+     * eye light with the desc's settings (spp, depths, sampler, ambient...; its width, height and
+     * camera are replaced by the ones above). The shade kernel calls the renderer's own shading
+     * (whitted_surface / whitted_light, path_vertex) and emits shadow, reflection, refraction and
+     * bounce rays as streams of their own, so the image equals rp_render's bit for bit. */
+    const rp_render_desc *render;
 } stream_desc;
 
 stream_desc stream_desc_defaults(const stream_desc *desc);
 
-/* Statistics of one frame (all streams: eye rays, then shadow rays). */
+/* Statistics of the streams of one kind of ray (rp_ray_kind) over a frame. */
+typedef struct stream_kind_stats {
+    uint64_t rays, hits;         /* hits: closest hit found, or (shadow rays) occluded */
+    uint64_t batches;            /* streams of this kind run through the scheduler */
+    uint64_t traversal_passes, intersection_passes; /* of those streams */
+    uint64_t voxels, tests;
+    uint32_t max_voxels, max_tests;
+} stream_kind_stats;
+
+/* Statistics of one frame (all streams: eye rays, then shadow, reflection, refraction, bounce). */
 typedef struct stream_stats {
     uint64_t rays, eye_rays, shadow_rays;
     uint64_t passes;             /* = traversal + intersection + other */
@@ -49,6 +70,7 @@ typedef struct stream_stats {
     uint64_t slots;              /* rays of the stream (wavefront: of the pass's queue) summed over those passes */
     double simd_efficiency;      /* work / slots: the mean fraction of a pass's rays doing work */
     uint64_t eye_hits, shadow_blocked;
+    stream_kind_stats kind[RP_RAY_KIND_COUNT]; /* sums over kinds equal the totals above */
     double ms;
 } stream_stats;
 

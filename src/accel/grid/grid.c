@@ -86,14 +86,33 @@ static void scan(grid *g, double margin, bool fill, uint32_t *cursor) {
                         g->offsets[c + 1]++;
                 }
     }
+    /* primitives: every voxel their box (with the margin) overlaps */
+    for (uint32_t k = 0; k < g->prim_count; k++) {
+        const float *b = &g->prim_box[6 * k];
+        int lo[3], hi[3];
+        for (int a = 0; a < 3; a++) {
+            double l = floor((b[a] - margin - g->lo[a]) / g->cell[a]), h = floor((b[3 + a] + margin - g->lo[a]) / g->cell[a]);
+            lo[a] = l < 0.0 ? 0 : (l > g->res[a] - 1 ? g->res[a] - 1 : (int)l);
+            hi[a] = h < 0.0 ? 0 : (h > g->res[a] - 1 ? g->res[a] - 1 : (int)h);
+        }
+        for (int z = lo[2]; z <= hi[2]; z++)
+            for (int y = lo[1]; y <= hi[1]; y++)
+                for (int x = lo[0]; x <= hi[0]; x++) {
+                    uint32_t c = ((uint32_t)z * (uint32_t)g->res[1] + (uint32_t)y) * (uint32_t)g->res[0] + (uint32_t)x;
+                    if (fill)
+                        g->items[cursor[c]++] = g->tri_count + k;
+                    else
+                        g->offsets[c + 1]++;
+                }
+    }
 }
 
-grid *grid_build_tri4(const sys_allocator *alloc, const tri4 *blocks, size_t block_count, const grid_desc *desc_in) {
+/* The grid of the tri4 blocks and of the primitives of g->prims / g->prim_box (set by the caller;
+ * g allocated, its allocator set). */
+static grid *build(grid *g, const tri4 *blocks, size_t block_count, const grid_desc *desc_in) {
     double t0 = sys_seconds();
     grid_desc desc = grid_desc_defaults(desc_in);
-    grid *g = sys_calloc(alloc, sizeof(grid));
-    if (!g) return NULL;
-    g->alloc = *alloc;
+    const sys_allocator *alloc = &g->alloc;
     size_t n = 0;
     for (size_t b = 0; b < block_count; b++)
         for (int l = 0; l < 4; l++) n += blocks[b].mask[l] != 0;
@@ -110,7 +129,10 @@ grid *grid_build_tri4(const sys_allocator *alloc, const tri4 *blocks, size_t blo
             for (int k = 0; k < 9; k++) lo[k % 3] = fmin(lo[k % 3], t.v[k]), hi[k % 3] = fmax(hi[k % 3], t.v[k]);
             g->tris[g->tri_count++] = t;
         }
-    if (g->tri_count == 0)
+    for (uint32_t k = 0; k < g->prim_count; k++)
+        for (int a = 0; a < 3; a++)
+            lo[a] = fmin(lo[a], g->prim_box[6 * k + a]), hi[a] = fmax(hi[a], g->prim_box[6 * k + 3 + a]);
+    if (g->tri_count + g->prim_count == 0)
         for (int a = 0; a < 3; a++) lo[a] = 0.0, hi[a] = 1.0;
     /* margin: well above the rounding of a hit point's coordinates, so the voxel the DDA is in
      * when a hit's distance is reached always lists the triangle */
@@ -128,7 +150,7 @@ grid *grid_build_tri4(const sys_allocator *alloc, const tri4 *blocks, size_t blo
             lo[a] -= grow, hi[a] += grow, ext[a] = hi[a] - lo[a];
         }
     }
-    pick_resolution(&desc, ext, g->tri_count, g->res);
+    pick_resolution(&desc, ext, g->tri_count + g->prim_count, g->res);
     for (int a = 0; a < 3; a++) {
         g->lo[a] = (float)lo[a], g->hi[a] = (float)hi[a];
         g->cell[a] = (float)(ext[a] / g->res[a]);
@@ -166,20 +188,58 @@ grid *grid_build_scene(rp_scene *scene, const grid_desc *desc, char *err, size_t
         snprintf(err, err_size, "grid: the scene is not committed");
         return NULL;
     }
-    if (scene->prim_count) {
-        snprintf(err, err_size, "grid: the scene has %zu spheres or user primitives; the grid holds triangles only",
-                 scene->prim_count);
-        return NULL;
+    const sys_allocator *alloc = &scene->device->alloc;
+    grid *g = sys_calloc(alloc, sizeof(grid));
+    if (!g) goto oom;
+    g->alloc = *alloc;
+    g->acc = &scene->accel;
+    size_t np = scene->prim_count;
+    if (np) {
+        g->prims = sys_alloc(alloc, np * sizeof(prim_ref));
+        g->prim_box = sys_alloc(alloc, np * 6 * sizeof(float));
+        if (!g->prims || !g->prim_box) goto oom;
+        g->prim_count = (uint32_t)np;
     }
-    grid *g = grid_build_tri4(&scene->device->alloc, scene->tris, scene->tri_block_count, desc);
-    if (!g) snprintf(err, err_size, "grid: out of memory");
-    return g;
+    /* the primitives' boxes as the commit gathered them (spheres: centre +- radius; user: its
+     * bounds callback), in the order of the core's list */
+    for (size_t k = 0; k < np; k++) {
+        prim_ref r = scene->prims[k];
+        const rp_geometry *geo = scene->geoms[r.geom];
+        float *b = &g->prim_box[6 * k];
+        g->prims[k] = r;
+        if (geo->type == RP_GEOMETRY_SPHERE) {
+            const float *c = geom_item(&geo->buffers[RP_BUFFER_VERTEX], r.prim);
+            for (int a = 0; a < 3; a++) b[a] = c[a] - c[3], b[3 + a] = c[a] + c[3];
+        } else if (geo->type == RP_GEOMETRY_USER) {
+            rp_bounds ub = {0};
+            geo->user_bounds(geo->user, r.prim, &ub);
+            b[0] = ub.lower_x, b[1] = ub.lower_y, b[2] = ub.lower_z, b[3] = ub.upper_x, b[4] = ub.upper_y, b[5] = ub.upper_z;
+        } else {
+            snprintf(err, err_size, "grid: the scene holds instances (an animated scene not built flat?); the grid "
+                                    "holds triangles, spheres and user primitives of one level");
+            grid_free(g);
+            return NULL;
+        }
+    }
+    if (build(g, scene->tris, scene->tri_block_count, desc)) return g;
+    g = NULL; /* build freed it */
+oom:
+    grid_free(g);
+    snprintf(err, err_size, "grid: out of memory");
+    return NULL;
+}
+
+grid *grid_build_tri4(const sys_allocator *alloc, const tri4 *blocks, size_t block_count, const grid_desc *desc) {
+    grid *g = sys_calloc(alloc, sizeof(grid));
+    if (!g) return NULL;
+    g->alloc = *alloc;
+    return build(g, blocks, block_count, desc);
 }
 
 size_t grid_bytes(const grid *g) {
     if (!g) return 0;
     return sizeof(grid) + ((size_t)g->voxel_count + 1) * sizeof(uint32_t) + g->item_count * sizeof(uint32_t) +
-           (size_t)g->tri_count * sizeof(grid_tri);
+           (size_t)g->tri_count * sizeof(grid_tri) + (size_t)g->prim_count * (sizeof(prim_ref) + 6 * sizeof(float));
 }
 
 void grid_free(grid *g) {
@@ -188,6 +248,8 @@ void grid_free(grid *g) {
     if (g->offsets) sys_free(&a, g->offsets, ((size_t)g->voxel_count + 1) * sizeof(uint32_t));
     if (g->items) sys_free(&a, g->items, (g->item_count ? g->item_count : 1) * sizeof(uint32_t));
     if (g->tris) sys_free(&a, g->tris, g->tri_capacity * sizeof(grid_tri));
+    if (g->prims) sys_free(&a, g->prims, (size_t)g->prim_count * sizeof(prim_ref));
+    if (g->prim_box) sys_free(&a, g->prim_box, (size_t)g->prim_count * 6 * sizeof(float));
     sys_free(&a, g, sizeof(grid));
 }
 
@@ -196,7 +258,7 @@ void grid_free(grid *g) {
 bool grid_walk_setup(const grid *g, const rp_ray *ray, grid_walk *w) {
     const float o[3] = {ray->org_x, ray->org_y, ray->org_z}, d[3] = {ray->dir_x, ray->dir_y, ray->dir_z};
     float t0 = ray->tnear, t1 = ray->tfar;
-    if (!(t0 <= t1) || g->tri_count == 0) return false;
+    if (!(t0 <= t1) || g->tri_count + g->prim_count == 0) return false;
     for (int a = 0; a < 3; a++) {
         /* the kernels' safe reciprocal: no 0 * inf */
         float dd = fabsf(d[a]) < 1e-18f ? copysignf(1e-18f, d[a]) : d[a];
@@ -244,7 +306,20 @@ bool grid_walk_step(const grid *g, grid_walk *w, float tfar) {
     return w->cell[a] >= 0 && w->cell[a] < g->res[a];
 }
 
+/* A primitive through the core's callback, over [tnear, the hit so far]: the BVH's leaves test
+ * primitives after the triangles with tfar at the triangles' hit, so a primitive wins a tie. */
+static bool prim_test(const grid *g, uint32_t k, const rp_ray *ray, grid_hit *h) {
+    rp_ray r = *ray;
+    r.tfar = h->t;
+    rp_hit hit = {.geom_id = RP_INVALID_ID};
+    if (!g->acc->prim_intersect(g->acc, g->prims[k], &r, &hit)) return false;
+    h->t = r.tfar, h->u = hit.u, h->v = hit.v, h->tri = g->tri_count + k;
+    h->ng[0] = hit.Ng_x, h->ng[1] = hit.Ng_y, h->ng[2] = hit.Ng_z;
+    return true;
+}
+
 bool grid_test(const grid *g, uint32_t i, const rp_ray *ray, grid_hit *h) {
+    if (i >= g->tri_count) return prim_test(g, i - g->tri_count, ray, h);
     const grid_tri *tr = &g->tris[i];
     if (!(tr->mask & ray->mask)) return false;
     const float o[3] = {ray->org_x, ray->org_y, ray->org_z}, d[3] = {ray->dir_x, ray->dir_y, ray->dir_z};
@@ -252,7 +327,7 @@ bool grid_test(const grid *g, uint32_t i, const rp_ray *ray, grid_hit *h) {
     if (!tri_intersect_ref(o, d, ray->tnear, h->t, tr->v, tr->v + 3, tr->v + 6, &t, &u, &v)) return false;
     /* t <= h->t here: nearer, or a tie won by the lower (geom, prim) as in the BVH kernels */
     if (t < h->t || h->tri == UINT32_MAX ||
-        hit_key_less(tr->geom, tr->prim, g->tris[h->tri].geom, g->tris[h->tri].prim)) {
+        (h->tri < g->tri_count && hit_key_less(tr->geom, tr->prim, g->tris[h->tri].geom, g->tris[h->tri].prim))) {
         h->t = t, h->u = u, h->v = v, h->tri = i;
     }
     return true;
@@ -260,6 +335,14 @@ bool grid_test(const grid *g, uint32_t i, const rp_ray *ray, grid_hit *h) {
 
 void grid_hit_write(const grid *g, const grid_hit *h, rp_rayhit *rh) {
     if (h->tri == UINT32_MAX) return;
+    if (h->tri >= g->tri_count) {
+        prim_ref r = g->prims[h->tri - g->tri_count];
+        rh->ray.tfar = h->t;
+        rh->hit.u = h->u, rh->hit.v = h->v;
+        rh->hit.Ng_x = h->ng[0], rh->hit.Ng_y = h->ng[1], rh->hit.Ng_z = h->ng[2];
+        rh->hit.geom_id = r.geom, rh->hit.prim_id = r.prim, rh->hit.inst_id = RP_INVALID_ID;
+        return;
+    }
     const grid_tri *tr = &g->tris[h->tri];
     float e1[3], e2[3];
     for (int a = 0; a < 3; a++) e1[a] = tr->v[3 + a] - tr->v[a], e2[a] = tr->v[6 + a] - tr->v[a];

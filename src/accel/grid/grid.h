@@ -6,7 +6,9 @@
  *
  * The traversal is split into setup / cell / step so the stream tracer (src/stream) runs it one
  * voxel per pass with the per-ray state in its own arrays, through the same code as the single-ray
- * loop. Triangles only: spheres and user geometry are not in the grid. */
+ * loop. Spheres and user primitives (NFF cones) are listed in the voxels their boxes overlap, after
+ * the triangles (item index tri_count + k), and tested by the core's own callbacks, as the BVH's
+ * leaves test them; instances are not (a flat scene only). */
 #ifndef RP_GRID_H
 #define RP_GRID_H
 
@@ -49,14 +51,19 @@ typedef struct grid {
     uint32_t tri_count;
     size_t tri_capacity;    /* allocated (live lanes; non-finite triangles are dropped) */
     uint32_t nonempty;      /* voxels with at least one triangle */
+    /* spheres and user primitives: items tri_count + k, tested through the scene's accel */
+    const rp_accel *acc;
+    prim_ref *prims;
+    float *prim_box;        /* 6 per primitive: lo xyz, hi xyz */
+    uint32_t prim_count;
     double build_ms;
 } grid;
 
 /* Builds a grid over the live lanes (mask != 0) of tri4 blocks, copying their vertices. NULL when
  * out of memory. A grid of no triangles is valid (every ray misses). */
 grid *grid_build_tri4(const sys_allocator *alloc, const tri4 *blocks, size_t block_count, const grid_desc *desc);
-/* Builds a grid of a committed scene's triangles. NULL with a message in err when the scene is not
- * committed, holds spheres or user geometry, or memory runs out. Owned by the caller (grid_free);
+/* Builds a grid of a committed scene's triangles, spheres and user primitives. NULL with a message in
+ * err when the scene is not committed, holds instances, or memory runs out. Owned by the caller (grid_free);
  * valid while the scene is not edited. */
 grid *grid_build_scene(rp_scene *scene, const grid_desc *desc, char *err, size_t err_size);
 void grid_free(grid *g);
@@ -99,10 +106,11 @@ bool grid_walk_step(const grid *g, grid_walk *w, float tfar);
 /* A closest hit so far. */
 typedef struct grid_hit {
     float t, u, v;
-    uint32_t tri;           /* index into g->tris, UINT32_MAX: none */
+    uint32_t tri;           /* item: index into g->tris, or tri_count + primitive; UINT32_MAX: none */
+    float ng[3];            /* a primitive's normal, as its callback wrote it */
 } grid_hit;
 
-/* Tests triangle i; on a hit in [tnear, h->t] that is nearer, or as near with a lower (geom, prim),
+/* Tests item i (a triangle, or a primitive through the core's callback); on a hit in [tnear, h->t] that is nearer, or as near with a lower (geom, prim),
  * takes it. Returns true on any hit in [tnear, h->t] (for any-hit queries). */
 bool grid_test(const grid *g, uint32_t i, const rp_ray *ray, grid_hit *h);
 /* Writes a closest hit into rh as rp_intersect1 does. */

@@ -11,7 +11,7 @@
 
 static float max3(v3 c) { return fmaxf(c.x, fmaxf(c.y, c.z)); }
 
-static void add_px(render_thread *th, uint32_t pixel, v3 c) {
+void path_add_px(render_thread *th, uint32_t pixel, v3 c) {
     if (!(isfinite(c.x) && isfinite(c.y) && isfinite(c.z))) return; /* never let one NaN poison a pixel */
     th->accum[3 * pixel + 0] += c.x;
     th->accum[3 * pixel + 1] += c.y;
@@ -27,8 +27,8 @@ static void rayhit_reset(rp_rayhit *rh, v3 org, v3 dir) {
 
 /* Shades one path vertex: adds emission and a light sample's contribution (queued as a shadow ray),
  * and samples the bounce into *next. Returns false when the path ends. */
-static bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, const rp_rayhit *rh,
-                        rp_rayhit *next, uint32_t *nshadow) {
+bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, const rp_rayhit *rh, rp_rayhit *next,
+                 uint32_t *nshadow) {
     const rp_render_scene *s = f->s;
     pbr_thread *pt = th->pbr;
     bool ao = f->desc.integrator == RP_INTEGRATOR_AO;
@@ -39,7 +39,7 @@ static bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, 
         v3 le = light_env_radiance(s, dir);
         float w = 1.0f;
         if (!st->specular) w = pbr_mis(st->pdf, s->light_pick.pmf[s->env_light] * light_env_pdf(s, dir));
-        add_px(th, st->pixel, v3_scale(v3_mul(st->beta, le), w));
+        path_add_px(th, st->pixel, v3_scale(v3_mul(st->beta, le), w));
         return false;
     }
     render_surface sf;
@@ -69,7 +69,7 @@ static bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, 
             float pl = s->light_pick.pmf[li] * light_triangle_pdf(&s->pb_lights[li], st->prev, sf.p, sf.ng);
             w = pbr_mis(st->pdf, pl);
         }
-        add_px(th, st->pixel, v3_scale(v3_mul(st->beta, le), w));
+        path_add_px(th, st->pixel, v3_scale(v3_mul(st->beta, le), w));
     }
     if (st->depth >= f->desc.max_depth) return false;
     render_bsdf bsdf = material_bsdf(s, m, &sf);
@@ -182,7 +182,7 @@ static void path_block(const render_frame *f, render_thread *th, int bx, int by,
             rp_occluded_array(f->s->scene, pt->shadow, nshadow, RP_QUERY_INCOHERENT);
             th->rays[RP_RAY_SHADOW] += nshadow;
             for (uint32_t k = 0; k < nshadow; k++)
-                if (!(pt->shadow[k].tfar < 0.0f)) add_px(th, pt->shadow_pixel[k], pt->shadow_L[k]);
+                if (!(pt->shadow[k].tfar < 0.0f)) path_add_px(th, pt->shadow_pixel[k], pt->shadow_L[k]);
         }
         if (next) {
             rp_intersect_array(f->s->scene, pt->bounce, next, RP_QUERY_INCOHERENT);

@@ -66,6 +66,14 @@ typedef struct pbr_frame {
 float pbr_mis(float a, float b);
 rp_query_n_desc pbr_query(const render_frame *f, render_thread *th, rp_ray_kind kind);
 
+/* path.c: one path vertex (path tracing, direct lighting, ambient occlusion): adds the hit's
+ * emission (or the environment) to th->accum[3 * st->pixel], queues the light sample's shadow ray
+ * in th->pbr->shadow[*nshadow] (its radiance in shadow_L, its pixel in shadow_pixel) and samples
+ * the bounce into *next; false when the path ends. The stream tracer shades with it too. */
+bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, const rp_rayhit *rh, rp_rayhit *next,
+                 uint32_t *nshadow);
+/* Adds c to th->accum's pixel, unless it is not finite. */
+void path_add_px(render_thread *th, uint32_t pixel, v3 c);
 /* path.c: path tracing, direct lighting and ambient occlusion of one tile (sums into th->accum). */
 bool path_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1);
 /* instant_radiosity.c */

@@ -10,8 +10,8 @@
 
 /* Shading of a Whitted hit without the rays it spawns: the local terms, the shading point the
  * shadow rays start from, and the reflection and refraction rays with their weights. */
-static void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_hit *hit, int depth, float weight,
-                            whitted_slot *o) {
+void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_hit *hit, int depth, float weight,
+                     whitted_slot *o) {
     o->lit = o->has_r = o->has_t = false;
     if (hit->geom_id == RP_INVALID_ID) {
         o->color = f->background;
@@ -90,8 +90,8 @@ static void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_h
 /* The shadow ray of a lit slot towards a light and what the light brings when unoccluded (Phong
  * lobe of the material, whitted_light_contrib); false when the light cannot reach the point, so no
  * ray is needed. */
-static bool whitted_light(const render_frame *f, const whitted_slot *o, const rp_light_source *light, rp_ray *sr,
-                          whitted_light_term *lt) {
+bool whitted_light(const render_frame *f, const whitted_slot *o, const rp_light_source *light, rp_ray *sr,
+                   whitted_light_term *lt) {
     v3 pos = v3_make(0, 0, 0), intensity = pos;
     bool inverse_square = false;
     switch (light->type) {
@@ -128,7 +128,7 @@ static bool whitted_light(const render_frame *f, const whitted_slot *o, const rp
 
 /* The light of whitted_light's term, once its shadow ray found the light unoccluded (the highlight's
  * powf only then: most of a kitchen's shadow rays are occluded). */
-static v3 whitted_light_contrib(const whitted_slot *o, const whitted_light_term *lt) {
+v3 whitted_light_contrib(const whitted_slot *o, const whitted_light_term *lt) {
     v3 term = lt->term;
     if (lt->rv > 0.0f) term = v3_add(term, v3_scale(v3_load(o->m->ks), powf(lt->rv, o->m->ns)));
     return v3_mul(lt->intensity, term);

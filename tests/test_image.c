@@ -271,6 +271,10 @@ static void test_jpeg_dc_range(void) {
     CHECKF(strstr(err, "a DC coefficient out of range"), "%s", err);
     err = load_textured(jpg, hand_jpeg(jpg, 16, 8, false, 1, 1, true, true, true)); /* 2 << 13 fits */
     CHECKF(err[0] == '\0', "%s", err);
+    /* a baseline scan with Se = 0 and no AC table: stb reads AC coefficients whatever Se says, from a
+     * table it never wrote (tests/fuzz/crashes/texture/stb_jpeg_baseline_scan_without_ac_table) */
+    err = load_textured(jpg, hand_jpeg(jpg, 16, 8, false, 1, 1, true, false, false));
+    CHECKF(strstr(err, "tex.mtl:2: error: cannot decode texture 't.jpg': corrupt JPEG (a Huffman table"), "%s", err);
 }
 
 int main(void) {

@@ -112,10 +112,12 @@ static uint8_t *ppm_decode(const char *data, size_t size, int32_t *w, int32_t *h
 /* True unless a JPEG's DHT segment declares a table of more than 256 codes or runs past its
  * segment (stb_image (2022-09) writes such counts past its 257-entry arrays), or a scan decodes with
  * a Huffman table no DHT defined before it (stb then reads its never-written table: indices of
- * 16777346 into a 256-entry array, found by the texture fuzzer). Walks the markers up to the end,
+ * 16777346 into a 256-entry array, found by the texture fuzzer; a baseline scan decodes AC
+ * coefficients whatever its Se says). Walks the markers up to the end,
  * skipping entropy-coded data (progressive files have tables between scans). */
 static bool jpeg_tables_ok(const uint8_t *d, size_t n) {
     bool defined[2][4] = {{false}}; /* [DC, AC][table id] */
+    bool progressive = false;
     size_t i = 0; /* stb takes fill bytes (0xFF) before SOI, so the walk starts at 0 */
     while (i + 4 <= n) {
         if (d[i] != 0xFF) {
@@ -132,6 +134,7 @@ static bool jpeg_tables_ok(const uint8_t *d, size_t n) {
         if (len < 2) return false;
         size_t seg = i + 4, seg_end = i + 2 + len;
         if (seg_end > n) seg_end = n; /* truncated: stb reads zeros past the end */
+        if (m == 0xC2) progressive = true;
         if (m == 0xC4) {
             size_t j = seg;
             while (j < seg_end) {
@@ -154,7 +157,8 @@ static bool jpeg_tables_ok(const uint8_t *d, size_t n) {
                 unsigned t = d[seg + 2 + 2 * c], td = t >> 4, ta = t & 15u;
                 if (td > 3 || ta > 3) return false;
                 if (ss == 0 && !defined[0][td]) return false; /* DC coefficients */
-                if (se > 0 && !defined[1][ta]) return false;  /* AC coefficients */
+                /* AC coefficients: a baseline scan always has them (stb takes Se as 63 there) */
+                if ((se > 0 || !progressive) && !defined[1][ta]) return false;
             }
         }
         i = i + 2 + len;

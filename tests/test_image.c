@@ -277,6 +277,26 @@ static void test_jpeg_dc_range(void) {
     CHECKF(strstr(err, "tex.mtl:2: error: cannot decode texture 't.jpg': corrupt JPEG (a Huffman table"), "%s", err);
 }
 
+/* An HDR header line that starts with a NUL byte ends the header for stb_image (it compares the
+ * line as a C string), so the RLE check must read the pixels from there too: it did not, and stb
+ * looped forever on the truncated RLE scanline behind it (issue 23, texture fuzzer; reproducer in
+ * tests/fuzz/crashes/texture/stb_hdr_nul_header_line_hang). Refused, not hung. */
+static void test_hdr_nul_header_line(void) {
+    static const char hdr[] = "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\0\0\n-Y 1 +X 8\n\x02\x02\x00\x08\x88\x64";
+    char path[512], err[512] = "";
+    FILE *f = fopen(tmp_path(path, sizeof path, "nul.hdr"), "wb");
+    if (f) {
+        fwrite(hdr, 1, sizeof hdr - 1, f);
+        fclose(f);
+    }
+    int w, h;
+    float *px = rp_image_read_hdr(path, &w, &h, err, sizeof err);
+    CHECK(px == NULL);
+    free(px);
+    CHECKF(strstr(err, "nul.hdr: error: corrupt Radiance HDR image (an RLE scanline with a run of length 0, or cut short)"),
+           "%s", err);
+}
+
 int main(void) {
     test_declared_sizes();
     test_pfm_roundtrip(1);
@@ -284,5 +304,6 @@ int main(void) {
     test_8bit();
     test_errors();
     test_jpeg_dc_range();
+    test_hdr_nul_header_line();
     return RP_TEST_END();
 }

@@ -291,6 +291,17 @@ static void test_errors(void) {
     expect_fail("zipped.gltf.gz", "gzip");
     write_text("bad.stl", "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0\n");
     expect_fail("bad.stl", NULL);
+    /* a .glb whose JSON chunk claims 0x69040000 bytes: assimp allocated that plus one (1761869825,
+     * fuzz_gltf) before finding the file short; refused before assimp sees it */
+    write_glb("huge_json.glb");
+    char path[1024];
+    FILE *f = fopen(tmp_path("huge_json.glb", path, sizeof path), "r+b");
+    if (f) {
+        const unsigned char len[4] = {0x00, 0x00, 0x04, 0x69};
+        CHECK(fseek(f, 12, SEEK_SET) == 0 && fwrite(len, 1, 4, f) == 4);
+        fclose(f);
+    }
+    expect_fail("huge_json.glb", "binary glTF: its JSON chunk claims 1761869824 bytes, but the file holds");
 }
 
 /* The shared scenes: counts, attributes, textures; Suzanne's eyes (yellow in her base colour

@@ -353,6 +353,47 @@ static bool png_chunks_ok(const uint8_t *d, size_t n) {
     return i == n; /* no IEND: stb decides on what is there */
 }
 
+/* Decodes an image stb_image reads (PNG, JPEG) held in memory into 8-bit RGB (io_malloc'd), after
+ * the checks above and the pixel cap, whether it came from a file or from inside a glTF; NULL with
+ * the reason in *why (which may point into ctx->why) otherwise. */
+static uint8_t *stb_decode(io_ctx *ctx, const void *data, size_t size, int32_t *w, int32_t *h, const char **why) {
+    if (size > INT32_MAX) {
+        *why = "too large";
+        return NULL;
+    }
+    int iw = 0, ih = 0, comp;
+    const stbi_uc *bytes = data;
+    bool jpeg = size >= 2 && bytes[0] == 0xFF; /* what stb_image's JPEG test accepts */
+    bool png = size >= 8 && memcmp(bytes, "\x89PNG\r\n\x1a\n", 8) == 0;
+    bool oom = false;
+    stbi_uc *px = NULL;
+    if (jpeg && !jpeg_tables_ok(bytes, size)) { /* before stb reads the header too */
+        *why = "corrupt JPEG (a Huffman table of more than 256 codes, or a scan without its table)";
+    } else if (png && !png_chunks_ok(bytes, size)) {
+        *why = "corrupt or truncated PNG (a chunk longer than the file, or an empty first IDAT)";
+    } else if (!stbi_info_from_memory(bytes, (int)size, &iw, &ih, &comp)) {
+        *why = stbi_failure_reason();
+    } else if ((uint64_t)iw * (uint64_t)ih > ctx->limits.max_texture_pixels) {
+        snprintf(ctx->why, sizeof ctx->why, "%dx%d is more than %llu pixels; RP_MAX_TEXTURE_PIXELS raises the limit",
+                 iw, ih, (unsigned long long)ctx->limits.max_texture_pixels);
+        *why = ctx->why;
+    } else if (jpeg && !jpeg_dc_ok(bytes, size, &oom)) {
+        *why = oom ? "out of memory" : "corrupt JPEG (a DC coefficient out of range)";
+    } else {
+        px = stbi_load_from_memory(bytes, (int)size, &iw, &ih, &comp, 3);
+        if (!px) *why = stbi_failure_reason();
+    }
+    if (!px) return NULL;
+    size_t n = (size_t)iw * (size_t)ih * 3;
+    uint8_t *rgb = io_malloc(n);
+    if (rgb) memcpy(rgb, px, n); /* stb's buffer goes back to stb's allocator */
+    stbi_image_free(px);
+    if (!rgb) *why = "out of memory";
+    *w = iw;
+    *h = ih;
+    return rgb;
+}
+
 uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const char *file,
                   uint32_t line) {
     io_builder *b = &ctx->b;
@@ -370,40 +411,10 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
     uint8_t *rgb = NULL;
     const char *why = "unsupported or corrupt image";
     unsigned long failures = io_alloc_failures();
-    if (buf.size >= 3 && buf.data[0] == 'P' && (buf.data[1] == '3' || buf.data[1] == '6')) {
+    if (buf.size >= 3 && buf.data[0] == 'P' && (buf.data[1] == '3' || buf.data[1] == '6'))
         rgb = ppm_decode(buf.data, buf.size, &w, &h, &why);
-    } else if (buf.size <= INT32_MAX) {
-        int iw = 0, ih = 0, comp;
-        const stbi_uc *bytes = (const stbi_uc *)buf.data;
-        bool jpeg = buf.size >= 2 && bytes[0] == 0xFF; /* what stb_image's JPEG test accepts */
-        stbi_uc *px = NULL;
-        bool oom = false;
-        bool png = buf.size >= 8 && memcmp(bytes, "\x89PNG\r\n\x1a\n", 8) == 0;
-        if (jpeg && !jpeg_tables_ok(bytes, buf.size)) { /* before stb reads the header too */
-            why = "corrupt JPEG (a Huffman table of more than 256 codes, or a scan without its table)";
-        } else if (png && !png_chunks_ok(bytes, buf.size)) {
-            why = "corrupt or truncated PNG (a chunk longer than the file, or an empty first IDAT)";
-        } else if (!stbi_info_from_memory(bytes, (int)buf.size, &iw, &ih, &comp)) {
-            why = stbi_failure_reason();
-        } else if ((uint64_t)iw * (uint64_t)ih > ctx->limits.max_texture_pixels) {
-            snprintf(ctx->why, sizeof ctx->why, "%dx%d is more than %llu pixels; RP_MAX_TEXTURE_PIXELS raises the limit",
-                     iw, ih, (unsigned long long)ctx->limits.max_texture_pixels);
-            why = ctx->why;
-        } else if (jpeg && !jpeg_dc_ok(bytes, buf.size, &oom)) {
-            if (!oom) why = "corrupt JPEG (a DC coefficient out of range)";
-        } else {
-            px = stbi_load_from_memory(bytes, (int)buf.size, &iw, &ih, &comp, 3);
-            if (!px) why = stbi_failure_reason();
-        }
-        if (px) {
-            size_t n = (size_t)iw * (size_t)ih * 3;
-            rgb = io_malloc(n);
-            if (rgb) memcpy(rgb, px, n); /* stb's buffer goes back to stb's allocator */
-            stbi_image_free(px);
-            w = iw;
-            h = ih;
-        }
-    }
+    else
+        rgb = stb_decode(ctx, buf.data, buf.size, &w, &h, &why);
     vfs_buf_free(&buf);
     if (!rgb) {
         if (io_alloc_failures() != failures) why = "out of memory"; /* stb then names another reason */
@@ -413,30 +424,22 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
     return tex_add_rgb(ctx, path, as_written, w, h, rgb, file, line);
 }
 
+/* An image inside a glTF (data URI or buffer view) goes through the same checks as a file. */
 uint32_t tex_add_encoded(io_ctx *ctx, const char *key, const char *as_written, const void *data,
                          size_t size, const char *file, uint32_t line) {
     io_builder *b = &ctx->b;
     for (size_t i = 0; i < b->texture_n; i++)
         if (strcmp(b->texture_keys[i], key) == 0) return (uint32_t)i;
-    int iw, ih, comp;
+    int32_t w = 0, h = 0;
+    const char *why = "unsupported or corrupt image";
     unsigned long failures = io_alloc_failures();
-    stbi_uc *px = size <= INT32_MAX ? stbi_load_from_memory((const stbi_uc *)data, (int)size, &iw, &ih, &comp, 3) : NULL;
-    if (!px) {
-        io_error(ctx, file, line, "cannot decode texture '%s': %s", as_written,
-                 size > INT32_MAX                     ? "too large"
-                 : io_alloc_failures() != failures ? "out of memory"
-                                                   : stbi_failure_reason());
-        return IO_NONE;
-    }
-    size_t n = (size_t)iw * (size_t)ih * 3;
-    uint8_t *rgb = io_malloc(n);
-    if (rgb) memcpy(rgb, px, n);
-    stbi_image_free(px);
+    uint8_t *rgb = stb_decode(ctx, data, size, &w, &h, &why);
     if (!rgb) {
-        io_error(ctx, file, line, "out of memory");
+        if (io_alloc_failures() != failures) why = "out of memory";
+        io_error(ctx, file, line, "cannot decode texture '%s': %s", as_written, why);
         return IO_NONE;
     }
-    return tex_add_rgb(ctx, key, as_written, iw, ih, rgb, file, line);
+    return tex_add_rgb(ctx, key, as_written, w, h, rgb, file, line);
 }
 
 uint32_t tex_add_rgb(io_ctx *ctx, const char *path, const char *as_written, int32_t w, int32_t h,

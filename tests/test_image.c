@@ -271,6 +271,18 @@ static void test_jpeg_dc_range(void) {
     CHECKF(strstr(err, "a DC coefficient out of range"), "%s", err);
     err = load_textured(jpg, hand_jpeg(jpg, 16, 8, false, 1, 1, true, true, true)); /* 2 << 13 fits */
     CHECKF(err[0] == '\0', "%s", err);
+    /* the texture fuzzer's file whose entropy-coded data a marker cuts inside a code: stb's count
+     * of bits went to -8 and its next refill shifted by 32 (stb_image.h:2065) */
+    const char *src = getenv("RP_SOURCE_DIR");
+    char repro[1024];
+    snprintf(repro, sizeof repro, "%s/tests/fuzz/crashes/texture/stb_jpeg_code_cut_by_marker", src ? src : ".");
+    FILE *f = fopen(repro, "rb");
+    size_t got = f ? fread(jpg, 1, sizeof jpg, f) : 0;
+    if (f) fclose(f);
+    CHECKF(got > 100, "cannot read %s", repro);
+    err = load_textured(jpg, got);
+    CHECKF(strstr(err, "tex.mtl:2: error: cannot decode texture 't.jpg': corrupt JPEG (entropy-coded data cut inside a code by a marker)"),
+           "%s", err);
     /* a baseline scan with Se = 0 and no AC table: stb reads AC coefficients whatever Se says, from a
      * table it never wrote (tests/fuzz/crashes/texture/stb_jpeg_baseline_scan_without_ac_table) */
     err = load_textured(jpg, hand_jpeg(jpg, 16, 8, false, 1, 1, true, false, false));

@@ -176,10 +176,18 @@ static bool jpeg_dc_out_of_range(int dc, int scale) {
     return dc < -32768 || dc > 32767 || (dc < 0 ? -dc : dc) * scale > 32767; /* the first bound keeps the product in int */
 }
 
+/* stb_image takes bits it may not have once a marker ends the data (its fast AC path, its
+ * extend-receive): its count of bits goes negative, and a refill at -8 or below shifts an int by
+ * 32 or more (undefined, stb_image.h:2065, found by the texture fuzzer). True when the next refill
+ * would; checked before each call into stb's bit reader. */
+static bool jpeg_bits_broken(const stbi__jpeg *j) { return j->code_bits <= -8; }
+
 /* stbi__jpeg_decode_block without its stores and IDCT: the same bits, the same DC prediction;
- * returns 0 where stb fails (it then stops), -1 for a DC coefficient out of range, else 1. */
+ * returns 0 where stb fails (it then stops), -1 for a DC coefficient out of range, -2 for a count
+ * of bits stb would break on (jpeg_bits_broken), else 1. */
 static int jpeg_check_block(stbi__jpeg *j, stbi__huffman *hdc, stbi__huffman *hac, stbi__int16 *fac, int b,
                             int dequant) {
+    if (jpeg_bits_broken(j)) return -2;
     if (j->code_bits < 16) stbi__grow_buffer_unsafe(j);
     int t = stbi__jpeg_huff_decode(j, hdc);
     if (t < 0 || t > 15) return 0;
@@ -189,6 +197,7 @@ static int jpeg_check_block(stbi__jpeg *j, stbi__huffman *hdc, stbi__huffman *ha
     if (jpeg_dc_out_of_range(dc, dequant)) return -1;
     int k = 1;
     do {
+        if (jpeg_bits_broken(j)) return -2;
         if (j->code_bits < 16) stbi__grow_buffer_unsafe(j);
         int c = (int)((j->code_buffer >> (32 - FAST_BITS)) & ((1 << FAST_BITS) - 1));
         int r = fac[c];
@@ -219,6 +228,7 @@ static int jpeg_check_block(stbi__jpeg *j, stbi__huffman *hdc, stbi__huffman *ha
 /* stbi__jpeg_decode_block_prog_dc likewise (first DC scans only: refinements add one bit). */
 static int jpeg_check_block_prog_dc(stbi__jpeg *j, stbi__huffman *hdc, int b) {
     if (j->spec_end != 0) return 0;
+    if (jpeg_bits_broken(j)) return -2;
     if (j->code_bits < 16) stbi__grow_buffer_unsafe(j);
     if (j->succ_high != 0) {
         (void)stbi__jpeg_get_bit(j);
@@ -232,7 +242,7 @@ static int jpeg_check_block_prog_dc(stbi__jpeg *j, stbi__huffman *hdc, int b) {
 }
 
 /* One scan's entropy-coded data, walked as stbi__parse_entropy_coded_data walks it (block order,
- * restart intervals); 0, -1 or 1 as above. A progressive AC scan holds no DC: it is skipped to the
+ * restart intervals); 0, -1, -2 or 1 as above. A progressive AC scan holds no DC: it is skipped to the
  * next marker that is not a restart, where stb's reader stops too (or stb fails). */
 static int jpeg_check_scan(stbi__jpeg *z) {
     if (z->progressive && z->spec_start != 0) {
@@ -268,6 +278,7 @@ static int jpeg_check_scan(stbi__jpeg *z) {
                 }
             }
             if (--z->todo <= 0) {
+                if (jpeg_bits_broken(z)) return -2;
                 if (z->code_bits < 24) stbi__grow_buffer_unsafe(z);
                 if (!STBI__RESTART(z->marker)) return 1;
                 stbi__jpeg_reset(z);
@@ -277,21 +288,18 @@ static int jpeg_check_scan(stbi__jpeg *z) {
     return 1;
 }
 
-/* False when a scan of the JPEG would drive a DC coefficient out of range (see
- * jpeg_dc_out_of_range), found by a dry run of stb_image's own marker parser and bit reader over
- * the entropy-coded data before stb decodes it; true otherwise, and where stb fails by itself
- * (it then reports why). *oom is set when the dry run's state could not be allocated. */
-static bool jpeg_dc_ok(const uint8_t *d, size_t n, bool *oom) {
+/* Why stb_image must not decode the JPEG: a scan would drive a DC coefficient out of range (see
+ * jpeg_dc_out_of_range) or stb's count of bits to where it breaks (jpeg_bits_broken), found by a
+ * dry run of stb's own marker parser and bit reader over the entropy-coded data before stb
+ * decodes it; NULL otherwise, and where stb fails by itself (it then reports why). */
+static const char *jpeg_entropy_problem(const uint8_t *d, size_t n) {
     stbi__context s;
     stbi__start_mem(&s, d, (int)n);
     stbi__jpeg *z = io_malloc(sizeof *z);
-    if (!z) {
-        *oom = true;
-        return false;
-    }
+    if (!z) return "out of memory";
     memset(z, 0, sizeof *z);
     z->s = &s;
-    bool ok = true;
+    const char *why = NULL;
     if (!stbi__decode_jpeg_header(z, STBI__SCAN_header)) goto done;
     /* the MCU geometry stbi__process_frame_header computes only when it allocates */
     int hmax = 1, vmax = 1;
@@ -312,7 +320,8 @@ static bool jpeg_dc_ok(const uint8_t *d, size_t n, bool *oom) {
         if (stbi__SOS(m)) {
             if (!stbi__process_scan_header(z)) break;
             int r = jpeg_check_scan(z);
-            if (r < 0) ok = false;
+            if (r == -1) why = "corrupt JPEG (a DC coefficient out of range)";
+            if (r == -2) why = "corrupt JPEG (entropy-coded data cut inside a code by a marker)";
             if (r <= 0) break;
             if (z->marker == STBI__MARKER_none) {
                 while (!stbi__at_eof(z->s)) {
@@ -331,7 +340,7 @@ static bool jpeg_dc_ok(const uint8_t *d, size_t n, bool *oom) {
     }
 done:
     free(z);
-    return ok;
+    return why;
 }
 
 /* True when every PNG chunk's declared length fits in the bytes that follow it (stb_image grows its
@@ -365,7 +374,7 @@ static uint8_t *stb_decode(io_ctx *ctx, const void *data, size_t size, int32_t *
     const stbi_uc *bytes = data;
     bool jpeg = size >= 2 && bytes[0] == 0xFF; /* what stb_image's JPEG test accepts */
     bool png = size >= 8 && memcmp(bytes, "\x89PNG\r\n\x1a\n", 8) == 0;
-    bool oom = false;
+    const char *bad = NULL;
     stbi_uc *px = NULL;
     if (jpeg && !jpeg_tables_ok(bytes, size)) { /* before stb reads the header too */
         *why = "corrupt JPEG (a Huffman table of more than 256 codes, or a scan without its table)";
@@ -377,8 +386,8 @@ static uint8_t *stb_decode(io_ctx *ctx, const void *data, size_t size, int32_t *
         snprintf(ctx->why, sizeof ctx->why, "%dx%d is more than %llu pixels; RP_MAX_TEXTURE_PIXELS raises the limit",
                  iw, ih, (unsigned long long)ctx->limits.max_texture_pixels);
         *why = ctx->why;
-    } else if (jpeg && !jpeg_dc_ok(bytes, size, &oom)) {
-        *why = oom ? "out of memory" : "corrupt JPEG (a DC coefficient out of range)";
+    } else if (jpeg && (bad = jpeg_entropy_problem(bytes, size)) != NULL) {
+        *why = bad;
     } else {
         px = stbi_load_from_memory(bytes, (int)size, &iw, &ih, &comp, 3);
         if (!px) *why = stbi_failure_reason();

@@ -243,6 +243,12 @@ static void test_errors(void) {
     expect_error("e_tpa.aff", "tpa 2\n 1\n 0 0 0 0 0 1\n 1 0 0 0 0 1\n 0 1 0 0 0 1\n 0.5\n 0 0 0 0 0 1\n 1 0 0 0 0 1\n 0 1 0 0 0 1\n",
                  9, "before the previous");
     expect_error("e_tpa_n.aff", "p 3\n 0 0 0\n 1 0 0\n 0 1 0\ntpa 0\n", 5, "keyframe count");
+    /* a keyframed block inside a scale of 0: rp_scene_data_set_time could not undo its rest
+     * transform (anim_inverse), so the loader refuses it */
+    expect_error("e_singular.aff",
+                 "xs 0 1 1  0 1 0 0  0 0 0\n{\n  x a\n  {\n    p 3\n 0 0 0\n 1 0 0\n 0 1 0\n  }\n}\n"
+                 "k a\n{\n  transl 4\n  0 0 0 0 0 0 0\n  1 1 0 0 0 0 0\n  2 2 0 0 0 0 0\n  3 3 0 0 0 0 0\n}\n",
+                 0, "singular transform around keyframed block 'a'");
     expect_error("e_tpa_eof.aff", "tpa 2\n 0\n 0 0 0 0 0 1\n 1 0 0 0 0 1\n 0 1 0 0 0 1\n 1\n 0 0 0 0 0 1\n", 8, "end of file");
 }
 

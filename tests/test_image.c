@@ -170,11 +170,152 @@ static void test_declared_sizes(void) {
     io_set_alloc_hook(NULL, NULL);
 }
 
+/* A one-component JPEG of w x h pixels built by hand: one quantisation table (16-bit entries of q,
+ * or 8-bit), a DC table whose only code, the bit 0, means "category dc_cat", an AC table whose only
+ * code means "end of block" (ac_table false: none, and a scan with Se = 0 that still names table 0
+ * for its AC coefficients), then either no
+ * entropy-coded data at all (stb_image feeds itself zeros: a DC difference of -(2^dc_cat - 1) per
+ * block) or, with data, a difference of +(2^dc_cat - 1) per block. progressive: one first DC scan
+ * with successive approximation Al = 13. Returns its size. */
+static size_t hand_jpeg(uint8_t *out, int w, int h, bool dqt16, int q, int dc_cat, bool data, bool ac_table,
+                        bool progressive) {
+    size_t n = 0;
+#define PUT(...)                                                                     \
+    do {                                                                             \
+        const uint8_t bytes_[] = {__VA_ARGS__};                                      \
+        memcpy(out + n, bytes_, sizeof bytes_);                                      \
+        n += sizeof bytes_;                                                          \
+    } while (0)
+    PUT(0xff, 0xd8);
+    PUT(0xff, 0xdb, 0, dqt16 ? 131 : 67, dqt16 ? 0x10 : 0x00);
+    for (int i = 0; i < 64; i++) {
+        if (dqt16) PUT((uint8_t)(q >> 8));
+        PUT((uint8_t)q);
+    }
+    PUT(0xff, progressive ? 0xc2 : 0xc0, 0, 11, 8, (uint8_t)(h >> 8), (uint8_t)h, (uint8_t)(w >> 8), (uint8_t)w, 1, 1,
+        0x11, 0);
+    PUT(0xff, 0xc4, 0, 20, 0x00, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, (uint8_t)dc_cat);
+    if (ac_table && !progressive) PUT(0xff, 0xc4, 0, 20, 0x10, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x00);
+    if (progressive)
+        PUT(0xff, 0xda, 0, 8, 1, 1, 0x00, 0, 0, 13);
+    else
+        PUT(0xff, 0xda, 0, 8, 1, 1, 0x00, 0, ac_table ? 63 : 0, 0); /* Se = 0 without AC table */
+    if (data) { /* per block: the DC code 0, dc_cat one bits, the end-of-block code 0 */
+        int blocks = ((w + 7) / 8) * ((h + 7) / 8), bits = 0;
+        uint32_t acc = 0;
+        for (int b = 0; b < blocks; b++)
+            for (int i = 0; i < dc_cat + 2; i++) {
+                acc = acc << 1 | (i >= 1 && i <= dc_cat);
+                if (++bits == 8) {
+                    out[n++] = (uint8_t)acc;
+                    if (acc == 0xff) out[n++] = 0; /* byte stuffing */
+                    acc = 0, bits = 0;
+                }
+            }
+        if (bits) out[n++] = (uint8_t)(acc << (8 - bits) | (0xffu >> bits));
+    }
+    PUT(0xff, 0xd9);
+#undef PUT
+    return n;
+}
+
+/* Loads an OBJ whose material maps the texture t.jpg, written from jpg; returns the error, or ""
+ * when it loaded. */
+static const char *load_textured(const uint8_t *jpg, size_t size) {
+    static char err[1024];
+    char path[512];
+    FILE *f = fopen(tmp_path(path, sizeof path, "t.jpg"), "wb");
+    if (f) {
+        fwrite(jpg, 1, size, f);
+        fclose(f);
+    }
+    f = fopen(tmp_path(path, sizeof path, "tex.mtl"), "w");
+    if (f) {
+        fputs("newmtl a\nmap_Kd t.jpg\n", f);
+        fclose(f);
+    }
+    f = fopen(tmp_path(path, sizeof path, "tex.obj"), "w");
+    if (f) {
+        fputs("mtllib tex.mtl\nusemtl a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n", f);
+        fclose(f);
+    }
+    rp_scene_data s;
+    err[0] = '\0';
+    if (rp_scene_data_load(path, &s, err, sizeof err)) {
+        rp_scene_data_free(&s);
+        err[0] = '\0';
+    }
+    return err;
+}
+
+/* JPEGs that made stb_image (2.27) compute out of range (issue 23, texture fuzzer): stb sums the DC
+ * differences of every block since the last restart and multiplies the sum by the quantiser in int
+ * (stb_image.h:2197; dc << Al in progressive scans), so corrupt data overflows it. They are refused
+ * with file:line before stb decodes them; the same files with small differences still load. */
+static void test_jpeg_dc_range(void) {
+    static uint8_t jpg[8192];
+    const char *err;
+    /* two blocks of -32767 from the zeros stb reads past the end, times 65535 (tests/fuzz/crashes/
+     * texture/stb_jpeg_dc_overflow_dqt16) */
+    err = load_textured(jpg, hand_jpeg(jpg, 16, 8, true, 65535, 15, false, true, false));
+    CHECKF(strstr(err, "tex.mtl:2: error: cannot decode texture 't.jpg': corrupt JPEG (a DC coefficient out of range)"),
+           "%s", err);
+    /* 258 blocks of +32767 coded in the data, times an 8-bit quantiser of 255 */
+    err = load_textured(jpg, hand_jpeg(jpg, 2064, 8, false, 255, 15, true, true, false));
+    CHECKF(strstr(err, "a DC coefficient out of range"), "%s", err);
+    /* the same with differences of +1 (a grey ramp of 258 blocks): loads */
+    err = load_textured(jpg, hand_jpeg(jpg, 2064, 8, false, 1, 1, true, true, false));
+    CHECKF(err[0] == '\0', "%s", err);
+    /* a progressive first DC scan: 9 blocks of -32767, shifted left by 13 (stbi__jpeg_decode_block_prog_dc) */
+    err = load_textured(jpg, hand_jpeg(jpg, 160, 8, false, 1, 15, false, true, true));
+    CHECKF(strstr(err, "a DC coefficient out of range"), "%s", err);
+    err = load_textured(jpg, hand_jpeg(jpg, 16, 8, false, 1, 1, true, true, true)); /* 2 << 13 fits */
+    CHECKF(err[0] == '\0', "%s", err);
+    /* the texture fuzzer's file whose entropy-coded data a marker cuts inside a code: stb's count
+     * of bits went to -8 and its next refill shifted by 32 (stb_image.h:2065) */
+    const char *src = getenv("RP_SOURCE_DIR");
+    char repro[1024];
+    snprintf(repro, sizeof repro, "%s/tests/fuzz/crashes/texture/stb_jpeg_code_cut_by_marker", src ? src : ".");
+    FILE *f = fopen(repro, "rb");
+    size_t got = f ? fread(jpg, 1, sizeof jpg, f) : 0;
+    if (f) fclose(f);
+    CHECKF(got > 100, "cannot read %s", repro);
+    err = load_textured(jpg, got);
+    CHECKF(strstr(err, "tex.mtl:2: error: cannot decode texture 't.jpg': corrupt JPEG (entropy-coded data cut inside a code by a marker)"),
+           "%s", err);
+    /* a baseline scan with Se = 0 and no AC table: stb reads AC coefficients whatever Se says, from a
+     * table it never wrote (tests/fuzz/crashes/texture/stb_jpeg_baseline_scan_without_ac_table) */
+    err = load_textured(jpg, hand_jpeg(jpg, 16, 8, false, 1, 1, true, false, false));
+    CHECKF(strstr(err, "tex.mtl:2: error: cannot decode texture 't.jpg': corrupt JPEG (a Huffman table"), "%s", err);
+}
+
+/* An HDR header line that starts with a NUL byte ends the header for stb_image (it compares the
+ * line as a C string), so the RLE check must read the pixels from there too: it did not, and stb
+ * looped forever on the truncated RLE scanline behind it (issue 23, texture fuzzer; reproducer in
+ * tests/fuzz/crashes/texture/stb_hdr_nul_header_line_hang). Refused, not hung. */
+static void test_hdr_nul_header_line(void) {
+    static const char hdr[] = "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\0\0\n-Y 1 +X 8\n\x02\x02\x00\x08\x88\x64";
+    char path[512], err[512] = "";
+    FILE *f = fopen(tmp_path(path, sizeof path, "nul.hdr"), "wb");
+    if (f) {
+        fwrite(hdr, 1, sizeof hdr - 1, f);
+        fclose(f);
+    }
+    int w, h;
+    float *px = rp_image_read_hdr(path, &w, &h, err, sizeof err);
+    CHECK(px == NULL);
+    free(px);
+    CHECKF(strstr(err, "nul.hdr: error: corrupt Radiance HDR image (an RLE scanline with a run of length 0, or cut short)"),
+           "%s", err);
+}
+
 int main(void) {
     test_declared_sizes();
     test_pfm_roundtrip(1);
     test_pfm_roundtrip(3);
     test_8bit();
     test_errors();
+    test_jpeg_dc_range();
+    test_hdr_nul_header_line();
     return RP_TEST_END();
 }

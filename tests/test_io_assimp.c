@@ -291,6 +291,37 @@ static void test_errors(void) {
     expect_fail("zipped.gltf.gz", "gzip");
     write_text("bad.stl", "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0\n");
     expect_fail("bad.stl", NULL);
+    /* a .glb whose JSON chunk claims 0x69040000 bytes: assimp allocated that plus one (1761869825,
+     * fuzz_gltf) before finding the file short; refused before assimp sees it */
+    write_glb("huge_json.glb");
+    char path[1024];
+    FILE *f = fopen(tmp_path("huge_json.glb", path, sizeof path), "r+b");
+    if (f) {
+        const unsigned char len[4] = {0x00, 0x00, 0x04, 0x69};
+        CHECK(fseek(f, 12, SEEK_SET) == 0 && fwrite(len, 1, 4, f) == 4);
+        fclose(f);
+    }
+    expect_fail("huge_json.glb", "binary glTF: its JSON chunk claims 1761869824 bytes, but the file holds");
+    /* an image inside the glTF (a data URI) gets the checks a texture file gets: this JPEG made
+     * stb_image overflow an int (tests/fuzz/crashes/texture/stb_jpeg_dc_overflow_dqt16) */
+    const char *src = getenv("RP_SOURCE_DIR");
+    char jpg_path[1024];
+    snprintf(jpg_path, sizeof jpg_path, "%s/tests/fuzz/crashes/texture/stb_jpeg_dc_overflow_dqt16", src ? src : ".");
+    f = fopen(jpg_path, "rb");
+    unsigned char jpg[1024];
+    size_t jpg_n = f ? fread(jpg, 1, sizeof jpg, f) : 0;
+    if (f) fclose(f);
+    CHECKF(jpg_n > 100, "cannot read %s", jpg_path);
+    static const char b64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    char text[8192];
+    int n = snprintf(text, sizeof text, "%s", gltf_head);
+    for (size_t i = 0; i < jpg_n; i += 3) {
+        uint32_t v = (uint32_t)jpg[i] << 16 | (i + 1 < jpg_n ? (uint32_t)jpg[i + 1] << 8 : 0) | (i + 2 < jpg_n ? jpg[i + 2] : 0);
+        for (size_t k = 0; k < 4; k++) text[n++] = i + k <= jpg_n ? b64[(v >> (18 - 6 * k)) & 63] : '=';
+    }
+    snprintf(text + n, sizeof text - (size_t)n, gltf_tail_fmt, "tri.bin");
+    write_text("bad_image.gltf", text);
+    expect_fail("bad_image.gltf", "corrupt JPEG (a DC coefficient out of range)");
 }
 
 /* The shared scenes: counts, attributes, textures; Suzanne's eyes (yellow in her base colour

@@ -104,7 +104,7 @@ static bool hdr_rle_ok(const unsigned char *d, size_t n) {
         pos++;
         line[len] = '\0';
         if (lines == 0 && strcmp(line, "#?RADIANCE") != 0 && strcmp(line, "#?RGBE") != 0) return true;
-        if (lines > 0 && len == 0) break;
+        if (lines > 0 && line[0] == '\0') break; /* stb's test: a line starting with NUL ends it too */
         lines++;
     }
     size_t len = 0;

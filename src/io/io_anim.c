@@ -149,7 +149,7 @@ static void m_mul(const double *a, const double *b, double *out) {
     memcpy(out, r, sizeof r);
 }
 
-static bool m_inverse(const double *m, double *out) {
+bool anim_inverse(const double *m, double *out) {
     double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], i = m[10];
     double co[9] = {e * i - f * h, c * h - b * i, b * f - c * e, f * g - d * i, a * i - c * g,
                     c * d - a * f, d * h - e * g, b * g - a * h, a * e - b * d};
@@ -226,7 +226,7 @@ bool rp_scene_data_set_time(rp_scene_data *s, float t) {
         rp_anim_node *n = &a->nodes[i];
         double rest[12], inv[12], k[12], m[12];
         for (int j = 0; j < 12; j++) rest[j] = n->rest[j];
-        if (!m_inverse(rest, inv)) memcpy(inv, rest, sizeof inv); /* refused at load */
+        if (!anim_inverse(rest, inv)) memcpy(inv, rest, sizeof inv); /* refused at load (io_nff.c) */
         node_keys(a, n, t, k);
         m_mul(rest, k, m);
         m_mul(m, inv, m);

@@ -228,6 +228,10 @@ uint32_t io_chunk_count(const io_ctx *ctx, size_t size);
 bool anim_finish(io_ctx *ctx, rp_scene_data *out);
 /* Frees an animation and every array it owns. */
 void anim_free(rp_animation_data *a);
+/* Inverse of an affine row-major 3x4 matrix (m and out may not alias); false when singular or not
+ * finite. rp_scene_data_set_time moves a block by rest * keys * rest^-1, so the AFF loader refuses
+ * a block whose rest transform this cannot invert. */
+bool anim_inverse(const double *m, double *out);
 
 /* ---- polygons (io_poly.c) --------------------------------------------------------------------- */
 

@@ -244,20 +244,6 @@ static void xf_trs(const float t[3], const float axis[3], float deg, const float
     }
 }
 
-/* Inverse of an affine 3x4 matrix; false when singular. */
-static bool xf_inverse(const float *m, float *out) {
-    double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], i = m[10];
-    double co[9] = {e * i - f * h, c * h - b * i, b * f - c * e, f * g - d * i, a * i - c * g,
-                    c * d - a * f, d * h - e * g, b * g - a * h, a * e - b * d};
-    double det = a * co[0] + b * co[3] + c * co[6];
-    if (det == 0.0 || !isfinite(det)) return false;
-    for (int row = 0; row < 3; row++) {
-        for (int col = 0; col < 3; col++) out[4 * row + col] = (float)(co[3 * row + col] / det);
-        out[4 * row + 3] = -(out[4 * row] * m[3] + out[4 * row + 1] * m[7] + out[4 * row + 2] * m[11]);
-    }
-    return true;
-}
-
 static inline void xf_point(const nff_xf *x, float *p) {
     const float *m = x->m;
     float v[3] = {p[0], p[1], p[2]};
@@ -867,8 +853,9 @@ static bool nff_animation(io_ctx *ctx, nff_state *st, const char *shown) {
         snprintf(n->name, sizeof n->name, "%s", s->name);
         n->parent = s->parent_node;
         memcpy(n->rest, s->parent.m, sizeof n->rest);
-        float inv[12];
-        if (!xf_inverse(n->rest, inv)) return io_error(ctx, shown, 0, "singular transform around keyframed block '%s'", s->name);
+        double rest[12], inv[12]; /* as rp_scene_data_set_time inverts it */
+        for (int j = 0; j < 12; j++) rest[j] = n->rest[j];
+        if (!anim_inverse(rest, inv)) return io_error(ctx, shown, 0, "singular transform around keyframed block '%s'", s->name);
         for (size_t i = 0; i < st->key_n; i++) {
             if (strcmp(st->keys[i].name, s->name) != 0) continue;
             memcpy(n->track, st->keys[i].track, sizeof n->track);

@@ -1,7 +1,8 @@
 /* Texture images for materials: PPM (P3 and P6) decoded here, PNG and JPEG by stb_image. All end up
  * 8-bit RGB, top row first. stb_image trusts its input more than a loader may (fuzzing found a heap
- * overflow in its 16-bit PNM path and one in its JPEG Huffman tables): only its PNG and JPEG
- * decoders are compiled, JPEG Huffman tables are checked here first, and the declared size is
+ * overflow in its 16-bit PNM path, one in its JPEG Huffman tables and an int overflow in its JPEG DC
+ * prediction): only its PNG and JPEG decoders are compiled, JPEG Huffman tables are checked here
+ * first and a JPEG's DC coefficients by a dry run of stb's own parser, and the declared size is
  * capped before it allocates. */
 #include <stdio.h>
 
@@ -111,10 +112,12 @@ static uint8_t *ppm_decode(const char *data, size_t size, int32_t *w, int32_t *h
 /* True unless a JPEG's DHT segment declares a table of more than 256 codes or runs past its
  * segment (stb_image (2022-09) writes such counts past its 257-entry arrays), or a scan decodes with
  * a Huffman table no DHT defined before it (stb then reads its never-written table: indices of
- * 16777346 into a 256-entry array, found by the texture fuzzer). Walks the markers up to the end,
+ * 16777346 into a 256-entry array, found by the texture fuzzer; a baseline scan decodes AC
+ * coefficients whatever its Se says). Walks the markers up to the end,
  * skipping entropy-coded data (progressive files have tables between scans). */
 static bool jpeg_tables_ok(const uint8_t *d, size_t n) {
     bool defined[2][4] = {{false}}; /* [DC, AC][table id] */
+    bool progressive = false;
     size_t i = 0; /* stb takes fill bytes (0xFF) before SOI, so the walk starts at 0 */
     while (i + 4 <= n) {
         if (d[i] != 0xFF) {
@@ -131,6 +134,7 @@ static bool jpeg_tables_ok(const uint8_t *d, size_t n) {
         if (len < 2) return false;
         size_t seg = i + 4, seg_end = i + 2 + len;
         if (seg_end > n) seg_end = n; /* truncated: stb reads zeros past the end */
+        if (m == 0xC2) progressive = true;
         if (m == 0xC4) {
             size_t j = seg;
             while (j < seg_end) {
@@ -153,12 +157,190 @@ static bool jpeg_tables_ok(const uint8_t *d, size_t n) {
                 unsigned t = d[seg + 2 + 2 * c], td = t >> 4, ta = t & 15u;
                 if (td > 3 || ta > 3) return false;
                 if (ss == 0 && !defined[0][td]) return false; /* DC coefficients */
-                if (se > 0 && !defined[1][ta]) return false;  /* AC coefficients */
+                /* AC coefficients: a baseline scan always has them (stb takes Se as 63 there) */
+                if ((se > 0 || !progressive) && !defined[1][ta]) return false;
             }
         }
         i = i + 2 + len;
     }
     return true;
+}
+
+/* A DC coefficient stb_image cannot hold: stb stores dequantised coefficients as shorts, and
+ * computes them in int as dc * dequant[0] (baseline) or dc << Al (progressive), with dc summed over
+ * every block since the last restart. Corrupt data (long runs of the largest DC difference, or the
+ * zeros stb feeds itself past the end of the data) grows dc until that int overflows (undefined
+ * behaviour, stb_image.h:2197, found by the texture fuzzer). Real 8-bit JPEGs stay within about
+ * +-1024 after dequantisation. */
+static bool jpeg_dc_out_of_range(int dc, int scale) {
+    return dc < -32768 || dc > 32767 || (dc < 0 ? -dc : dc) * scale > 32767; /* the first bound keeps the product in int */
+}
+
+/* stb_image takes bits it may not have once a marker ends the data (its fast AC path, its
+ * extend-receive): its count of bits goes negative, and a refill at -8 or below shifts an int by
+ * 32 or more (undefined, stb_image.h:2065, found by the texture fuzzer). True when the next refill
+ * would; checked before each call into stb's bit reader. */
+static bool jpeg_bits_broken(const stbi__jpeg *j) { return j->code_bits <= -8; }
+
+/* stbi__jpeg_decode_block without its stores and IDCT: the same bits, the same DC prediction;
+ * returns 0 where stb fails (it then stops), -1 for a DC coefficient out of range, -2 for a count
+ * of bits stb would break on (jpeg_bits_broken), else 1. */
+static int jpeg_check_block(stbi__jpeg *j, stbi__huffman *hdc, stbi__huffman *hac, stbi__int16 *fac, int b,
+                            int dequant) {
+    if (jpeg_bits_broken(j)) return -2;
+    if (j->code_bits < 16) stbi__grow_buffer_unsafe(j);
+    int t = stbi__jpeg_huff_decode(j, hdc);
+    if (t < 0 || t > 15) return 0;
+    int diff = t ? stbi__extend_receive(j, t) : 0;
+    int dc = j->img_comp[b].dc_pred + diff; /* |dc_pred| <= 32767 here: no overflow */
+    j->img_comp[b].dc_pred = dc;
+    if (jpeg_dc_out_of_range(dc, dequant)) return -1;
+    int k = 1;
+    do {
+        if (jpeg_bits_broken(j)) return -2;
+        if (j->code_bits < 16) stbi__grow_buffer_unsafe(j);
+        int c = (int)((j->code_buffer >> (32 - FAST_BITS)) & ((1 << FAST_BITS) - 1));
+        int r = fac[c];
+        if (r) {
+            k += (r >> 4) & 15;
+            int s = r & 15;
+            j->code_buffer <<= s;
+            j->code_bits -= s;
+            k++;
+        } else {
+            int rs = stbi__jpeg_huff_decode(j, hac);
+            if (rs < 0) return 0;
+            int s = rs & 15;
+            r = rs >> 4;
+            if (s == 0) {
+                if (rs != 0xf0) break;
+                k += 16;
+            } else {
+                k += r;
+                (void)stbi__extend_receive(j, s);
+                k++;
+            }
+        }
+    } while (k < 64);
+    return 1;
+}
+
+/* stbi__jpeg_decode_block_prog_dc likewise (first DC scans only: refinements add one bit). */
+static int jpeg_check_block_prog_dc(stbi__jpeg *j, stbi__huffman *hdc, int b) {
+    if (j->spec_end != 0) return 0;
+    if (jpeg_bits_broken(j)) return -2;
+    if (j->code_bits < 16) stbi__grow_buffer_unsafe(j);
+    if (j->succ_high != 0) {
+        (void)stbi__jpeg_get_bit(j);
+        return 1;
+    }
+    int t = stbi__jpeg_huff_decode(j, hdc);
+    if (t < 0 || t > 15) return 0;
+    int dc = j->img_comp[b].dc_pred + (t ? stbi__extend_receive(j, t) : 0);
+    j->img_comp[b].dc_pred = dc;
+    return jpeg_dc_out_of_range(dc, 1 << j->succ_low) ? -1 : 1;
+}
+
+/* One scan's entropy-coded data, walked as stbi__parse_entropy_coded_data walks it (block order,
+ * restart intervals); 0, -1, -2 or 1 as above. A progressive AC scan holds no DC: it is skipped to the
+ * next marker that is not a restart, where stb's reader stops too (or stb fails). */
+static int jpeg_check_scan(stbi__jpeg *z) {
+    if (z->progressive && z->spec_start != 0) {
+        stbi__context *s = z->s;
+        while (s->img_buffer + 1 < s->img_buffer_end) {
+            stbi_uc m = s->img_buffer[1];
+            if (s->img_buffer[0] != 0xFF || m == 0x00 || m == 0xFF || STBI__RESTART(m)) {
+                s->img_buffer += s->img_buffer[0] == 0xFF && m != 0xFF ? 2 : 1;
+                continue;
+            }
+            z->marker = m;
+            s->img_buffer += 2;
+            return 1;
+        }
+        s->img_buffer = s->img_buffer_end;
+        return 1;
+    }
+    stbi__jpeg_reset(z);
+    int one = z->scan_n == 1, n0 = z->order[0];
+    int w = one ? (z->img_comp[n0].x + 7) >> 3 : z->img_mcu_x;
+    int h = one ? (z->img_comp[n0].y + 7) >> 3 : z->img_mcu_y;
+    for (int y = 0; y < h; y++) {
+        for (int x = 0; x < w; x++) {
+            for (int k = 0; k < z->scan_n; k++) {
+                int n = z->order[k];
+                int blocks = one ? 1 : z->img_comp[n].h * z->img_comp[n].v;
+                for (int i = 0; i < blocks; i++) {
+                    int ha = z->img_comp[n].ha;
+                    int r = z->progressive ? jpeg_check_block_prog_dc(z, z->huff_dc + z->img_comp[n].hd, n)
+                                           : jpeg_check_block(z, z->huff_dc + z->img_comp[n].hd, z->huff_ac + ha,
+                                                              z->fast_ac[ha], n, z->dequant[z->img_comp[n].tq][0]);
+                    if (r <= 0) return r;
+                }
+            }
+            if (--z->todo <= 0) {
+                if (jpeg_bits_broken(z)) return -2;
+                if (z->code_bits < 24) stbi__grow_buffer_unsafe(z);
+                if (!STBI__RESTART(z->marker)) return 1;
+                stbi__jpeg_reset(z);
+            }
+        }
+    }
+    return 1;
+}
+
+/* Why stb_image must not decode the JPEG: a scan would drive a DC coefficient out of range (see
+ * jpeg_dc_out_of_range) or stb's count of bits to where it breaks (jpeg_bits_broken), found by a
+ * dry run of stb's own marker parser and bit reader over the entropy-coded data before stb
+ * decodes it; NULL otherwise, and where stb fails by itself (it then reports why). */
+static const char *jpeg_entropy_problem(const uint8_t *d, size_t n) {
+    stbi__context s;
+    stbi__start_mem(&s, d, (int)n);
+    stbi__jpeg *z = io_malloc(sizeof *z);
+    if (!z) return "out of memory";
+    memset(z, 0, sizeof *z);
+    z->s = &s;
+    const char *why = NULL;
+    if (!stbi__decode_jpeg_header(z, STBI__SCAN_header)) goto done;
+    /* the MCU geometry stbi__process_frame_header computes only when it allocates */
+    int hmax = 1, vmax = 1;
+    for (int i = 0; i < s.img_n; i++) {
+        if (z->img_comp[i].h > hmax) hmax = z->img_comp[i].h;
+        if (z->img_comp[i].v > vmax) vmax = z->img_comp[i].v;
+    }
+    for (int i = 0; i < s.img_n; i++)
+        if (hmax % z->img_comp[i].h || vmax % z->img_comp[i].v) goto done; /* stb refuses it */
+    z->img_mcu_x = (int)((s.img_x + (unsigned)hmax * 8 - 1) / ((unsigned)hmax * 8));
+    z->img_mcu_y = (int)((s.img_y + (unsigned)vmax * 8 - 1) / ((unsigned)vmax * 8));
+    for (int i = 0; i < s.img_n; i++) {
+        z->img_comp[i].x = (int)((s.img_x * (unsigned)z->img_comp[i].h + (unsigned)hmax - 1) / (unsigned)hmax);
+        z->img_comp[i].y = (int)((s.img_y * (unsigned)z->img_comp[i].v + (unsigned)vmax - 1) / (unsigned)vmax);
+    }
+    /* stbi__decode_jpeg_image's marker loop */
+    for (int m = stbi__get_marker(z); !stbi__EOI(m); m = stbi__get_marker(z)) {
+        if (stbi__SOS(m)) {
+            if (!stbi__process_scan_header(z)) break;
+            int r = jpeg_check_scan(z);
+            if (r == -1) why = "corrupt JPEG (a DC coefficient out of range)";
+            if (r == -2) why = "corrupt JPEG (entropy-coded data cut inside a code by a marker)";
+            if (r <= 0) break;
+            if (z->marker == STBI__MARKER_none) {
+                while (!stbi__at_eof(z->s)) {
+                    if (stbi__get8(z->s) == 255) {
+                        z->marker = stbi__get8(z->s);
+                        break;
+                    }
+                }
+            }
+        } else if (stbi__DNL(m)) {
+            int ld = stbi__get16be(z->s);
+            if (ld != 4 || (stbi__uint32)stbi__get16be(z->s) != s.img_y) break; /* stb refuses it */
+        } else if (!stbi__process_marker(z, m)) {
+            break;
+        }
+    }
+done:
+    free(z);
+    return why;
 }
 
 /* True when every PNG chunk's declared length fits in the bytes that follow it (stb_image grows its
@@ -180,6 +362,47 @@ static bool png_chunks_ok(const uint8_t *d, size_t n) {
     return i == n; /* no IEND: stb decides on what is there */
 }
 
+/* Decodes an image stb_image reads (PNG, JPEG) held in memory into 8-bit RGB (io_malloc'd), after
+ * the checks above and the pixel cap, whether it came from a file or from inside a glTF; NULL with
+ * the reason in *why (which may point into ctx->why) otherwise. */
+static uint8_t *stb_decode(io_ctx *ctx, const void *data, size_t size, int32_t *w, int32_t *h, const char **why) {
+    if (size > INT32_MAX) {
+        *why = "too large";
+        return NULL;
+    }
+    int iw = 0, ih = 0, comp;
+    const stbi_uc *bytes = data;
+    bool jpeg = size >= 2 && bytes[0] == 0xFF; /* what stb_image's JPEG test accepts */
+    bool png = size >= 8 && memcmp(bytes, "\x89PNG\r\n\x1a\n", 8) == 0;
+    const char *bad = NULL;
+    stbi_uc *px = NULL;
+    if (jpeg && !jpeg_tables_ok(bytes, size)) { /* before stb reads the header too */
+        *why = "corrupt JPEG (a Huffman table of more than 256 codes, or a scan without its table)";
+    } else if (png && !png_chunks_ok(bytes, size)) {
+        *why = "corrupt or truncated PNG (a chunk longer than the file, or an empty first IDAT)";
+    } else if (!stbi_info_from_memory(bytes, (int)size, &iw, &ih, &comp)) {
+        *why = stbi_failure_reason();
+    } else if ((uint64_t)iw * (uint64_t)ih > ctx->limits.max_texture_pixels) {
+        snprintf(ctx->why, sizeof ctx->why, "%dx%d is more than %llu pixels; RP_MAX_TEXTURE_PIXELS raises the limit",
+                 iw, ih, (unsigned long long)ctx->limits.max_texture_pixels);
+        *why = ctx->why;
+    } else if (jpeg && (bad = jpeg_entropy_problem(bytes, size)) != NULL) {
+        *why = bad;
+    } else {
+        px = stbi_load_from_memory(bytes, (int)size, &iw, &ih, &comp, 3);
+        if (!px) *why = stbi_failure_reason();
+    }
+    if (!px) return NULL;
+    size_t n = (size_t)iw * (size_t)ih * 3;
+    uint8_t *rgb = io_malloc(n);
+    if (rgb) memcpy(rgb, px, n); /* stb's buffer goes back to stb's allocator */
+    stbi_image_free(px);
+    if (!rgb) *why = "out of memory";
+    *w = iw;
+    *h = ih;
+    return rgb;
+}
+
 uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const char *file,
                   uint32_t line) {
     io_builder *b = &ctx->b;
@@ -197,37 +420,10 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
     uint8_t *rgb = NULL;
     const char *why = "unsupported or corrupt image";
     unsigned long failures = io_alloc_failures();
-    if (buf.size >= 3 && buf.data[0] == 'P' && (buf.data[1] == '3' || buf.data[1] == '6')) {
+    if (buf.size >= 3 && buf.data[0] == 'P' && (buf.data[1] == '3' || buf.data[1] == '6'))
         rgb = ppm_decode(buf.data, buf.size, &w, &h, &why);
-    } else if (buf.size <= INT32_MAX) {
-        int iw = 0, ih = 0, comp;
-        const stbi_uc *bytes = (const stbi_uc *)buf.data;
-        bool jpeg = buf.size >= 2 && bytes[0] == 0xFF; /* what stb_image's JPEG test accepts */
-        stbi_uc *px = NULL;
-        bool png = buf.size >= 8 && memcmp(bytes, "\x89PNG\r\n\x1a\n", 8) == 0;
-        if (jpeg && !jpeg_tables_ok(bytes, buf.size)) { /* before stb reads the header too */
-            why = "corrupt JPEG (a Huffman table of more than 256 codes, or a scan without its table)";
-        } else if (png && !png_chunks_ok(bytes, buf.size)) {
-            why = "corrupt or truncated PNG (a chunk longer than the file, or an empty first IDAT)";
-        } else if (!stbi_info_from_memory(bytes, (int)buf.size, &iw, &ih, &comp)) {
-            why = stbi_failure_reason();
-        } else if ((uint64_t)iw * (uint64_t)ih > ctx->limits.max_texture_pixels) {
-            snprintf(ctx->why, sizeof ctx->why, "%dx%d is more than %llu pixels; RP_MAX_TEXTURE_PIXELS raises the limit",
-                     iw, ih, (unsigned long long)ctx->limits.max_texture_pixels);
-            why = ctx->why;
-        } else {
-            px = stbi_load_from_memory(bytes, (int)buf.size, &iw, &ih, &comp, 3);
-            if (!px) why = stbi_failure_reason();
-        }
-        if (px) {
-            size_t n = (size_t)iw * (size_t)ih * 3;
-            rgb = io_malloc(n);
-            if (rgb) memcpy(rgb, px, n); /* stb's buffer goes back to stb's allocator */
-            stbi_image_free(px);
-            w = iw;
-            h = ih;
-        }
-    }
+    else
+        rgb = stb_decode(ctx, buf.data, buf.size, &w, &h, &why);
     vfs_buf_free(&buf);
     if (!rgb) {
         if (io_alloc_failures() != failures) why = "out of memory"; /* stb then names another reason */
@@ -237,30 +433,22 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
     return tex_add_rgb(ctx, path, as_written, w, h, rgb, file, line);
 }
 
+/* An image inside a glTF (data URI or buffer view) goes through the same checks as a file. */
 uint32_t tex_add_encoded(io_ctx *ctx, const char *key, const char *as_written, const void *data,
                          size_t size, const char *file, uint32_t line) {
     io_builder *b = &ctx->b;
     for (size_t i = 0; i < b->texture_n; i++)
         if (strcmp(b->texture_keys[i], key) == 0) return (uint32_t)i;
-    int iw, ih, comp;
+    int32_t w = 0, h = 0;
+    const char *why = "unsupported or corrupt image";
     unsigned long failures = io_alloc_failures();
-    stbi_uc *px = size <= INT32_MAX ? stbi_load_from_memory((const stbi_uc *)data, (int)size, &iw, &ih, &comp, 3) : NULL;
-    if (!px) {
-        io_error(ctx, file, line, "cannot decode texture '%s': %s", as_written,
-                 size > INT32_MAX                     ? "too large"
-                 : io_alloc_failures() != failures ? "out of memory"
-                                                   : stbi_failure_reason());
-        return IO_NONE;
-    }
-    size_t n = (size_t)iw * (size_t)ih * 3;
-    uint8_t *rgb = io_malloc(n);
-    if (rgb) memcpy(rgb, px, n);
-    stbi_image_free(px);
+    uint8_t *rgb = stb_decode(ctx, data, size, &w, &h, &why);
     if (!rgb) {
-        io_error(ctx, file, line, "out of memory");
+        if (io_alloc_failures() != failures) why = "out of memory";
+        io_error(ctx, file, line, "cannot decode texture '%s': %s", as_written, why);
         return IO_NONE;
     }
-    return tex_add_rgb(ctx, key, as_written, iw, ih, rgb, file, line);
+    return tex_add_rgb(ctx, key, as_written, w, h, rgb, file, line);
 }
 
 uint32_t tex_add_rgb(io_ctx *ctx, const char *path, const char *as_written, int32_t w, int32_t h,

@@ -559,31 +559,47 @@ static bool same_bytes(const char *a, const char *b) {
     return same;
 }
 
-/* render --engine cuda: on a GPU the eye-light image is the CPU's, byte for byte; without one it
- * says so (exit 1); without nvcc at build time it is a usage error (exit 2). Not bench's, but it
- * shares its runner and the CUDA cases. */
-static void cuda_render_case(const char *cli, const char *scene, int size) {
+/* render --engine cuda: the image (integrator and flags `extra`) is the CPU's `render --anim-flat`
+ * with the same flags, byte for byte, on a GPU, or with --cuda-emulate (the kernels' code on the CPU)
+ * anywhere nvcc was at build time; without a GPU the GPU run says so (exit 1); without nvcc at build
+ * time it is a usage error (exit 2). Not bench's, but it shares its runner and the CUDA cases. */
+static void cuda_render_case(const char *cli, const char *scene, const char *integ, const char *extra, bool emulate,
+                             int size) {
     char gpu[1024], cpu[1024], log[1024], cmd[8192];
-    snprintf(gpu, sizeof gpu, "%s/render_cuda.png", tmp_dir());
-    snprintf(cpu, sizeof cpu, "%s/render_cpu.png", tmp_dir());
+    snprintf(gpu, sizeof gpu, "%s/render_cuda.pfm", tmp_dir());
+    snprintf(cpu, sizeof cpu, "%s/render_cpu.pfm", tmp_dir());
     snprintf(log, sizeof log, "%s/render_cuda.log", tmp_dir());
     remove(gpu);
-    snprintf(cmd, sizeof cmd, "'%s' render '%s' --engine cuda --integrator eyelight --width %d --height %d -o '%s'",
-             cli, scene, size, size, gpu);
+    snprintf(cmd, sizeof cmd, "'%s' render '%s' --engine cuda%s --integrator %s %s --width %d --height %d -o '%s'",
+             cli, scene, emulate ? " --cuda-emulate" : "", integ, extra, size, size, gpu);
     int rc = run(cmd, log);
     if (log_contains(log, "built without CUDA")) {
         CHECKF(rc == 2, "cuda render: `%s` exited with %d", cmd, rc);
         return;
     }
-    if (log_contains(log, "no CUDA device found")) {
+    if (!emulate && log_contains(log, "no CUDA device found")) {
         CHECKF(rc == 1, "cuda render: `%s` exited with %d", cmd, rc);
         return;
     }
     CHECKF(rc == 0, "cuda render: `%s` exited with %d", cmd, rc);
-    snprintf(cmd, sizeof cmd, "'%s' render '%s' --integrator eyelight --width %d --height %d -o '%s' -q", cli, scene,
-             size, size, cpu);
+    CHECKF(log_contains(log, emulate ? "rays traced on CPU (the CUDA kernels' code" : "rays traced on"),
+           "cuda render: `%s` does not say where its rays were traced", cmd);
+    snprintf(cmd, sizeof cmd, "'%s' render '%s' --anim-flat --integrator %s %s --width %d --height %d -o '%s' -q", cli,
+             scene, integ, extra, size, size, cpu);
     CHECKF(run(cmd, log) == 0, "cuda render: `%s` failed", cmd);
-    CHECKF(same_bytes(gpu, cpu), "cuda render: %s differs from the CPU's %s", gpu, cpu);
+    CHECKF(same_bytes(gpu, cpu), "cuda render: %s (%s) differs from the CPU's %s", gpu, integ, cpu);
+}
+
+/* render --engine cuda refuses what the GPU does not trace (spheres and cones: the museum), naming
+ * them, with exit 1, on a GPU or emulated alike. */
+static void cuda_refusal_case(const char *cli, const char *scene) {
+    char log[1024], cmd[8192];
+    snprintf(log, sizeof log, "%s/render_cuda.log", tmp_dir());
+    snprintf(cmd, sizeof cmd, "'%s' render '%s' --engine cuda --cuda-emulate --integrator whitted --width 8 --height 8 -o '%s/refused.pfm'",
+             cli, scene, tmp_dir());
+    int rc = run(cmd, log);
+    if (log_contains(log, "built without CUDA")) return;
+    CHECKF(rc == 1 && log_contains(log, "spheres, cones"), "cuda render: `%s` exited with %d", cmd, rc);
 }
 
 int main(void) {
@@ -599,6 +615,8 @@ int main(void) {
     char cornell_buf[1024], teapot_buf[1024];
     const char *cornell = rp_test_scene("cornell_box/cornell_box.obj", cornell_buf, sizeof cornell_buf);
     const char *teapot = rp_test_scene("spd_teapot.nff.gz", teapot_buf, sizeof teapot_buf);
+    char museum_buf[1024];
+    const char *museum = rp_test_scene("bart_museum5.tar.gz", museum_buf, sizeof museum_buf);
     CHECK(cornell != NULL);
     CHECK(teapot != NULL);
 
@@ -611,7 +629,18 @@ int main(void) {
     if (cornell) grid_case(cli, cornell, small ? 16 : 48);
     if (cornell) bad_rays_case(cli, cornell, small ? 32 : 64);
     if (cornell) cuda_case(cli, cornell, small ? 32 : 64);
-    if (cornell) cuda_render_case(cli, cornell, small ? 32 : 96);
+    if (cornell) {
+        int cs = small ? 24 : 64;
+        cuda_render_case(cli, cornell, "eyelight", "", false, small ? 32 : 96);
+        cuda_render_case(cli, cornell, "whitted", "--spp 2", false, cs);
+        cuda_render_case(cli, cornell, "path", "--spp 2 --max-depth 3", false, cs);
+        cuda_render_case(cli, cornell, "eyelight", "", true, cs);
+        cuda_render_case(cli, cornell, "whitted", "--spp 2", true, cs);
+        cuda_render_case(cli, cornell, "path", "--spp 2 --max-depth 3", true, cs);
+        cuda_render_case(cli, cornell, "direct", "", true, cs);
+        cuda_render_case(cli, cornell, "ao", "", true, cs);
+    }
+    if (museum) cuda_refusal_case(cli, museum);
 
     /* Usage errors and missing files fail. */
     char cmd[sizeof cli + 128], log[1024];

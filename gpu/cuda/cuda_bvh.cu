@@ -26,7 +26,7 @@ struct rp_cuda_bvh {
 struct rp_cuda_batch {
     rp_cuda_bvh_ray *rays;
     rp_cuda_bvh_hit *hits;
-    size_t n;
+    size_t n, cap;          /* rays now, room for */
     unsigned *counter;
 };
 
@@ -476,6 +476,7 @@ extern "C" rp_cuda_batch *rp_cuda_batch_new(const rp_cuda_bvh_ray *rays, size_t 
     }
     q->n = n;
     size_t m = n ? n : 1;
+    q->cap = m;
     cudaError_t e;
     if ((e = cudaMalloc(&q->rays, m * sizeof *rays)) != cudaSuccess ||
         (e = cudaMalloc(&q->hits, m * sizeof(rp_cuda_bvh_hit))) != cudaSuccess ||
@@ -486,6 +487,24 @@ extern "C" rp_cuda_batch *rp_cuda_batch_new(const rp_cuda_bvh_ray *rays, size_t 
         return NULL;
     }
     return q;
+}
+
+extern "C" int rp_cuda_batch_set(rp_cuda_batch *q, const rp_cuda_bvh_ray *rays, size_t n, char *err,
+                                  size_t err_size) {
+    cudaError_t e = cudaSuccess;
+    if (n > q->cap) {
+        cudaFree(q->rays);
+        cudaFree(q->hits);
+        q->rays = NULL, q->hits = NULL, q->n = q->cap = 0;
+        if ((e = cudaMalloc(&q->rays, n * sizeof *rays)) != cudaSuccess ||
+            (e = cudaMalloc(&q->hits, n * sizeof(rp_cuda_bvh_hit))) != cudaSuccess)
+            return fail(err, err_size, "ray upload", e);
+        q->cap = n;
+    }
+    q->n = n;
+    if (n && (e = cudaMemcpy(q->rays, rays, n * sizeof *rays, cudaMemcpyHostToDevice)) != cudaSuccess)
+        return fail(err, err_size, "ray upload", e);
+    return 1;
 }
 
 extern "C" int rp_cuda_batch_hits(const rp_cuda_batch *q, rp_cuda_bvh_hit *out, char *err, size_t err_size) {

@@ -85,6 +85,8 @@ size_t rp_cuda_bvh_bytes(const rp_cuda_bvh *bvh);
 /* n rays on the device and room for their hits. */
 rp_cuda_batch *rp_cuda_batch_new(const rp_cuda_bvh_ray *rays, size_t n, char *err, size_t err_size);
 void rp_cuda_batch_free(rp_cuda_batch *batch);
+/* Replaces the batch's rays by n others, growing its device memory when n is more than it held. */
+int rp_cuda_batch_set(rp_cuda_batch *batch, const rp_cuda_bvh_ray *rays, size_t n, char *err, size_t err_size);
 /* Traces the batch (closest hit, or any hit with occlusion); *ms gets the kernel's time (CUDA
  * events), NULL allowed. */
 int rp_cuda_bvh_trace(const rp_cuda_bvh *bvh, rp_cuda_batch *batch, rp_cuda_kernel kernel, bool occlusion,

@@ -44,11 +44,12 @@ typedef struct ray_stream {
     uint32_t *active;      /* rays traversing or intersecting, compacted after each pass */
     uint32_t *queue;       /* wavefront: the intersect queue, then the traverse queue (2 per ray) */
     size_t active_count;
+    rp_rayhit *xray;       /* stream_desc.trace: each ray and its hit as the tracer left them */
 } ray_stream;
 
 static void stream_free(ray_stream *s) {
     free(s->ray), free(s->walk), free(s->hit), free(s->cursor), free(s->end), free(s->mailbox);
-    free(s->state), free(s->voxels), free(s->tests), free(s->active), free(s->queue);
+    free(s->state), free(s->voxels), free(s->tests), free(s->active), free(s->queue), free(s->xray);
     memset(s, 0, sizeof *s);
 }
 
@@ -214,7 +215,53 @@ static void run_passes(const grid *g, ray_stream *s, size_t first, size_t count,
     ks->intersection_passes += st->intersection_passes - isect0;
 }
 
+/* The external tracer (stream_desc.trace) on rays [first, first + count): each ray and its hit into
+ * s->xray, and s->hit as the grid's passes leave it (tri 0: a hit, or blocked). */
+static bool trace_external(const stream_desc *d, ray_stream *s, size_t first, size_t count, rp_ray_kind kind,
+                           stream_stats *st, char *err, size_t err_size) {
+    if (count == 0) return true;
+    if (!s->xray && !(s->xray = malloc(s->count * sizeof *s->xray))) {
+        snprintf(err, err_size, "stream: out of memory for %zu rays", s->count);
+        return false;
+    }
+    rp_rayhit *x = s->xray + first;
+    for (size_t i = 0; i < count; i++) {
+        x[i].ray = s->ray[first + i];
+        x[i].hit = (rp_hit){.geom_id = RP_INVALID_ID, .prim_id = RP_INVALID_ID, .inst_id = RP_INVALID_ID};
+    }
+    double t0 = sys_seconds();
+    bool ok = d->trace(d->trace_user, x, count, s->any, err, err_size);
+    st->trace_ms += (sys_seconds() - t0) * 1e3;
+    if (!ok) return false;
+    stream_kind_stats *ks = &st->kind[kind];
+    for (size_t i = 0; i < count; i++) {
+        size_t j = first + i;
+        bool hit = s->any ? x[i].ray.tfar == -INFINITY && s->ray[j].tfar != -INFINITY
+                          : x[i].hit.geom_id != RP_INVALID_ID;
+        s->hit[j] = (grid_hit){.t = x[i].ray.tfar, .tri = hit ? 0 : UINT32_MAX};
+        s->voxels[j] = s->tests[j] = 0;
+        s->state[j] = RAY_SHADING;
+        ks->hits += hit;
+    }
+    st->rays += count;
+    ks->rays += count, ks->batches++;
+    return true;
+}
+
+/* Traces rays [first, first + count) of s: by the external tracer when the desc has one, else by
+ * the grid's passes. false (with err) when the tracer failed. */
+static bool trace_rays(const grid *g, const stream_desc *d, ray_stream *s, size_t first, size_t count,
+                       rp_ray_kind kind, stream_stats *st, char *err, size_t err_size) {
+    if (d->trace) return trace_external(d, s, first, count, kind, st, err, err_size);
+    run_passes(g, s, first, count, kind, d->oracle, d->wavefront, st);
+    return true;
+}
+
 static void hit_of(const grid *g, const ray_stream *s, size_t i, rp_rayhit *rh) {
+    if (s->xray) { /* the external tracer's */
+        *rh = s->xray[i];
+        return;
+    }
     rh->ray = s->ray[i];
     rh->hit = (rp_hit){.geom_id = RP_INVALID_ID, .prim_id = RP_INVALID_ID, .inst_id = RP_INVALID_ID};
     grid_hit_write(g, &s->hit[i], rh);
@@ -262,10 +309,15 @@ typedef struct stream_ctx {
     ray_stream rays, shadow;
     uint32_t *owner;          /* shadow ray -> the slot it lights */
     whitted_light_term *term; /* shadow ray -> what its light brings */
+    char *err;                /* the tracer's message when it failed */
+    size_t err_size;
+    bool failed;
 } stream_ctx;
 
-static void trace(stream_ctx *c, ray_stream *s, size_t first, size_t count, rp_ray_kind kind) {
-    run_passes(c->g, s, first, count, kind, c->d->oracle, c->d->wavefront, c->st);
+static bool trace(stream_ctx *c, ray_stream *s, size_t first, size_t count, rp_ray_kind kind) {
+    if (trace_rays(c->g, c->d, s, first, count, kind, c->st, c->err, c->err_size)) return true;
+    c->failed = true;
+    return false;
 }
 
 /* Whitted's shading kernel on a level: whitted_surface per ray, then its shadow stream (one ray per
@@ -298,7 +350,7 @@ static bool whitted_level_shade(stream_ctx *c, whitted_stream_level *lv, int dep
             c->owner[ns++] = (uint32_t)k;
         }
     }
-    trace(c, &c->shadow, 0, ns, RP_RAY_SHADOW);
+    if (!trace(c, &c->shadow, 0, ns, RP_RAY_SHADOW)) return false;
     for (size_t j = 0; j < ns; j++) {
         c->st->shades++;
         if (!shadow_passes(&c->shadow, j)) {
@@ -349,7 +401,7 @@ static bool whitted_sample(stream_ctx *c, int sample, whitted_stream_level *leve
     levels[0].reflected = n;
     c->st->other_passes++;
     c->st->eye_rays += n;
-    trace(c, &c->rays, 0, n, RP_RAY_PRIMARY);
+    if (!trace(c, &c->rays, 0, n, RP_RAY_PRIMARY)) return false;
     int used = 1;
     for (int depth = 0; depth <= depth_max; depth++) {
         whitted_stream_level *lv = &levels[depth];
@@ -373,8 +425,8 @@ static bool whitted_sample(stream_ctx *c, int sample, whitted_stream_level *leve
             }
         }
         dn->reflected = nr;
-        trace(c, &c->rays, 0, nr, RP_RAY_REFLECTION);
-        trace(c, &c->rays, nr, nt, RP_RAY_REFRACTION);
+        if (!trace(c, &c->rays, 0, nr, RP_RAY_REFLECTION) || !trace(c, &c->rays, nr, nt, RP_RAY_REFRACTION))
+            return false;
     }
     /* Kernel: the children's radiance into their parents, deepest level first */
     for (int l = used - 1; l > 0; l--) {
@@ -413,7 +465,7 @@ static bool path_sample(stream_ctx *c, uint32_t sample, pbr_path *paths) {
     }
     c->st->other_passes++;
     c->st->eye_rays += n;
-    trace(c, &c->rays, 0, n, RP_RAY_PRIMARY);
+    if (!trace(c, &c->rays, 0, n, RP_RAY_PRIMARY)) return false;
     size_t count = n;
     rp_ray_kind kind = RP_RAY_PRIMARY;
     while (count) {
@@ -431,7 +483,7 @@ static bool path_sample(stream_ctx *c, uint32_t sample, pbr_path *paths) {
             paths[next++] = p;
         }
         c->st->other_passes++;
-        trace(c, &c->shadow, 0, nshadow, RP_RAY_SHADOW);
+        if (!trace(c, &c->shadow, 0, nshadow, RP_RAY_SHADOW)) return false;
         for (uint32_t k = 0; k < nshadow; k++) {
             c->st->shades++;
             if (shadow_passes(&c->shadow, k))
@@ -442,7 +494,7 @@ static bool path_sample(stream_ctx *c, uint32_t sample, pbr_path *paths) {
         c->st->shadow_rays += nshadow;
         if (nshadow) c->st->other_passes++;
         kind = RP_RAY_BOUNCE;
-        trace(c, &c->rays, 0, next, kind);
+        if (!trace(c, &c->rays, 0, next, kind)) return false;
         count = next;
     }
     return true;
@@ -456,7 +508,7 @@ static bool render_integrator(rp_render_scene *rs, const grid *g, const stream_d
     rd.region[0] = rd.region[1] = rd.region[2] = rd.region[3] = 0;
     rd.accumulate = false, rd.bounce_rays = NULL;
     render_frame *f = calloc(1, sizeof *f);
-    stream_ctx c = {.g = g, .d = d, .f = f, .st = st};
+    stream_ctx c = {.g = g, .d = d, .f = f, .st = st, .err = err, .err_size = err_size};
     size_t n = (size_t)d->width * (size_t)d->height;
     bool whitted = false, ok = false;
     whitted_stream_level *levels = NULL;
@@ -500,7 +552,7 @@ static bool render_integrator(rp_render_scene *rs, const grid *g, const stream_d
     for (size_t i = 0; i < 3 * n; i++) pixels[i] = f->desc.spp == 1 ? c.th.accum[i] : c.th.accum[i] * inv;
     ok = true;
 oom:
-    if (!ok) snprintf(err, err_size, "stream: out of memory for %zu rays", n);
+    if (!ok && !c.failed) snprintf(err, err_size, "stream: out of memory for %zu rays", n);
     if (levels)
         for (int l = 0; l <= f->desc.max_depth; l++) whitted_level_free(&levels[l]);
     free(levels), free(paths);
@@ -516,7 +568,7 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
     double t0 = sys_seconds();
     stream_desc d = stream_desc_defaults(desc_in);
     stream_stats st = {0};
-    if (!rs || !g || !pixels) {
+    if (!rs || (!g && !d.trace) || !pixels) {
         snprintf(err, err_size, "stream: missing scene, grid or pixels");
         return false;
     }
@@ -537,7 +589,10 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
     for (size_t i = 0; i < n; i++)
         camera_ray(&rc, (float)(i % (size_t)d.width) + 0.5f, (float)(i / (size_t)d.width) + 0.5f, &eye.ray[i]);
     st.other_passes++;
-    run_passes(g, &eye, 0, n, RP_RAY_PRIMARY, d.oracle, d.wavefront, &st);
+    if (!trace_rays(g, &d, &eye, 0, n, RP_RAY_PRIMARY, &st, err, err_size)) {
+        stream_free(&eye);
+        return false;
+    }
     st.eye_rays = n;
 
     /* Kernel: shading (one pass); with shadows it emits the shadow stream */
@@ -590,7 +645,11 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
     }
     st.other_passes++;
     if (shadows) {
-        run_passes(g, &shadow, 0, n, RP_RAY_SHADOW, d.oracle, d.wavefront, &st);
+        if (!trace_rays(g, &d, &shadow, 0, n, RP_RAY_SHADOW, &st, err, err_size)) {
+            free(kd_cos);
+            stream_free(&shadow), stream_free(&eye);
+            return false;
+        }
         for (size_t i = 0; i < n; i++) {
             bool traced = shadow.ray[i].tfar >= 0.0f;
             if (!traced) continue;

@@ -46,6 +46,13 @@ typedef struct stream_desc {
      * (whitted_surface / whitted_light, path_vertex) and emits shadow, reflection, refraction and
      * bounce rays as streams of their own, so the image equals rp_render's bit for bit. */
     const rp_render_desc *render;
+    /* When not NULL, every stream is traced by this instead of the grid's passes (the CUDA backend,
+     * gpu/cuda/cuda_tracer.h); stream_render's grid may then be NULL, and the grid's counters
+     * (voxels, tests, passes of traversal and intersection) stay 0. It traces rays[0..n) as
+     * rp_intersect1 (closest hit: ray.tfar and hit set on a hit) or, with occlusion, as rp_occluded1
+     * (ray.tfar -inf when blocked) would, bit for bit; false with a message in err. */
+    bool (*trace)(void *user, rp_rayhit *rays, size_t n, bool occlusion, char *err, size_t err_size);
+    void *trace_user;
 } stream_desc;
 
 stream_desc stream_desc_defaults(const stream_desc *desc);
@@ -72,6 +79,7 @@ typedef struct stream_stats {
     uint64_t eye_hits, shadow_blocked;
     stream_kind_stats kind[RP_RAY_KIND_COUNT]; /* sums over kinds equal the totals above */
     double ms;
+    double trace_ms;             /* of ms, the time in stream_desc.trace (0 over the grid) */
 } stream_stats;
 
 /* Renders width x height x 3 floats (top row first) of the scene with the stream tracer over g

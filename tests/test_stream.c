@@ -241,6 +241,11 @@ int main(void) {
                      small ? 16 : 32, small ? 2 : 4, RP_RAY_BOUNCE);
     check_integrator(dev, "cornell_original/CornellBox-Original.obj", RP_INTEGRATOR_DIRECT, 16, 16, 2, RP_RAY_BOUNCE);
     check_integrator(dev, "cornell_original/CornellBox-Original.obj", RP_INTEGRATOR_AO, 16, 16, 2, RP_RAY_SHADOW);
+    /* more than one chunk of 4096 rays: the shading kernels on both threads, merged in order */
+    check_integrator(dev, "cornell_original/CornellBox-Original.obj", RP_INTEGRATOR_PATH, small ? 80 : 128,
+                     small ? 64 : 96, 1, RP_RAY_BOUNCE);
+    check_integrator(dev, "bart_kitchen.tar.gz", RP_INTEGRATOR_WHITTED, small ? 80 : 128, small ? 64 : 72, 1,
+                     RP_RAY_REFRACTION);
     rp_device_release(dev);
     return RP_TEST_END();
 }

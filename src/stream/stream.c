@@ -320,18 +320,93 @@ static bool trace(stream_ctx *c, ray_stream *s, size_t first, size_t count, rp_r
     return false;
 }
 
+/* The shading kernels run over chunks of a stream on the device's threads; each chunk keeps its own
+ * counts and outputs, merged in chunk order afterwards, so every image and statistic is the one
+ * ray order gives. */
+#define STREAM_CHUNK 4096u
+
+static uint32_t chunks_of(size_t n) { return (uint32_t)((n + STREAM_CHUNK - 1) / STREAM_CHUNK); }
+
+static void chunk_range(uint32_t k, size_t n, size_t *a, size_t *b) {
+    *a = (size_t)k * STREAM_CHUNK;
+    *b = *a + STREAM_CHUNK < n ? *a + STREAM_CHUNK : n;
+}
+
+/* Kernel: eye-ray generation, the packet tracer's rays: Whitted's (render_sample_offset) or the
+ * path tracer's (the pixel's sampler), with their per-ray state. */
+typedef struct eye_job {
+    stream_ctx *c;
+    size_t n;
+    int sample;
+    whitted_stream_level *level; /* Whitted, else paths */
+    pbr_path *paths;
+} eye_job;
+
+static void eye_chunk(void *user, uint32_t k, uint32_t thread) {
+    (void)thread;
+    const eye_job *j = user;
+    const render_frame *f = j->c->f;
+    size_t w = (size_t)f->desc.width, a, b;
+    chunk_range(k, j->n, &a, &b);
+    rp_ray *rays = j->c->rays.ray;
+    for (size_t i = a; i < b; i++) {
+        int x = (int)(i % w), y = (int)(i / w);
+        if (j->level) {
+            float ox, oy;
+            render_sample_offset(x, y, j->sample, &ox, &oy);
+            camera_ray(&f->cam, (float)x + ox, (float)y + oy, &rays[i]);
+            j->level->weight[i] = 1.0f;
+            j->level->parent[i] = (uint32_t)i;
+            continue;
+        }
+        pbr_path *p = &j->paths[i];
+        p->rng = sampler_start_pixel(f->desc.sampler, (uint32_t)x, (uint32_t)y, (uint32_t)j->sample);
+        camera_ray(&f->cam, (float)x + sampler_at(&p->rng, 0), (float)y + sampler_at(&p->rng, 1), &rays[i]);
+        p->beta = v3_make(1, 1, 1), p->pdf = 0.0f, p->pixel = (uint32_t)i, p->depth = 0, p->specular = true;
+    }
+}
+
+static void make_eye_rays(stream_ctx *c, size_t n, int sample, whitted_stream_level *level, pbr_path *paths) {
+    eye_job j = {.c = c, .n = n, .sample = sample, .level = level, .paths = paths};
+    rp_device_parallel_for(c->f->s->device, chunks_of(n), eye_chunk, &j);
+}
+
 /* Whitted's shading kernel on a level: whitted_surface per ray, then its shadow stream (one ray per
  * lit slot and light, slot after slot, lights in order, so each slot sums its lights in the order
  * the packet tracer does), then the lights that got through. */
+typedef struct whitted_job {
+    stream_ctx *c;
+    whitted_stream_level *lv;
+    int depth;
+    uint32_t *hits; /* per chunk */
+} whitted_job;
+
+static void whitted_chunk(void *user, uint32_t k, uint32_t thread) {
+    (void)thread;
+    const whitted_job *j = user;
+    size_t a, b;
+    chunk_range(k, j->lv->count, &a, &b);
+    uint32_t hits = 0;
+    for (size_t i = a; i < b; i++) {
+        rp_rayhit rh;
+        hit_of(j->c->g, &j->c->rays, i, &rh);
+        hits += rh.hit.geom_id != RP_INVALID_ID;
+        whitted_surface(j->c->f, &rh.ray, &rh.hit, j->depth, j->lv->weight[i], &j->lv->slot[i]);
+    }
+    j->hits[k] = hits;
+}
+
 static bool whitted_level_shade(stream_ctx *c, whitted_stream_level *lv, int depth) {
     const render_frame *f = c->f;
-    for (size_t k = 0; k < lv->count; k++) {
-        rp_rayhit rh;
-        hit_of(c->g, &c->rays, k, &rh);
-        c->st->shades += rh.hit.geom_id != RP_INVALID_ID;
-        if (depth == 0) c->st->eye_hits += rh.hit.geom_id != RP_INVALID_ID;
-        whitted_surface(f, &rh.ray, &rh.hit, depth, lv->weight[k], &lv->slot[k]);
+    uint32_t chunks = chunks_of(lv->count);
+    whitted_job job = {.c = c, .lv = lv, .depth = depth, .hits = calloc(chunks ? chunks : 1, sizeof(uint32_t))};
+    if (!job.hits) return false;
+    rp_device_parallel_for(f->s->device, chunks, whitted_chunk, &job);
+    for (uint32_t k = 0; k < chunks; k++) {
+        c->st->shades += job.hits[k];
+        if (depth == 0) c->st->eye_hits += job.hits[k];
     }
+    free(job.hits);
     c->st->other_passes++;
     size_t lit = 0;
     for (size_t k = 0; k < lv->count; k++) lit += lv->slot[k].lit;
@@ -389,15 +464,7 @@ static bool whitted_sample(stream_ctx *c, int sample, whitted_stream_level *leve
     size_t n = (size_t)w * (size_t)h;
     int depth_max = f->desc.max_depth;
     if (!whitted_level_alloc(&levels[0], n) || !stream_grow(&c->rays, n, false)) return false;
-    /* Kernel: eye-ray generation, the packet tracer's rays (render_sample_offset) */
-    for (size_t i = 0; i < n; i++) {
-        int x = (int)(i % (size_t)w), y = (int)(i / (size_t)w);
-        float ox, oy;
-        render_sample_offset(x, y, sample, &ox, &oy);
-        camera_ray(&f->cam, (float)x + ox, (float)y + oy, &c->rays.ray[i]);
-        levels[0].weight[i] = 1.0f;
-        levels[0].parent[i] = (uint32_t)i;
-    }
+    make_eye_rays(c, n, sample, &levels[0], NULL);
     levels[0].reflected = n;
     c->st->other_passes++;
     c->st->eye_rays += n;
@@ -449,6 +516,40 @@ static bool whitted_sample(stream_ctx *c, int sample, whitted_stream_level *leve
  * path_vertex on every live path (emission into the accumulator, the light sample's shadow ray into
  * the shadow stream, the bounce into the next stream), the shadow stream, the bounce stream. Each
  * pixel gets its terms in the packet renderer's order. */
+typedef struct path_job {
+    stream_ctx *c;
+    pbr_path *paths;
+    size_t count;
+    uint32_t *counts; /* per chunk: next rays, shadow rays, hits */
+} path_job;
+
+static void path_chunk(void *user, uint32_t k, uint32_t thread) {
+    (void)thread;
+    const path_job *j = user;
+    stream_ctx *c = j->c;
+    size_t a, b;
+    chunk_range(k, j->count, &a, &b);
+    /* the chunk's own view of the thread state: the shared sums (each pixel has one path) and its
+     * own range of the shadow queue */
+    pbr_thread pt = *c->th.pbr;
+    pt.shadow += a, pt.shadow_L += a, pt.shadow_pixel += a;
+    render_thread th = c->th;
+    th.pbr = &pt;
+    uint32_t nshadow = 0, hits = 0;
+    size_t next = a;
+    for (size_t i = a; i < b; i++) {
+        rp_rayhit rh, nx;
+        hit_of(c->g, &c->rays, i, &rh);
+        hits += rh.hit.geom_id != RP_INVALID_ID;
+        pbr_path p = j->paths[i];
+        if (!path_vertex(c->f, &th, &p, &rh, &nx, &nshadow)) continue;
+        /* next <= i: the slot is read already */
+        c->rays.ray[next] = nx.ray;
+        j->paths[next++] = p;
+    }
+    j->counts[3 * k] = (uint32_t)(next - a), j->counts[3 * k + 1] = nshadow, j->counts[3 * k + 2] = hits;
+}
+
 static bool path_sample(stream_ctx *c, uint32_t sample, pbr_path *paths) {
     const render_frame *f = c->f;
     int w = f->desc.width, h = f->desc.height;
@@ -456,34 +557,42 @@ static bool path_sample(stream_ctx *c, uint32_t sample, pbr_path *paths) {
     if (!stream_grow(&c->rays, n, false) || !stream_grow(&c->shadow, n, true)) return false;
     pbr_thread *pt = c->th.pbr;
     pt->shadow = c->shadow.ray; /* path_vertex queues its shadow rays straight into the stream */
-    for (size_t i = 0; i < n; i++) {
-        uint32_t x = (uint32_t)(i % (size_t)w), y = (uint32_t)(i / (size_t)w);
-        pbr_path *p = &paths[i];
-        p->rng = sampler_start_pixel(f->desc.sampler, x, y, sample);
-        camera_ray(&f->cam, (float)x + sampler_at(&p->rng, 0), (float)y + sampler_at(&p->rng, 1), &c->rays.ray[i]);
-        p->beta = v3_make(1, 1, 1), p->pdf = 0.0f, p->pixel = (uint32_t)i, p->depth = 0, p->specular = true;
-    }
+    make_eye_rays(c, n, (int)sample, NULL, paths);
+    uint32_t *counts = malloc(3 * (size_t)(chunks_of(n) ? chunks_of(n) : 1) * sizeof *counts);
+    if (!counts) return false;
     c->st->other_passes++;
     c->st->eye_rays += n;
-    if (!trace(c, &c->rays, 0, n, RP_RAY_PRIMARY)) return false;
+    if (!trace(c, &c->rays, 0, n, RP_RAY_PRIMARY)) {
+        free(counts);
+        return false;
+    }
     size_t count = n;
     rp_ray_kind kind = RP_RAY_PRIMARY;
     while (count) {
-        uint32_t nshadow = 0;
+        /* Kernel: path_vertex on every live path, chunk by chunk: a chunk's shadow rays (at most
+         * one a path) and its next rays go to its own range, then the ranges are closed up in order */
+        uint32_t chunks = chunks_of(count), nshadow = 0;
+        path_job job = {.c = c, .paths = paths, .count = count, .counts = counts};
+        rp_device_parallel_for(f->s->device, chunks, path_chunk, &job);
         size_t next = 0;
-        for (size_t i = 0; i < count; i++) {
-            rp_rayhit rh, nx;
-            hit_of(c->g, &c->rays, i, &rh);
-            c->st->shades += rh.hit.geom_id != RP_INVALID_ID;
-            if (kind == RP_RAY_PRIMARY) c->st->eye_hits += rh.hit.geom_id != RP_INVALID_ID;
-            pbr_path p = paths[i];
-            if (!path_vertex(f, &c->th, &p, &rh, &nx, &nshadow)) continue;
-            /* next <= i: the slot is read already */
-            c->rays.ray[next] = nx.ray;
-            paths[next++] = p;
+        for (uint32_t k = 0; k < chunks; k++) {
+            size_t a, b;
+            chunk_range(k, count, &a, &b);
+            uint32_t nn = counts[3 * k], ns = counts[3 * k + 1], hits = counts[3 * k + 2];
+            c->st->shades += hits;
+            if (kind == RP_RAY_PRIMARY) c->st->eye_hits += hits;
+            memmove(&c->rays.ray[next], &c->rays.ray[a], nn * sizeof(rp_ray));
+            memmove(&paths[next], &paths[a], nn * sizeof(pbr_path));
+            memmove(&pt->shadow[nshadow], &pt->shadow[a], ns * sizeof(rp_ray));
+            memmove(&pt->shadow_L[nshadow], &pt->shadow_L[a], ns * sizeof(v3));
+            memmove(&pt->shadow_pixel[nshadow], &pt->shadow_pixel[a], ns * sizeof(uint32_t));
+            next += nn, nshadow += ns;
         }
         c->st->other_passes++;
-        if (!trace(c, &c->shadow, 0, nshadow, RP_RAY_SHADOW)) return false;
+        if (!trace(c, &c->shadow, 0, nshadow, RP_RAY_SHADOW)) {
+            free(counts);
+            return false;
+        }
         for (uint32_t k = 0; k < nshadow; k++) {
             c->st->shades++;
             if (shadow_passes(&c->shadow, k))
@@ -494,9 +603,13 @@ static bool path_sample(stream_ctx *c, uint32_t sample, pbr_path *paths) {
         c->st->shadow_rays += nshadow;
         if (nshadow) c->st->other_passes++;
         kind = RP_RAY_BOUNCE;
-        if (!trace(c, &c->rays, 0, next, kind)) return false;
+        if (!trace(c, &c->rays, 0, next, kind)) {
+            free(counts);
+            return false;
+        }
         count = next;
     }
+    free(counts);
     return true;
 }
 

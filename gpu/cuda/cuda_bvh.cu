@@ -489,6 +489,15 @@ extern "C" rp_cuda_batch *rp_cuda_batch_new(const rp_cuda_bvh_ray *rays, size_t 
     return q;
 }
 
+extern "C" void *rp_cuda_host_alloc(size_t bytes) {
+    void *p = NULL;
+    return cudaMallocHost(&p, bytes ? bytes : 1) == cudaSuccess ? p : NULL;
+}
+
+extern "C" void rp_cuda_host_free(void *p) {
+    if (p) cudaFreeHost(p);
+}
+
 extern "C" int rp_cuda_batch_set(rp_cuda_batch *q, const rp_cuda_bvh_ray *rays, size_t n, char *err,
                                   size_t err_size) {
     cudaError_t e = cudaSuccess;

@@ -85,6 +85,10 @@ size_t rp_cuda_bvh_bytes(const rp_cuda_bvh *bvh);
 /* n rays on the device and room for their hits. */
 rp_cuda_batch *rp_cuda_batch_new(const rp_cuda_bvh_ray *rays, size_t n, char *err, size_t err_size);
 void rp_cuda_batch_free(rp_cuda_batch *batch);
+/* Page-locked host memory (cudaMallocHost: copies to and from it run at the bus's speed); NULL when
+ * there is none or no device. */
+void *rp_cuda_host_alloc(size_t bytes);
+void rp_cuda_host_free(void *p);
 /* Replaces the batch's rays by n others, growing its device memory when n is more than it held. */
 int rp_cuda_batch_set(rp_cuda_batch *batch, const rp_cuda_bvh_ray *rays, size_t n, char *err, size_t err_size);
 /* Traces the batch (closest hit, or any hit with occlusion); *ms gets the kernel's time (CUDA

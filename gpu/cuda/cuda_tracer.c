@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "core/core.h"
 #include "sys/sys.h"
 
 struct rp_cuda_tracer {
@@ -13,19 +14,46 @@ struct rp_cuda_tracer {
     rp_cuda_bvh *gpu;        /* NULL when emulated */
     rp_cuda_batch *batch;
     rp_cuda_kernel kernel;
-    rp_cuda_bvh_ray *rays;   /* host staging, cap of each */
+    rp_cuda_bvh_ray *rays;   /* host staging, cap of each: page-locked on a GPU */
     rp_cuda_bvh_hit *hits;
     size_t cap;
+    rp_device *pool;         /* the scene's device: its threads convert the rays and hits */
     char device[256];
     rp_cuda_tracer_stats stats;
 };
+
+static void staging_free(rp_cuda_tracer *t) {
+    if (t->gpu) {
+        rp_cuda_host_free(t->rays), rp_cuda_host_free(t->hits);
+    } else {
+        free(t->rays), free(t->hits);
+    }
+    t->rays = NULL, t->hits = NULL, t->cap = 0;
+}
+
+static bool staging_grow(rp_cuda_tracer *t, size_t n) {
+    if (n <= t->cap) return true;
+    staging_free(t);
+    n += n / 4; /* the next depth's stream is rarely larger */
+    if (t->gpu) {
+        t->rays = rp_cuda_host_alloc(n * sizeof *t->rays), t->hits = rp_cuda_host_alloc(n * sizeof *t->hits);
+    } else {
+        t->rays = malloc(n * sizeof *t->rays), t->hits = malloc(n * sizeof *t->hits);
+    }
+    if (!t->rays || !t->hits) {
+        staging_free(t);
+        return false;
+    }
+    t->cap = n;
+    return true;
+}
 
 void rp_cuda_tracer_free(rp_cuda_tracer *t) {
     if (!t) return;
     rp_cuda_batch_free(t->batch);
     rp_cuda_bvh_free(t->gpu);
     rp_cuda_bvh_src_free(&t->src);
-    free(t->rays), free(t->hits);
+    staging_free(t);
     free(t);
 }
 
@@ -37,6 +65,7 @@ rp_cuda_tracer *rp_cuda_tracer_new(const rp_scene *scene, rp_cuda_kernel kernel,
         return NULL;
     }
     t->kernel = kernel;
+    t->pool = scene->device;
     if (!rp_cuda_bvh_src_from_scene(scene, &t->src, err, err_size)) goto fail;
     if (t->src.skipped) {
         snprintf(err, err_size,
@@ -67,46 +96,85 @@ size_t rp_cuda_tracer_bytes(const rp_cuda_tracer *t) {
 }
 rp_cuda_tracer_stats rp_cuda_tracer_get_stats(const rp_cuda_tracer *t) { return t->stats; }
 
+/* The conversions, in chunks on the scene's device's threads. */
+#define TRACE_CHUNK 16384u
+
+typedef struct convert_job {
+    rp_cuda_tracer *t;
+    rp_rayhit *rh;
+    size_t n;
+    bool occlusion;
+    uint32_t *bad_mask; /* per chunk: 1 + the first ray with a mask other than all ones, or 0 */
+} convert_job;
+
+static void rays_chunk(void *user, uint32_t k, uint32_t thread) {
+    (void)thread;
+    convert_job *j = user;
+    size_t a = (size_t)k * TRACE_CHUNK, b = a + TRACE_CHUNK < j->n ? a + TRACE_CHUNK : j->n;
+    j->bad_mask[k] = 0;
+    for (size_t i = a; i < b; i++) {
+        const rp_ray *r = &j->rh[i].ray;
+        if (r->mask != 0xFFFFFFFFu && !j->bad_mask[k]) j->bad_mask[k] = (uint32_t)(i - a) + 1;
+        j->t->rays[i] = (rp_cuda_bvh_ray){{r->org_x, r->org_y, r->org_z}, r->tnear, {r->dir_x, r->dir_y, r->dir_z}, r->tfar};
+    }
+}
+
+/* The kernels' code on the CPU, a chunk of rays per task. */
+static void emulate_chunk(void *user, uint32_t k, uint32_t thread) {
+    (void)thread;
+    convert_job *j = user;
+    size_t a = (size_t)k * TRACE_CHUNK, b = a + TRACE_CHUNK < j->n ? a + TRACE_CHUNK : j->n;
+    rp_cuda_bvh_trace_emulated(&j->t->src, j->t->rays + a, b - a, j->occlusion, j->t->hits + a);
+}
+
+static void hits_chunk(void *user, uint32_t k, uint32_t thread) {
+    (void)thread;
+    convert_job *j = user;
+    size_t a = (size_t)k * TRACE_CHUNK, b = a + TRACE_CHUNK < j->n ? a + TRACE_CHUNK : j->n;
+    for (size_t i = a; i < b; i++) {
+        const rp_cuda_bvh_hit *h = &j->t->hits[i];
+        rp_rayhit *o = &j->rh[i];
+        if (j->occlusion) {
+            if (h->t == -INFINITY) o->ray.tfar = -INFINITY;
+            continue;
+        }
+        if (h->geom == RP_INVALID_ID) continue;
+        o->ray.tfar = h->t;
+        o->hit = (rp_hit){.Ng_x = h->ng[0], .Ng_y = h->ng[1], .Ng_z = h->ng[2], .u = h->u, .v = h->v,
+                          .prim_id = h->prim, .geom_id = h->geom, .inst_id = RP_INVALID_ID};
+    }
+}
+
 bool rp_cuda_trace(void *user, rp_rayhit *rh, size_t n, bool occlusion, char *err, size_t err_size) {
     rp_cuda_tracer *t = user;
     if (n == 0) return true;
     double t0 = sys_seconds();
-    if (n > t->cap) {
-        free(t->rays), free(t->hits);
-        t->rays = malloc(n * sizeof *t->rays), t->hits = malloc(n * sizeof *t->hits);
-        t->cap = t->rays && t->hits ? n : 0;
-        if (!t->cap) {
-            snprintf(err, err_size, "cuda: out of memory for %zu rays", n);
-            return false;
-        }
+    uint32_t chunks = (uint32_t)((n + TRACE_CHUNK - 1) / TRACE_CHUNK);
+    convert_job job = {.t = t, .rh = rh, .n = n, .occlusion = occlusion, .bad_mask = malloc(chunks * sizeof(uint32_t))};
+    if (!job.bad_mask || !staging_grow(t, n)) {
+        free(job.bad_mask);
+        snprintf(err, err_size, "cuda: out of memory for %zu rays", n);
+        return false;
     }
-    for (size_t i = 0; i < n; i++) {
-        const rp_ray *r = &rh[i].ray;
-        if (r->mask != 0xFFFFFFFFu) {
-            snprintf(err, err_size, "cuda: ray %zu has mask 0x%x; the GPU traces rays with every mask bit", i, r->mask);
-            return false;
-        }
-        t->rays[i] = (rp_cuda_bvh_ray){{r->org_x, r->org_y, r->org_z}, r->tnear, {r->dir_x, r->dir_y, r->dir_z}, r->tfar};
+    rp_device_parallel_for(t->pool, chunks, rays_chunk, &job);
+    for (uint32_t k = 0; k < chunks; k++) {
+        if (!job.bad_mask[k]) continue;
+        size_t i = (size_t)k * TRACE_CHUNK + job.bad_mask[k] - 1;
+        snprintf(err, err_size, "cuda: ray %zu has mask 0x%x; the GPU traces rays with every mask bit", i,
+                 rh[i].ray.mask);
+        free(job.bad_mask);
+        return false;
     }
+    free(job.bad_mask);
     float ms = 0.0f;
     if (!t->gpu) {
-        rp_cuda_bvh_trace_emulated(&t->src, t->rays, n, occlusion, t->hits);
+        rp_device_parallel_for(t->pool, chunks, emulate_chunk, &job);
     } else if (!rp_cuda_batch_set(t->batch, t->rays, n, err, err_size) ||
                !rp_cuda_bvh_trace(t->gpu, t->batch, t->kernel, occlusion, &ms, err, err_size) ||
                !rp_cuda_batch_hits(t->batch, t->hits, err, err_size)) {
         return false;
     }
-    for (size_t i = 0; i < n; i++) {
-        const rp_cuda_bvh_hit *h = &t->hits[i];
-        if (occlusion) {
-            if (h->t == -INFINITY) rh[i].ray.tfar = -INFINITY;
-            continue;
-        }
-        if (h->geom == RP_INVALID_ID) continue;
-        rh[i].ray.tfar = h->t;
-        rh[i].hit = (rp_hit){.Ng_x = h->ng[0], .Ng_y = h->ng[1], .Ng_z = h->ng[2], .u = h->u, .v = h->v,
-                             .prim_id = h->prim, .geom_id = h->geom, .inst_id = RP_INVALID_ID};
-    }
+    rp_device_parallel_for(t->pool, chunks, hits_chunk, &job);
     t->stats.rays += n, t->stats.batches++;
     t->stats.kernel_ms += ms;
     t->stats.total_ms += (sys_seconds() - t0) * 1e3;

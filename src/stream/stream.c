@@ -216,43 +216,73 @@ static void run_passes(const grid *g, ray_stream *s, size_t first, size_t count,
 }
 
 /* The external tracer (stream_desc.trace) on rays [first, first + count): each ray and its hit into
- * s->xray, and s->hit as the grid's passes leave it (tri 0: a hit, or blocked). */
-static bool trace_external(const stream_desc *d, ray_stream *s, size_t first, size_t count, rp_ray_kind kind,
-                           stream_stats *st, char *err, size_t err_size) {
+ * s->xray, and s->hit as the grid's passes leave it (tri 0: a hit, or blocked). The copies run in
+ * chunks on the device's threads. */
+#define EXTERNAL_CHUNK 16384u
+
+typedef struct external_job {
+    ray_stream *s;
+    size_t first, count;
+    uint32_t *hits; /* per chunk */
+} external_job;
+
+static void external_in(void *user, uint32_t k, uint32_t thread) {
+    (void)thread;
+    const external_job *j = user;
+    size_t a = j->first + (size_t)k * EXTERNAL_CHUNK, b = a + EXTERNAL_CHUNK, end = j->first + j->count;
+    for (size_t i = a; i < (b < end ? b : end); i++) {
+        j->s->xray[i].ray = j->s->ray[i];
+        j->s->xray[i].hit = (rp_hit){.geom_id = RP_INVALID_ID, .prim_id = RP_INVALID_ID, .inst_id = RP_INVALID_ID};
+    }
+}
+
+static void external_out(void *user, uint32_t k, uint32_t thread) {
+    (void)thread;
+    const external_job *j = user;
+    ray_stream *s = j->s;
+    size_t a = j->first + (size_t)k * EXTERNAL_CHUNK, b = a + EXTERNAL_CHUNK, end = j->first + j->count;
+    uint32_t hits = 0;
+    for (size_t i = a; i < (b < end ? b : end); i++) {
+        const rp_rayhit *x = &s->xray[i];
+        bool hit = s->any ? x->ray.tfar == -INFINITY && s->ray[i].tfar != -INFINITY : x->hit.geom_id != RP_INVALID_ID;
+        s->hit[i] = (grid_hit){.t = x->ray.tfar, .tri = hit ? 0 : UINT32_MAX};
+        s->voxels[i] = s->tests[i] = 0;
+        s->state[i] = RAY_SHADING;
+        hits += hit;
+    }
+    j->hits[k] = hits;
+}
+
+static bool trace_external(rp_device *dev, const stream_desc *d, ray_stream *s, size_t first, size_t count,
+                           rp_ray_kind kind, stream_stats *st, char *err, size_t err_size) {
     if (count == 0) return true;
-    if (!s->xray && !(s->xray = malloc(s->count * sizeof *s->xray))) {
+    uint32_t chunks = (uint32_t)((count + EXTERNAL_CHUNK - 1) / EXTERNAL_CHUNK);
+    external_job job = {.s = s, .first = first, .count = count, .hits = malloc(chunks * sizeof(uint32_t))};
+    if (!job.hits || (!s->xray && !(s->xray = malloc(s->count * sizeof *s->xray)))) {
+        free(job.hits);
         snprintf(err, err_size, "stream: out of memory for %zu rays", s->count);
         return false;
     }
-    rp_rayhit *x = s->xray + first;
-    for (size_t i = 0; i < count; i++) {
-        x[i].ray = s->ray[first + i];
-        x[i].hit = (rp_hit){.geom_id = RP_INVALID_ID, .prim_id = RP_INVALID_ID, .inst_id = RP_INVALID_ID};
-    }
+    rp_device_parallel_for(dev, chunks, external_in, &job);
     double t0 = sys_seconds();
-    bool ok = d->trace(d->trace_user, x, count, s->any, err, err_size);
+    bool ok = d->trace(d->trace_user, s->xray + first, count, s->any, err, err_size);
     st->trace_ms += (sys_seconds() - t0) * 1e3;
-    if (!ok) return false;
-    stream_kind_stats *ks = &st->kind[kind];
-    for (size_t i = 0; i < count; i++) {
-        size_t j = first + i;
-        bool hit = s->any ? x[i].ray.tfar == -INFINITY && s->ray[j].tfar != -INFINITY
-                          : x[i].hit.geom_id != RP_INVALID_ID;
-        s->hit[j] = (grid_hit){.t = x[i].ray.tfar, .tri = hit ? 0 : UINT32_MAX};
-        s->voxels[j] = s->tests[j] = 0;
-        s->state[j] = RAY_SHADING;
-        ks->hits += hit;
+    if (ok) {
+        rp_device_parallel_for(dev, chunks, external_out, &job);
+        stream_kind_stats *ks = &st->kind[kind];
+        for (uint32_t k = 0; k < chunks; k++) ks->hits += job.hits[k];
+        st->rays += count;
+        ks->rays += count, ks->batches++;
     }
-    st->rays += count;
-    ks->rays += count, ks->batches++;
-    return true;
+    free(job.hits);
+    return ok;
 }
 
 /* Traces rays [first, first + count) of s: by the external tracer when the desc has one, else by
  * the grid's passes. false (with err) when the tracer failed. */
-static bool trace_rays(const grid *g, const stream_desc *d, ray_stream *s, size_t first, size_t count,
+static bool trace_rays(rp_device *dev, const grid *g, const stream_desc *d, ray_stream *s, size_t first, size_t count,
                        rp_ray_kind kind, stream_stats *st, char *err, size_t err_size) {
-    if (d->trace) return trace_external(d, s, first, count, kind, st, err, err_size);
+    if (d->trace) return trace_external(dev, d, s, first, count, kind, st, err, err_size);
     run_passes(g, s, first, count, kind, d->oracle, d->wavefront, st);
     return true;
 }
@@ -315,7 +345,7 @@ typedef struct stream_ctx {
 } stream_ctx;
 
 static bool trace(stream_ctx *c, ray_stream *s, size_t first, size_t count, rp_ray_kind kind) {
-    if (trace_rays(c->g, c->d, s, first, count, kind, c->st, c->err, c->err_size)) return true;
+    if (trace_rays(c->f->s->device, c->g, c->d, s, first, count, kind, c->st, c->err, c->err_size)) return true;
     c->failed = true;
     return false;
 }
@@ -371,75 +401,120 @@ static void make_eye_rays(stream_ctx *c, size_t n, int sample, whitted_stream_le
     rp_device_parallel_for(c->f->s->device, chunks_of(n), eye_chunk, &j);
 }
 
-/* Whitted's shading kernel on a level: whitted_surface per ray, then its shadow stream (one ray per
- * lit slot and light, slot after slot, lights in order, so each slot sums its lights in the order
- * the packet tracer does), then the lights that got through. */
 typedef struct whitted_job {
     stream_ctx *c;
     whitted_stream_level *lv;
     int depth;
-    uint32_t *hits; /* per chunk */
+    /* per chunk: hits and lit slots (surface pass); the first entry of its shadow rays before and
+     * after closing up, their count and how many were blocked (light passes) */
+    uint32_t *hits, *lit, *made, *blocked;
+    size_t *base, *start;
 } whitted_job;
 
+/* Kernel: whitted_surface on a chunk of the level's rays. */
 static void whitted_chunk(void *user, uint32_t k, uint32_t thread) {
     (void)thread;
     const whitted_job *j = user;
     size_t a, b;
     chunk_range(k, j->lv->count, &a, &b);
-    uint32_t hits = 0;
+    uint32_t hits = 0, lit = 0;
     for (size_t i = a; i < b; i++) {
         rp_rayhit rh;
         hit_of(j->c->g, &j->c->rays, i, &rh);
         hits += rh.hit.geom_id != RP_INVALID_ID;
         whitted_surface(j->c->f, &rh.ray, &rh.hit, j->depth, j->lv->weight[i], &j->lv->slot[i]);
+        lit += j->lv->slot[i].lit;
     }
-    j->hits[k] = hits;
+    j->hits[k] = hits, j->lit[k] = lit;
 }
 
+/* Kernel: the shadow rays of a chunk's lit slots (one a light, slot after slot, lights in order),
+ * from its own range of the shadow stream. */
+static void whitted_lights_chunk(void *user, uint32_t k, uint32_t thread) {
+    (void)thread;
+    const whitted_job *j = user;
+    stream_ctx *c = j->c;
+    const render_frame *f = c->f;
+    size_t a, b, n = j->base[k];
+    chunk_range(k, j->lv->count, &a, &b);
+    for (size_t s = a; s < b; s++) {
+        if (!j->lv->slot[s].lit) continue;
+        for (size_t i = 0; i < f->light_count; i++) {
+            if (!whitted_light(f, &j->lv->slot[s], &f->lights[i], &c->shadow.ray[n], &c->term[n])) continue;
+            c->owner[n++] = (uint32_t)s;
+        }
+    }
+    j->made[k] = (uint32_t)(n - j->base[k]);
+}
+
+/* Kernel: the lights that got through, into a chunk's slots (each slot sums its lights in order). */
+static void whitted_direct_chunk(void *user, uint32_t k, uint32_t thread) {
+    (void)thread;
+    const whitted_job *j = user;
+    stream_ctx *c = j->c;
+    uint32_t blocked = 0;
+    for (size_t r = j->start[k]; r < j->start[k] + j->made[k]; r++) {
+        if (!shadow_passes(&c->shadow, r)) {
+            blocked++;
+            continue;
+        }
+        whitted_slot *o = &j->lv->slot[c->owner[r]];
+        o->direct = v3_add(o->direct, whitted_light_contrib(o, &c->term[r]));
+    }
+    size_t a, b;
+    chunk_range(k, j->lv->count, &a, &b);
+    for (size_t s = a; s < b; s++)
+        if (j->lv->slot[s].lit) j->lv->slot[s].color = v3_add(j->lv->slot[s].color, j->lv->slot[s].direct);
+    j->blocked[k] = blocked;
+}
+
+/* Whitted's shading kernel on a level: whitted_surface per ray, then its shadow stream (one ray per
+ * lit slot and light, slot after slot, lights in order, so each slot sums its lights in the order
+ * the packet tracer does), then the lights that got through. */
 static bool whitted_level_shade(stream_ctx *c, whitted_stream_level *lv, int depth) {
     const render_frame *f = c->f;
-    uint32_t chunks = chunks_of(lv->count);
-    whitted_job job = {.c = c, .lv = lv, .depth = depth, .hits = calloc(chunks ? chunks : 1, sizeof(uint32_t))};
-    if (!job.hits) return false;
-    rp_device_parallel_for(f->s->device, chunks, whitted_chunk, &job);
+    rp_device *dev = f->s->device;
+    uint32_t chunks = chunks_of(lv->count), m = chunks ? chunks : 1;
+    whitted_job job = {.c = c, .lv = lv, .depth = depth, .hits = calloc(4 * (size_t)m, sizeof(uint32_t)),
+                       .base = calloc(2 * (size_t)m, sizeof(size_t))};
+    bool ok = false;
+    if (!job.hits || !job.base) goto done;
+    job.lit = job.hits + m, job.made = job.lit + m, job.blocked = job.made + m, job.start = job.base + m;
+    rp_device_parallel_for(dev, chunks, whitted_chunk, &job);
+    size_t lit = 0;
     for (uint32_t k = 0; k < chunks; k++) {
         c->st->shades += job.hits[k];
         if (depth == 0) c->st->eye_hits += job.hits[k];
+        job.base[k] = lit * f->light_count;
+        lit += job.lit[k];
     }
-    free(job.hits);
     c->st->other_passes++;
-    size_t lit = 0;
-    for (size_t k = 0; k < lv->count; k++) lit += lv->slot[k].lit;
     size_t cap = lit * f->light_count;
     if (cap) {
-        if (!stream_grow(&c->shadow, cap, true)) return false;
+        if (!stream_grow(&c->shadow, cap, true)) goto done;
         free(c->owner), free(c->term);
         c->owner = malloc(cap * sizeof *c->owner), c->term = malloc(cap * sizeof *c->term);
-        if (!c->owner || !c->term) return false;
+        if (!c->owner || !c->term) goto done;
+        rp_device_parallel_for(dev, chunks, whitted_lights_chunk, &job);
     }
-    size_t ns = 0;
-    for (size_t k = 0; k < lv->count; k++) {
-        if (!lv->slot[k].lit) continue;
-        for (size_t i = 0; i < f->light_count; i++) {
-            if (!whitted_light(f, &lv->slot[k], &f->lights[i], &c->shadow.ray[ns], &c->term[ns])) continue;
-            c->owner[ns++] = (uint32_t)k;
-        }
+    size_t ns = 0; /* close up the chunks' ranges, in order */
+    for (uint32_t k = 0; cap && k < chunks; k++) {
+        job.start[k] = ns;
+        memmove(&c->shadow.ray[ns], &c->shadow.ray[job.base[k]], job.made[k] * sizeof(rp_ray));
+        memmove(&c->term[ns], &c->term[job.base[k]], job.made[k] * sizeof *c->term);
+        memmove(&c->owner[ns], &c->owner[job.base[k]], job.made[k] * sizeof *c->owner);
+        ns += job.made[k];
     }
-    if (!trace(c, &c->shadow, 0, ns, RP_RAY_SHADOW)) return false;
-    for (size_t j = 0; j < ns; j++) {
-        c->st->shades++;
-        if (!shadow_passes(&c->shadow, j)) {
-            c->st->shadow_blocked++;
-            continue;
-        }
-        whitted_slot *o = &lv->slot[c->owner[j]];
-        o->direct = v3_add(o->direct, whitted_light_contrib(o, &c->term[j]));
-    }
+    if (!trace(c, &c->shadow, 0, ns, RP_RAY_SHADOW)) goto done;
+    rp_device_parallel_for(dev, chunks, whitted_direct_chunk, &job);
+    for (uint32_t k = 0; k < chunks; k++) c->st->shadow_blocked += job.blocked[k];
+    c->st->shades += ns;
     c->st->shadow_rays += ns;
     if (ns) c->st->other_passes++;
-    for (size_t k = 0; k < lv->count; k++)
-        if (lv->slot[k].lit) lv->slot[k].color = v3_add(lv->slot[k].color, lv->slot[k].direct);
-    return true;
+    ok = true;
+done:
+    free(job.hits), free(job.base);
+    return ok;
 }
 
 static void whitted_level_free(whitted_stream_level *lv) {
@@ -702,7 +777,7 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
     for (size_t i = 0; i < n; i++)
         camera_ray(&rc, (float)(i % (size_t)d.width) + 0.5f, (float)(i / (size_t)d.width) + 0.5f, &eye.ray[i]);
     st.other_passes++;
-    if (!trace_rays(g, &d, &eye, 0, n, RP_RAY_PRIMARY, &st, err, err_size)) {
+    if (!trace_rays(rs->device, g, &d, &eye, 0, n, RP_RAY_PRIMARY, &st, err, err_size)) {
         stream_free(&eye);
         return false;
     }
@@ -758,7 +833,7 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
     }
     st.other_passes++;
     if (shadows) {
-        if (!trace_rays(g, &d, &shadow, 0, n, RP_RAY_SHADOW, &st, err, err_size)) {
+        if (!trace_rays(rs->device, g, &d, &shadow, 0, n, RP_RAY_SHADOW, &st, err, err_size)) {
             free(kd_cos);
             stream_free(&shadow), stream_free(&eye);
             return false;

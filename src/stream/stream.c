@@ -53,27 +53,28 @@ static void stream_free(ray_stream *s) {
     memset(s, 0, sizeof *s);
 }
 
-static bool stream_alloc(ray_stream *s, size_t n, bool any) {
+/* A stream of n rays; walk: with the grid's traversal state (not for an external tracer). */
+static bool stream_alloc(ray_stream *s, size_t n, bool any, bool walk) {
     memset(s, 0, sizeof *s);
     s->count = n, s->any = any;
     size_t m = n ? n : 1;
     s->ray = malloc(m * sizeof(rp_ray));
-    s->walk = malloc(m * sizeof(grid_walk));
     s->hit = malloc(m * sizeof(grid_hit));
-    s->cursor = malloc(m * sizeof(uint32_t));
-    s->end = malloc(m * sizeof(uint32_t));
-    s->mailbox = malloc(m * GRID_MAILBOX * sizeof(uint32_t));
     s->state = malloc(m);
     s->voxels = calloc(m, sizeof(uint32_t));
     s->tests = calloc(m, sizeof(uint32_t));
-    s->active = malloc(m * sizeof(uint32_t));
-    s->queue = malloc(2 * m * sizeof(uint32_t));
-    if (!s->queue || !s->ray || !s->walk || !s->hit || !s->cursor || !s->end || !s->mailbox || !s->state || !s->voxels ||
-        !s->tests || !s->active) {
-        stream_free(s);
-        return false;
+    bool ok = s->ray && s->hit && s->state && s->voxels && s->tests;
+    if (ok && walk) {
+        s->walk = malloc(m * sizeof(grid_walk));
+        s->cursor = malloc(m * sizeof(uint32_t));
+        s->end = malloc(m * sizeof(uint32_t));
+        s->mailbox = malloc(m * GRID_MAILBOX * sizeof(uint32_t));
+        s->active = malloc(m * sizeof(uint32_t));
+        s->queue = malloc(2 * m * sizeof(uint32_t));
+        ok = s->walk && s->cursor && s->end && s->mailbox && s->active && s->queue;
     }
-    return true;
+    if (!ok) stream_free(s);
+    return ok;
 }
 
 /* Enters voxel state: intersecting when the current voxel lists triangles, else traversing. */
@@ -309,10 +310,10 @@ static float eyelight(const rp_rayhit *rh) {
 /* ---- the renderer's integrators on the stream ------------------------------------------------ */
 
 /* A stream whose rays are traced as closest hits (any-hit rays are shadow streams). */
-static bool stream_grow(ray_stream *s, size_t n, bool any) {
+static bool stream_grow(ray_stream *s, size_t n, bool any, bool walk) {
     if (s->ray && n <= s->count) return true;
     stream_free(s);
-    return stream_alloc(s, n, any);
+    return stream_alloc(s, n, any, walk);
 }
 
 /* rp_occluded1's answer for ray i of a traced any-hit stream: its tfar -inf when blocked, and a ray
@@ -491,7 +492,7 @@ static bool whitted_level_shade(stream_ctx *c, whitted_stream_level *lv, int dep
     c->st->other_passes++;
     size_t cap = lit * f->light_count;
     if (cap) {
-        if (!stream_grow(&c->shadow, cap, true)) goto done;
+        if (!stream_grow(&c->shadow, cap, true, !c->d->trace)) goto done;
         free(c->owner), free(c->term);
         c->owner = malloc(cap * sizeof *c->owner), c->term = malloc(cap * sizeof *c->term);
         if (!c->owner || !c->term) goto done;
@@ -538,7 +539,7 @@ static bool whitted_sample(stream_ctx *c, int sample, whitted_stream_level *leve
     int w = f->desc.width, h = f->desc.height;
     size_t n = (size_t)w * (size_t)h;
     int depth_max = f->desc.max_depth;
-    if (!whitted_level_alloc(&levels[0], n) || !stream_grow(&c->rays, n, false)) return false;
+    if (!whitted_level_alloc(&levels[0], n) || !stream_grow(&c->rays, n, false, !c->d->trace)) return false;
     make_eye_rays(c, n, sample, &levels[0], NULL);
     levels[0].reflected = n;
     c->st->other_passes++;
@@ -552,7 +553,7 @@ static bool whitted_sample(stream_ctx *c, int sample, whitted_stream_level *leve
         for (size_t k = 0; k < lv->count; k++) nr += lv->slot[k].has_r, nt += lv->slot[k].has_t;
         if (nr + nt == 0 || depth == depth_max) break;
         whitted_stream_level *dn = &levels[depth + 1];
-        if (!whitted_level_alloc(dn, nr + nt) || !stream_grow(&c->rays, nr + nt, false)) return false;
+        if (!whitted_level_alloc(dn, nr + nt) || !stream_grow(&c->rays, nr + nt, false, !c->d->trace)) return false;
         used = depth + 2;
         size_t r = 0, t = nr;
         for (size_t k = 0; k < lv->count; k++) {
@@ -629,7 +630,7 @@ static bool path_sample(stream_ctx *c, uint32_t sample, pbr_path *paths) {
     const render_frame *f = c->f;
     int w = f->desc.width, h = f->desc.height;
     size_t n = (size_t)w * (size_t)h;
-    if (!stream_grow(&c->rays, n, false) || !stream_grow(&c->shadow, n, true)) return false;
+    if (!stream_grow(&c->rays, n, false, !c->d->trace) || !stream_grow(&c->shadow, n, true, !c->d->trace)) return false;
     pbr_thread *pt = c->th.pbr;
     pt->shadow = c->shadow.ray; /* path_vertex queues its shadow rays straight into the stream */
     make_eye_rays(c, n, (int)sample, NULL, paths);
@@ -766,7 +767,7 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
         goto done;
     }
     ray_stream eye;
-    if (!stream_alloc(&eye, n, false)) {
+    if (!stream_alloc(&eye, n, false, !d.trace)) {
         snprintf(err, err_size, "stream: out of memory for %zu rays", n);
         return false;
     }
@@ -789,7 +790,7 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
     v3 light = rc.eye;
     if (shadows && rs->light_count > 0 && rs->lights[0].type == RP_LIGHT_SOURCE_POINT)
         light = v3_load(rs->lights[0].point.position);
-    if (shadows && !stream_alloc(&shadow, n, true)) {
+    if (shadows && !stream_alloc(&shadow, n, true, !d.trace)) {
         stream_free(&eye);
         snprintf(err, err_size, "stream: out of memory for %zu shadow rays", n);
         return false;

@@ -71,10 +71,10 @@ void camera_rays_n(const render_camera *c, int bx, int by, int s, uint32_t count
     for (uint32_t q = 0; q < count; q++) g[q] = pr[q] = in[q] = RP_INVALID_ID;
 }
 
-/* Score of a view: primary hits on front faces minus hits on back faces, on a coarse grid. Closed
- * meshes score the same from every side; a room open on one side (the Cornell box) is seen through
- * its opening. */
-static int view_score(rp_scene *scene, const rp_camera *cam) {
+/* Score of a view: primary hits on front faces minus hits on back faces, on a coarse grid, and the
+ * number of distinct primitives hit (*distinct). Closed meshes score the same from every side; a room
+ * open on one side (the Cornell box) is seen through its opening. */
+static int view_score(rp_scene *scene, const rp_camera *cam, int *distinct) {
     enum { N = 12 };
     render_camera rc;
     camera_setup(cam, N, N, &rc);
@@ -90,14 +90,22 @@ static int view_score(rp_scene *scene, const rp_camera *cam) {
     }
     rp_intersect_array(scene, rh, N * N, RP_QUERY_INCOHERENT);
     int score = 0;
+    *distinct = 0;
     for (int i = 0; i < N * N; i++) {
         if (rh[i].hit.geom_id == RP_INVALID_ID) continue;
         float d = rh[i].hit.Ng_x * rh[i].ray.dir_x + rh[i].hit.Ng_y * rh[i].ray.dir_y +
                   rh[i].hit.Ng_z * rh[i].ray.dir_z;
         score += d < 0.0f ? 1 : (d > 0.0f ? -1 : 0);
+        bool seen = false;
+        for (int j = 0; j < i && !seen; j++)
+            seen = rh[j].hit.geom_id == rh[i].hit.geom_id && rh[j].hit.prim_id == rh[i].hit.prim_id;
+        *distinct += !seen;
     }
     return score;
 }
+
+/* Fewer distinct primitives than this in the best outside view: a flat wall (sponza's outside). */
+#define VIEW_FEW_PRIMS 8
 
 rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b) {
     rp_camera cam = {.type = RP_CAMERA_PINHOLE};
@@ -120,7 +128,7 @@ rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b) {
     float dist = radius / sinf(p->fov_deg * 0.5f * (3.14159265358979f / 180.0f));
     /* Candidate directions, y up (the common convention); the first best one wins. */
     static const float dirs[4][3] = {{0, 0, 1}, {0, 0, -1}, {1, 0, 0}, {-1, 0, 0}};
-    int best = -1, best_score = 0;
+    int best = -1, best_score = 0, best_distinct = 0;
     for (int i = 0; i < 4; i++) {
         rp_camera cand = cam;
         for (int k = 0; k < 3; k++) {
@@ -128,10 +136,32 @@ rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b) {
             cand.pinhole.eye[k] = v3_at(c, k) + dirs[i][k] * dist;
             cand.pinhole.up[k] = k == 1 ? 1.0f : 0.0f;
         }
-        int s = view_score(scene, &cand);
+        int distinct, s = view_score(scene, &cand, &distinct);
         if (best < 0 || s > best_score) {
             best = i;
             best_score = s;
+            best_distinct = distinct;
+            cam = cand;
+        }
+    }
+    if (best_score > 0 && best_distinct >= VIEW_FEW_PRIMS) return cam;
+    /* Seen from outside the scene shows back faces or one flat wall: a room or a building whose
+     * walls face inwards (the conference room, sponza's atrium). Look along each horizontal axis
+     * from near one end of the box, at a fifth of its height (eye level in a building); the view that sees front faces and the
+     * most distinct primitives wins, if it sees more than the outside one. */
+    for (int i = 0; i < 4; i++) {
+        rp_camera cand = cam;
+        cand.pinhole.fov_deg = 60.0f;
+        for (int k = 0; k < 3; k++) {
+            float half = 0.5f * (v3_at(hi, k) - v3_at(lo, k));
+            float at = k == 1 ? v3_at(lo, k) + 0.2f * (v3_at(hi, k) - v3_at(lo, k)) : v3_at(c, k);
+            cand.pinhole.eye[k] = at - dirs[i][k] * 0.8f * half;
+            cand.pinhole.look[k] = at + dirs[i][k] * half;
+            cand.pinhole.up[k] = k == 1 ? 1.0f : 0.0f;
+        }
+        int distinct, s = view_score(scene, &cand, &distinct);
+        if (s > 0 && distinct > best_distinct) {
+            best_distinct = distinct;
             cam = cand;
         }
     }

@@ -55,7 +55,7 @@ static void usage(FILE *out, bool bench) {
             "                          (--purcell uses 64, the paper's bunny grid)\n"
             "  --oracle F              intersect once this fraction of active rays needs it [0.2]\n"
             "  --wavefront             the wavefront scheduler: per-kernel queues compacted between passes\n"
-            "  --threads N, --isa NAME the device (the stream runs on one thread)\n");
+            "  --threads N, --isa NAME the device: its threads run each pass over chunks of the stream\n");
     if (bench)
         fprintf(out, "  --purcell               print the paper's table 2 and fig. 6 beside ours\n");
     else

@@ -85,20 +85,18 @@ static void enter_voxel(const grid *g, ray_stream *s, uint32_t i) {
     s->state[i] = s->cursor[i] < s->end[i] ? RAY_INTERSECTING : RAY_TRAVERSING;
 }
 
-/* Kernel: traversal setup (per-ray DDA setup and the first voxel). */
-static void kernel_setup(const grid *g, ray_stream *s, size_t first, size_t count) {
-    s->active_count = 0;
-    for (size_t i = first; i < first + count; i++) {
-        s->voxels[i] = s->tests[i] = 0;
-        s->hit[i] = (grid_hit){.t = s->ray[i].tfar, .tri = UINT32_MAX};
-        for (int k = 0; k < GRID_MAILBOX; k++) s->mailbox[i * GRID_MAILBOX + k] = UINT32_MAX;
-        if (!(s->ray[i].tnear <= s->ray[i].tfar) || !grid_walk_setup(g, &s->ray[i], &s->walk[i])) {
-            s->state[i] = RAY_SHADING; /* misses the grid: shaded as a miss */
-            continue;
-        }
-        enter_voxel(g, s, (uint32_t)i);
-        s->active[s->active_count++] = (uint32_t)i;
+/* Kernel: traversal setup of ray i (DDA setup and the first voxel); false when it misses the grid
+ * (shaded as a miss). */
+static bool setup_ray(const grid *g, ray_stream *s, size_t i) {
+    s->voxels[i] = s->tests[i] = 0;
+    s->hit[i] = (grid_hit){.t = s->ray[i].tfar, .tri = UINT32_MAX};
+    for (int k = 0; k < GRID_MAILBOX; k++) s->mailbox[i * GRID_MAILBOX + k] = UINT32_MAX;
+    if (!(s->ray[i].tnear <= s->ray[i].tfar) || !grid_walk_setup(g, &s->ray[i], &s->walk[i])) {
+        s->state[i] = RAY_SHADING;
+        return false;
     }
+    enter_voxel(g, s, (uint32_t)i);
+    return true;
 }
 
 /* Kernel: one traversal step of ray i (a traversal pass runs it on every traversing ray). */
@@ -129,76 +127,117 @@ static void kernel_intersect(const grid *g, ray_stream *s, uint32_t i) {
     s->state[i] = grid_walk_exit(g, w) < end ? RAY_TRAVERSING : RAY_SHADING;
 }
 
-/* The wavefront loop (Laine, Karras, Aila 2013): every iteration compacts the active rays into one
- * queue per kernel and runs both kernels, each over its own queue only, so every ray of a pass
- * does work (SIMD efficiency 1 by construction; the cost moves into the compaction). */
-static void run_wavefront(const grid *g, ray_stream *s, stream_stats *st) {
-    uint32_t *qi = s->queue, *qt = s->queue + (s->count ? s->count : 1);
-    for (;;) {
-        size_t ni = 0, nt = 0;
-        for (size_t k = 0; k < s->active_count; k++) {
-            uint32_t i = s->active[k];
-            if (s->state[i] == RAY_INTERSECTING) qi[ni++] = i;
-            else qt[nt++] = i;
+/* A pass runs over the active rays in chunks on the device's threads: each chunk runs the kernels
+ * on its rays, keeps its rays still traversing or intersecting at the front of its own range and
+ * counts; the ranges are then closed up in order, so the active list, every ray's state and every
+ * count are the ones a single thread gives. Small lists run on the calling thread. */
+#define PASS_CHUNK 8192u
+
+enum { PASS_SETUP = 0xFE, PASS_BOTH = 0xFF }; /* pass_job.want besides RAY_TRAVERSING / RAY_INTERSECTING */
+
+typedef struct pass_job {
+    const grid *g;
+    ray_stream *s;
+    uint8_t want;     /* the state whose kernel runs; PASS_BOTH: each ray's own (wavefront);
+                       * PASS_SETUP: traversal setup of rays [first, first + n) */
+    size_t first, n;  /* the active list's length (setup: the rays) */
+    uint32_t *active; /* setup: where the active list goes */
+    /* per chunk: kept, worked, ran intersect, ran traverse, then traversing, then intersecting */
+    uint32_t (*out)[6];
+} pass_job;
+
+static void pass_chunk(void *user, uint32_t k, uint32_t thread) {
+    (void)thread;
+    const pass_job *j = user;
+    ray_stream *s = j->s;
+    size_t a = (size_t)k * PASS_CHUNK, b = a + PASS_CHUNK < j->n ? a + PASS_CHUNK : j->n, kept = a;
+    uint32_t worked = 0, ni = 0, nt = 0, trav = 0, isect = 0;
+    for (size_t p = a; p < b; p++) {
+        uint32_t i;
+        if (j->want == PASS_SETUP) {
+            i = (uint32_t)(j->first + p);
+            if (!setup_ray(j->g, s, i)) continue;
+        } else {
+            i = s->active[p];
+            uint8_t q = s->state[i];
+            if (j->want == PASS_BOTH || q == j->want) {
+                worked++;
+                if (q == RAY_INTERSECTING) {
+                    ni++;
+                    kernel_intersect(j->g, s, i);
+                } else {
+                    nt++;
+                    kernel_traverse(j->g, s, i);
+                }
+            }
         }
-        if (ni + nt == 0) break;
-        if (ni) {
-            for (size_t k = 0; k < ni; k++) kernel_intersect(g, s, qi[k]);
-            st->intersection_passes++, st->work += ni, st->slots += ni;
+        uint8_t q = s->state[i];
+        if (q == RAY_TRAVERSING || q == RAY_INTERSECTING) {
+            j->active[kept++] = i;
+            trav += q == RAY_TRAVERSING, isect += q == RAY_INTERSECTING;
         }
-        if (nt) {
-            for (size_t k = 0; k < nt; k++) kernel_traverse(g, s, qt[k]);
-            st->traversal_passes++, st->work += nt, st->slots += nt;
-        }
-        size_t kept = 0;
-        for (size_t k = 0; k < s->active_count; k++) {
-            uint32_t i = s->active[k];
-            if (s->state[i] == RAY_TRAVERSING || s->state[i] == RAY_INTERSECTING) s->active[kept++] = i;
-        }
-        s->active_count = kept;
     }
+    uint32_t *o = j->out[k];
+    o[0] = (uint32_t)(kept - a), o[1] = worked, o[2] = ni, o[3] = nt, o[4] = trav, o[5] = isect;
+}
+
+/* Runs one pass (see pass_job) and closes up the active list; sums[6] gets the chunks' counts. False
+ * when out of memory. */
+static bool run_pass(rp_device *dev, const grid *g, ray_stream *s, uint8_t want, size_t first, size_t n,
+                     uint64_t sums[6]) {
+    uint32_t chunks = (uint32_t)((n + PASS_CHUNK - 1) / PASS_CHUNK), one[1][6];
+    pass_job j = {.g = g, .s = s, .want = want, .first = first, .n = n, .active = s->active, .out = one};
+    if (chunks > 1 && !(j.out = malloc(chunks * sizeof *j.out))) return false;
+    if (chunks > 1)
+        rp_device_parallel_for(dev, chunks, pass_chunk, &j);
+    else if (chunks == 1)
+        pass_chunk(&j, 0, 0);
+    size_t kept = 0;
+    for (int m = 0; m < 6; m++) sums[m] = 0;
+    for (uint32_t k = 0; k < chunks; k++) {
+        if (kept != (size_t)k * PASS_CHUNK)
+            memmove(&s->active[kept], &s->active[(size_t)k * PASS_CHUNK], j.out[k][0] * sizeof(uint32_t));
+        kept += j.out[k][0];
+        for (int m = 0; m < 6; m++) sums[m] += j.out[k][m];
+    }
+    s->active_count = kept;
+    if (chunks > 1) free(j.out);
+    return true;
+}
+
+/* The wavefront loop (Laine, Karras, Aila 2013): every iteration runs each active ray's own kernel,
+ * as if compacted into one queue per kernel, so every ray of a pass does work (SIMD efficiency 1 by
+ * construction; the cost moves into the compaction). */
+static bool run_wavefront(rp_device *dev, const grid *g, ray_stream *s, stream_stats *st) {
+    while (s->active_count) {
+        uint64_t c[6];
+        if (!run_pass(dev, g, s, PASS_BOTH, 0, s->active_count, c)) return false;
+        if (c[2]) st->intersection_passes++, st->work += c[2], st->slots += c[2];
+        if (c[3]) st->traversal_passes++, st->work += c[3], st->slots += c[3];
+    }
+    return true;
 }
 
 /* The multipass loop: the oracle picks the pass, the pass runs its kernel on the rays in its state
  * (the others wait, as fragments killed by the stencil do). */
-static void run_passes(const grid *g, ray_stream *s, size_t first, size_t count, rp_ray_kind kind, float oracle,
-                       bool wavefront, stream_stats *st) {
-    if (count == 0) return;
+static bool run_passes(rp_device *dev, const grid *g, ray_stream *s, size_t first, size_t count, rp_ray_kind kind,
+                       float oracle, bool wavefront, stream_stats *st) {
+    if (count == 0) return true;
     stream_kind_stats *ks = &st->kind[kind];
-    uint64_t trav0 = st->traversal_passes, isect0 = st->intersection_passes;
-    kernel_setup(g, s, first, count);
+    uint64_t trav0 = st->traversal_passes, isect0 = st->intersection_passes, c[6];
+    if (!run_pass(dev, g, s, PASS_SETUP, first, count, c)) return false;
     st->other_passes++;
-    for (;;) {
-        if (wavefront) {
-            run_wavefront(g, s, st);
-            break;
-        }
-        size_t n_trav = 0, n_isect = 0;
-        for (size_t k = 0; k < s->active_count; k++) {
-            uint8_t q = s->state[s->active[k]];
-            n_trav += q == RAY_TRAVERSING, n_isect += q == RAY_INTERSECTING;
-        }
+    if (wavefront && !run_wavefront(dev, g, s, st)) return false;
+    while (!wavefront) {
+        uint64_t n_trav = c[4], n_isect = c[5];
         if (n_trav + n_isect == 0) break;
         bool isect = n_isect > 0 && (float)n_isect >= oracle * (float)(n_trav + n_isect);
-        uint8_t want = isect ? RAY_INTERSECTING : RAY_TRAVERSING;
-        size_t kept = 0, worked = 0;
-        for (size_t k = 0; k < s->active_count; k++) {
-            uint32_t i = s->active[k];
-            if (s->state[i] == want) {
-                worked++;
-                if (isect)
-                    kernel_intersect(g, s, i);
-                else
-                    kernel_traverse(g, s, i);
-            }
-            if (s->state[i] == RAY_TRAVERSING || s->state[i] == RAY_INTERSECTING) s->active[kept++] = i;
-        }
-        s->active_count = kept;
+        if (!run_pass(dev, g, s, isect ? RAY_INTERSECTING : RAY_TRAVERSING, 0, s->active_count, c)) return false;
         if (isect)
             st->intersection_passes++;
         else
             st->traversal_passes++;
-        st->work += worked;
+        st->work += c[1];
         st->slots += count;
     }
     for (size_t i = first; i < first + count; i++) {
@@ -214,6 +253,7 @@ static void run_passes(const grid *g, ray_stream *s, size_t first, size_t count,
     ks->rays += count, ks->batches++;
     ks->traversal_passes += st->traversal_passes - trav0;
     ks->intersection_passes += st->intersection_passes - isect0;
+    return true;
 }
 
 /* The external tracer (stream_desc.trace) on rays [first, first + count): each ray and its hit into
@@ -284,8 +324,9 @@ static bool trace_external(rp_device *dev, const stream_desc *d, ray_stream *s, 
 static bool trace_rays(rp_device *dev, const grid *g, const stream_desc *d, ray_stream *s, size_t first, size_t count,
                        rp_ray_kind kind, stream_stats *st, char *err, size_t err_size) {
     if (d->trace) return trace_external(dev, d, s, first, count, kind, st, err, err_size);
-    run_passes(g, s, first, count, kind, d->oracle, d->wavefront, st);
-    return true;
+    if (run_passes(dev, g, s, first, count, kind, d->oracle, d->wavefront, st)) return true;
+    snprintf(err, err_size, "stream: out of memory for the passes over %zu rays", count);
+    return false;
 }
 
 static void hit_of(const grid *g, const ray_stream *s, size_t i, rp_rayhit *rh) {

@@ -13,10 +13,10 @@
  * same traversal and intersection passes, so the image is rp_render's bit for bit (the grid's hits
  * are the BVH's) and the statistics are kept per ray kind.
  *
- * The grid's passes run on one thread in ray order; the integrators' shading kernels (eye-ray
- * generation, whitted_surface, path_vertex) run over chunks of a stream on the device's threads and
- * merge their outputs in chunk order: every number, image and hit is deterministic, and the same
- * on any number of threads. */
+ * Each pass (traversal setup, traversal, intersection, and the integrators' shading kernels: eye-ray
+ * generation, whitted_surface, path_vertex) runs over chunks of its stream on the device's threads,
+ * and the chunks' outputs (the active list, new rays, counts) are merged in chunk order: every
+ * number, image and hit is deterministic, and the same on any number of threads. */
 #ifndef RP_STREAM_H
 #define RP_STREAM_H
 

@@ -283,6 +283,19 @@ static void test_jpeg_dc_range(void) {
     err = load_textured(jpg, got);
     CHECKF(strstr(err, "tex.mtl:2: error: cannot decode texture 't.jpg': corrupt JPEG (entropy-coded data cut inside a code by a marker)"),
            "%s", err);
+    /* the same in a progressive AC scan (stbi__jpeg_decode_block_prog_ac's fast path takes bits it
+     * does not have): the first 1176 bytes of Node.js's doc/thin-white-stripe.jpg (MIT), a
+     * progressive JPEG, and an EOI (tests/fuzz/crashes/texture/stb_jpeg_progressive_ac_cut_by_marker);
+     * the cut at every other place of that file is refused by stb itself or loads */
+    snprintf(repro, sizeof repro, "%s/tests/fuzz/crashes/texture/stb_jpeg_progressive_ac_cut_by_marker",
+             src ? src : ".");
+    f = fopen(repro, "rb");
+    got = f ? fread(jpg, 1, sizeof jpg, f) : 0;
+    if (f) fclose(f);
+    CHECKF(got > 1000, "cannot read %s", repro);
+    err = load_textured(jpg, got);
+    CHECKF(strstr(err, "tex.mtl:2: error: cannot decode texture 't.jpg': corrupt JPEG (entropy-coded data cut inside a code by a marker)"),
+           "%s", err);
     /* a baseline scan with Se = 0 and no AC table: stb reads AC coefficients whatever Se says, from a
      * table it never wrote (tests/fuzz/crashes/texture/stb_jpeg_baseline_scan_without_ac_table) */
     err = load_textured(jpg, hand_jpeg(jpg, 16, 8, false, 1, 1, true, false, false));

@@ -241,25 +241,108 @@ static int jpeg_check_block_prog_dc(stbi__jpeg *j, stbi__huffman *hdc, int b) {
     return jpeg_dc_out_of_range(dc, 1 << j->succ_low) ? -1 : 1;
 }
 
-/* One scan's entropy-coded data, walked as stbi__parse_entropy_coded_data walks it (block order,
- * restart intervals); 0, -1, -2 or 1 as above. A progressive AC scan holds no DC: it is skipped to the
- * next marker that is not a restart, where stb's reader stops too (or stb fails). */
-static int jpeg_check_scan(stbi__jpeg *z) {
-    if (z->progressive && z->spec_start != 0) {
-        stbi__context *s = z->s;
-        while (s->img_buffer + 1 < s->img_buffer_end) {
-            stbi_uc m = s->img_buffer[1];
-            if (s->img_buffer[0] != 0xFF || m == 0x00 || m == 0xFF || STBI__RESTART(m)) {
-                s->img_buffer += s->img_buffer[0] == 0xFF && m != 0xFF ? 2 : 1;
-                continue;
-            }
-            z->marker = m;
-            s->img_buffer += 2;
+/* stbi__jpeg_decode_block_prog_ac likewise: the same bits read, the coefficients kept only as which
+ * of the block's 64 are not zero (*nz, bit = position in the block), for the refinement scans read
+ * a bit for each coefficient that is not zero. 0, -2 or 1 as above. */
+static int jpeg_check_block_prog_ac(stbi__jpeg *j, stbi__huffman *hac, stbi__int16 *fac, uint64_t *nz) {
+    if (j->spec_start == 0) return 0;
+    int k = j->spec_start;
+    if (j->succ_high == 0) {
+        int shift = j->succ_low;
+        if (j->eob_run) {
+            --j->eob_run;
             return 1;
         }
-        s->img_buffer = s->img_buffer_end;
+        do {
+            if (jpeg_bits_broken(j)) return -2;
+            if (j->code_bits < 16) stbi__grow_buffer_unsafe(j);
+            int c = (int)((j->code_buffer >> (32 - FAST_BITS)) & ((1 << FAST_BITS) - 1));
+            int r = fac[c], v;
+            unsigned zig;
+            if (r) { /* fast-AC path */
+                k += (r >> 4) & 15;
+                int sz = r & 15;
+                j->code_buffer <<= sz;
+                j->code_bits -= sz;
+                zig = stbi__jpeg_dezigzag[k++];
+                v = (short)((r >> 8) * (1 << shift));
+            } else {
+                if (jpeg_bits_broken(j)) return -2;
+                int rs = stbi__jpeg_huff_decode(j, hac);
+                if (rs < 0) return 0;
+                int sz = rs & 15;
+                r = rs >> 4;
+                if (sz == 0) {
+                    if (r < 15) {
+                        j->eob_run = 1 << r;
+                        if (r) {
+                            if (jpeg_bits_broken(j)) return -2;
+                            j->eob_run += stbi__jpeg_get_bits(j, r);
+                        }
+                        --j->eob_run;
+                        break;
+                    }
+                    k += 16;
+                    continue;
+                }
+                k += r;
+                zig = stbi__jpeg_dezigzag[k++];
+                if (jpeg_bits_broken(j)) return -2;
+                v = (short)(stbi__extend_receive(j, sz) * (1 << shift));
+            }
+            *nz = v ? *nz | 1ull << zig : *nz & ~(1ull << zig);
+        } while (k <= j->spec_end);
         return 1;
     }
+    if (j->eob_run) { /* refinement: one bit for each coefficient already there */
+        --j->eob_run;
+        for (; k <= j->spec_end; ++k) {
+            if (!(*nz >> stbi__jpeg_dezigzag[k] & 1)) continue;
+            if (jpeg_bits_broken(j)) return -2;
+            (void)stbi__jpeg_get_bit(j);
+        }
+        return 1;
+    }
+    do {
+        if (jpeg_bits_broken(j)) return -2;
+        int rs = stbi__jpeg_huff_decode(j, hac);
+        if (rs < 0) return 0;
+        int sz = rs & 15, r = rs >> 4;
+        if (sz == 0) {
+            if (r < 15) {
+                j->eob_run = (1 << r) - 1;
+                if (r) {
+                    if (jpeg_bits_broken(j)) return -2;
+                    j->eob_run += stbi__jpeg_get_bits(j, r);
+                }
+                r = 64; /* the end of the block */
+            }
+        } else {
+            if (sz != 1) return 0;
+            if (jpeg_bits_broken(j)) return -2;
+            (void)stbi__jpeg_get_bit(j); /* the sign: the new coefficient is not zero */
+        }
+        while (k <= j->spec_end) {
+            unsigned zig = stbi__jpeg_dezigzag[k++];
+            if (*nz >> zig & 1) {
+                if (jpeg_bits_broken(j)) return -2;
+                (void)stbi__jpeg_get_bit(j);
+            } else {
+                if (r == 0) {
+                    if (sz) *nz |= 1ull << zig; /* stb writes s: +-bit, or 0 for a run of 16 */
+                    break;
+                }
+                --r;
+            }
+        }
+    } while (k <= j->spec_end);
+    return 1;
+}
+
+/* One scan's entropy-coded data, walked as stbi__parse_entropy_coded_data walks it (block order,
+ * restart intervals); 0, -1, -2 or 1 as above. nz: per component, the non-zero coefficients of each
+ * of its coeff_w x coeff_h blocks (progressive AC scans). */
+static int jpeg_check_scan(stbi__jpeg *z, uint64_t *const *nz) {
     stbi__jpeg_reset(z);
     int one = z->scan_n == 1, n0 = z->order[0];
     int w = one ? (z->img_comp[n0].x + 7) >> 3 : z->img_mcu_x;
@@ -270,10 +353,15 @@ static int jpeg_check_scan(stbi__jpeg *z) {
                 int n = z->order[k];
                 int blocks = one ? 1 : z->img_comp[n].h * z->img_comp[n].v;
                 for (int i = 0; i < blocks; i++) {
-                    int ha = z->img_comp[n].ha;
-                    int r = z->progressive ? jpeg_check_block_prog_dc(z, z->huff_dc + z->img_comp[n].hd, n)
-                                           : jpeg_check_block(z, z->huff_dc + z->img_comp[n].hd, z->huff_ac + ha,
-                                                              z->fast_ac[ha], n, z->dequant[z->img_comp[n].tq][0]);
+                    int ha = z->img_comp[n].ha, r;
+                    if (z->progressive && z->spec_start != 0 && one)
+                        r = jpeg_check_block_prog_ac(z, z->huff_ac + ha, z->fast_ac[ha],
+                                                     &nz[n][(size_t)x + (size_t)y * (size_t)z->img_comp[n].coeff_w]);
+                    else if (z->progressive)
+                        r = jpeg_check_block_prog_dc(z, z->huff_dc + z->img_comp[n].hd, n);
+                    else
+                        r = jpeg_check_block(z, z->huff_dc + z->img_comp[n].hd, z->huff_ac + ha, z->fast_ac[ha], n,
+                                             z->dequant[z->img_comp[n].tq][0]);
                     if (r <= 0) return r;
                 }
             }
@@ -300,6 +388,7 @@ static const char *jpeg_entropy_problem(const uint8_t *d, size_t n) {
     memset(z, 0, sizeof *z);
     z->s = &s;
     const char *why = NULL;
+    uint64_t *nz[4] = {NULL, NULL, NULL, NULL}; /* progressive: each component's non-zero AC coefficients */
     if (!stbi__decode_jpeg_header(z, STBI__SCAN_header)) goto done;
     /* the MCU geometry stbi__process_frame_header computes only when it allocates */
     int hmax = 1, vmax = 1;
@@ -314,12 +403,19 @@ static const char *jpeg_entropy_problem(const uint8_t *d, size_t n) {
     for (int i = 0; i < s.img_n; i++) {
         z->img_comp[i].x = (int)((s.img_x * (unsigned)z->img_comp[i].h + (unsigned)hmax - 1) / (unsigned)hmax);
         z->img_comp[i].y = (int)((s.img_y * (unsigned)z->img_comp[i].v + (unsigned)vmax - 1) / (unsigned)vmax);
+        z->img_comp[i].coeff_w = z->img_mcu_x * z->img_comp[i].h;
+        z->img_comp[i].coeff_h = z->img_mcu_y * z->img_comp[i].v;
+        if (z->progressive && i < 4 &&
+            !(nz[i] = io_calloc((size_t)z->img_comp[i].coeff_w * (size_t)z->img_comp[i].coeff_h, sizeof(uint64_t)))) {
+            why = "out of memory";
+            goto done;
+        }
     }
     /* stbi__decode_jpeg_image's marker loop */
     for (int m = stbi__get_marker(z); !stbi__EOI(m); m = stbi__get_marker(z)) {
         if (stbi__SOS(m)) {
             if (!stbi__process_scan_header(z)) break;
-            int r = jpeg_check_scan(z);
+            int r = jpeg_check_scan(z, nz);
             if (r == -1) why = "corrupt JPEG (a DC coefficient out of range)";
             if (r == -2) why = "corrupt JPEG (entropy-coded data cut inside a code by a marker)";
             if (r <= 0) break;
@@ -339,6 +435,7 @@ static const char *jpeg_entropy_problem(const uint8_t *d, size_t n) {
         }
     }
 done:
+    for (int i = 0; i < 4; i++) free(nz[i]);
     free(z);
     return why;
 }

@@ -17,8 +17,8 @@
  * answer). A pending child's intervals are not stored: when it is popped each lane's interval is
  * recomputed from the child's box (the root box cut by its ancestors' clip planes, as alt_ray_box
  * with the widened exit), and lanes whose closest hit lies before the box (or occluded lanes) drop
- * out; a child no lane still needs is skipped. A subtree that a single ray still enters is handed
- * to the single-ray walk with that ray's interval. Leaves test each active ray against their
+ * out; a child no lane still needs is skipped. A subtree that only one or two rays still enter is
+ * handed to the single-ray walk with their intervals. Leaves test each active ray against their
  * blocks with the single-ray leaf (alt_leaf), so each ray gets its single-ray hit bit for bit. */
 #include "accel/bih/bih.h"
 #include "accel/tri_leaf.h"
@@ -86,14 +86,22 @@ static bool bih_trav(const rp_accel *acc, const accel_built *s, const alt_ray *r
 
 /* ---- packets ------------------------------------------------------------------------------- */
 
-/* Widened distances of tri_leaf.h, 4 lanes at a time (the same products, lane for lane). */
-static inline vf4 up4(vf4 t) { return vf4_select(t > vf4_splat(0.0f), t * vf4_splat(ALT_UP), t * vf4_splat(ALT_DN)); }
-static inline vf4 dn4(vf4 t) { return vf4_select(t > vf4_splat(0.0f), t * vf4_splat(ALT_DN), t * vf4_splat(ALT_UP)); }
+/* Widened distances of tri_leaf.h, 4 lanes at a time: alt_up(t) is the larger of t * ALT_UP and
+ * t * ALT_DN, alt_dn(t) the smaller (bit for bit, NaN too), without a compare and a blend. */
+static inline vf4 up4(vf4 t) { return vf4_max(t * vf4_splat(ALT_UP), t * vf4_splat(ALT_DN)); }
+static inline vf4 dn4(vf4 t) { return vf4_min(t * vf4_splat(ALT_UP), t * vf4_splat(ALT_DN)); }
 /* A closest hit so far moved away from the ray's start by the culling slack: boxes entered beyond
  * it are skipped (the single-ray walk's e.t0 <= h->t * ALT_CULL_SLACK, also for t <= 0). */
 static inline vf4 cull4(vf4 t) {
-    return vf4_select(t > vf4_splat(0.0f), t * vf4_splat(ALT_CULL_SLACK), t * vf4_splat(1.0f / ALT_CULL_SLACK));
+    return vf4_max(t * vf4_splat(ALT_CULL_SLACK), t * vf4_splat(1.0f / ALT_CULL_SLACK));
 }
+
+/* Set bits of a 4-lane mask (the baseline ISA these kernels are built for has no popcnt: GCC
+ * calls libgcc's, 5% of the packets' time on spd_teapot). */
+static inline uint32_t pop4(uint32_t m) { return (0x4332322132212110ull >> (4 * m)) & 0xFu; }
+
+/* Subtrees that at most this many of a packet's rays enter go to the single-ray walk. */
+#define BIH_SINGLE_SWITCH 2
 
 /* The most rays a packet walk holds: a 16x16 block (larger n x n packets go as their 16x16
  * blocks, which keeps the walk's buffers, about 40 KB, on the stack). */
@@ -109,6 +117,7 @@ typedef struct bih_pk {
     vf4 *tnear;
     vf4 *ht;            /* closest hit distance so far; -inf for dead and occluded rays */
     int pos[3];         /* the majority sign of each axis' direction: the packet's near child */
+    int uni[3];         /* every live ray has that sign */
     bool any;
     uint32_t left;      /* live rays not yet occluded (any) */
     uint32_t occ[BIH_PK_MAX / 32]; /* occluded rays (any) */
@@ -130,24 +139,24 @@ static uint32_t pk_box(const bih_pk *p, const float b[6], vf4 *t0, vf4 *t1, uint
         for (int k = 0; k < 3; k++) {
             vf4 ta = (vf4_splat(b[k]) - p->o[k][c]) * p->rd[k][c];
             vf4 tb = (vf4_splat(b[3 + k]) - p->o[k][c]) * p->rd[k][c];
-            vi4 lt = ta < tb;
-            vf4 tn = vf4_select(lt, ta, tb), tf = up4(vf4_select(lt, tb, ta));
-            lo = vf4_select(tn > lo, tn, lo);
-            hi = vf4_select(tf < hi, tf, hi);
+            /* minps / maxps: alt_ray_box's ternaries, NaN included */
+            vf4 tn = vf4_min(ta, tb), tf = up4(vf4_max(tb, ta));
+            lo = vf4_max(tn, lo);
+            hi = vf4_min(tf, hi);
         }
         uint32_t m = vi4_movemask(lo <= hi);
         t0[c] = vf4_select(lo <= hi, lo, vf4_splat(INFINITY));
         t1[c] = vf4_select(lo <= hi, hi, vf4_splat(-INFINITY));
         if (m) {
             first = first == UINT32_MAX ? c : first, last = c;
-            active += simd_popcount(m);
+            active += pop4(m);
         }
     }
     *c0 = first == UINT32_MAX ? 0 : first, *c1 = first == UINT32_MAX ? 0 : last + 1;
     return active;
 }
 
-/* The one active ray of chunks [c0, c1) through the single-ray walk from `node`. */
+/* The few active rays of chunks [c0, c1) through the single-ray walk from `node`. */
 static void pk_single(bih_pk *p, const accel_built *s, uint32_t node, const vf4 *t0, const vf4 *t1, uint32_t c0,
                       uint32_t c1) {
     for (uint32_t c = c0; c < c1; c++) {
@@ -176,7 +185,7 @@ static void pk_walk(bih_pk *p, const accel_built *s) {
     float box[6];
     memcpy(box, s->bounds, sizeof box);
     for (;;) {
-        if (active == 1) {
+        if (active <= BIH_SINGLE_SWITCH) {
             pk_single(p, s, node, t0, t1, c0, c1);
             goto pop;
         }
@@ -190,26 +199,37 @@ static void pk_walk(bih_pk *p, const accel_built *s) {
             vf4 *a0 = buf[a][0], *a1 = buf[a][1], *b0 = buf[b][0], *b1 = buf[b][1];
             vf4 cl = vf4_splat(nd->clip[0]), cr = vf4_splat(nd->clip[1]);
             uint32_t fa = UINT32_MAX, la = 0, fb = UINT32_MAX, lb = 0, na = 0, nb = 0;
-            for (uint32_t c = c0; c < c1; c++) {
-                vf4 o = p->o[axis][c], rd = p->rd[axis][c];
-                vf4 tl = (cl - o) * rd, tr = (cr - o) * rd;
-                vi4 pos = rd > vf4_splat(0.0f);
-                vf4 n1 = up4(vf4_select(pos, tl, tr)), f0 = dn4(vf4_select(pos, tr, tl));
-                vf4 x0 = t0[c], x1 = t1[c];
-                vi4 act = x0 <= x1;
-                vi4 vn = act & (x0 <= n1), vf = act & (f0 <= x1);
-                vf4 nhi = vf4_select(n1 < x1, n1, x1), flo = vf4_select(f0 > x0, f0, x0);
-                /* lanes whose near child is the packet's first one */
-                vi4 same = ppos ? pos : ~pos;
-                vi4 ma = (same & vn) | (~same & vf), mb = (same & vf) | (~same & vn);
-                vf4 alo = vf4_select(same, x0, flo), ahi = vf4_select(same, nhi, x1);
-                vf4 blo = vf4_select(same, flo, x0), bhi = vf4_select(same, x1, nhi);
-                a0[c] = vf4_select(ma, alo, vf4_splat(INFINITY)), a1[c] = vf4_select(ma, ahi, vf4_splat(-INFINITY));
-                b0[c] = vf4_select(mb, blo, vf4_splat(INFINITY)), b1[c] = vf4_select(mb, bhi, vf4_splat(-INFINITY));
-                uint32_t bits_a = vi4_movemask(ma), bits_b = vi4_movemask(mb);
-                if (bits_a) fa = fa == UINT32_MAX ? c : fa, la = c, na += simd_popcount(bits_a);
-                if (bits_b) fb = fb == UINT32_MAX ? c : fb, lb = c, nb += simd_popcount(bits_b);
+            /* Per lane: the near child's interval [x0, min(x1, n1)], the far one's [max(x0, f0), x1]
+             * (the single-ray walk's, value for value; empty where it skips the child, NaN too) */
+#define BIH_COUNT(c)                                                                              \
+    do {                                                                                          \
+        uint32_t bits_a = vi4_movemask(a0[c] <= a1[c]), bits_b = vi4_movemask(b0[c] <= b1[c]);    \
+        if (bits_a) fa = fa == UINT32_MAX ? c : fa, la = c, na += pop4(bits_a);                   \
+        if (bits_b) fb = fb == UINT32_MAX ? c : fb, lb = c, nb += pop4(bits_b);                   \
+    } while (0)
+            if (p->uni[axis]) { /* every live ray's near child is the packet's first */
+                vf4 cn = ppos ? cl : cr, cf = ppos ? cr : cl;
+                for (uint32_t c = c0; c < c1; c++) {
+                    vf4 o = p->o[axis][c], rd = p->rd[axis][c], x0 = t0[c], x1 = t1[c];
+                    vf4 n1 = up4((cn - o) * rd), f0 = dn4((cf - o) * rd);
+                    a0[c] = x0, a1[c] = vf4_min(x1, n1);
+                    b0[c] = vf4_max(x0, f0), b1[c] = x1;
+                    BIH_COUNT(c);
+                }
+            } else {
+                for (uint32_t c = c0; c < c1; c++) {
+                    vf4 o = p->o[axis][c], rd = p->rd[axis][c], x0 = t0[c], x1 = t1[c];
+                    vf4 tl = (cl - o) * rd, tr = (cr - o) * rd;
+                    vi4 pos = rd > vf4_splat(0.0f);
+                    vf4 n1 = up4(vf4_select(pos, tl, tr)), f0 = dn4(vf4_select(pos, tr, tl));
+                    vf4 nhi = vf4_min(x1, n1), flo = vf4_max(x0, f0);
+                    vi4 same = ppos ? pos : ~pos; /* lanes whose near child is the packet's first */
+                    a0[c] = vf4_select(same, x0, flo), a1[c] = vf4_select(same, nhi, x1);
+                    b0[c] = vf4_select(same, flo, x0), b1[c] = vf4_select(same, x1, nhi);
+                    BIH_COUNT(c);
+                }
             }
+#undef BIH_COUNT
             /* the children's boxes: the left one ends at clip 0, the right one starts at clip 1 */
             float bfirst[6], bsecond[6];
             memcpy(bfirst, box, sizeof box), memcpy(bsecond, box, sizeof box);
@@ -268,13 +288,14 @@ static void pk_setup(bih_pk *p, vf4 (*soa)[BIH_PK_CHUNKS], const alt_ray *r, alt
     memset(p->occ, 0, sizeof p->occ);
     for (int k = 0; k < 3; k++) p->o[k] = soa[k], p->rd[k] = soa[3 + k];
     p->tnear = soa[6], p->ht = soa[7];
-    int votes[3] = {0, 0, 0};
+    int votes[3] = {0, 0, 0}, npos[3] = {0, 0, 0};
     for (uint32_t i = 0; i < 4 * p->chunks; i++) {
         uint32_t c = i / 4, j = i % 4;
         if (i < count && (live[i / 32] >> (i % 32) & 1u)) {
             for (int k = 0; k < 3; k++) {
                 p->o[k][c][j] = r[i].org[k], p->rd[k][c][j] = r[i].rdir[k];
                 votes[k] += r[i].rdir[k] > 0.0f ? 1 : -1;
+                npos[k] += r[i].rdir[k] > 0.0f;
             }
             p->tnear[c][j] = r[i].tnear, p->ht[c][j] = h[i].t;
             p->left++;
@@ -283,7 +304,8 @@ static void pk_setup(bih_pk *p, vf4 (*soa)[BIH_PK_CHUNKS], const alt_ray *r, alt
             p->tnear[c][j] = INFINITY, p->ht[c][j] = -INFINITY;
         }
     }
-    for (int k = 0; k < 3; k++) p->pos[k] = votes[k] >= 0;
+    for (int k = 0; k < 3; k++)
+        p->pos[k] = votes[k] >= 0, p->uni[k] = npos[k] == 0 || npos[k] == (int)p->left;
 }
 
 /* The SIMD packets (ALT_KERNELS' PTRAV): all of them walk the tree together; occluded lanes are

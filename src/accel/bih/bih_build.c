@@ -28,17 +28,9 @@ typedef struct bih_ctx {
     _Atomic uint32_t depth;
     _Atomic uint64_t leaves;
     /* leaf packing */
-    uint32_t *block_of;        /* per position: its leaf's first block (at the leaf's first position) */
+    uint32_t *block_of;        /* per position: its block */
     tri4 *blocks;
-    uint32_t chunks;
 } bih_ctx;
-
-static inline uint32_t id_of(const bvh_prim *b) {
-    uint32_t id;
-    float f = b->lo[3];
-    memcpy(&id, &f, 4);
-    return id;
-}
 
 static void make_leaf(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, uint32_t depth) {
     bih_node *n = &c->nodes[node];
@@ -128,7 +120,8 @@ static void task_run(void *user, uint32_t index, uint32_t thread) {
     split(c, t.node, t.begin, t.end, t.sb, (cbounds){t.clo, t.chi}, t.depth, false);
 }
 
-/* Numbers the blocks: a leaf's first position gets the leaf's first block. */
+/* Numbers the blocks: every position gets its block (a leaf's triangles fill blocks of four in
+ * order, its first position starting one), as the BVH's tri_pack_plan. */
 static uint32_t plan_blocks(bih_ctx *c, uint32_t node_count, uint32_t n) {
     memset(c->block_of, 0, (size_t)n * sizeof(uint32_t));
     for (uint32_t i = 0; i < node_count; i++) {
@@ -138,45 +131,45 @@ static uint32_t plan_blocks(bih_ctx *c, uint32_t node_count, uint32_t n) {
         memcpy(&first, &nd->clip[0], 4), memcpy(&count, &nd->clip[1], 4);
         if (count) c->block_of[first] = count;
     }
-    uint32_t next = 0;
+    uint32_t next = 0, block = 0, k = 0; /* k: position in the current leaf */
     for (uint32_t p = 0; p < n; p++) {
         uint32_t count = c->block_of[p];
-        if (!count) continue;
-        c->block_of[p] = next;
-        next += (count + 3) / 4;
+        if (count) block = next, next += (count + 3) / 4, k = 0;
+        c->block_of[p] = block + k++ / 4;
     }
     return next;
 }
 
 typedef struct fill_ctx {
     bih_ctx *c;
-    uint32_t node_count, chunks;
+    uint32_t node_count, n, chunks;
 } fill_ctx;
 
-/* Fills the blocks of the leaves among a chunk of the nodes and points the leaves at them. */
+/* First position of chunk `index`, moved on to the start of a block. */
+static uint32_t fill_chunk_start(const fill_ctx *f, uint32_t index) {
+    uint32_t p = (uint32_t)((uint64_t)f->n * index / f->chunks);
+    while (p > 0 && p < f->n && f->c->block_of[p] == f->c->block_of[p - 1]) p++;
+    return p;
+}
+
+/* Fills the blocks of a chunk of the positions (the scene's fill, accel_tri_input.fill, reading
+ * each position's id from its box, lo's w lane) and points the leaves among a chunk of the nodes
+ * at their blocks. */
 static void fill_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     const fill_ctx *f = user;
     bih_ctx *c = f->c;
-    uint64_t n = f->node_count;
-    uint32_t b = (uint32_t)(n * index / f->chunks), e = (uint32_t)(n * (index + 1) / f->chunks);
+    uint32_t pb = fill_chunk_start(f, index), pe = fill_chunk_start(f, index + 1);
+    const uint32_t *ids = (const uint32_t *)(const void *)&c->p[0].lo[3];
+    c->in->fill(c->in->user, c->in->refs, ids, sizeof(bvh_prim) / sizeof(uint32_t), c->block_of, pb, pe, c->blocks);
+    uint64_t nn = f->node_count;
+    uint32_t b = (uint32_t)(nn * index / f->chunks), e = (uint32_t)(nn * (index + 1) / f->chunks);
     for (uint32_t i = b; i < e; i++) {
         bih_node *nd = &c->nodes[i];
-        /* the references of a leaf a few nodes on (nodes come in about the boxes' order) */
-        if (i + 8 < e && c->nodes[i + 8].meta == BIH_LEAF) {
-            uint32_t f8;
-            memcpy(&f8, &c->nodes[i + 8].clip[0], 4);
-            __builtin_prefetch(&c->in->refs[id_of(&c->p[f8])]);
-        }
         if (nd->meta != BIH_LEAF) continue;
         uint32_t first, count;
         memcpy(&first, &nd->clip[0], 4), memcpy(&count, &nd->clip[1], 4);
         uint32_t block = count ? c->block_of[first] : 0, blocks = (count + 3) / 4;
-        for (uint32_t k = 0; k < blocks; k++) {
-            uint32_t ids[4], m = count - 4 * k < 4 ? count - 4 * k : 4;
-            for (uint32_t q = 0; q < m; q++) ids[q] = id_of(&c->p[first + 4 * k + q]);
-            accel_fill_block(c->in, ids, m, &c->blocks[block + k]);
-        }
         memcpy(&nd->clip[0], &block, 4), memcpy(&nd->clip[1], &blocks, 4);
     }
 }
@@ -235,7 +228,7 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     c.blocks = accel_blocks_alloc(a, blocks);
     bool ok = c.blocks != NULL;
     if (ok) {
-        fill_ctx f = {&c, node_count, pool ? threads * 8 : 1};
+        fill_ctx f = {&c, node_count, n, pool ? threads * 8 : 1};
         if (pool) sys_pool_parallel_for(pool, f.chunks, fill_task, &f);
         else fill_task(&f, 0, 0);
     }

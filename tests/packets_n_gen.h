@@ -45,8 +45,9 @@ static inline void cross(const float a[3], const float b[3], float o[3]) {
 }
 static inline float dot(const float a[3], const float b[3]) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
-static inline rp_scene *make_scene(rp_device *dev, const rp_scene_data *sd) {
-    rp_scene *scene = rp_scene_new(dev, NULL);
+/* The scene of sd with the acceleration structure accel (RP_ACCEL_BVH: the default). */
+static inline rp_scene *make_scene_accel(rp_device *dev, const rp_scene_data *sd, rp_accel_type accel) {
+    rp_scene *scene = rp_scene_new(dev, &(rp_scene_desc){.accel = accel});
     rp_geometry *g = rp_geometry_new(dev, RP_GEOMETRY_TRIANGLE);
     rp_geometry_set_buffer(g, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, sd->positions, 0, 0, sd->vertex_count);
     rp_geometry_set_buffer(g, RP_BUFFER_INDEX, RP_FORMAT_UINT3, sd->indices, 0, 0, sd->triangle_count);
@@ -66,6 +67,10 @@ static inline rp_scene *make_scene(rp_device *dev, const rp_scene_data *sd) {
     }
     CHECK(rp_scene_commit(scene) == RP_ERROR_NONE);
     return scene;
+}
+
+static inline rp_scene *make_scene(rp_device *dev, const rp_scene_data *sd) {
+    return make_scene_accel(dev, sd, RP_ACCEL_BVH);
 }
 
 static inline bool load_world(const char *file, const char *name, world *w) {

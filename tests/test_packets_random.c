@@ -8,7 +8,10 @@
  * toward a random light; reflection packets off the hit surfaces. Every traversal x packet size x
  * frustum setting, closest hit and any hit, ray by ray against rp_intersect1 / rp_occluded1.
  *
- * Every ISA's kernels (the best with all cameras, the others with a quarter).
+ * Every ISA's kernels (the best with all cameras, the others with a quarter). Then the BIH
+ * (rp_scene_desc.accel) with half the cameras: its n x n packets (every traversal setting) and its
+ * 4/8/16-ray SIMD packets (rp_intersect4..16, rp_occluded4..16, the packet's slots in order, dead
+ * rays included), hit for hit against the BVH's single rays.
  * `test_packets_random --long [CAMERAS]` runs many more cameras (default 4000 per scene) with
  * seeds after the CI list; `--seed S` runs one. */
 #include <math.h>
@@ -111,9 +114,10 @@ typedef struct stats {
 } stats;
 
 /* Traces rays[0 .. n*n) (slot q of the packet holds rays[q]) with every traversal and frustum
- * setting; counts the rays whose answer differs from the single-ray one. */
+ * setting (few: auto, single and SIMD without frustum, for a structure whose packets ignore both);
+ * counts the rays whose answer differs from the single-ray one. */
 static void trace_all(rp_device *dev, rp_scene *scene, const test_ray *rays, uint32_t n, rp_frustum_kind fk,
-                      const float point[3], const char *what, uint64_t seed, stats *st) {
+                      const float point[3], const char *what, uint64_t seed, bool few, stats *st) {
     rp_rayhit_n p;
     if (!rp_rayhit_n_alloc(dev, n, &p)) {
         CHECK(!"packet allocates");
@@ -126,8 +130,11 @@ static void trace_all(rp_device *dev, rp_scene *scene, const test_ray *rays, uin
     rp_auto_tally tally;
     memset(&tally, 0, sizeof tally);
     for (size_t m = 0; m < sizeof modes / sizeof modes[0]; m++)
-        for (int fr = 0; fr < 2; fr++)
+        for (int fr = 0; fr < 2 - few; fr++)
             for (int occ = 0; occ < 2; occ++) {
+                if (few && modes[m] != RP_TRAVERSAL_AUTO && modes[m] != RP_TRAVERSAL_SINGLE &&
+                    modes[m] != RP_TRAVERSAL_SIMD)
+                    continue;
                 rp_query_n_desc d = {.traversal = modes[m], .frustum = fr ? fk : RP_FRUSTUM_NONE,
                                      .tally = modes[m] == RP_TRAVERSAL_AUTO && occ ? &tally : NULL};
                 if (point) memcpy(d.point, point, sizeof d.point);
@@ -153,7 +160,7 @@ static void trace_all(rp_device *dev, rp_scene *scene, const test_ray *rays, uin
                     if (wrong && first == UINT32_MAX) first = q;
                     bad += wrong;
                 }
-                if (m == 0 && !fr && !occ) st->rays += count;
+                if (modes[m] == RP_TRAVERSAL_AUTO && !fr && !occ) st->rays += count;
                 st->bad += bad;
                 CHECKF(bad == 0,
                        "seed %llu: %s %ux%u %s, frustum %s, %s: %u of %u rays differ from single rays (first: slot %u, "
@@ -166,8 +173,71 @@ static void trace_all(rp_device *dev, rp_scene *scene, const test_ray *rays, uin
     rp_rayhit_n_free(dev, &p);
 }
 
-/* One random camera: a primary packet, then shadow and reflection packets from its hits. */
-static void check_camera(rp_device *dev, rp_scene *scene, const world *w, uint64_t seed, stats *st) {
+/* Rays[0 .. count) as SIMD packets of W rays (slot order, dead rays as invalid lanes), closest
+ * and any hit, against the reference; dead lanes must stay untouched. */
+#define TRACE_SIMD(W)                                                                             \
+    static uint32_t trace_simd_##W(rp_scene *scene, const test_ray *rays, uint32_t count, uint32_t *first) { \
+        uint32_t bad = 0;                                                                         \
+        for (uint32_t base = 0; base + W <= count; base += W) {                                   \
+            rp_rayhit##W p;                                                                       \
+            rp_ray##W o;                                                                          \
+            int32_t valid[W];                                                                     \
+            memset(&p, 0, sizeof p), memset(&o, 0, sizeof o);                                     \
+            for (int i = 0; i < W; i++) {                                                         \
+                const test_ray *t = &rays[base + (uint32_t)i];                                    \
+                const rp_ray *r = &t->ray;                                                        \
+                valid[i] = t->live ? -1 : 0;                                                      \
+                p.ray.org_x[i] = o.org_x[i] = r->org_x, p.ray.org_y[i] = o.org_y[i] = r->org_y;   \
+                p.ray.org_z[i] = o.org_z[i] = r->org_z, p.ray.dir_x[i] = o.dir_x[i] = r->dir_x;   \
+                p.ray.dir_y[i] = o.dir_y[i] = r->dir_y, p.ray.dir_z[i] = o.dir_z[i] = r->dir_z;   \
+                p.ray.tnear[i] = o.tnear[i] = r->tnear;                                           \
+                p.ray.tfar[i] = o.tfar[i] = t->live ? r->tfar : 42.0f;                            \
+                p.ray.mask[i] = o.mask[i] = r->mask;                                              \
+                p.hit.geom_id[i] = RP_INVALID_ID, p.hit.prim_id[i] = 777u;                        \
+            }                                                                                     \
+            rp_intersect##W(scene, valid, &p);                                                    \
+            rp_occluded##W(scene, valid, &o);                                                     \
+            for (int i = 0; i < W; i++) {                                                         \
+                const test_ray *t = &rays[base + (uint32_t)i];                                    \
+                bool wrong;                                                                       \
+                if (!t->live)                                                                     \
+                    wrong = p.ray.tfar[i] != 42.0f || o.tfar[i] != 42.0f || p.hit.geom_id[i] != RP_INVALID_ID || \
+                            p.hit.prim_id[i] != 777u;                                             \
+                else                                                                              \
+                    wrong = (o.tfar[i] == -INFINITY) != t->occluded || p.hit.geom_id[i] != t->ref.hit.geom_id || \
+                            (t->ref.hit.geom_id != RP_INVALID_ID &&                               \
+                             (p.hit.prim_id[i] != t->ref.hit.prim_id || p.ray.tfar[i] != t->ref.ray.tfar || \
+                              p.hit.u[i] != t->ref.hit.u || p.hit.v[i] != t->ref.hit.v ||          \
+                              p.hit.Ng_x[i] != t->ref.hit.Ng_x || p.hit.Ng_y[i] != t->ref.hit.Ng_y || \
+                              p.hit.Ng_z[i] != t->ref.hit.Ng_z));                                 \
+                if (wrong && *first == UINT32_MAX) *first = base + (uint32_t)i;                   \
+                bad += wrong;                                                                     \
+            }                                                                                     \
+        }                                                                                         \
+        return bad;                                                                               \
+    }
+TRACE_SIMD(4)
+TRACE_SIMD(8)
+TRACE_SIMD(16)
+
+/* The SIMD packets of every width over the n x n rays. */
+static void trace_simd_all(rp_scene *scene, const test_ray *rays, uint32_t count, const char *what, uint64_t seed,
+                           stats *st) {
+    uint32_t (*fn[3])(rp_scene *, const test_ray *, uint32_t, uint32_t *) = {trace_simd_4, trace_simd_8, trace_simd_16};
+    static const int widths[3] = {4, 8, 16};
+    for (int w = 0; w < 3; w++) {
+        uint32_t first = UINT32_MAX, bad = fn[w](scene, rays, count, &first);
+        st->bad += bad;
+        CHECKF(bad == 0, "seed %llu: %s %d-ray SIMD packets: %u of %u rays differ from the reference (first: slot %u)",
+               (unsigned long long)seed, what, widths[w], bad, count, first);
+    }
+}
+
+/* One random camera: a primary packet, then shadow and reflection packets from its hits. The
+ * references are ref_scene's single rays; the packets go to scene (with simd, its SIMD packets
+ * too). */
+static void check_camera(rp_device *dev, rp_scene *ref_scene, rp_scene *scene, const world *w, uint64_t seed, bool simd,
+                         stats *st) {
     uint64_t s = seed;
     cam c;
     rand_camera(w, &s, &c);
@@ -193,9 +263,10 @@ static void check_camera(rp_device *dev, rp_scene *scene, const world *w, uint64
             float jx = jitter ? rng_float(&s) : 0.5f, jy = jitter ? rng_float(&s) : 0.5f;
             cam_ray(&c, x0 + (int)x, y0 + (int)y, jx, jy, &t->ray);
             t->live = !dead || rng_below(&s, 8) != 0;
-            if (t->live) reference(scene, t);
+            if (t->live) reference(ref_scene, t);
         }
-    trace_all(dev, scene, prim, n, RP_FRUSTUM_PRIMARY, NULL, "primary", seed, st);
+    trace_all(dev, scene, prim, n, RP_FRUSTUM_PRIMARY, NULL, "primary", seed, simd, st);
+    if (simd) trace_simd_all(scene, prim, count, "primary", seed, st);
     float diag = 0.0f, light[3];
     for (int a = 0; a < 3; a++) diag += (w->hi[a] - w->lo[a]) * (w->hi[a] - w->lo[a]);
     diag = sqrtf(diag);
@@ -228,12 +299,13 @@ static void check_camera(rp_device *dev, rp_scene *scene, const world *w, uint64
                 t->ray = (rp_ray){.org_x = pt[0], .org_y = pt[1], .org_z = pt[2], .tnear = 1e-4f * diag,
                                   .dir_x = nd[0], .dir_y = nd[1], .dir_z = nd[2], .tfar = INFINITY, .mask = 0xFFFFFFFFu};
             }
-            reference(scene, t);
+            reference(ref_scene, t);
             live++;
         }
         if (!live) continue;
-        if (kind == 0) trace_all(dev, scene, sec, n, RP_FRUSTUM_SHADOW, light, "shadow", seed, st);
-        else trace_all(dev, scene, sec, n, RP_FRUSTUM_SECONDARY, NULL, "reflection", seed, st);
+        if (kind == 0) trace_all(dev, scene, sec, n, RP_FRUSTUM_SHADOW, light, "shadow", seed, simd, st);
+        else trace_all(dev, scene, sec, n, RP_FRUSTUM_SECONDARY, NULL, "reflection", seed, simd, st);
+        if (simd) trace_simd_all(scene, sec, count, kind ? "reflection" : "shadow", seed, st);
     }
     for (uint32_t q = 0; q < count; q++) st->hits += prim[q].live && prim[q].ref.hit.geom_id != RP_INVALID_ID;
     st->cameras++;
@@ -359,7 +431,7 @@ int main(int argc, char **argv) {
             for (int c = 0; c < n_cams; c++) {
                 uint64_t seed = ((uint64_t)f << 40) + first + (uint64_t)c;
                 if (only && seed != only) continue;
-                check_camera(dev, scene, &w, seed, &st);
+                check_camera(dev, scene, scene, &w, seed, false, &st);
             }
             printf("%-40s %2d-wide %5llu cameras, %8llu rays, %6llu primary hits, %llu wrong answers\n", files[f],
                    isas[ii], (unsigned long long)st.cameras, (unsigned long long)st.rays, (unsigned long long)st.hits,
@@ -368,6 +440,25 @@ int main(int argc, char **argv) {
             if (!only)
                 CHECKF(st.hits > st.rays / 200, "%s: too few primary hits (%llu)", files[f], (unsigned long long)st.hits);
             rp_scene_release(scene);
+            rp_device_release(dev);
+        }
+        /* the BIH's packets against the BVH's single rays */
+        {
+            rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 1});
+            rp_scene *ref = make_scene(dev, &w.sd), *scene = make_scene_accel(dev, &w.sd, RP_ACCEL_BIH);
+            stats st = {0};
+            for (int c = 0; c < cameras / 2; c++) {
+                uint64_t seed = ((uint64_t)f << 40) + first + (uint64_t)c;
+                if (only && seed != only) continue;
+                check_camera(dev, ref, scene, &w, seed, true, &st);
+            }
+            printf("%-40s bih     %5llu cameras, %8llu rays, %6llu primary hits, %llu wrong answers\n", files[f],
+                   (unsigned long long)st.cameras, (unsigned long long)st.rays, (unsigned long long)st.hits,
+                   (unsigned long long)st.bad);
+            if (!only)
+                CHECKF(st.hits > st.rays / 200, "%s bih: too few primary hits (%llu)", files[f], (unsigned long long)st.hits);
+            rp_scene_release(scene);
+            rp_scene_release(ref);
             rp_device_release(dev);
         }
         rp_scene_data_free(&w.sd);

@@ -22,6 +22,12 @@ typedef struct accel_tri_input {
     box3 bounds;            /* of all boxes */
     /* Writes triangle r's vertices (v0 xyz, v1 xyz, v2 xyz) and its geometry's mask. */
     void (*fetch)(const void *user, prim_ref r, float v[9], uint32_t *mask);
+    /* Fills the blocks of positions [begin, end) of a leaf order, as the BVH's are filled (in
+     * order, prefetching each triangle's reference, indices and vertices ahead): position p is
+     * triangle refs[ids[p * stride]], in block block_of[p]; block_of[begin] starts a block, and
+     * a block's unused lanes repeat lane 0 with mask 0. */
+    void (*fill)(const void *user, const prim_ref *refs, const uint32_t *ids, size_t stride, const uint32_t *block_of,
+                 uint32_t begin, uint32_t end, tri4 *blocks);
     const void *user;
 } accel_tri_input;
 

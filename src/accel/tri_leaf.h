@@ -110,10 +110,11 @@ static inline bool alt_leaf(const tri4 *blocks, const alt_ray *r, uint32_t first
  * and whose packet traversal is
  * bool PTRAV(const accel_built *s, const alt_ray *r, alt_hit *h, uint32_t live, int k, bool any,
  *            uint32_t *occluded)
- * (false: it does not take this packet, which then goes ray by ray through TRAV). Spheres and
+ * (false: it does not take this packet, which then goes ray by ray through TRAV), and TRACE_N its
+ * n x n packets' traversal (rp_kernels.trace_n) or NULL. Spheres and
  * user primitives go to the device's BVH kernels (acc->nodes is NULL), after the triangles, as
  * the BVH's kernels order them. */
-#define ALT_KERNELS(NAME, TRAV, PTRAV)                                                            \
+#define ALT_KERNELS(NAME, TRAV, PTRAV, TRACE_N)                                                   \
     static void NAME##_intersect1(const rp_accel *acc, rp_rayhit *rh) {                           \
         if (!(rh->ray.tnear <= rh->ray.tfar)) return;                                             \
         const accel_built *s = acc->alt;                                                          \
@@ -149,6 +150,7 @@ static inline bool alt_leaf(const tri4 *blocks, const alt_ray *r, uint32_t first
         .intersect4 = NAME##_intersect_4, .intersect8 = NAME##_intersect_8,                       \
         .intersect16 = NAME##_intersect_16, .occluded4 = NAME##_occluded_4,                       \
         .occluded8 = NAME##_occluded_8, .occluded16 = NAME##_occluded_16,                         \
+        .trace_n = TRACE_N,                                                                       \
     };
 
 static inline void alt_write_hit(const accel_built *s, const alt_hit *h, rp_rayhit *rh) {

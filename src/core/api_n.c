@@ -344,9 +344,11 @@ static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p
         trace_instances(scene, &d, p, any);
         return;
     }
-    /* the large-packet kernels walk the BVH; a kd-tree's or BIH's packet is traced as its SIMD rays */
+    /* the large-packet kernels walk the BVH; a kd-tree's or BIH's packet goes to its structure's
+     * packet traversal where it has one (the BIH's), else as its SIMD rays */
     if (scene->accel.alt) {
-        trace_small(scene, RP_TRAVERSAL_SIMD, p, any);
+        if (scene->kernels->trace_n) scene->kernels->trace_n(&scene->accel, p, any);
+        else trace_small(scene, RP_TRAVERSAL_SIMD, p, any);
         return;
     }
     /* a packet too small for frustum tests to pay (packet_n.inc) gets none */

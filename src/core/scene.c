@@ -291,29 +291,27 @@ static uint32_t pack_chunk_start(const tri_pack_ctx *c, uint32_t index) {
     return p;
 }
 
-/* Fills the blocks of a chunk of primitive positions. Unused lanes repeat lane 0 with mask 0
- * (never hit): zeroed lanes made every edge function exactly 0, so each test of a partly filled
- * block took the watertight test's double-precision refinement. */
-static void tri_pack_task(void *user, uint32_t index, uint32_t thread) {
-    (void)thread;
-    const tri_pack_ctx *c = user;
-    const uint32_t *prims = c->bvh->prims, *block_of = c->block_of;
-    const prim_ref *refs = c->refs;
-    uint32_t b = pack_chunk_start(c, index), e = pack_chunk_start(c, index + 1), lane = 0;
+/* Fills the blocks of primitive positions [b, e) (block_of[b] starts a block): position p holds
+ * triangle refs[ids[p * stride]] and goes to block block_of[p]. Unused lanes repeat lane 0 with
+ * mask 0 (never hit): zeroed lanes made every edge function exactly 0, so each test of a partly
+ * filled block took the watertight test's double-precision refinement. */
+static inline void tri_fill_range(const rp_scene *s, const prim_ref *refs, const uint32_t *ids, size_t stride,
+                                  const uint32_t *block_of, tri4 *blocks, uint32_t b, uint32_t e) {
+    uint32_t lane = 0;
     for (uint32_t p = b; p < e; p++) {
-        if (p + PACK_AHEAD_REF < e) __builtin_prefetch(&refs[prims[p + PACK_AHEAD_REF]]);
-        if (p + PACK_AHEAD_INDEX < e) __builtin_prefetch(tri_indices(c->scene, refs[prims[p + PACK_AHEAD_INDEX]]));
+        if (p + PACK_AHEAD_REF < e) __builtin_prefetch(&refs[ids[(p + PACK_AHEAD_REF) * stride]]);
+        if (p + PACK_AHEAD_INDEX < e) __builtin_prefetch(tri_indices(s, refs[ids[(p + PACK_AHEAD_INDEX) * stride]]));
         if (p + PACK_AHEAD_VERTEX < e) {
-            prim_ref r = refs[prims[p + PACK_AHEAD_VERTEX]];
-            const uint32_t *idx = tri_indices(c->scene, r);
-            const geom_buffer *vb = &c->scene->geoms[r.geom]->buffers[RP_BUFFER_VERTEX];
+            prim_ref r = refs[ids[(p + PACK_AHEAD_VERTEX) * stride]];
+            const uint32_t *idx = tri_indices(s, r);
+            const geom_buffer *vb = &s->geoms[r.geom]->buffers[RP_BUFFER_VERTEX];
             for (int k = 0; k < 3; k++) __builtin_prefetch(geom_item(vb, idx[k]));
         }
         uint32_t blk = block_of[p];
         lane = p > b && blk == block_of[p - 1] ? lane + 1 : 0;
-        tri4 *t = &c->blocks[blk];
-        prim_ref r = refs[prims[p]];
-        const rp_geometry *g = c->scene->geoms[r.geom];
+        tri4 *t = &blocks[blk];
+        prim_ref r = refs[ids[p * stride]];
+        const rp_geometry *g = s->geoms[r.geom];
         vec3 v[3] = {{0}};
         load_triangle(g, r.prim, v); /* validated when gathered */
         for (int q = 0; q < 3; q++) {
@@ -328,6 +326,20 @@ static void tri_pack_task(void *user, uint32_t index, uint32_t thread) {
             t->geom[j] = t->geom[0], t->prim[j] = t->prim[0], t->mask[j] = 0;
         }
     }
+}
+
+/* Fills the blocks of a chunk of the BVH's primitive positions. */
+static void tri_pack_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    const tri_pack_ctx *c = user;
+    uint32_t b = pack_chunk_start(c, index), e = pack_chunk_start(c, index + 1);
+    tri_fill_range(c->scene, c->refs, c->bvh->prims, 1, c->block_of, c->blocks, b, e);
+}
+
+/* accel_tri_input.fill: the same fill for the other structures. */
+static void tri_fill(const void *user, const prim_ref *refs, const uint32_t *ids, size_t stride,
+                     const uint32_t *block_of, uint32_t begin, uint32_t end, tri4 *blocks) {
+    tri_fill_range(user, refs, ids, stride, block_of, blocks, begin, end);
 }
 
 /* Points each leaf of a chunk of the nodes at its blocks (count: blocks, index: the first block),
@@ -656,7 +668,7 @@ rp_error scene_build(rp_scene *s) {
     if (err == RP_ERROR_NONE && tris.count && ops) {
         sys_pool *tpool = tris.count >= SMALL_BUILD ? pool : NULL;
         accel_tri_input in = {.boxes = tris.boxes, .refs = tris.refs, .count = tris.count, .bounds = tri_bounds,
-                              .fetch = tri_fetch, .user = s};
+                              .fetch = tri_fetch, .fill = tri_fill, .user = s};
         if (!ops->build(a, tpool, &in, &s->alt)) {
             err = RP_ERROR_OUT_OF_MEMORY;
         } else {

@@ -72,6 +72,10 @@ typedef struct rp_kernels {
     void (*occluded4)(const rp_accel *acc, const int32_t *valid, rp_ray4 *ray);
     void (*occluded8)(const rp_accel *acc, const int32_t *valid, rp_ray8 *ray);
     void (*occluded16)(const rp_accel *acc, const int32_t *valid, rp_ray16 *ray);
+    /* n x n packets of a structure other than the BVH (rp_accel.alt): closest hit, or any hit
+     * (occluded rays get tfar = -inf); valid and the rays' intervals say which rays are live.
+     * NULL: such packets go as SIMD rays; the BVH's go to rp_kernels_n. */
+    void (*trace_n)(const rp_accel *acc, rp_rayhit_n *p, bool any);
 } rp_kernels;
 
 extern const rp_kernels rp_kernels_scalar, rp_kernels_sse, rp_kernels_avx2, rp_kernels_avx512;

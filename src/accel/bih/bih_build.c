@@ -3,13 +3,20 @@
  * to the two sides in place (one quicksort-like pass over the box array), and keeps each side's
  * extreme bound as its clip plane; when one side is empty the split box is halved towards the
  * other and the step repeated, so no node is made. Every inner node has two non-empty children,
- * so 2n - 1 nodes suffice: they are allocated once, from the primitive count. The top levels
- * run on the calling thread; their subtrees are built in parallel. */
+ * so 2n - 1 nodes suffice: they are allocated once, from the primitive count. Nodes larger than
+ * a share of the primitives (BIH_TASK_SHARE per thread) are split on the calling thread, the
+ * largest with a partition that all threads run (BIH_PAR_MIN); the subtrees below them are tasks,
+ * handed to the threads largest first (spd_tree_s12's depth-4 subtrees, the tasks until then, held
+ * a third of its triangles in one, and one thread built it while the other had finished). */
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "accel/accel.h"
 #include "accel/bih/bih.h"
+
+/* Subtrees of at most 1 / (BIH_TASK_SHARE x threads) of the primitives are tasks. */
+#define BIH_TASK_SHARE 8u
 
 typedef struct bih_task {
     uint32_t node, begin, end, depth;
@@ -22,23 +29,16 @@ typedef struct bih_ctx {
     bvh_prim *p;               /* the boxes, reordered in place; lo[3] holds each one's id */
     bih_node *nodes;
     _Atomic uint32_t next;     /* first free node */
-    uint32_t spawn_depth;      /* subtrees at this depth are tasks (when tasks != NULL) */
+    uint32_t task_max;         /* subtrees of at most this many primitives are tasks (with a pool) */
+    sys_pool *pool;            /* the threads, while the top of the tree is split */
     bih_task *tasks;
     uint32_t task_count, task_cap;
     _Atomic uint32_t depth;
     _Atomic uint64_t leaves;
     /* leaf packing */
-    uint32_t *block_of;        /* per position: its leaf's first block (at the leaf's first position) */
+    uint32_t *block_of;        /* per position: its block */
     tri4 *blocks;
-    uint32_t chunks;
 } bih_ctx;
-
-static inline uint32_t id_of(const bvh_prim *b) {
-    uint32_t id;
-    float f = b->lo[3];
-    memcpy(&id, &f, 4);
-    return id;
-}
 
 static void make_leaf(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, uint32_t depth) {
     bih_node *n = &c->nodes[node];
@@ -57,6 +57,139 @@ typedef struct cbounds {
     vf4 lo, hi;
 } cbounds;
 
+/* What a partition found out about its two sides: the left side's upper bound and the right
+ * side's lower bound (the clip planes, lane axis) and their centroids' bounds. */
+typedef struct sides {
+    vf4 lhi, rlo;
+    cbounds cl, cr;
+} sides;
+
+static inline sides sides_empty(void) {
+    vf4 inf = vf4_splat(INFINITY), ninf = vf4_splat(-INFINITY);
+    return (sides){ninf, inf, {inf, ninf}, {inf, ninf}};
+}
+
+static inline void sides_merge(sides *s, const sides *o) {
+    s->lhi = vf4_max(s->lhi, o->lhi), s->rlo = vf4_min(s->rlo, o->rlo);
+    s->cl.lo = vf4_min(s->cl.lo, o->cl.lo), s->cl.hi = vf4_max(s->cl.hi, o->cl.hi);
+    s->cr.lo = vf4_min(s->cr.lo, o->cr.lo), s->cr.hi = vf4_max(s->cr.hi, o->cr.hi);
+}
+
+/* Hoare's partition of [i, j) by centroid (lo + hi < twice on axis: left), each misplaced pair
+ * swapped once; returns the first right-side position. */
+static uint32_t partition(bvh_prim *p, uint32_t i, uint32_t j, int axis, float twice, sides *s) {
+    for (;;) {
+        vf4 ci;
+        for (;; i++) {
+            if (i == j) return i;
+            ci = p[i].lo + p[i].hi;
+            if (!(ci[axis] < twice)) break;
+            s->lhi = vf4_max(s->lhi, p[i].hi);
+            s->cl.lo = vf4_min(s->cl.lo, ci), s->cl.hi = vf4_max(s->cl.hi, ci);
+        }
+        /* p[i] is on the right */
+        vf4 cj;
+        for (;;) {
+            if (--j == i) {
+                s->rlo = vf4_min(s->rlo, p[i].lo);
+                s->cr.lo = vf4_min(s->cr.lo, ci), s->cr.hi = vf4_max(s->cr.hi, ci);
+                return i;
+            }
+            cj = p[j].lo + p[j].hi;
+            if (cj[axis] < twice) break;
+            s->rlo = vf4_min(s->rlo, p[j].lo);
+            s->cr.lo = vf4_min(s->cr.lo, cj), s->cr.hi = vf4_max(s->cr.hi, cj);
+        }
+        bvh_prim t = p[i];
+        p[i] = p[j], p[j] = t;
+        s->lhi = vf4_max(s->lhi, p[i].hi);
+        s->cl.lo = vf4_min(s->cl.lo, cj), s->cl.hi = vf4_max(s->cl.hi, cj);
+        s->rlo = vf4_min(s->rlo, p[j].lo);
+        s->cr.lo = vf4_min(s->cr.lo, ci), s->cr.hi = vf4_max(s->cr.hi, ci);
+        i++;
+    }
+}
+
+/* The partition of a large node by all threads: BIH_PAR_CHUNKS chunks partitioned in place, then
+ * the right-side boxes before the node's middle swapped with the left-side ones after it (the
+ * BVH's split_partition_par). The sides are the same sets as a serial partition's, so the tree
+ * is the same. */
+#define BIH_PAR_MIN 65536u
+#define BIH_PAR_CHUNKS 16u
+typedef struct par_job {
+    bvh_prim *p;
+    uint32_t begin, end, mid;
+    int axis;
+    float twice;
+    uint32_t local_mid[BIH_PAR_CHUNKS];
+    sides side[BIH_PAR_CHUNKS];
+    /* the misplaced boxes: ranges of right-side ones before mid, left-side ones after it */
+    uint32_t rb[BIH_PAR_CHUNKS], re[BIH_PAR_CHUNKS], lb[BIH_PAR_CHUNKS], le[BIH_PAR_CHUNKS];
+    uint32_t rn, ln;
+    uint64_t misplaced;
+} par_job;
+
+static void par_chunk(const par_job *j, uint32_t index, uint32_t *b, uint32_t *e) {
+    uint64_t n = j->end - j->begin;
+    *b = j->begin + (uint32_t)(n * index / BIH_PAR_CHUNKS), *e = j->begin + (uint32_t)(n * (index + 1) / BIH_PAR_CHUNKS);
+}
+
+static void par_local_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    par_job *j = user;
+    uint32_t b, e;
+    par_chunk(j, index, &b, &e);
+    j->side[index] = sides_empty();
+    j->local_mid[index] = partition(j->p, b, e, j->axis, j->twice, &j->side[index]);
+}
+
+/* Position of the k-th element of the ranges [b[i], e[i]) taken in order; *i: the range. */
+static uint32_t par_locate(const uint32_t *b, const uint32_t *e, uint32_t count, uint64_t k, uint32_t *i) {
+    for (*i = 0; *i < count; (*i)++) {
+        if (k < e[*i] - b[*i]) return b[*i] + (uint32_t)k;
+        k -= e[*i] - b[*i];
+    }
+    return 0; /* not reached: k < the ranges' total */
+}
+
+static void par_swap_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    par_job *j = user;
+    uint64_t k = j->misplaced * index / BIH_PAR_CHUNKS, kend = j->misplaced * (index + 1) / BIH_PAR_CHUNKS;
+    if (k == kend) return;
+    uint32_t ri, li;
+    uint32_t r = par_locate(j->rb, j->re, j->rn, k, &ri), l = par_locate(j->lb, j->le, j->ln, k, &li);
+    for (; k < kend; k++) {
+        bvh_prim x = j->p[r];
+        j->p[r] = j->p[l], j->p[l] = x;
+        if (++r == j->re[ri] && ri + 1 < j->rn) r = j->rb[++ri];
+        if (++l == j->le[li] && li + 1 < j->ln) l = j->lb[++li];
+    }
+}
+
+static uint32_t partition_par(sys_pool *pool, bvh_prim *p, uint32_t begin, uint32_t end, int axis, float twice,
+                              sides *s) {
+    par_job job = {.p = p, .begin = begin, .end = end, .axis = axis, .twice = twice}, *j = &job;
+    sys_pool_parallel_for(pool, BIH_PAR_CHUNKS, par_local_task, j);
+    uint32_t mid = begin;
+    for (uint32_t i = 0; i < BIH_PAR_CHUNKS; i++) {
+        uint32_t b, e;
+        par_chunk(j, i, &b, &e);
+        mid += j->local_mid[i] - b;
+        sides_merge(s, &j->side[i]);
+    }
+    for (uint32_t i = 0; i < BIH_PAR_CHUNKS; i++) {
+        uint32_t b, e, m = j->local_mid[i];
+        par_chunk(j, i, &b, &e);
+        uint32_t r0 = m, r1 = e < mid ? e : mid; /* right side before mid */
+        if (r0 < r1) j->rb[j->rn] = r0, j->re[j->rn++] = r1, j->misplaced += r1 - r0;
+        uint32_t l0 = b > mid ? b : mid, l1 = m; /* left side after mid */
+        if (l0 < l1) j->lb[j->ln] = l0, j->le[j->ln++] = l1;
+    }
+    if (j->misplaced) sys_pool_parallel_for(pool, BIH_PAR_CHUNKS, par_swap_task, j);
+    return mid;
+}
+
 static void split(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, float sb[6], cbounds cb, uint32_t depth,
                   bool spawn) {
     for (;;) {
@@ -64,7 +197,8 @@ static void split(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, float
             make_leaf(c, node, begin, end, depth);
             return;
         }
-        if (spawn && depth == c->spawn_depth) {
+        /* a subtree small enough is a task (or, the task list full, built here) */
+        if (spawn && end - begin <= c->task_max && c->task_count < c->task_cap) {
             bih_task *t = &c->tasks[c->task_count++];
             *t = (bih_task){node, begin, end, depth, {0}, cb.lo, cb.hi};
             memcpy(t->sb, sb, sizeof t->sb);
@@ -90,35 +224,26 @@ static void split(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, float
             else break;
         }
         float twice = 2.0f * plane;
-        bvh_prim *p = c->p;
-        uint32_t i = begin, j = end;
-        vf4 inf = vf4_splat(INFINITY), ninf = vf4_splat(-INFINITY);
-        vf4 lhi = ninf, rlo = inf; /* the sides' bounds: the clip planes */
-        cbounds cl = {inf, ninf}, cr = {inf, ninf};
-        while (i < j) {
-            vf4 c2 = p[i].lo + p[i].hi;
-            if (c2[axis] < twice) {
-                lhi = vf4_max(lhi, p[i].hi);
-                cl.lo = vf4_min(cl.lo, c2), cl.hi = vf4_max(cl.hi, c2);
-                i++;
-            } else {
-                j--;
-                bvh_prim t = p[i];
-                p[i] = p[j], p[j] = t;
-                rlo = vf4_min(rlo, t.lo);
-                cr.lo = vf4_min(cr.lo, c2), cr.hi = vf4_max(cr.hi, c2);
-            }
-        }
+        sides sd = sides_empty();
+        uint32_t i = spawn && c->pool && end - begin >= BIH_PAR_MIN ? partition_par(c->pool, c->p, begin, end, axis, twice, &sd)
+                                                                    : partition(c->p, begin, end, axis, twice, &sd);
         uint32_t child = atomic_fetch_add_explicit(&c->next, 2, memory_order_relaxed);
-        c->nodes[node] = (bih_node){{lhi[axis], rlo[axis]}, child << 2 | (uint32_t)axis};
+        c->nodes[node] = (bih_node){{sd.lhi[axis], sd.rlo[axis]}, child << 2 | (uint32_t)axis};
         float sl[6], sr[6];
         memcpy(sl, sb, sizeof sl), memcpy(sr, sb, sizeof sr);
         sl[3 + axis] = plane, sr[axis] = plane;
-        split(c, child, begin, i, sl, cl, depth + 1, spawn);
+        split(c, child, begin, i, sl, sd.cl, depth + 1, spawn);
         /* the right side in this frame (a loop, not a call: the recursion's depth is the left path) */
-        node = child + 1, begin = i, depth = depth + 1, cb = cr;
+        node = child + 1, begin = i, depth = depth + 1, cb = sd.cr;
         memcpy(sb, sr, sizeof sr);
     }
+}
+
+/* Tasks largest first: the pool hands them out in order, so the last to start are the shortest. */
+static int task_larger(const void *a, const void *b) {
+    const bih_task *x = a, *y = b;
+    uint32_t nx = x->end - x->begin, ny = y->end - y->begin;
+    return nx > ny ? -1 : nx < ny ? 1 : (x->begin > y->begin) - (x->begin < y->begin);
 }
 
 static void task_run(void *user, uint32_t index, uint32_t thread) {
@@ -128,7 +253,8 @@ static void task_run(void *user, uint32_t index, uint32_t thread) {
     split(c, t.node, t.begin, t.end, t.sb, (cbounds){t.clo, t.chi}, t.depth, false);
 }
 
-/* Numbers the blocks: a leaf's first position gets the leaf's first block. */
+/* Numbers the blocks: every position gets its block (a leaf's triangles fill blocks of four in
+ * order, its first position starting one), as the BVH's tri_pack_plan. */
 static uint32_t plan_blocks(bih_ctx *c, uint32_t node_count, uint32_t n) {
     memset(c->block_of, 0, (size_t)n * sizeof(uint32_t));
     for (uint32_t i = 0; i < node_count; i++) {
@@ -138,45 +264,45 @@ static uint32_t plan_blocks(bih_ctx *c, uint32_t node_count, uint32_t n) {
         memcpy(&first, &nd->clip[0], 4), memcpy(&count, &nd->clip[1], 4);
         if (count) c->block_of[first] = count;
     }
-    uint32_t next = 0;
+    uint32_t next = 0, block = 0, k = 0; /* k: position in the current leaf */
     for (uint32_t p = 0; p < n; p++) {
         uint32_t count = c->block_of[p];
-        if (!count) continue;
-        c->block_of[p] = next;
-        next += (count + 3) / 4;
+        if (count) block = next, next += (count + 3) / 4, k = 0;
+        c->block_of[p] = block + k++ / 4;
     }
     return next;
 }
 
 typedef struct fill_ctx {
     bih_ctx *c;
-    uint32_t node_count, chunks;
+    uint32_t node_count, n, chunks;
 } fill_ctx;
 
-/* Fills the blocks of the leaves among a chunk of the nodes and points the leaves at them. */
+/* First position of chunk `index`, moved on to the start of a block. */
+static uint32_t fill_chunk_start(const fill_ctx *f, uint32_t index) {
+    uint32_t p = (uint32_t)((uint64_t)f->n * index / f->chunks);
+    while (p > 0 && p < f->n && f->c->block_of[p] == f->c->block_of[p - 1]) p++;
+    return p;
+}
+
+/* Fills the blocks of a chunk of the positions (the scene's fill, accel_tri_input.fill, reading
+ * each position's id from its box, lo's w lane) and points the leaves among a chunk of the nodes
+ * at their blocks. */
 static void fill_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     const fill_ctx *f = user;
     bih_ctx *c = f->c;
-    uint64_t n = f->node_count;
-    uint32_t b = (uint32_t)(n * index / f->chunks), e = (uint32_t)(n * (index + 1) / f->chunks);
+    uint32_t pb = fill_chunk_start(f, index), pe = fill_chunk_start(f, index + 1);
+    const uint32_t *ids = (const uint32_t *)(const void *)&c->p[0].lo[3];
+    c->in->fill(c->in->user, c->in->refs, ids, sizeof(bvh_prim) / sizeof(uint32_t), c->block_of, pb, pe, c->blocks);
+    uint64_t nn = f->node_count;
+    uint32_t b = (uint32_t)(nn * index / f->chunks), e = (uint32_t)(nn * (index + 1) / f->chunks);
     for (uint32_t i = b; i < e; i++) {
         bih_node *nd = &c->nodes[i];
-        /* the references of a leaf a few nodes on (nodes come in about the boxes' order) */
-        if (i + 8 < e && c->nodes[i + 8].meta == BIH_LEAF) {
-            uint32_t f8;
-            memcpy(&f8, &c->nodes[i + 8].clip[0], 4);
-            __builtin_prefetch(&c->in->refs[id_of(&c->p[f8])]);
-        }
         if (nd->meta != BIH_LEAF) continue;
         uint32_t first, count;
         memcpy(&first, &nd->clip[0], 4), memcpy(&count, &nd->clip[1], 4);
         uint32_t block = count ? c->block_of[first] : 0, blocks = (count + 3) / 4;
-        for (uint32_t k = 0; k < blocks; k++) {
-            uint32_t ids[4], m = count - 4 * k < 4 ? count - 4 * k : 4;
-            for (uint32_t q = 0; q < m; q++) ids[q] = id_of(&c->p[first + 4 * k + q]);
-            accel_fill_block(c->in, ids, m, &c->blocks[block + k]);
-        }
         memcpy(&nd->clip[0], &block, 4), memcpy(&nd->clip[1], &blocks, 4);
     }
 }
@@ -207,9 +333,9 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     c.block_of = sys_alloc(a, (size_t)n * sizeof(uint32_t) + 4);
     uint32_t threads = pool && n >= 4096 ? (uint32_t)sys_pool_threads(pool) : 1;
     if (threads < 2) pool = NULL;
-    c.spawn_depth = 3;
-    while ((1u << c.spawn_depth) < 8 * threads && c.spawn_depth < 12) c.spawn_depth++;
-    c.task_cap = 1u << c.spawn_depth;
+    c.task_max = n / (BIH_TASK_SHARE * threads);
+    c.task_cap = 4096;
+    c.pool = pool;
     c.tasks = pool ? sys_alloc(a, c.task_cap * sizeof(bih_task)) : NULL;
     if (!c.nodes || !c.block_of || (pool && !c.tasks)) {
         sys_free(a, c.nodes, node_bytes), sys_free(a, c.block_of, (size_t)n * sizeof(uint32_t) + 4);
@@ -229,13 +355,16 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
         cb.lo = vf4_min(cb.lo, c2), cb.hi = vf4_max(cb.hi, c2);
     }
     split(&c, 0, 0, n, sb, cb, 1, pool != NULL);
-    if (pool && c.task_count) sys_pool_parallel_for(pool, c.task_count, task_run, &c);
+    if (pool && c.task_count) {
+        qsort(c.tasks, c.task_count, sizeof *c.tasks, task_larger);
+        sys_pool_parallel_for(pool, c.task_count, task_run, &c);
+    }
     uint32_t node_count = atomic_load(&c.next);
     uint32_t blocks = plan_blocks(&c, node_count, n);
     c.blocks = accel_blocks_alloc(a, blocks);
     bool ok = c.blocks != NULL;
     if (ok) {
-        fill_ctx f = {&c, node_count, pool ? threads * 8 : 1};
+        fill_ctx f = {&c, node_count, n, pool ? threads * 8 : 1};
         if (pool) sys_pool_parallel_for(pool, f.chunks, fill_task, &f);
         else fill_task(&f, 0, 0);
     }

@@ -157,4 +157,4 @@ static bool kd_packet(const accel_built *s, const alt_ray *r, alt_hit *h, uint32
     return true;
 }
 
-ALT_KERNELS(kdtree, kd_trav, kd_packet)
+ALT_KERNELS(kdtree, kd_trav, kd_packet, NULL)

@@ -708,7 +708,9 @@ rp_error scene_build(rp_scene *s) {
                 mean_side = leaves ? (double)sum / (double)leaves * 0x1p-24 * diag : 0.0;
             }
             sys_free(a, sums, sbytes);
-            if (!ok || !bvhw_from_bvh2(a, tpool, &b2, width, leaf_range, NULL, &s->tri_bvh)) {
+            if (!ok || !bvhw_from_bvh2(a, tpool, &b2, width, leaf_range, NULL, &s->tri_bvh) ||
+                !bvhw_compact(a, &s->tri_bvh)) {
+                bvhw_free(a, &s->tri_bvh);
                 sys_free(a, pc.blocks, alloc_blocks * sizeof(tri4));
                 err = RP_ERROR_OUT_OF_MEMORY;
             } else {
@@ -923,6 +925,7 @@ static bool scene_refit(rp_scene *s) {
     bvhw wide = {0};
     if (ok) ok = bvhw_from_bvh2(a, j.count >= 1024 ? pool : NULL, &s->tri_bvh2, s->tri_bvh.width, leaf_range, NULL, &wide);
     if (locked) pthread_mutex_unlock(&s->device->pool_lock);
+    if (ok && !bvhw_compact(a, &wide)) bvhw_free(a, &wide), ok = false;
     if (!ok) return false;
     bvhw_free(a, &s->tri_bvh);
     s->tri_bvh = wide;

@@ -74,11 +74,29 @@ double bvh2_refit_blocks(bvh2 *bvh, const struct tri4 *blocks, double trav_cost)
 
 static inline uint32_t bvhw_node_bytes(int width) { return (uint32_t)width * 7u * 4u; }
 
+/* Compact layout (the triangle BVH's): a node of width W that holds at most W / 2^s children is
+ * stored W / 2^s wide (s = 0..3, at least 2 wide), in the same form, padded to 64 bytes. An inner
+ * reference is then the node's byte offset / 64 << 2 | s; the root (reference 0) is full width.
+ * BVH16 nodes had held 4.5 children on average (28-36% of their slots: most nodes near the leaves
+ * hold 2-4), and their 448 bytes had been 28-31% of a scene's structure. */
+#define BVHW_KIND_BITS 2u
+#define BVHW_KIND_MASK 3u
+/* Bytes past the last node that the kernels' full-width loads of a narrow node may read. */
+#define BVHW_TAIL_PAD 64u
+
+static inline uint32_t bvhw_kind_bytes(int width, uint32_t s) {
+    return (bvhw_node_bytes(width >> s) + 63u) & ~63u;
+}
+static inline const char *bvhw_node_at(const void *nodes, uint32_t ref) {
+    return (const char *)nodes + (size_t)(ref >> BVHW_KIND_BITS) * 64u;
+}
+
 typedef struct bvhw {
     int width;
     void *nodes;        /* 64-byte aligned array of node_count nodes; node 0 is the root */
     uint32_t node_count;
     size_t bytes;
+    bool compact;       /* the compact layout above (bvhw_compact) */
 } bvhw;
 
 /* Maps a binary leaf to its payload: the first item and the number of items (1..15) holding its
@@ -90,5 +108,8 @@ typedef bool (*bvhw_leaf_fn)(void *user, const bvh_node *leaf, uint32_t *first_i
 bool bvhw_from_bvh2(const sys_allocator *alloc, sys_pool *pool, const bvh2 *src, int width, bvhw_leaf_fn leaf,
                     void *leaf_user, bvhw *out);
 void bvhw_free(const sys_allocator *alloc, bvhw *bvh);
+/* Rewrites a wide BVH in the compact layout (above); false (bvh unchanged) when out of memory or
+ * past the references' reach. */
+bool bvhw_compact(const sys_allocator *alloc, bvhw *bvh);
 
 #endif

@@ -62,6 +62,46 @@ double bvh2_blocks_cost(const bvh2 *bvh, double trav_cost);
 struct tri4;
 double bvh2_refit_blocks(bvh2 *bvh, const struct tri4 *blocks, double trav_cost);
 
+/* The binary BVH the large packets walk (and the refit and the CUDA layout start from), kept
+ * beside the wide one in 16 bytes a node instead of 32: each box is quantized to 16 bits per plane
+ * on a grid over the root's box, rounded outward (lower planes down, upper planes up, checked when
+ * encoded, with one more step of margin), so a decoded box holds the exact one and no ray loses a
+ * hit; a grid step is 1/65535 of the scene's extent. ic: index << 4 | count, as bvh_node's index
+ * and count (a leaf's count is its tri4 blocks, at most 15). */
+typedef struct bvh2q_node {
+    uint16_t lo[3], hi[3];
+    uint32_t ic;
+} bvh2q_node;
+
+#define BVH2Q_MAX_INDEX ((1u << 28) - 1u)
+
+typedef struct bvh2q {
+    bvh2q_node *nodes;   /* 64-byte aligned; nodes[0] is the root */
+    uint32_t node_count; /* as bvh2's, unused nodes included */
+    uint32_t depth, leaf_count;
+    float org[3], scale[3]; /* a plane q decodes to org + q * scale (no fused multiply-add) */
+} bvh2q;
+
+/* A node with its box decoded (conservative) and its index and count. */
+static inline bvh_node bvh2q_decode(const bvh2q_node *n, const float org[3], const float scale[3]) {
+    bvh_node d;
+    for (int a = 0; a < 3; a++) {
+        d.lo[a] = org[a] + (float)n->lo[a] * scale[a];
+        d.hi[a] = org[a] + (float)n->hi[a] * scale[a];
+    }
+    d.index = n->ic >> 4;
+    d.count = n->ic & 15u;
+    return d;
+}
+
+/* Encodes a binary BVH whose leaves are ranges of at most 15 tri4 blocks; false when out of
+ * memory, when an index or a count does not fit, or when a box is not finite. */
+bool bvh2q_from_bvh2(const sys_allocator *alloc, const bvh2 *src, bvh2q *out);
+/* The float form of a quantized BVH (decoded, so conservative, boxes; no prims), for the refit
+ * and the CUDA layout; free it with bvh2_free. */
+bool bvh2q_to_bvh2(const sys_allocator *alloc, const bvh2q *src, bvh2 *out);
+void bvh2q_free(const sys_allocator *alloc, bvh2q *q);
+
 /* Wide node of width W (4, 8 or 16) is stored as floats bounds[6][W] (lo_x, hi_x, lo_y, hi_y,
  * lo_z, hi_z) followed by uint32_t child[W]. A child reference is either an inner node index or a
  * leaf: BVHW_LEAF | first_item << 4 | item_count (1..15). Empty slots have an empty box and the

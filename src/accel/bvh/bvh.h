@@ -6,6 +6,7 @@
 
 #include <math.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "math/vec.h"
 #include "simd/simd.h"
@@ -91,6 +92,27 @@ static inline bvh_node bvh2q_decode(const bvh2q_node *n, const float org[3], con
     }
     d.index = n->ic >> 4;
     d.count = n->ic & 15u;
+    return d;
+}
+
+/* The same decode, the six planes at once (zero extension, conversion, multiply, add: the same
+ * IEEE results lane by lane); org and scale hold lo x y z, hi x y z, 0, 0 (bvh2q_grid8). The large
+ * packets decode every node they visit and both children of each inner one: scalar, that had cost
+ * 6.8% more instructions than the float nodes (AVX2, conference, 16x16 Span, callgrind). */
+typedef uint16_t bvh2q_u16x8 __attribute__((vector_size(16)));
+typedef int32_t bvh2q_i32x8 __attribute__((vector_size(32)));
+typedef float bvh2q_f32x8 __attribute__((vector_size(32)));
+
+static inline void bvh2q_grid8(const float org[3], const float scale[3], bvh2q_f32x8 *o8, bvh2q_f32x8 *s8) {
+    *o8 = (bvh2q_f32x8){org[0], org[1], org[2], org[0], org[1], org[2], 0.0f, 0.0f};
+    *s8 = (bvh2q_f32x8){scale[0], scale[1], scale[2], scale[0], scale[1], scale[2], 0.0f, 0.0f};
+}
+
+static inline bvh_node bvh2q_decode8(const bvh2q_node *n, bvh2q_f32x8 o8, bvh2q_f32x8 s8) {
+    bvh2q_u16x8 q;
+    memcpy(&q, n, sizeof q);
+    bvh2q_f32x8 b = o8 + __builtin_convertvector(__builtin_convertvector(q, bvh2q_i32x8), bvh2q_f32x8) * s8;
+    bvh_node d = {{b[0], b[1], b[2]}, n->ic >> 4, {b[3], b[4], b[5]}, n->ic & 15u};
     return d;
 }
 

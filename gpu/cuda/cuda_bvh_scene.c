@@ -1,5 +1,5 @@
 /* The canonical binary BVH of a committed scene (core/scene.c keeps it beside the wide layout, its
- * leaves ranges of tri4 blocks) converted to the CUDA layout of cuda_bvh.h (tinybvh's ConvertFrom:
+ * leaves ranges of tri4 blocks, quantized: decoded here, so its boxes are conservative) converted to the CUDA layout of cuda_bvh.h (tinybvh's ConvertFrom:
  * the builder stays the CPU's, only the layout changes). A node's children are numbered when it is
  * written and the left subtree is walked first, so siblings are adjacent and a leaf's triangles
  * follow its parent's other leaves'. Also the grid's arrays for the CUDA grid. */
@@ -47,13 +47,26 @@ static bool put_leaf(const rp_scene *s, const bvh_node *leaf, rp_cuda_bvh_src *o
     return true;
 }
 
+static bool src_from_tree(const rp_scene *s, const bvh2 *b, bool empty, rp_cuda_bvh_src *out, char *err,
+                          size_t err_size);
+
 bool rp_cuda_bvh_src_from_scene(const rp_scene *s, rp_cuda_bvh_src *out, char *err, size_t err_size) {
     memset(out, 0, sizeof *out);
     if (!s || !s->committed) return fail(err, err_size, "the scene is not committed");
     if (s->desc.accel != RP_ACCEL_BVH) return fail(err, err_size, "the GPU traces the BVH only (--accel bvh)");
     out->skipped = s->prim_count;
-    const bvh2 *b = &s->tri_bvh2;
+    bvh2 tree = {0};
+    if (s->tri_bvh2q.nodes && !bvh2q_to_bvh2(&s->device->alloc, &s->tri_bvh2q, &tree))
+        return fail(err, err_size, "out of memory");
+    const bvh2 *b = &tree;
     bool empty = !b->nodes || !s->tris;
+    bool ok = src_from_tree(s, b, empty, out, err, err_size);
+    bvh2_free(&s->device->alloc, &tree);
+    return ok;
+}
+
+static bool src_from_tree(const rp_scene *s, const bvh2 *b, bool empty, rp_cuda_bvh_src *out, char *err,
+                          size_t err_size) {
     if (!empty && b->depth > RP_CUDA_STACK) return fail(err, err_size, "BVH deeper than the GPU traversal stack");
     /* at most one GPU node per binary inner node, and one more when the root is a leaf */
     size_t inner = empty ? 1 : (b->leaf_count > 1 ? b->leaf_count - 1 : 1);

@@ -60,7 +60,8 @@ struct rp_scene {
     accel_built alt;      /* the triangles' kd-tree or BIH (desc.accel), else empty */
     /* storage behind accel */
     bvhw tri_bvh, prim_bvh;
-    bvh2 tri_bvh2;        /* binary BVH of the triangles, leaves rewritten to tri4 blocks (large packets) */
+    bvh2q tri_bvh2q;      /* binary BVH of the triangles, leaves rewritten to tri4 blocks (large packets),
+                           * quantized (bvh.h) */
     tri4 *tris;
     size_t tri_block_count;
     prim_ref *prims;

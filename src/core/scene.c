@@ -47,7 +47,7 @@ void scene_free_accel(rp_scene *s) {
     const sys_allocator *a = &s->device->alloc;
     bvhw_free(a, &s->tri_bvh);
     bvhw_free(a, &s->prim_bvh);
-    if (s->tri_bvh2.nodes) bvh2_free(a, &s->tri_bvh2);
+    bvh2q_free(a, &s->tri_bvh2q);
     sys_free(a, s->tris, s->tri_block_count * sizeof(tri4));
     sys_free(a, s->prims, s->prim_count * sizeof(prim_ref));
     accel_built_free(a, &s->alt);
@@ -133,7 +133,6 @@ static void scene_record_build(rp_scene *s) {
     for (uint32_t i = 0; i < s->geom_count; i++) s->built_topo[i] = s->geoms[i] ? s->geoms[i]->topo : RP_INVALID_ID;
     s->built_count = s->geom_count;
     s->attach_changed = false;
-    s->built_cost = s->tri_bvh2.nodes ? bvh2_blocks_cost(&s->tri_bvh2, REFIT_TRAV_COST) : 0.0;
 }
 
 rp_error rp_scene_commit(rp_scene *scene) {
@@ -557,6 +556,7 @@ static rp_error gather_triangles(const rp_scene *s, sys_pool *pool, gather *out,
 rp_error scene_build(rp_scene *s) {
     const sys_allocator *a = &s->device->alloc;
     rp_scene_stats st = {0};
+    s->built_cost = 0.0;
     gather tris = {0}, prims = {0};
     rp_error err = RP_ERROR_NONE;
     box3 bounds = box3_empty();
@@ -720,7 +720,9 @@ rp_error scene_build(rp_scene *s) {
                 mean_side = leaves ? (double)sum / (double)leaves * 0x1p-24 * diag : 0.0;
             }
             sys_free(a, sums, sbytes);
-            if (!ok || !bvhw_from_bvh2(a, tpool, &b2, width, leaf_range, NULL, &s->tri_bvh)) {
+            if (!ok || !bvhw_from_bvh2(a, tpool, &b2, width, leaf_range, NULL, &s->tri_bvh) ||
+                !bvhw_compact(a, &s->tri_bvh) || !bvh2q_from_bvh2(a, &b2, &s->tri_bvh2q)) {
+                bvhw_free(a, &s->tri_bvh);
                 sys_free(a, pc.blocks, alloc_blocks * sizeof(tri4));
                 err = RP_ERROR_OUT_OF_MEMORY;
             } else {
@@ -736,12 +738,12 @@ rp_error scene_build(rp_scene *s) {
                 st.depth = b2.depth;
                 st.sah_cost = b2.sah_cost;
                 st.tri_refs = tris.count;
-                st.bytes = s->tri_bvh.bytes + (size_t)pc.block_count * sizeof(tri4) + (size_t)b2.node_count * sizeof(bvh_node);
-                s->tri_bvh2 = b2;
-                b2.nodes = NULL;
+                st.bytes = s->tri_bvh.bytes + (size_t)pc.block_count * sizeof(tri4) +
+                           (size_t)s->tri_bvh2q.node_count * sizeof(bvh2q_node);
+                s->built_cost = bvh2_blocks_cost(&b2, REFIT_TRAV_COST); /* the exact tree's, for scene_refit */
             }
             sys_free(a, pc.block_of, (size_t)b2.prim_count * sizeof(uint32_t));
-            if (b2.nodes) bvh2_free(a, &b2);
+            bvh2_free(a, &b2);
         }
     }
     if (err == RP_ERROR_NONE && prims.count) {
@@ -784,7 +786,9 @@ rp_error scene_build(rp_scene *s) {
         .nodes = s->tri_bvh.nodes,
         .tris = s->tris,
         .tri_mask_and = tri_mask_and,
-        .nodes2 = s->tri_bvh2.nodes,
+        .nodes2 = s->tri_bvh2q.nodes,
+        .q_org = {s->tri_bvh2q.org[0], s->tri_bvh2q.org[1], s->tri_bvh2q.org[2]},
+        .q_scale = {s->tri_bvh2q.scale[0], s->tri_bvh2q.scale[1], s->tri_bvh2q.scale[2]},
         .pnodes = s->prim_bvh.nodes,
         .prims = s->prims,
         .prim_intersect = sphere_intersect_cb,
@@ -909,7 +913,7 @@ static void refit_fill_task(void *user, uint32_t index, uint32_t thread) {
  * BVH scene whose geometries kept their topology since the last build, when a vertex became
  * invalid, or when the refitted tree's SAH cost grew past refit_max_growth times the built one's. */
 static bool scene_refit(rp_scene *s) {
-    if (s->desc.accel != RP_ACCEL_BVH || s->desc.refit_max_growth < 0.0f || !s->tri_bvh2.nodes || !s->tris ||
+    if (s->desc.accel != RP_ACCEL_BVH || s->desc.refit_max_growth < 0.0f || !s->tri_bvh2q.nodes || !s->tris ||
         s->attach_changed || s->geom_count != s->built_count || s->prim_count || s->stats.rejected_prims ||
         s->stats.degenerate_prims)
         return false;
@@ -930,21 +934,35 @@ static bool scene_refit(rp_scene *s) {
     if (j.chunks > 1) sys_pool_parallel_for(pool, j.chunks, refit_fill_task, &j);
     else refit_fill_task(&j, 0, 0);
     bool ok = !atomic_load(&j.bad);
-    double cost = ok ? bvh2_refit_blocks(&s->tri_bvh2, s->tris, REFIT_TRAV_COST) : 0.0;
+    /* the float tree, refitted, then quantized again (its topology is the quantized one's) */
+    bvh2 tree = {0};
+    bvh2q q = {0};
+    if (ok) ok = bvh2q_to_bvh2(a, &s->tri_bvh2q, &tree);
+    double cost = ok ? bvh2_refit_blocks(&tree, s->tris, REFIT_TRAV_COST) : 0.0;
     if (ok && cost > (double)s->desc.refit_max_growth * s->built_cost) ok = false;
     bvhw wide = {0};
-    if (ok) ok = bvhw_from_bvh2(a, j.count >= 1024 ? pool : NULL, &s->tri_bvh2, s->tri_bvh.width, leaf_range, NULL, &wide);
+    if (ok) ok = bvhw_from_bvh2(a, j.count >= 1024 ? pool : NULL, &tree, s->tri_bvh.width, leaf_range, NULL, &wide);
     if (locked) pthread_mutex_unlock(&s->device->pool_lock);
-    if (!ok) return false;
+    if (ok && !bvhw_compact(a, &wide)) bvhw_free(a, &wide), ok = false;
+    if (ok && !bvh2q_from_bvh2(a, &tree, &q)) bvhw_free(a, &wide), ok = false;
+    if (!ok) {
+        bvh2_free(a, &tree);
+        return false;
+    }
     bvhw_free(a, &s->tri_bvh);
     s->tri_bvh = wide;
-    const bvh_node *r = &s->tri_bvh2.nodes[0];
+    bvh2q_free(a, &s->tri_bvh2q);
+    s->tri_bvh2q = q;
+    const bvh_node *r = &tree.nodes[0];
     s->bounds = (rp_bounds){r->lo[0], r->lo[1], r->lo[2], 0.0f, r->hi[0], r->hi[1], r->hi[2], 0.0f};
+    bvh2_free(a, &tree);
     s->accel.nodes = s->tri_bvh.nodes;
+    s->accel.nodes2 = s->tri_bvh2q.nodes;
+    for (int k = 0; k < 3; k++) s->accel.q_org[k] = s->tri_bvh2q.org[k], s->accel.q_scale[k] = s->tri_bvh2q.scale[k];
     s->stats.wide_nodes = s->tri_bvh.node_count;
     s->stats.sah_cost = cost;
     s->stats.bytes = s->tri_bvh.bytes + (s->tri_block_count - 1) * sizeof(tri4) +
-                     (size_t)s->tri_bvh2.node_count * sizeof(bvh_node);
+                     (size_t)s->tri_bvh2q.node_count * sizeof(bvh2q_node);
     s->stats.refit = 1;
     return true;
 }

@@ -48,7 +48,8 @@ struct rp_accel {
     const tri4 *tris;
     uint32_t tri_mask_and;     /* AND of the triangle geometries' masks: a ray sharing a bit with it
                                 * passes every mask test, so its leaves skip them */
-    const void *nodes2;        /* the binary BVH (bvh_node), leaves: tri4 blocks [index, index + count) */
+    const void *nodes2;        /* the binary BVH (bvh2q_node), leaves: tri4 blocks [index, index + count) */
+    float q_org[3], q_scale[3]; /* its boxes' grid (bvh2q_decode) */
     /* spheres and user primitives: BVH4 of prim_refs */
     const void *pnodes;        /* NULL when there are none */
     const prim_ref *prims;

@@ -220,3 +220,51 @@ void bvhw_free(const sys_allocator *alloc, bvhw *bvh) {
     if (bvh->nodes) sys_free(alloc, bvh->nodes, bvh->bytes);
     memset(bvh, 0, sizeof *bvh);
 }
+
+bool bvhw_compact(const sys_allocator *alloc, bvhw *bvh) {
+    const int w = bvh->width;
+    const uint32_t n = bvh->node_count, stride = bvhw_node_bytes(w);
+    if (bvh->compact || !bvh->nodes || n == 0) return true;
+    uint32_t max_s = 0;
+    while ((w >> (max_s + 1)) >= 2 && max_s < BVHW_KIND_MASK) max_s++;
+    /* each node's kind and 64-byte offset, the nodes in the order they were numbered */
+    uint32_t *ref = sys_alloc(alloc, (size_t)n * sizeof(uint32_t));
+    if (!ref) return false;
+    uint64_t units = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        const uint32_t *child = (const uint32_t *)((const char *)bvh->nodes + (size_t)i * stride + 6u * 4u * (size_t)w);
+        int k = 0;
+        for (int q = 0; q < w; q++)
+            if (child[q] != BVHW_EMPTY) k = q + 1;
+        uint32_t s = 0;
+        while (i != 0 && s < max_s && (w >> (s + 1)) >= k) s++;
+        ref[i] = (uint32_t)units << BVHW_KIND_BITS | s;
+        units += bvhw_kind_bytes(w, s) / 64u;
+        if (units >= (1u << (31 - BVHW_KIND_BITS))) { /* past what a reference can address */
+            sys_free(alloc, ref, (size_t)n * sizeof(uint32_t));
+            return false;
+        }
+    }
+    size_t bytes = (size_t)units * 64u + BVHW_TAIL_PAD;
+    char *out = sys_alloc(alloc, bytes);
+    if (!out) {
+        sys_free(alloc, ref, (size_t)n * sizeof(uint32_t));
+        return false;
+    }
+    memset(out, 0, bytes);
+    for (uint32_t i = 0; i < n; i++) {
+        const float *b = (const float *)((const char *)bvh->nodes + (size_t)i * stride);
+        const uint32_t *child = (const uint32_t *)(b + 6 * w);
+        const int kw = w >> (ref[i] & BVHW_KIND_MASK);
+        float *d = (float *)(out + (size_t)(ref[i] >> BVHW_KIND_BITS) * 64u);
+        uint32_t *dc = (uint32_t *)(d + 6 * kw);
+        for (int p = 0; p < 6; p++) memcpy(d + p * kw, b + p * w, (size_t)kw * sizeof(float));
+        for (int q = 0; q < kw; q++) dc[q] = (child[q] & BVHW_LEAF) ? child[q] : ref[child[q]];
+    }
+    sys_free(alloc, ref, (size_t)n * sizeof(uint32_t));
+    sys_free(alloc, bvh->nodes, bvh->bytes);
+    bvh->nodes = out;
+    bvh->bytes = bytes;
+    bvh->compact = true;
+    return true;
+}

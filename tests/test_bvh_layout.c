@@ -1,0 +1,139 @@
+// rp-test: labels=core timeout=120
+/* The compact layouts of the triangle BVH (accel/bvh/bvh.h): the quantized binary BVH's decoded
+ * boxes hold the exact ones (boxes far from the origin, tiny, flat and point-like ones, and one
+ * scene of a single box), with the same topology; the compact wide BVH holds, node for node, the
+ * children and boxes of the full-width one, each node as narrow as its children allow. */
+#include <math.h>
+#include <stdint.h>
+
+#include "accel/bvh/bvh.h"
+#include "rp_test.h"
+
+static uint64_t rng_state = 7;
+static float rng_f(void) {
+    rng_state = rng_state * 6364136223846793005ull + 1442695040888963407ull;
+    return (float)((uint32_t)(rng_state >> 33) >> 7) * (1.0f / 16777216.0f);
+}
+
+/* n boxes of one of several shapes around `centre`, spread over `extent`. */
+static void make_boxes(bvh_prim *p, uint32_t n, float centre, float extent, int shape) {
+    for (uint32_t i = 0; i < n; i++) {
+        box3 b;
+        float c[3], s[3];
+        for (int a = 0; a < 3; a++) {
+            c[a] = centre + (rng_f() - 0.5f) * extent;
+            s[a] = shape == 0 ? rng_f() * extent * 1e-3f : shape == 1 ? rng_f() * extent * 1e-6f : 0.0f;
+        }
+        if (shape == 3) s[0] = extent * 0.01f, s[1] = 0.0f, s[2] = extent * 0.01f; /* flat */
+        b.lo = v3(c[0] - s[0], c[1] - s[1], c[2] - s[2]);
+        b.hi = v3(c[0] + s[0], c[1] + s[1], c[2] + s[2]);
+        p[i] = bvh_prim_of(b);
+    }
+}
+
+/* Leaves as bvhw_from_bvh2 wants them (their primitive range, at most 15 items). */
+static bool leaf_fn(void *user, const bvh_node *leaf, uint32_t *first, uint32_t *items) {
+    (void)user;
+    *first = leaf->index;
+    *items = (leaf->count + 3) / 4;
+    return true;
+}
+
+static void check_quant(const sys_allocator *a, const bvh2 *b) {
+    /* the counts as scene.c leaves them: blocks of 4 */
+    bvh2 t = *b;
+    bvh_node *nodes = malloc((size_t)b->node_count * sizeof *nodes);
+    memcpy(nodes, b->nodes, (size_t)b->node_count * sizeof *nodes);
+    for (uint32_t i = 0; i < b->node_count; i++)
+        if (nodes[i].count) nodes[i].count = (nodes[i].count + 3) / 4;
+    t.nodes = nodes;
+    bvh2q q;
+    CHECK(bvh2q_from_bvh2(a, &t, &q));
+    if (!q.nodes) {
+        free(nodes);
+        return;
+    }
+    uint32_t bad = 0, moved = 0;
+    for (uint32_t i = 0; i < t.node_count; i++) {
+        const bvh_node *n = &t.nodes[i];
+        if (i != 0 && n->count == 0 && n->index == 0) continue; /* unused */
+        bvh_node d = bvh2q_decode(&q.nodes[i], q.org, q.scale);
+        moved += d.index != n->index || d.count != n->count;
+        for (int k = 0; k < 3; k++) bad += !(d.lo[k] <= n->lo[k]) || !(d.hi[k] >= n->hi[k]);
+    }
+    CHECKF(bad == 0, "%u planes of decoded boxes cut into the exact boxes", bad);
+    CHECK(moved == 0);
+    bvh2 back;
+    CHECK(bvh2q_to_bvh2(a, &q, &back));
+    CHECK(back.node_count == t.node_count && back.depth == t.depth && back.leaf_count == t.leaf_count);
+    bvh2_free(a, &back);
+    bvh2q_free(a, &q);
+    free(nodes);
+}
+
+static uint32_t kids_of(const float *b, int w, const uint32_t **child) {
+    *child = (const uint32_t *)(b + 6 * w);
+    uint32_t k = 0;
+    for (int i = 0; i < w; i++)
+        if ((*child)[i] != BVHW_EMPTY) k = (uint32_t)i + 1;
+    return k;
+}
+
+/* Walks the full-width and the compact tree side by side. */
+static void check_compact(const sys_allocator *a, const bvh2 *b, int width) {
+    bvhw full, comp;
+    CHECK(bvhw_from_bvh2(a, NULL, b, width, leaf_fn, NULL, &full));
+    CHECK(bvhw_from_bvh2(a, NULL, b, width, leaf_fn, NULL, &comp));
+    CHECK(bvhw_compact(a, &comp) && comp.compact);
+    /* smaller, but for trees of a few nodes (the root rounded up to 64 bytes, the tail's pad) */
+    CHECKF(full.node_count > 16 ? comp.bytes < full.bytes : comp.bytes <= full.bytes + 64 + BVHW_TAIL_PAD,
+           "compact %zu bytes, full %zu", comp.bytes, full.bytes);
+    uint32_t stack_f[4096], stack_c[4096], sp = 0, bad = 0, visited = 0;
+    stack_f[sp] = 0, stack_c[sp] = 0, sp++;
+    while (sp && sp < 4096 - 16) {
+        sp--;
+        uint32_t rf = stack_f[sp], rc = stack_c[sp];
+        const float *bf = (const float *)((const char *)full.nodes + (size_t)rf * bvhw_node_bytes(width));
+        const int wc = width >> (rc & BVHW_KIND_MASK);
+        const float *bc = (const float *)bvhw_node_at(comp.nodes, rc);
+        const uint32_t *cf, *cc;
+        uint32_t kf = kids_of(bf, width, &cf), kc = kids_of(bc, wc, &cc);
+        visited++;
+        /* as narrow as the children allow (the root stays full width), and the same children */
+        bad += kc != kf || (rc != 0 && wc > 2 && (uint32_t)(wc / 2) >= kf) || (rc == 0 && wc != width);
+        for (uint32_t i = 0; i < kf && i < kc; i++) {
+            for (int p = 0; p < 6; p++) bad += memcmp(&bf[p * width + (int)i], &bc[p * wc + (int)i], 4) != 0;
+            if (cf[i] & BVHW_LEAF) {
+                bad += cc[i] != cf[i];
+            } else {
+                bad += (cc[i] & BVHW_LEAF) != 0;
+                stack_f[sp] = cf[i], stack_c[sp] = cc[i], sp++;
+            }
+        }
+    }
+    CHECKF(bad == 0 && visited == full.node_count, "%u differences, %u of %u nodes visited", bad, visited,
+           full.node_count);
+    bvhw_free(a, &full);
+    bvhw_free(a, &comp);
+}
+
+int main(void) {
+    const sys_allocator a = {sys_default_alloc, NULL};
+    const float centres[3] = {0.0f, 1.0e4f, -3.0e6f};
+    const uint32_t sizes[4] = {1, 7, 1000, 20000};
+    for (int c = 0; c < 3; c++)
+        for (int shape = 0; shape < 4; shape++)
+            for (int si = 0; si < 4; si++) {
+                uint32_t n = sizes[si];
+                bvh_prim *p = malloc((size_t)n * sizeof *p);
+                make_boxes(p, n, centres[c], c == 2 ? 10.0f : 100.0f, shape);
+                bvh2 b;
+                bvh_build_desc d = {.bins = 16, .max_leaf_size = 8, .block_size = 4, .trav_cost = 0.5f};
+                CHECK(bvh_build(&a, NULL, p, n, &d, &b));
+                check_quant(&a, &b);
+                for (int w = 4; w <= 16; w *= 2) check_compact(&a, &b, w);
+                bvh2_free(&a, &b);
+                free(p);
+            }
+    return RP_TEST_END();
+}

@@ -1,4 +1,4 @@
-/* Acceleration structures other than the BVH (kd-tree, BIH): what their builders take, what they
+/* Acceleration structures other than the BVH (kd-tree, BIH, uniform grid): what their builders take, what they
  * produce, and the query table a scene picks at commit (STYLE.md: open sets are tables of
  * function pointers). Builders read primitive boxes and, through a callback, the triangles' vertices;
  * their leaves are ranges of tri4 blocks, tested with the project's watertight test (tri_leaf.h), so
@@ -23,6 +23,7 @@ typedef struct accel_tri_input {
     /* Writes triangle r's vertices (v0 xyz, v1 xyz, v2 xyz) and its geometry's mask. */
     void (*fetch)(const void *user, prim_ref r, float v[9], uint32_t *mask);
     const void *user;
+    float grid_density;     /* the grid's voxels per triangle (rp_scene_desc.grid_density; 0: default) */
 } accel_tri_input;
 
 /* What a builder made: nodes (its own layout) and the tri4 blocks its leaves point at. */
@@ -45,9 +46,9 @@ typedef struct accel_ops {
     const rp_kernels *kernels;
 } accel_ops;
 
-extern const accel_ops accel_kdtree, accel_bih;
-/* The structures' queries (kdtree_trav.c, bih_trav.c). */
-extern const rp_kernels kdtree_kernels, bih_kernels;
+extern const accel_ops accel_kdtree, accel_bih, accel_grid;
+/* The structures' queries (kdtree_trav.c, bih_trav.c, grid_accel.c). */
+extern const rp_kernels kdtree_kernels, bih_kernels, grid_accel_kernels;
 
 /* Frees what a builder made. */
 void accel_built_free(const sys_allocator *a, accel_built *b);

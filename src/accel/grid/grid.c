@@ -107,11 +107,11 @@ static void scan(grid *g, double margin, bool fill, uint32_t *cursor) {
     }
 }
 
+static grid *build_lists(grid *g, const grid_desc *desc_in);
+
 /* The grid of the tri4 blocks and of the primitives of g->prims / g->prim_box (set by the caller;
  * g allocated, its allocator set). */
 static grid *build(grid *g, const tri4 *blocks, size_t block_count, const grid_desc *desc_in) {
-    double t0 = sys_seconds();
-    grid_desc desc = grid_desc_defaults(desc_in);
     const sys_allocator *alloc = &g->alloc;
     size_t n = 0;
     for (size_t b = 0; b < block_count; b++)
@@ -119,16 +119,30 @@ static grid *build(grid *g, const tri4 *blocks, size_t block_count, const grid_d
     g->tri_capacity = n ? n : 1;
     g->tris = sys_alloc(alloc, g->tri_capacity * sizeof(grid_tri));
     if (!g->tris) goto fail;
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (size_t b = 0; b < block_count; b++)
         for (int l = 0; l < 4; l++) {
             if (!blocks[b].mask[l]) continue;
             grid_tri t = {.geom = blocks[b].geom[l], .prim = blocks[b].prim[l], .mask = blocks[b].mask[l]};
             for (int k = 0; k < 9; k++) t.v[k] = blocks[b].v[k][l];
             if (!tri_finite(t.v)) continue; /* the BVH never hits these either */
-            for (int k = 0; k < 9; k++) lo[k % 3] = fmin(lo[k % 3], t.v[k]), hi[k % 3] = fmax(hi[k % 3], t.v[k]);
             g->tris[g->tri_count++] = t;
         }
+    return build_lists(g, desc_in);
+fail:
+    grid_free(g);
+    return NULL;
+}
+
+/* The voxel lists of g->tris (finite triangles) and of the primitives of g->prims / g->prim_box. */
+static grid *build_lists(grid *g, const grid_desc *desc_in) {
+    double t0 = sys_seconds();
+    grid_desc desc = grid_desc_defaults(desc_in);
+    const sys_allocator *alloc = &g->alloc;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t i = 0; i < g->tri_count; i++) {
+        const float *v = g->tris[i].v;
+        for (int k = 0; k < 9; k++) lo[k % 3] = fmin(lo[k % 3], v[k]), hi[k % 3] = fmax(hi[k % 3], v[k]);
+    }
     for (uint32_t k = 0; k < g->prim_count; k++)
         for (int a = 0; a < 3; a++)
             lo[a] = fmin(lo[a], g->prim_box[6 * k + a]), hi[a] = fmax(hi[a], g->prim_box[6 * k + 3 + a]);
@@ -227,6 +241,21 @@ oom:
     grid_free(g);
     snprintf(err, err_size, "grid: out of memory");
     return NULL;
+}
+
+grid *grid_build_tris(const sys_allocator *alloc, const grid_tri *tris, uint32_t count, const grid_desc *desc) {
+    grid *g = sys_calloc(alloc, sizeof(grid));
+    if (!g) return NULL;
+    g->alloc = *alloc;
+    g->tri_capacity = count ? count : 1;
+    g->tris = sys_alloc(alloc, g->tri_capacity * sizeof(grid_tri));
+    if (!g->tris) {
+        grid_free(g);
+        return NULL;
+    }
+    for (uint32_t i = 0; i < count; i++)
+        if (tri_finite(tris[i].v)) g->tris[g->tri_count++] = tris[i];
+    return build_lists(g, desc);
 }
 
 grid *grid_build_tri4(const sys_allocator *alloc, const tri4 *blocks, size_t block_count, const grid_desc *desc) {

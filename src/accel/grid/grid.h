@@ -62,6 +62,9 @@ typedef struct grid {
 /* Builds a grid over the live lanes (mask != 0) of tri4 blocks, copying their vertices. NULL when
  * out of memory. A grid of no triangles is valid (every ray misses). */
 grid *grid_build_tri4(const sys_allocator *alloc, const tri4 *blocks, size_t block_count, const grid_desc *desc);
+/* Builds a grid over count triangles (copied; non-finite ones are dropped, so g->tris[i] is
+ * tris[i] when all are finite). NULL when out of memory. */
+grid *grid_build_tris(const sys_allocator *alloc, const grid_tri *tris, uint32_t count, const grid_desc *desc);
 /* Builds a grid of a committed scene's triangles, spheres and user primitives. NULL with a message in
  * err when the scene is not committed, holds instances, or memory runs out. Owned by the caller (grid_free);
  * valid while the scene is not edited. */

@@ -1,0 +1,155 @@
+/* The uniform grid as a core acceleration structure (RP_ACCEL_GRID): the voxel lists of grid.c
+ * (resolution rule, margin, triangle / voxel overlap) repacked as tri4 blocks per voxel, so a
+ * voxel's triangles are tested four at a time by the BVH's watertight leaf test (tri_leaf.h) and
+ * every query returns the BVH's hits bit for bit. A triangle in several voxels is in a block of
+ * each; a mailbox of the triangles tested (Amanatides, Woo 1987) skips a block whose triangles
+ * were all tested already. Traversal is the 3D-DDA of Amanatides and Woo, front to back, ending
+ * when the closest hit lies before the current voxel's exit. Packets go ray by ray. */
+#include <math.h>
+#include <string.h>
+
+#include "accel/grid/grid.h"
+#include "accel/tri_leaf.h"
+
+/* At the head of accel_built.nodes, followed by
+ *   uint32_t first[voxel_count + 1]: voxel v's blocks are [first[v], first[v + 1]),
+ *   uint32_t ids[4 * block_count]: the triangle of each lane (the mailbox's key). */
+typedef struct grid_layout {
+    float lo[3], cell[3];
+    int32_t res[3];
+    uint32_t voxel_count;
+    uint64_t block_count;
+} grid_layout;
+
+#define LAYOUT_HEAD ((sizeof(grid_layout) + 63) / 64 * 64)
+
+static inline const uint32_t *layout_first(const grid_layout *g) {
+    return (const uint32_t *)((const char *)g + LAYOUT_HEAD);
+}
+static inline const uint32_t *layout_ids(const grid_layout *g) { return layout_first(g) + g->voxel_count + 1; }
+
+/* voxels per triangle when rp_scene_desc.grid_density is 0 */
+#define GRID_ACCEL_DENSITY 4.0f
+
+static bool grid_accel_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *in, accel_built *out) {
+    (void)pool;
+    memset(out, 0, sizeof *out);
+    grid_tri *tris = sys_alloc(a, (size_t)(in->count ? in->count : 1) * sizeof(grid_tri));
+    if (!tris) return false;
+    for (uint32_t i = 0; i < in->count; i++) {
+        grid_tri *t = &tris[i];
+        prim_ref r = in->refs[i];
+        in->fetch(in->user, r, t->v, &t->mask);
+        t->geom = r.geom, t->prim = r.prim, t->pad = 0;
+    }
+    grid_desc gd = {.density = in->grid_density > 0.0f ? in->grid_density : GRID_ACCEL_DENSITY};
+    grid *g = grid_build_tris(a, tris, in->count, &gd);
+    sys_free(a, tris, (size_t)(in->count ? in->count : 1) * sizeof(grid_tri));
+    if (!g) return false;
+    uint64_t blocks = 0;
+    for (uint32_t v = 0; v < g->voxel_count; v++) blocks += (g->offsets[v + 1] - g->offsets[v] + 3) / 4;
+    if (blocks >= UINT32_MAX / 4) {
+        grid_free(g);
+        return false;
+    }
+    size_t bytes = LAYOUT_HEAD + ((size_t)g->voxel_count + 1) * sizeof(uint32_t) + (size_t)blocks * 4 * sizeof(uint32_t);
+    grid_layout *lay = sys_alloc(a, bytes);
+    tri4 *tb = lay ? accel_blocks_alloc(a, (uint32_t)blocks) : NULL;
+    if (!tb) {
+        sys_free(a, lay, bytes);
+        grid_free(g);
+        return false;
+    }
+    memset(lay, 0, LAYOUT_HEAD);
+    for (int k = 0; k < 3; k++) lay->lo[k] = g->lo[k], lay->cell[k] = g->cell[k], lay->res[k] = g->res[k];
+    lay->voxel_count = g->voxel_count;
+    lay->block_count = blocks;
+    uint32_t *first = (uint32_t *)((char *)lay + LAYOUT_HEAD), *ids = first + g->voxel_count + 1;
+    uint32_t b = 0;
+    for (uint32_t v = 0; v < g->voxel_count; v++) {
+        first[v] = b;
+        for (uint32_t k = g->offsets[v]; k < g->offsets[v + 1]; k += 4, b++) {
+            uint32_t n = g->offsets[v + 1] - k < 4 ? g->offsets[v + 1] - k : 4;
+            tri4 *dst = &tb[b];
+            for (uint32_t lane = 0; lane < 4; lane++) {
+                /* unused lanes: lane 0 again, never hit (mask 0), as the BVH's blocks */
+                uint32_t i = g->items[k + (lane < n ? lane : 0)];
+                const grid_tri *t = &g->tris[i];
+                for (int q = 0; q < 9; q++) dst->v[q][lane] = t->v[q];
+                dst->geom[lane] = t->geom, dst->prim[lane] = t->prim;
+                dst->mask[lane] = lane < n ? t->mask : 0;
+                ids[4 * b + lane] = i;
+            }
+        }
+    }
+    first[g->voxel_count] = b;
+    out->nodes = lay;
+    out->node_bytes = bytes;
+    out->blocks = tb;
+    out->block_count = (uint32_t)blocks;
+    out->root_depth = 1;
+    out->nodes_total = g->voxel_count;
+    out->inner_nodes = 0;
+    out->leaves = g->nonempty;
+    out->tri_refs = g->item_count;
+    out->sah_cost = 0.0;
+    for (int k = 0; k < 3; k++) out->bounds[k] = g->lo[k], out->bounds[3 + k] = g->hi[k];
+    grid_free(g);
+    return true;
+}
+
+/* True when every lane's triangle of the block is in the mailbox; else puts them there. */
+static inline bool mailbox_all_seen(uint32_t *mb, const uint32_t *id) {
+    bool seen = mb[id[0] % GRID_MAILBOX] == id[0] && mb[id[1] % GRID_MAILBOX] == id[1] &&
+                mb[id[2] % GRID_MAILBOX] == id[2] && mb[id[3] % GRID_MAILBOX] == id[3];
+    if (!seen)
+        for (int l = 0; l < 4; l++) mb[id[l] % GRID_MAILBOX] = id[l];
+    return seen;
+}
+
+/* 3D-DDA (Amanatides, Woo 1987). Each axis's next crossing is computed afresh from its plane
+ * (not accumulated), so rounding does not grow along the ray; the voxel lists' margin covers the
+ * rest. The walk ends when the next voxel starts beyond the closest hit (with the kernels' cull
+ * slack, relative to the distance, for the rounding of both). */
+static bool grid_trav(const rp_accel *acc, const accel_built *s, const alt_ray *r, alt_hit *h, bool any) {
+    (void)acc;
+    float t0, t1;
+    if (!alt_ray_box(r, s->bounds, h->t, &t0, &t1)) return false;
+    const grid_layout *g = s->nodes;
+    const uint32_t *first = layout_first(g), *ids = layout_ids(g);
+    const int32_t stride[3] = {1, g->res[0], g->res[0] * g->res[1]};
+    int32_t cell[3], step[3], stop[3];
+    float next[3];
+    uint32_t voxel = 0;
+    for (int k = 0; k < 3; k++) {
+        float p = r->org[k] + r->dir[k] * t0;
+        float c = floorf((p - g->lo[k]) / g->cell[k]);
+        cell[k] = !(c >= 0.0f) ? 0 : (c > (float)(g->res[k] - 1) ? g->res[k] - 1 : (int32_t)c);
+        bool pos = r->rdir[k] >= 0.0f;
+        step[k] = pos ? 1 : -1;
+        stop[k] = pos ? g->res[k] : -1;
+        next[k] = r->dir[k] == 0.0f ? INFINITY
+                                    : (g->lo[k] + (float)(cell[k] + pos) * g->cell[k] - r->org[k]) * r->rdir[k];
+        voxel += (uint32_t)(cell[k] * stride[k]);
+    }
+    uint32_t mb[GRID_MAILBOX];
+    for (int i = 0; i < GRID_MAILBOX; i++) mb[i] = UINT32_MAX;
+    for (;;) {
+        for (uint32_t b = first[voxel], e = first[voxel + 1]; b < e; b++) {
+            if (mailbox_all_seen(mb, &ids[4 * b])) continue;
+            if (alt_leaf(s->blocks, r, b, 1, h, any)) return true;
+        }
+        int k = next[0] < next[1] ? (next[0] < next[2] ? 0 : 2) : (next[1] < next[2] ? 1 : 2);
+        float te = next[k];
+        float ht = h->t, lim = ht > 0.0f ? ht * ALT_CULL_SLACK : ht * (1.0f / ALT_CULL_SLACK);
+        if (te > t1 || te > lim) return false;
+        cell[k] += step[k];
+        if (cell[k] == stop[k]) return false;
+        voxel += (uint32_t)(step[k] * stride[k]);
+        next[k] = (g->lo[k] + (float)(cell[k] + (step[k] > 0)) * g->cell[k] - r->org[k]) * r->rdir[k];
+    }
+}
+
+ALT_KERNELS(grid_accel, grid_trav, alt_no_packets)
+
+RP_HIDDEN const accel_ops accel_grid = {"grid", grid_accel_build, &grid_accel_kernels};

@@ -51,8 +51,34 @@ static bool plane_overlaps(const double n[3], double d, const double c[3], const
     return fabs(s) <= r;
 }
 
+/* The nine edge x axis separating axes of the triangle-box test (Akenine-Moller 2001): false
+ * when one separates triangle v (three points) from the box of centre c and half sides h. */
+static bool edges_overlap(const float *v, const double c[3], const double h[3]) {
+    double p[3][3];
+    for (int i = 0; i < 3; i++)
+        for (int a = 0; a < 3; a++) p[i][a] = (double)v[3 * i + a] - c[a];
+    for (int e = 0; e < 3; e++) {
+        const double *a0 = p[e], *a1 = p[(e + 1) % 3];
+        double ed[3] = {a1[0] - a0[0], a1[1] - a0[1], a1[2] - a0[2]};
+        for (int k = 0; k < 3; k++) {
+            /* axis = unit vector k x edge */
+            double ax[3] = {0.0, 0.0, 0.0};
+            int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+            ax[k1] = -ed[k2], ax[k2] = ed[k1];
+            double mn = INFINITY, mx = -INFINITY;
+            for (int i = 0; i < 3; i++) {
+                double d = ax[0] * p[i][0] + ax[1] * p[i][1] + ax[2] * p[i][2];
+                mn = fmin(mn, d), mx = fmax(mx, d);
+            }
+            double rad = h[0] * fabs(ax[0]) + h[1] * fabs(ax[1]) + h[2] * fabs(ax[2]);
+            if (mn > rad || mx < -rad) return false;
+        }
+    }
+    return true;
+}
+
 /* Counts (fill == false) or writes (fill == true) the voxels of each triangle. */
-static void scan(grid *g, double margin, bool fill, uint32_t *cursor) {
+static void scan(grid *g, double margin, bool fill, uint32_t *cursor, bool sat) {
     for (uint32_t i = 0; i < g->tri_count; i++) {
         const float *v = g->tris[i].v;
         int lo[3], hi[3];
@@ -78,6 +104,7 @@ static void scan(grid *g, double margin, bool fill, uint32_t *cursor) {
                         double c[3] = {g->lo[0] + (x + 0.5) * g->cell[0], g->lo[1] + (y + 0.5) * g->cell[1],
                                        g->lo[2] + (z + 0.5) * g->cell[2]};
                         if (!plane_overlaps(n, nd, c, h)) continue;
+                        if (sat && !edges_overlap(v, c, h)) continue;
                     }
                     uint32_t c = ((uint32_t)z * (uint32_t)g->res[1] + (uint32_t)y) * (uint32_t)g->res[0] + (uint32_t)x;
                     if (fill)
@@ -175,7 +202,7 @@ static grid *build_lists(grid *g, const grid_desc *desc_in) {
     g->voxel_count = (uint32_t)g->res[0] * (uint32_t)g->res[1] * (uint32_t)g->res[2];
     g->offsets = sys_calloc(alloc, ((size_t)g->voxel_count + 1) * sizeof(uint32_t));
     if (!g->offsets) goto fail;
-    scan(g, margin, false, NULL);
+    scan(g, margin, false, NULL, desc.sat);
     for (uint32_t c = 0; c < g->voxel_count; c++) {
         g->nonempty += g->offsets[c + 1] != 0;
         g->offsets[c + 1] += g->offsets[c];
@@ -188,7 +215,7 @@ static grid *build_lists(grid *g, const grid_desc *desc_in) {
         goto fail;
     }
     memcpy(cursor, g->offsets, ((size_t)g->voxel_count + 1) * sizeof(uint32_t));
-    scan(g, margin, true, cursor);
+    scan(g, margin, true, cursor, desc.sat);
     sys_free(alloc, cursor, ((size_t)g->voxel_count + 1) * sizeof(uint32_t));
     g->build_ms = (sys_seconds() - t0) * 1e3;
     return g;

@@ -27,6 +27,11 @@ typedef struct grid_desc {
      * (64 for the bunny gives 98 x 64 x 163); 0: use density */
     int min_dim;
     int max_voxels; /* cap on the voxel count (memory); 0: 1 << 24 */
+    /* list a triangle only in the voxels it overlaps by the full separating-axis test (Akenine-
+     * Moller 2001: the box's axes, the triangle's normal and the nine edge x axis directions),
+     * not the voxels of its box that its plane crosses: fewer references for long thin and
+     * slanted triangles */
+    bool sat;
 } grid_desc;
 
 grid_desc grid_desc_defaults(const grid_desc *desc);

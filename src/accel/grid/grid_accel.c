@@ -16,8 +16,10 @@
 #define GRID_LEVELS 2
 
 /* At the head of accel_built.nodes, followed by
+ *   uint64_t bits[(voxel_count + 63) / 64]: voxel v holds triangles,
  *   uint32_t first[voxel_count + 1]: voxel v's blocks are [first[v], first[v + 1]),
- *   uint32_t ids[4 * block_count]: the triangle of each lane (the mailbox's key). */
+ *   uint32_t ids[4 * block_count]: the triangle of each lane (the mailbox's key),
+ *   uint8_t macro[level][macro_count[level]]: the macro cell holds triangles. */
 typedef struct grid_layout {
     float lo[3], cell[3], inv_cell[3];
     int32_t res[3];
@@ -33,17 +35,18 @@ static const int32_t macro_log2[GRID_LEVELS] = {2, 4};
 
 #define LAYOUT_HEAD ((sizeof(grid_layout) + 63) / 64 * 64)
 
+/* One bit per voxel (set: it holds triangles; first, for its alignment), then first[] and ids[],
+ * then per level one byte per macro cell (1: one of its voxels holds triangles). The bits and
+ * bytes are small enough to stay in cache, so empty space costs no load of first[]. */
+static inline const uint64_t *layout_bits(const grid_layout *g) {
+    return (const uint64_t *)((const char *)g + LAYOUT_HEAD);
+}
 static inline const uint32_t *layout_first(const grid_layout *g) {
-    return (const uint32_t *)((const char *)g + LAYOUT_HEAD);
+    return (const uint32_t *)(layout_bits(g) + (g->voxel_count + 63) / 64);
 }
 static inline const uint32_t *layout_ids(const grid_layout *g) { return layout_first(g) + g->voxel_count + 1; }
-/* One bit per voxel (set: it holds triangles), then per level one byte per macro cell (1: one of
- * its voxels does): small enough to stay in cache, so empty space costs no load of first[]. */
-static inline const uint64_t *layout_bits(const grid_layout *g) {
-    return (const uint64_t *)(layout_ids(g) + 4 * g->block_count);
-}
 static inline const uint8_t *layout_macro(const grid_layout *g, int level) {
-    const uint8_t *m = (const uint8_t *)(layout_bits(g) + (g->voxel_count + 63) / 64);
+    const uint8_t *m = (const uint8_t *)(layout_ids(g) + 4 * g->block_count);
     for (int l = 0; l < level; l++) m += g->macro_count[l];
     return m;
 }
@@ -103,9 +106,10 @@ static bool grid_accel_build(const sys_allocator *a, sys_pool *pool, accel_tri_i
     lay->block_count = blocks;
     memcpy(lay->mres, mres, sizeof mres);
     memcpy(lay->macro_count, macro_count, sizeof macro_count);
-    uint32_t *first = (uint32_t *)((char *)lay + LAYOUT_HEAD), *ids = first + g->voxel_count + 1;
-    uint64_t *bits = (uint64_t *)(ids + 4 * blocks);
-    memset(bits, 0, bit_words * sizeof(uint64_t) + macro_bytes);
+    uint64_t *bits = (uint64_t *)((char *)lay + LAYOUT_HEAD);
+    uint32_t *first = (uint32_t *)(bits + bit_words), *ids = first + g->voxel_count + 1;
+    memset(bits, 0, bit_words * sizeof(uint64_t));
+    memset((uint8_t *)layout_macro(lay, 0), 0, macro_bytes);
     for (int32_t z = 0; z < g->res[2]; z++)
         for (int32_t y = 0; y < g->res[1]; y++)
             for (int32_t x = 0; x < g->res[0]; x++) {

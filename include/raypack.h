@@ -235,9 +235,10 @@ typedef enum rp_build_quality {
 typedef enum rp_accel_type {
     RP_ACCEL_BVH = 0,    /* binned SAH BVH, wide traversal layout (the default) */
     RP_ACCEL_KDTREE = 1, /* SAH kd-tree, O(n log n) sweep build (Wald, Havran 2006) */
-    RP_ACCEL_BIH = 2     /* bounding interval hierarchy (Waechter, Keller 2006) */
+    RP_ACCEL_BIH = 2,    /* bounding interval hierarchy (Waechter, Keller 2006) */
+    RP_ACCEL_GRID = 3    /* uniform grid, 3D-DDA with mailboxing (Cleary, Wyvill 1988; Amanatides, Woo 1987) */
 } rp_accel_type;
-#define RP_ACCEL_COUNT 3
+#define RP_ACCEL_COUNT 4
 
 typedef struct rp_scene_desc {
     rp_build_quality quality;
@@ -247,6 +248,8 @@ typedef struct rp_scene_desc {
     float refit_max_growth; /* a commit after only vertices moved refits the BVH, unless its SAH cost
                                grows past this times the last build's (then it rebuilds); 0: 1.5,
                                < 0: always rebuild */
+    float grid_density; /* RP_ACCEL_GRID: about this many voxels per triangle (Cleary-Wyvill), at most
+                           1000; 0: the default */
 } rp_scene_desc;
 
 /* Measurements of the last commit. */
@@ -289,7 +292,7 @@ RP_API rp_error rp_scene_commit(rp_scene *scene);
 RP_API void rp_scene_get_bounds(const rp_scene *scene, rp_bounds *out);
 /* Measurements of the last commit. */
 RP_API void rp_scene_get_stats(const rp_scene *scene, rp_scene_stats *out);
-/* Name of an acceleration structure kind ("bvh", "kdtree", "bih"), or NULL for an unknown one. */
+/* Name of an acceleration structure kind ("bvh", "kdtree", "bih", "grid"), or NULL for an unknown one. */
 RP_API const char *rp_accel_name(rp_accel_type type);
 
 /* ---- queries --------------------------------------------------------------------------------- */

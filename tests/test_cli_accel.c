@@ -39,17 +39,33 @@ int main(void) {
         CHECK(!"spd_teapot found");
         return RP_TEST_END();
     }
-    EXPECT("info --accel octree", 2, "expects bvh, kdtree or bih");
+    EXPECT("info --accel octree", 2, "expects bvh, kdtree, bih or grid");
+    EXPECT("render --accel grid --density 0", 2, "--density");
+    EXPECT("info --accel grid --density -1", 2, "--density");
+    EXPECT("bench --accel grid --density 1001", 2, "--density");
     EXPECT("render --accel", 2, "--accel");
     EXPECT("bench --accel-grid --grid", 2, "--accel-grid");
     snprintf(args, sizeof args, "info '%s' --accel kdtree", teapot);
     EXPECT(args, 0, "triangle references");
     snprintf(args, sizeof args, "info '%s' --accel bih", teapot);
     EXPECT(args, 0, "bih ");
+    snprintf(args, sizeof args, "info '%s' --accel grid", teapot);
+    EXPECT(args, 0, "voxels");
+    /* --density sets the grid's resolution: 8 voxels per triangle make more of them than 1 */
+    unsigned long long vox[2] = {0, 0};
+    static const char *const dens[2] = {"1", "8"};
+    for (int d = 0; d < 2; d++) {
+        snprintf(args, sizeof args, "info '%s' --accel grid --density %s", teapot, dens[d]);
+        EXPECT(args, 0, "voxels");
+        const char *g = strstr(output, "grid  ");
+        CHECKF(g && sscanf(g, "grid %llu voxels", &vox[d]) == 1, "info --density %s prints the voxels", dens[d]);
+    }
+    CHECKF(vox[0] > 0 && vox[1] > 4 * vox[0], "--density 8 gives more voxels (%llu) than --density 1 (%llu)", vox[1],
+           vox[0]);
     /* the same image from every structure, byte for byte (Whitted: shadows and reflections too) */
     size_t sizes[RP_ACCEL_COUNT];
     char *png[RP_ACCEL_COUNT];
-    static const char *names[RP_ACCEL_COUNT] = {"bvh", "kdtree", "bih"};
+    static const char *names[RP_ACCEL_COUNT] = {"bvh", "kdtree", "bih", "grid"};
     for (int a = 0; a < RP_ACCEL_COUNT; a++) {
         char path[1024];
         snprintf(path, sizeof path, "%s/teapot_%s.png", tmp, names[a]);
@@ -68,7 +84,11 @@ int main(void) {
     snprintf(args, sizeof args, "bench '%s' --accel-grid --width 64 --height 64 --repeats 1 --warmup 0 --json '%s'",
              teapot, json);
     EXPECT(args, 0, "every structure and mode finds the BVH's single-ray hits");
-    CHECK(strstr(output, "16x16") && strstr(output, "kdtree") && strstr(output, "diffuse"));
+    CHECK(strstr(output, "16x16") && strstr(output, "kdtree") && strstr(output, "grid") && strstr(output, "diffuse"));
+    /* plain bench on the grid checks its rays against the reference too */
+    snprintf(args, sizeof args, "bench '%s' --accel grid --density 2 --width 32 --height 32 --repeats 1 --warmup 0",
+             teapot);
+    EXPECT(args, 0, "");
     size_t n;
     char *j = slurp(json, &n);
     CHECK(j != NULL);

@@ -1038,12 +1038,14 @@ static void usage(FILE *f) {
             "                     ranged, partition, span and auto traversal x 4x4..32x32 packets x\n"
             "                     primary / +shadows / 2-deep refraction / 2-bounce reflection,\n"
             "                     frusta off and on, against single and SIMD rays (repeats 3)\n"
-            "  --accel-grid       every acceleration structure (bvh, kdtree, bih): build time,\n"
+            "  --accel-grid       every acceleration structure (bvh, kdtree, bih, grid): build time,\n"
             "                     memory and Mrays/s of single rays, SIMD rays and 16x16 packets\n"
             "                     per ray kind, on the same rays (repeats 3)\n"
             "  --engine cuda      the CUDA BVH kernels (gpu/cuda) on the same sets, checked against\n"
             "                     raypack's single rays, kernel time by CUDA events (docs/gpu.md)\n"
-            "  --accel KIND       the structure of plain bench and --grid: bvh, kdtree or bih\n"
+            "  --accel KIND       the structure of plain bench and --grid: bvh, kdtree, bih or grid\n"
+            "  --density F        the uniform grid's voxels per triangle (Cleary-Wyvill; --accel grid,\n"
+            "                     --accel-grid) [4]\n"
             "  --threads N        tracing threads (default 2); plain bench also times 1 thread\n"
             "  --isa NAME         raypack's kernels: auto (the widest the CPU has), scalar, sse,\n"
             "                     avx2 or avx512 (default auto)\n"
@@ -1103,6 +1105,8 @@ static int parse_args(int argc, char **argv, bench_opts *o) {
             ok = cli_parse_isa(cmd, a, val, &o->isa);
         } else if (strcmp(a, "--accel") == 0) {
             ok = cli_parse_accel(cmd, a, val, &o->accel);
+        } else if (strcmp(a, "--density") == 0) {
+            ok = cli_parse_float(cmd, a, val, 0.0, 1000.0, true, &o->grid_density);
         } else if (strcmp(a, "--repeats") == 0) {
             ok = cli_parse_int(cmd, a, val, 1, 1000, &o->repeats);
             o->repeats_set = true;
@@ -1216,7 +1220,7 @@ static bool setup_raypack(bench_ctx *ctx) {
 }
 
 rp_scene *bench_build_raypack(bench_ctx *ctx, double *wall_ms, rp_scene_stats *stats) {
-    rp_scene *scene = rp_scene_new(ctx->device, &(rp_scene_desc){.accel = ctx->opts.accel});
+    rp_scene *scene = rp_scene_new(ctx->device, &(rp_scene_desc){.accel = ctx->opts.accel, .grid_density = ctx->opts.grid_density});
     rp_geometry *geom = rp_geometry_new(ctx->device, RP_GEOMETRY_TRIANGLE);
     if (!scene || !geom) {
         if (geom) rp_geometry_release(geom);

@@ -35,6 +35,7 @@ typedef struct bench_opts {
     bool grid;               /* --grid: the experiment grid of Overbeck et al. 2008, sec. 5 */
     bool accel_grid;         /* --accel-grid: every acceleration structure on the same rays */
     rp_accel_type accel;     /* --accel: the structure raypack's scene is built with */
+    float grid_density;      /* --density: the grid's voxels per triangle (0: the default) */
     bool repeats_set;        /* --repeats was given (the grid's default differs) */
     int threads;             /* >= 1 */
     int isa;                 /* --isa: rp_device_desc.isa, 0 the best the CPU has */

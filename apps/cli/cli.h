@@ -46,7 +46,7 @@ bool cli_parse_vec3(const char *cmd, const char *flag, const char *text, float o
 bool cli_parse_isa(const char *cmd, const char *flag, const char *text, int *out);
 /* Creates the device for --threads and --isa; prints why on failure (an ISA the CPU lacks). */
 rp_device *cli_device_new(const char *cmd, int threads, int isa);
-/* Parses an --accel value: bvh, kdtree or bih (rp_accel_type); prints an error and returns false
+/* Parses an --accel value: bvh, kdtree, bih or grid (rp_accel_type); prints an error and returns false
  * on anything else. */
 bool cli_parse_accel(const char *cmd, const char *flag, const char *text, rp_accel_type *out);
 /* The name of an rp_device_desc.isa code ("avx512", ...). */

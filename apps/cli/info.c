@@ -11,14 +11,15 @@
 
 static void info_usage(FILE *out) {
     fprintf(out,
-            "usage: raypack info [SCENE] [--threads N] [--accel bvh|kdtree|bih]\n"
+            "usage: raypack info [SCENE] [--threads N] [--accel bvh|kdtree|bih|grid] [--density F]\n"
             "\n"
             "Loads SCENE (the built-in room without one), builds its BVH and prints its primitives, bounds,\n"
             "materials, textures, lights, camera, and the BVH's nodes, depth, SAH cost and build time.\n"
             "\n"
             "options:\n"
             "  --threads N   load and build threads, 1..%d; 0 for all hardware threads [0]\n"
-            "  --accel KIND  the triangles' structure: bvh, kdtree or bih [bvh]\n"
+            "  --accel KIND  the triangles' structure: bvh, kdtree, bih or grid [bvh]\n"
+            "  --density F   --accel grid: about F voxels per triangle (Cleary-Wyvill) [4]\n"
             "  --materials   list every material (else the first 16)\n"
             "  -h, --help    this help\n",
             CLI_MAX_THREADS);
@@ -39,6 +40,7 @@ int cli_info(int argc, char **argv) {
     int threads = 0;
     bool all_materials = false;
     rp_accel_type accel = RP_ACCEL_BVH;
+    float density = 0.0f;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
@@ -50,6 +52,9 @@ int cli_info(int argc, char **argv) {
         } else if (strcmp(a, "--accel") == 0) {
             const char *v = cli_flag_value("info", argc, argv, &i);
             if (!v || !cli_parse_accel("info", a, v, &accel)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--density") == 0) {
+            const char *v = cli_flag_value("info", argc, argv, &i);
+            if (!v || !cli_parse_float("info", a, v, 0.0, 1000.0, true, &density)) return CLI_EXIT_USAGE;
         } else if (strcmp(a, "--materials") == 0) {
             all_materials = true;
         } else if (a[0] == '-' && a[1] != '\0') {
@@ -91,7 +96,7 @@ int cli_info(int argc, char **argv) {
         goto done;
     }
     char err[512] = "";
-    rp_render_scene_desc rdesc = {.accel = {.accel = accel}};
+    rp_render_scene_desc rdesc = {.accel = {.accel = accel, .grid_density = density}};
     rs = rp_render_scene_new(device, &d, &rdesc, err, sizeof err);
     if (!rs) {
         fprintf(stderr, "raypack info: %s\n", err);
@@ -142,6 +147,10 @@ int cli_info(int argc, char **argv) {
                (unsigned long long)st.binary_nodes, (unsigned long long)st.leaves, st.depth, st.sah_cost);
         printf("layout      %llu inner nodes of width %u, %.2f MiB\n", (unsigned long long)st.wide_nodes, st.bvh_width,
                (double)st.bytes / 1048576.0);
+    } else if (st.accel == RP_ACCEL_GRID) {
+        printf("grid        %llu voxels, %llu not empty, %llu triangle references (%.2f per triangle), %.2f MiB\n",
+               (unsigned long long)st.binary_nodes, (unsigned long long)st.leaves, (unsigned long long)st.tri_refs,
+               st.triangles ? (double)st.tri_refs / (double)st.triangles : 0.0, (double)st.bytes / 1048576.0);
     } else {
         printf("%-11s %llu nodes (%llu inner), %llu leaves, depth %u, %llu triangle references, SAH cost %.2f, %.2f MiB\n",
                rp_accel_name(st.accel), (unsigned long long)st.binary_nodes, (unsigned long long)st.wide_nodes,

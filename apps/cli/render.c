@@ -80,7 +80,8 @@ static void render_usage(FILE *out) {
             "                         0 for all hardware threads [0]\n"
             "  --isa NAME             kernels: auto (the widest the CPU has), scalar, sse, avx2\n"
             "                         or avx512 [auto]; every choice gives the same image\n"
-            "  --accel KIND           the triangles' structure: bvh, kdtree or bih [bvh]\n"
+            "  --accel KIND           the triangles' structure: bvh, kdtree, bih or grid [bvh]\n"
+            "  --density F            --accel grid: about F voxels per triangle (Cleary-Wyvill) [4]\n"
             "  --traversal NAME       how Whitted's ray packets walk the BVH: auto (per packet, from\n"
             "                         its coherence: span, partition or its SIMD rays alone),\n"
             "                         masked, ranged, partition, span (ranged narrowed from both\n"
@@ -132,6 +133,7 @@ typedef struct render_options {
     int packet;
     bool no_frustum;
     rp_accel_type accel;
+    float grid_density;
     int reflect_depth, refract_depth; /* -1: not given */
     bool has_anim_time, anim_flat, anim_refit;
     float anim_time;
@@ -183,6 +185,9 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
         } else if (strcmp(a, "--accel") == 0) {
             VALUE();
             if (!cli_parse_accel(CMD, a, v, &o->accel)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--density") == 0) {
+            VALUE();
+            if (!cli_parse_float(CMD, a, v, 0.0, 1000.0, true, &o->grid_density)) return CLI_EXIT_USAGE;
         } else if (strcmp(a, "--integrator") == 0) {
             VALUE();
             static const struct { const char *name; rp_integrator_type type; } integrators[] = {
@@ -641,7 +646,7 @@ int cli_render(int argc, char **argv) {
     if (!device) goto done;
     double t1 = cli_now_ms();
     char err[512] = "";
-    rp_render_scene_desc sdesc = {.accel = {.accel = o.accel}, .environment = o.env, .flatten_animation = o.anim_flat,
+    rp_render_scene_desc sdesc = {.accel = {.accel = o.accel, .grid_density = o.grid_density}, .environment = o.env, .flatten_animation = o.anim_flat,
                                   .refit_blocks = o.anim_refit};
     if (o.has_env_scale) memcpy(sdesc.environment_scale, o.env_scale, sizeof o.env_scale);
     scene = rp_render_scene_new(device, &data, &sdesc, err, sizeof err);
@@ -901,7 +906,7 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
         .sampler = o.sampler,
         .ao_distance = o.ao_distance,
     };
-    out->scene_desc = (rp_render_scene_desc){.accel = {.accel = o.accel}, .environment = o.env,
+    out->scene_desc = (rp_render_scene_desc){.accel = {.accel = o.accel, .grid_density = o.grid_density}, .environment = o.env,
                                              .flatten_animation = o.anim_flat, .refit_blocks = o.anim_refit};
     out->has_anim_time = o.has_anim_time;
     out->anim_time = o.anim_time;

@@ -107,7 +107,7 @@ bool cli_parse_accel(const char *cmd, const char *flag, const char *text, rp_acc
             *out = (rp_accel_type)k;
             return true;
         }
-    fprintf(stderr, "raypack %s: %s expects bvh, kdtree or bih, got '%s'\n", cmd, flag, text);
+    fprintf(stderr, "raypack %s: %s expects bvh, kdtree, bih or grid, got '%s'\n", cmd, flag, text);
     return false;
 }
 

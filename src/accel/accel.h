@@ -1,4 +1,4 @@
-/* Acceleration structures other than the BVH (kd-tree, BIH): what their builders take, what they
+/* Acceleration structures other than the BVH (kd-tree, BIH, uniform grid): what their builders take, what they
  * produce, and the query table a scene picks at commit (STYLE.md: open sets are tables of
  * function pointers). Builders read primitive boxes and, through a callback, the triangles' vertices;
  * their leaves are ranges of tri4 blocks, tested with the project's watertight test (tri_leaf.h), so
@@ -29,6 +29,7 @@ typedef struct accel_tri_input {
     void (*fill)(const void *user, const prim_ref *refs, const uint32_t *ids, size_t stride, const uint32_t *block_of,
                  uint32_t begin, uint32_t end, tri4 *blocks);
     const void *user;
+    float grid_density;     /* the grid's voxels per triangle (rp_scene_desc.grid_density; 0: default) */
 } accel_tri_input;
 
 /* What a builder made: nodes (its own layout) and the tri4 blocks its leaves point at. */
@@ -51,9 +52,9 @@ typedef struct accel_ops {
     const rp_kernels *kernels;
 } accel_ops;
 
-extern const accel_ops accel_kdtree, accel_bih;
-/* The structures' queries (kdtree_trav.c, bih_trav.c). */
-extern const rp_kernels kdtree_kernels, bih_kernels;
+extern const accel_ops accel_kdtree, accel_bih, accel_grid;
+/* The structures' queries (kdtree_trav.c, bih_trav.c, grid_accel.c). */
+extern const rp_kernels kdtree_kernels, bih_kernels, grid_accel_kernels;
 
 /* Frees what a builder made. */
 void accel_built_free(const sys_allocator *a, accel_built *b);

@@ -23,7 +23,7 @@ WT_DEFINE(4)
 #define ALT_CULL_SLACK 1.000244140625f
 
 typedef struct alt_ray {
-    float org[3], rdir[3];
+    float org[3], dir[3], rdir[3];
     float tnear;
     uint32_t mask;
     int kx, ky, kz;
@@ -53,7 +53,7 @@ static inline void alt_ray_setup(alt_ray *r, const rp_ray *ray) {
     r->kx = neg ? y : x, r->ky = neg ? x : y, r->kz = z;
     vf4 rd = wt_rcp_4((vf4){d[0], d[1], d[2], 1.0f});
     vf4 sh = (vf4){d[r->kx], d[r->ky], 1.0f, 1.0f} / vf4_splat(d[r->kz]);
-    for (int i = 0; i < 3; i++) r->rdir[i] = rd[i];
+    for (int i = 0; i < 3; i++) r->rdir[i] = rd[i], r->dir[i] = d[i];
     r->sx = sh[0], r->sy = sh[1], r->sz = sh[2];
 }
 

@@ -23,8 +23,10 @@ rp_scene *rp_scene_new(rp_device *device, const rp_scene_desc *desc) {
     if (!device) return NULL;
     if (desc && ((unsigned)desc->quality > RP_BUILD_QUALITY_HIGH || (unsigned)desc->accel >= RP_ACCEL_COUNT ||
                  (desc->bvh_width != 0 && desc->bvh_width != 4 && desc->bvh_width != 8 && desc->bvh_width != 16) ||
-                 desc->max_leaf_size < 0 || desc->max_leaf_size > 60)) {
-        device_error(device, RP_ERROR_INVALID_ARGUMENT, "rp_scene_new: bad quality, accel, bvh_width or max_leaf_size");
+                 desc->max_leaf_size < 0 || desc->max_leaf_size > 60 ||
+                 !(desc->grid_density >= 0.0f && desc->grid_density <= 1000.0f))) {
+        device_error(device, RP_ERROR_INVALID_ARGUMENT,
+                     "rp_scene_new: bad quality, accel, bvh_width, max_leaf_size or grid_density");
         return NULL;
     }
     rp_scene *s = sys_calloc(&device->alloc, sizeof *s);
@@ -172,6 +174,7 @@ const char *rp_accel_name(rp_accel_type type) {
     case RP_ACCEL_BVH: return "bvh";
     case RP_ACCEL_KDTREE: return "kdtree";
     case RP_ACCEL_BIH: return "bih";
+    case RP_ACCEL_GRID: return "grid";
     }
     return NULL;
 }
@@ -181,6 +184,7 @@ static const accel_ops *accel_ops_of(rp_accel_type type) {
     switch (type) {
     case RP_ACCEL_KDTREE: return &accel_kdtree;
     case RP_ACCEL_BIH: return &accel_bih;
+    case RP_ACCEL_GRID: return &accel_grid;
     case RP_ACCEL_BVH: return NULL;
     }
     return NULL;
@@ -668,7 +672,7 @@ rp_error scene_build(rp_scene *s) {
     if (err == RP_ERROR_NONE && tris.count && ops) {
         sys_pool *tpool = tris.count >= SMALL_BUILD ? pool : NULL;
         accel_tri_input in = {.boxes = tris.boxes, .refs = tris.refs, .count = tris.count, .bounds = tri_bounds,
-                              .fetch = tri_fetch, .fill = tri_fill, .user = s};
+                              .fetch = tri_fetch, .fill = tri_fill, .user = s, .grid_density = s->desc.grid_density};
         if (!ops->build(a, tpool, &in, &s->alt)) {
             err = RP_ERROR_OUT_OF_MEMORY;
         } else {

@@ -51,8 +51,34 @@ static bool plane_overlaps(const double n[3], double d, const double c[3], const
     return fabs(s) <= r;
 }
 
+/* The nine edge x axis separating axes of the triangle-box test (Akenine-Moller 2001): false
+ * when one separates triangle v (three points) from the box of centre c and half sides h. */
+static bool edges_overlap(const float *v, const double c[3], const double h[3]) {
+    double p[3][3];
+    for (int i = 0; i < 3; i++)
+        for (int a = 0; a < 3; a++) p[i][a] = (double)v[3 * i + a] - c[a];
+    for (int e = 0; e < 3; e++) {
+        const double *a0 = p[e], *a1 = p[(e + 1) % 3];
+        double ed[3] = {a1[0] - a0[0], a1[1] - a0[1], a1[2] - a0[2]};
+        for (int k = 0; k < 3; k++) {
+            /* axis = unit vector k x edge */
+            double ax[3] = {0.0, 0.0, 0.0};
+            int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+            ax[k1] = -ed[k2], ax[k2] = ed[k1];
+            double mn = INFINITY, mx = -INFINITY;
+            for (int i = 0; i < 3; i++) {
+                double d = ax[0] * p[i][0] + ax[1] * p[i][1] + ax[2] * p[i][2];
+                mn = fmin(mn, d), mx = fmax(mx, d);
+            }
+            double rad = h[0] * fabs(ax[0]) + h[1] * fabs(ax[1]) + h[2] * fabs(ax[2]);
+            if (mn > rad || mx < -rad) return false;
+        }
+    }
+    return true;
+}
+
 /* Counts (fill == false) or writes (fill == true) the voxels of each triangle. */
-static void scan(grid *g, double margin, bool fill, uint32_t *cursor) {
+static void scan(grid *g, double margin, bool fill, uint32_t *cursor, bool sat) {
     for (uint32_t i = 0; i < g->tri_count; i++) {
         const float *v = g->tris[i].v;
         int lo[3], hi[3];
@@ -78,6 +104,7 @@ static void scan(grid *g, double margin, bool fill, uint32_t *cursor) {
                         double c[3] = {g->lo[0] + (x + 0.5) * g->cell[0], g->lo[1] + (y + 0.5) * g->cell[1],
                                        g->lo[2] + (z + 0.5) * g->cell[2]};
                         if (!plane_overlaps(n, nd, c, h)) continue;
+                        if (sat && !edges_overlap(v, c, h)) continue;
                     }
                     uint32_t c = ((uint32_t)z * (uint32_t)g->res[1] + (uint32_t)y) * (uint32_t)g->res[0] + (uint32_t)x;
                     if (fill)
@@ -107,11 +134,11 @@ static void scan(grid *g, double margin, bool fill, uint32_t *cursor) {
     }
 }
 
+static grid *build_lists(grid *g, const grid_desc *desc_in);
+
 /* The grid of the tri4 blocks and of the primitives of g->prims / g->prim_box (set by the caller;
  * g allocated, its allocator set). */
 static grid *build(grid *g, const tri4 *blocks, size_t block_count, const grid_desc *desc_in) {
-    double t0 = sys_seconds();
-    grid_desc desc = grid_desc_defaults(desc_in);
     const sys_allocator *alloc = &g->alloc;
     size_t n = 0;
     for (size_t b = 0; b < block_count; b++)
@@ -119,16 +146,30 @@ static grid *build(grid *g, const tri4 *blocks, size_t block_count, const grid_d
     g->tri_capacity = n ? n : 1;
     g->tris = sys_alloc(alloc, g->tri_capacity * sizeof(grid_tri));
     if (!g->tris) goto fail;
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (size_t b = 0; b < block_count; b++)
         for (int l = 0; l < 4; l++) {
             if (!blocks[b].mask[l]) continue;
             grid_tri t = {.geom = blocks[b].geom[l], .prim = blocks[b].prim[l], .mask = blocks[b].mask[l]};
             for (int k = 0; k < 9; k++) t.v[k] = blocks[b].v[k][l];
             if (!tri_finite(t.v)) continue; /* the BVH never hits these either */
-            for (int k = 0; k < 9; k++) lo[k % 3] = fmin(lo[k % 3], t.v[k]), hi[k % 3] = fmax(hi[k % 3], t.v[k]);
             g->tris[g->tri_count++] = t;
         }
+    return build_lists(g, desc_in);
+fail:
+    grid_free(g);
+    return NULL;
+}
+
+/* The voxel lists of g->tris (finite triangles) and of the primitives of g->prims / g->prim_box. */
+static grid *build_lists(grid *g, const grid_desc *desc_in) {
+    double t0 = sys_seconds();
+    grid_desc desc = grid_desc_defaults(desc_in);
+    const sys_allocator *alloc = &g->alloc;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t i = 0; i < g->tri_count; i++) {
+        const float *v = g->tris[i].v;
+        for (int k = 0; k < 9; k++) lo[k % 3] = fmin(lo[k % 3], v[k]), hi[k % 3] = fmax(hi[k % 3], v[k]);
+    }
     for (uint32_t k = 0; k < g->prim_count; k++)
         for (int a = 0; a < 3; a++)
             lo[a] = fmin(lo[a], g->prim_box[6 * k + a]), hi[a] = fmax(hi[a], g->prim_box[6 * k + 3 + a]);
@@ -161,7 +202,7 @@ static grid *build(grid *g, const tri4 *blocks, size_t block_count, const grid_d
     g->voxel_count = (uint32_t)g->res[0] * (uint32_t)g->res[1] * (uint32_t)g->res[2];
     g->offsets = sys_calloc(alloc, ((size_t)g->voxel_count + 1) * sizeof(uint32_t));
     if (!g->offsets) goto fail;
-    scan(g, margin, false, NULL);
+    scan(g, margin, false, NULL, desc.sat);
     for (uint32_t c = 0; c < g->voxel_count; c++) {
         g->nonempty += g->offsets[c + 1] != 0;
         g->offsets[c + 1] += g->offsets[c];
@@ -174,7 +215,7 @@ static grid *build(grid *g, const tri4 *blocks, size_t block_count, const grid_d
         goto fail;
     }
     memcpy(cursor, g->offsets, ((size_t)g->voxel_count + 1) * sizeof(uint32_t));
-    scan(g, margin, true, cursor);
+    scan(g, margin, true, cursor, desc.sat);
     sys_free(alloc, cursor, ((size_t)g->voxel_count + 1) * sizeof(uint32_t));
     g->build_ms = (sys_seconds() - t0) * 1e3;
     return g;
@@ -227,6 +268,21 @@ oom:
     grid_free(g);
     snprintf(err, err_size, "grid: out of memory");
     return NULL;
+}
+
+grid *grid_build_tris(const sys_allocator *alloc, const grid_tri *tris, uint32_t count, const grid_desc *desc) {
+    grid *g = sys_calloc(alloc, sizeof(grid));
+    if (!g) return NULL;
+    g->alloc = *alloc;
+    g->tri_capacity = count ? count : 1;
+    g->tris = sys_alloc(alloc, g->tri_capacity * sizeof(grid_tri));
+    if (!g->tris) {
+        grid_free(g);
+        return NULL;
+    }
+    for (uint32_t i = 0; i < count; i++)
+        if (tri_finite(tris[i].v)) g->tris[g->tri_count++] = tris[i];
+    return build_lists(g, desc);
 }
 
 grid *grid_build_tri4(const sys_allocator *alloc, const tri4 *blocks, size_t block_count, const grid_desc *desc) {

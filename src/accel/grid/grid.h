@@ -27,6 +27,11 @@ typedef struct grid_desc {
      * (64 for the bunny gives 98 x 64 x 163); 0: use density */
     int min_dim;
     int max_voxels; /* cap on the voxel count (memory); 0: 1 << 24 */
+    /* list a triangle only in the voxels it overlaps by the full separating-axis test (Akenine-
+     * Moller 2001: the box's axes, the triangle's normal and the nine edge x axis directions),
+     * not the voxels of its box that its plane crosses: fewer references for long thin and
+     * slanted triangles */
+    bool sat;
 } grid_desc;
 
 grid_desc grid_desc_defaults(const grid_desc *desc);
@@ -62,6 +67,9 @@ typedef struct grid {
 /* Builds a grid over the live lanes (mask != 0) of tri4 blocks, copying their vertices. NULL when
  * out of memory. A grid of no triangles is valid (every ray misses). */
 grid *grid_build_tri4(const sys_allocator *alloc, const tri4 *blocks, size_t block_count, const grid_desc *desc);
+/* Builds a grid over count triangles (copied; non-finite ones are dropped, so g->tris[i] is
+ * tris[i] when all are finite). NULL when out of memory. */
+grid *grid_build_tris(const sys_allocator *alloc, const grid_tri *tris, uint32_t count, const grid_desc *desc);
 /* Builds a grid of a committed scene's triangles, spheres and user primitives. NULL with a message in
  * err when the scene is not committed, holds instances, or memory runs out. Owned by the caller (grid_free);
  * valid while the scene is not edited. */

@@ -724,6 +724,7 @@ rp_error scene_build(rp_scene *s) {
                 mean_side = leaves ? (double)sum / (double)leaves * 0x1p-24 * diag : 0.0;
             }
             sys_free(a, sums, sbytes);
+            if (ok) bvh2_pad_boxes(&b2); /* every layout below is made from the widened boxes */
             if (!ok || !bvhw_from_bvh2(a, tpool, &b2, width, leaf_range, NULL, &s->tri_bvh) ||
                 !bvhw_compact(a, &s->tri_bvh) || !bvh2q_from_bvh2(a, &b2, &s->tri_bvh2q)) {
                 bvhw_free(a, &s->tri_bvh);
@@ -744,7 +745,7 @@ rp_error scene_build(rp_scene *s) {
                 st.tri_refs = tris.count;
                 st.bytes = s->tri_bvh.bytes + (size_t)pc.block_count * sizeof(tri4) +
                            (size_t)s->tri_bvh2q.node_count * sizeof(bvh2q_node);
-                s->built_cost = bvh2_blocks_cost(&b2, REFIT_TRAV_COST); /* the exact tree's, for scene_refit */
+                s->built_cost = bvh2_blocks_cost(&b2, REFIT_TRAV_COST); /* for scene_refit (the margin changes it by 1e-6) */
             }
             sys_free(a, pc.block_of, (size_t)b2.prim_count * sizeof(uint32_t));
             bvh2_free(a, &b2);
@@ -944,6 +945,7 @@ static bool scene_refit(rp_scene *s) {
     if (ok) ok = bvh2q_to_bvh2(a, &s->tri_bvh2q, &tree);
     double cost = ok ? bvh2_refit_blocks(&tree, s->tris, REFIT_TRAV_COST) : 0.0;
     if (ok && cost > (double)s->desc.refit_max_growth * s->built_cost) ok = false;
+    if (ok) bvh2_pad_boxes(&tree); /* as the build does */
     bvhw wide = {0};
     if (ok) ok = bvhw_from_bvh2(a, j.count >= 1024 ? pool : NULL, &tree, s->tri_bvh.width, leaf_range, NULL, &wide);
     if (locked) pthread_mutex_unlock(&s->device->pool_lock);

@@ -62,6 +62,12 @@ double bvh2_blocks_cost(const bvh2 *bvh, double trav_cost);
 /* Refits such a BVH to its blocks' vertices (topology unchanged) and returns its new cost. */
 struct tri4;
 double bvh2_refit_blocks(bvh2 *bvh, const struct tri4 *blocks, double trav_cost);
+/* Widens every box of the tree outward by 2^-22 of each coordinate's size plus 2^-20 of the root's
+ * largest side, before the traversal layouts are made from it. The kernels' slab test takes a
+ * direction component of 0 as +-1e-18 (safe_rcp): a ray lying in a box's face plane (an axis-parallel
+ * ray through a vertex) then leaves the exact box at t = 0 and misses hits the watertight triangle test
+ * gives it on that face; with the margin it stays inside for t up to about 1e11 scene sizes. */
+void bvh2_pad_boxes(bvh2 *bvh);
 
 /* The binary BVH the large packets walk (and the refit and the CUDA layout start from), kept
  * beside the wide one in 16 bytes a node instead of 32: each box is quantized to 16 bits per plane

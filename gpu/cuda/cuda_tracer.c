@@ -99,6 +99,11 @@ rp_cuda_tracer_stats rp_cuda_tracer_get_stats(const rp_cuda_tracer *t) { return 
 /* The conversions, in chunks on the scene's device's threads. */
 #define TRACE_CHUNK 16384u
 
+static void chunk_bounds(uint32_t k, size_t n, size_t *a, size_t *b) {
+    *a = (size_t)k * TRACE_CHUNK;
+    *b = *a + TRACE_CHUNK < n ? *a + TRACE_CHUNK : n;
+}
+
 typedef struct convert_job {
     rp_cuda_tracer *t;
     rp_rayhit *rh;
@@ -110,7 +115,8 @@ typedef struct convert_job {
 static void rays_chunk(void *user, uint32_t k, uint32_t thread) {
     (void)thread;
     convert_job *j = user;
-    size_t a = (size_t)k * TRACE_CHUNK, b = a + TRACE_CHUNK < j->n ? a + TRACE_CHUNK : j->n;
+    size_t a, b;
+    chunk_bounds(k, j->n, &a, &b);
     j->bad_mask[k] = 0;
     for (size_t i = a; i < b; i++) {
         const rp_ray *r = &j->rh[i].ray;
@@ -123,14 +129,16 @@ static void rays_chunk(void *user, uint32_t k, uint32_t thread) {
 static void emulate_chunk(void *user, uint32_t k, uint32_t thread) {
     (void)thread;
     convert_job *j = user;
-    size_t a = (size_t)k * TRACE_CHUNK, b = a + TRACE_CHUNK < j->n ? a + TRACE_CHUNK : j->n;
+    size_t a, b;
+    chunk_bounds(k, j->n, &a, &b);
     rp_cuda_bvh_trace_emulated(&j->t->src, j->t->rays + a, b - a, j->occlusion, j->t->hits + a);
 }
 
 static void hits_chunk(void *user, uint32_t k, uint32_t thread) {
     (void)thread;
     convert_job *j = user;
-    size_t a = (size_t)k * TRACE_CHUNK, b = a + TRACE_CHUNK < j->n ? a + TRACE_CHUNK : j->n;
+    size_t a, b;
+    chunk_bounds(k, j->n, &a, &b);
     for (size_t i = a; i < b; i++) {
         const rp_cuda_bvh_hit *h = &j->t->hits[i];
         rp_rayhit *o = &j->rh[i];

@@ -133,6 +133,14 @@ static void kernel_intersect(const grid *g, ray_stream *s, uint32_t i) {
  * count are the ones a single thread gives. Small lists run on the calling thread. */
 #define PASS_CHUNK 8192u
 
+/* Chunks of `size` items over n: how many, and chunk k's items [*a, *b). */
+static uint32_t chunk_count(size_t n, size_t size) { return (uint32_t)((n + size - 1) / size); }
+
+static void chunk_bounds(uint32_t k, size_t n, size_t size, size_t *a, size_t *b) {
+    *a = (size_t)k * size;
+    *b = *a + size < n ? *a + size : n;
+}
+
 enum { PASS_SETUP = 0xFE, PASS_BOTH = 0xFF }; /* pass_job.want besides RAY_TRAVERSING / RAY_INTERSECTING */
 
 typedef struct pass_job {
@@ -150,7 +158,9 @@ static void pass_chunk(void *user, uint32_t k, uint32_t thread) {
     (void)thread;
     const pass_job *j = user;
     ray_stream *s = j->s;
-    size_t a = (size_t)k * PASS_CHUNK, b = a + PASS_CHUNK < j->n ? a + PASS_CHUNK : j->n, kept = a;
+    size_t a, b;
+    chunk_bounds(k, j->n, PASS_CHUNK, &a, &b);
+    size_t kept = a;
     uint32_t worked = 0, ni = 0, nt = 0, trav = 0, isect = 0;
     for (size_t p = a; p < b; p++) {
         uint32_t i;
@@ -185,7 +195,7 @@ static void pass_chunk(void *user, uint32_t k, uint32_t thread) {
  * when out of memory. */
 static bool run_pass(rp_device *dev, const grid *g, ray_stream *s, uint8_t want, size_t first, size_t n,
                      uint64_t sums[6]) {
-    uint32_t chunks = (uint32_t)((n + PASS_CHUNK - 1) / PASS_CHUNK), one[1][6];
+    uint32_t chunks = chunk_count(n, PASS_CHUNK), one[1][6];
     pass_job j = {.g = g, .s = s, .want = want, .first = first, .n = n, .active = s->active, .out = one};
     if (chunks > 1 && !(j.out = malloc(chunks * sizeof *j.out))) return false;
     if (chunks > 1)
@@ -270,8 +280,9 @@ typedef struct external_job {
 static void external_in(void *user, uint32_t k, uint32_t thread) {
     (void)thread;
     const external_job *j = user;
-    size_t a = j->first + (size_t)k * EXTERNAL_CHUNK, b = a + EXTERNAL_CHUNK, end = j->first + j->count;
-    for (size_t i = a; i < (b < end ? b : end); i++) {
+    size_t a, b;
+    chunk_bounds(k, j->count, EXTERNAL_CHUNK, &a, &b);
+    for (size_t i = j->first + a; i < j->first + b; i++) {
         j->s->xray[i].ray = j->s->ray[i];
         j->s->xray[i].hit = (rp_hit){.geom_id = RP_INVALID_ID, .prim_id = RP_INVALID_ID, .inst_id = RP_INVALID_ID};
     }
@@ -281,9 +292,10 @@ static void external_out(void *user, uint32_t k, uint32_t thread) {
     (void)thread;
     const external_job *j = user;
     ray_stream *s = j->s;
-    size_t a = j->first + (size_t)k * EXTERNAL_CHUNK, b = a + EXTERNAL_CHUNK, end = j->first + j->count;
+    size_t a, b;
+    chunk_bounds(k, j->count, EXTERNAL_CHUNK, &a, &b);
     uint32_t hits = 0;
-    for (size_t i = a; i < (b < end ? b : end); i++) {
+    for (size_t i = j->first + a; i < j->first + b; i++) {
         const rp_rayhit *x = &s->xray[i];
         bool hit = s->any ? x->ray.tfar == -INFINITY && s->ray[i].tfar != -INFINITY : x->hit.geom_id != RP_INVALID_ID;
         s->hit[i] = (grid_hit){.t = x->ray.tfar, .tri = hit ? 0 : UINT32_MAX};
@@ -297,7 +309,7 @@ static void external_out(void *user, uint32_t k, uint32_t thread) {
 static bool trace_external(rp_device *dev, const stream_desc *d, ray_stream *s, size_t first, size_t count,
                            rp_ray_kind kind, stream_stats *st, char *err, size_t err_size) {
     if (count == 0) return true;
-    uint32_t chunks = (uint32_t)((count + EXTERNAL_CHUNK - 1) / EXTERNAL_CHUNK);
+    uint32_t chunks = chunk_count(count, EXTERNAL_CHUNK);
     external_job job = {.s = s, .first = first, .count = count, .hits = malloc(chunks * sizeof(uint32_t))};
     if (!job.hits || (!s->xray && !(s->xray = malloc(s->count * sizeof *s->xray)))) {
         free(job.hits);
@@ -397,12 +409,9 @@ static bool trace(stream_ctx *c, ray_stream *s, size_t first, size_t count, rp_r
  * ray order gives. */
 #define STREAM_CHUNK 4096u
 
-static uint32_t chunks_of(size_t n) { return (uint32_t)((n + STREAM_CHUNK - 1) / STREAM_CHUNK); }
+static uint32_t chunks_of(size_t n) { return chunk_count(n, STREAM_CHUNK); }
 
-static void chunk_range(uint32_t k, size_t n, size_t *a, size_t *b) {
-    *a = (size_t)k * STREAM_CHUNK;
-    *b = *a + STREAM_CHUNK < n ? *a + STREAM_CHUNK : n;
-}
+static void chunk_range(uint32_t k, size_t n, size_t *a, size_t *b) { chunk_bounds(k, n, STREAM_CHUNK, a, b); }
 
 /* Kernel: eye-ray generation, the packet tracer's rays: Whitted's (render_sample_offset) or the
  * path tracer's (the pixel's sampler), with their per-ray state. */

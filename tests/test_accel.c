@@ -377,16 +377,23 @@ static void check_grid(const char *name, const test_mesh *m, uint32_t n, uint32_
         CHECKF(bad[0] + bad[1] + bad[2] == 0, "%s: BVH packet16 %u, 16x16 auto %u, coherent array %u rays differ", name,
                bad[0], bad[1], bad[2]);
     }
-    static const float densities[4] = {0.01f, 0.5f, 0.0f, 24.0f};
+    /* the grid at four densities, then the kd-tree and the BIH on the same rays: their planes and
+     * boxes lie on the vertices' coordinates too, so the axis-parallel rays run in their faces */
+    static const struct { rp_accel_type accel; float density; } cases[6] = {
+        {RP_ACCEL_GRID, 0.01f}, {RP_ACCEL_GRID, 0.5f}, {RP_ACCEL_GRID, 0.0f}, {RP_ACCEL_GRID, 24.0f},
+        {RP_ACCEL_KDTREE, 0.0f}, {RP_ACCEL_BIH, 0.0f}};
     uint64_t voxels_prev = 0;
-    for (int d = 0; d < 4; d++) {
-        rp_scene *s = make_scene_d(dev, RP_ACCEL_GRID, m, NULL, 0, densities[d]);
+    for (int d = 0; d < 6; d++) {
+        const char *an = rp_accel_name(cases[d].accel);
+        double density = (double)cases[d].density;
+        rp_scene *s = make_scene_d(dev, cases[d].accel, m, NULL, 0, cases[d].density);
         rp_scene_stats st;
         rp_scene_get_stats(s, &st);
-        CHECKF(st.accel == RP_ACCEL_GRID && st.binary_nodes > voxels_prev && st.tri_refs >= st.triangles,
-               "%s grid density %g: %llu voxels after %llu, %llu refs", name, (double)densities[d],
+        bool grid = cases[d].accel == RP_ACCEL_GRID;
+        CHECKF(st.accel == cases[d].accel && (!grid || st.binary_nodes > voxels_prev) && st.tri_refs >= st.triangles,
+               "%s %s density %g: %llu voxels after %llu, %llu refs", name, an, density,
                (unsigned long long)st.binary_nodes, (unsigned long long)voxels_prev, (unsigned long long)st.tri_refs);
-        voxels_prev = st.binary_nodes;
+        if (grid) voxels_prev = st.binary_nodes;
         uint32_t bad[4] = {0};
         for (uint32_t i = 0; i < n; i++) {
             trace1(s, &rays[i], &one[i]);
@@ -399,8 +406,8 @@ static void check_grid(const char *name, const test_mesh *m, uint32_t n, uint32_
                 b = !same_got(&one[i], &ref[i]) || one[i].occluded != (ref[i].geom != RP_INVALID_ID);
             bad[0] += b;
             if (b && getenv("RP_TEST_VERBOSE"))
-                fprintf(stderr, "%s grid %g ray %u (kind %u): ref %u/%u t %.9g, got %u/%u t %.9g occl %d\n", name,
-                        (double)densities[d], i, grid_ray_kind(i), ref[i].geom, ref[i].prim, (double)ref[i].t,
+                fprintf(stderr, "%s %s %g ray %u (kind %u): ref %u/%u t %.9g, got %u/%u t %.9g occl %d\n", name, an,
+                        density, i, grid_ray_kind(i), ref[i].geom, ref[i].prim, (double)ref[i].t,
                         one[i].geom, one[i].prim, (double)one[i].t, one[i].occluded);
         }
         trace_16(s, rays, n, g);
@@ -415,9 +422,9 @@ static void check_grid(const char *name, const test_mesh *m, uint32_t n, uint32_
                                       "packet16 differs from its single rays", "16x16 auto differs from its single rays",
                                       "array coherent differs from its single rays"};
         for (int k = 0; k < 4; k++)
-            CHECKF(bad[k] == 0, "%s grid density %g: %s on %u of %u rays", name, (double)densities[d], what[k], bad[k], n);
-        printf("%s grid density %g: %llu voxels, %llu not empty, %llu refs for %llu triangles, %.2f ms\n", name,
-               (double)densities[d], (unsigned long long)st.binary_nodes, (unsigned long long)st.leaves,
+            CHECKF(bad[k] == 0, "%s %s density %g: %s on %u of %u rays", name, an, density, what[k], bad[k], n);
+        printf("%s %s density %g: %llu voxels or nodes, %llu not empty or leaves, %llu refs for %llu triangles, %.2f ms\n",
+               name, an, density, (unsigned long long)st.binary_nodes, (unsigned long long)st.leaves,
                (unsigned long long)st.tri_refs, (unsigned long long)st.triangles, st.build_ms);
         rp_scene_release(s);
     }

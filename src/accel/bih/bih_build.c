@@ -324,6 +324,22 @@ static void stamp_task(void *user, uint32_t index, uint32_t thread) {
     }
 }
 
+/* The root box and every node's clip planes moved outward by the BVH's margin (bvh2_pad_boxes): an
+ * axis-parallel ray lying in a plane, as through a vertex, then stays inside the child that plane
+ * bounds instead of leaving it at t = 0 (the traversal takes a direction component of 0 as 1e-18),
+ * and meets the triangles in that plane as the watertight test does. */
+static void pad_planes(bih_ctx *c, uint32_t node_count, float bounds[6]) {
+    float abs_pad = box_pad_abs(bounds, bounds + 3);
+    if (abs_pad == 0.0f) return;
+    for (int k = 0; k < 3; k++) bounds[k] = box_pad_lo(bounds[k], abs_pad), bounds[3 + k] = box_pad_hi(bounds[3 + k], abs_pad);
+    for (uint32_t i = 0; i < node_count; i++) {
+        bih_node *nd = &c->nodes[i];
+        if (nd->meta == BIH_LEAF) continue;
+        if (fabsf(nd->clip[0]) < INFINITY) nd->clip[0] = box_pad_hi(nd->clip[0], abs_pad);
+        if (fabsf(nd->clip[1]) < INFINITY) nd->clip[1] = box_pad_lo(nd->clip[1], abs_pad);
+    }
+}
+
 static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *in, accel_built *out) {
     memset(out, 0, sizeof *out);
     uint32_t n = in->count;
@@ -360,6 +376,7 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
         sys_pool_parallel_for(pool, c.task_count, task_run, &c);
     }
     uint32_t node_count = atomic_load(&c.next);
+    pad_planes(&c, node_count, out->bounds);
     uint32_t blocks = plan_blocks(&c, node_count, n);
     c.blocks = accel_blocks_alloc(a, blocks);
     bool ok = c.blocks != NULL;

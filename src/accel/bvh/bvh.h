@@ -68,6 +68,19 @@ double bvh2_refit_blocks(bvh2 *bvh, const struct tri4 *blocks, double trav_cost)
  * ray through a vertex) then leaves the exact box at t = 0 and misses hits the watertight triangle test
  * gives it on that face; with the margin it stays inside for t up to about 1e11 scene sizes. */
 void bvh2_pad_boxes(bvh2 *bvh);
+/* That margin's absolute part for a scene of box lo..hi (2^-20 of its largest side; a tiny one
+ * for a point or a flat scene; 0 for an infinite box, which is left as it is). */
+static inline float box_pad_abs(const float lo[3], const float hi[3]) {
+    float side = 0.0f;
+    for (int k = 0; k < 3; k++)
+        if (hi[k] - lo[k] > side) side = hi[k] - lo[k];
+    if (!(side < INFINITY)) return 0.0f;
+    float abs_pad = side * 0x1p-20f;
+    return abs_pad > 0.0f ? abs_pad : 0x1p-100f;
+}
+/* A lower / upper plane moved outward by the margin (the kd-tree's and the BIH's boxes too). */
+static inline float box_pad_lo(float x, float abs_pad) { return x - (fabsf(x) * 0x1p-22f + abs_pad); }
+static inline float box_pad_hi(float x, float abs_pad) { return x + (fabsf(x) * 0x1p-22f + abs_pad); }
 
 /* The binary BVH the large packets walk (and the refit and the CUDA layout start from), kept
  * beside the wide one in 16 bytes a node instead of 32: each box is quantized to 16 bits per plane

@@ -69,19 +69,14 @@ double bvh2_blocks_cost(const bvh2 *bvh, double trav_cost) {
 
 void bvh2_pad_boxes(bvh2 *bvh) {
     if (!bvh->nodes || bvh->node_count == 0) return;
-    const bvh_node *root = &bvh->nodes[0];
-    float side = 0.0f;
-    for (int k = 0; k < 3; k++)
-        if (root->hi[k] - root->lo[k] > side) side = root->hi[k] - root->lo[k];
-    if (!(side < INFINITY)) return;
-    float abs_pad = side * 0x1p-20f;
-    if (!(abs_pad > 0.0f)) abs_pad = 0x1p-100f; /* a point or a flat scene */
+    float abs_pad = box_pad_abs(bvh->nodes[0].lo, bvh->nodes[0].hi);
+    if (abs_pad == 0.0f) return;
     for (uint32_t i = 0; i < bvh->node_count; i++) {
         bvh_node *n = &bvh->nodes[i];
         for (int k = 0; k < 3; k++) {
             if (!(n->lo[k] <= n->hi[k])) continue; /* an unused node's empty box */
-            n->lo[k] -= fabsf(n->lo[k]) * 0x1p-22f + abs_pad;
-            n->hi[k] += fabsf(n->hi[k]) * 0x1p-22f + abs_pad;
+            n->lo[k] = box_pad_lo(n->lo[k], abs_pad);
+            n->hi[k] = box_pad_hi(n->hi[k], abs_pad);
         }
     }
 }

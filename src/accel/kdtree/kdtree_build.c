@@ -408,6 +408,10 @@ static bool kd_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *in
     out->leaves = bd.leaves;
     out->tri_refs = bd.refs;
     out->sah_cost = bd.cost;
+    /* the traversal starts from the root box moved outward by the BVH's margin (bvh2_pad_boxes):
+     * an axis-parallel ray in one of its faces would leave it at t = 0 */
+    float abs_pad = box_pad_abs(v, v + 3);
+    for (int k = 0; k < 3 && abs_pad > 0.0f; k++) v[k] = box_pad_lo(v[k], abs_pad), v[3 + k] = box_pad_hi(v[3 + k], abs_pad);
     memcpy(out->bounds, v, sizeof v);
     return true;
 }

@@ -1,10 +1,15 @@
 /* Single rays through the kd-tree: ordered front to back (near child first, the far one pushed
- * with its interval), and the walk stops as soon as the nearest pending cell starts beyond the
- * closest hit (early exit). Plane distances are widened by the rounding bound of Ize 2013, so a
- * cell the ray touches is never skipped. Packets of rays whose directions share their signs walk
- * the tree together (kd_packet, Wald et al. 2001); others go ray by ray. */
+ * with its interval), and pending cells that start beyond the closest hit are skipped (early
+ * exit). A ray lying in a split plane walks both sides with its whole interval. Plane distances
+ * are widened by the rounding bound of Ize 2013, so a cell the ray touches is never skipped.
+ * Packets of rays whose directions share their signs walk the tree together (kd_packet, Wald et
+ * al. 2001); others go ray by ray. */
 #include "accel/kdtree/kdtree.h"
 #include "accel/tri_leaf.h"
+
+/* The ray lies in planes of this axis (a direction component the traversal takes as +-1e-18,
+ * wt_rcp): on a split plane it meets the triangles of both sides that touch it. */
+#define KD_IN_PLANE(r, axis) (fabsf((r)->dir[axis]) < 1e-18f)
 
 typedef struct kd_entry {
     uint32_t node;
@@ -29,7 +34,10 @@ static bool kd_trav(const rp_accel *acc, const accel_built *s, const alt_ray *r,
             /* the near child holds the origin; on the plane, the side the ray leaves */
             bool left = o < split || (o == split && rd > 0.0f);
             uint32_t near = left ? child : child + 1, far = left ? child + 1 : child;
-            if (ts < 0.0f) {
+            if (o == split && KD_IN_PLANE(r, axis)) {
+                stack[sp++] = (kd_entry){far, t0, t1}; /* in the plane: both sides, the whole interval */
+                node = near;
+            } else if (ts < 0.0f) {
                 node = near; /* heading away from the plane */
             } else {
                 bool vn = t0 <= ts * ALT_UP, vf = ts * ALT_DN <= t1;
@@ -47,7 +55,8 @@ static bool kd_trav(const rp_accel *acc, const accel_built *s, const alt_ray *r,
             nd = nodes[node];
         }
         if (alt_leaf(s->blocks, r, nd.a, nd.b >> 2, h, any)) return true;
-        /* pending cells in front-to-back order: the first that starts beyond the hit ends it */
+        /* the next pending cell that does not start beyond the hit (the stack is not sorted: a
+         * ray in a plane pushed the far side with the interval the near side has) */
         for (;;) {
             if (sp == 0) return false;
             kd_entry e = stack[--sp];
@@ -55,8 +64,6 @@ static bool kd_trav(const rp_accel *acc, const accel_built *s, const alt_ray *r,
                 node = e.node, t0 = e.t0, t1 = e.t1;
                 break;
             }
-            /* the stack is sorted (the last pushed is the nearest): nothing after it is nearer */
-            if (!any) return false;
         }
     }
 }
@@ -101,18 +108,21 @@ static bool kd_packet(const accel_built *s, const alt_ray *r, alt_hit *h, uint32
             uint32_t near = pos ? child : child + 1, far = pos ? child + 1 : child;
             uint32_t mn = 0, mf = 0;
             float ts[16];
+            float tf[16]; /* where the far child starts: ts, or -inf for a ray in the plane */
             for (uint32_t q = m; q; q &= q - 1) {
                 uint32_t i = simd_ctz(q);
                 ts[i] = (split - r[i].org[axis]) * r[i].rdir[axis];
+                tf[i] = ts[i];
+                if (r[i].org[axis] == split && KD_IN_PLANE(&r[i], axis)) ts[i] = INFINITY, tf[i] = -INFINITY;
                 if (t0[i] <= alt_up(ts[i])) mn |= 1u << i;
-                if (alt_dn(ts[i]) <= t1[i]) mf |= 1u << i;
+                if (alt_dn(tf[i]) <= t1[i]) mf |= 1u << i;
             }
             if (mf && mn) {
                 kd_pentry *e = &stack[sp++];
                 e->node = far, e->mask = mf;
                 for (uint32_t q = mf; q; q &= q - 1) {
                     uint32_t i = simd_ctz(q);
-                    float d = alt_dn(ts[i]);
+                    float d = alt_dn(tf[i]);
                     e->t0[i] = d > t0[i] ? d : t0[i], e->t1[i] = t1[i];
                 }
             }
@@ -126,7 +136,7 @@ static bool kd_packet(const accel_built *s, const alt_ray *r, alt_hit *h, uint32
             } else if (mf) {
                 for (uint32_t q = mf; q; q &= q - 1) {
                     uint32_t i = simd_ctz(q);
-                    float d = alt_dn(ts[i]);
+                    float d = alt_dn(tf[i]);
                     t0[i] = d > t0[i] ? d : t0[i];
                 }
                 node = far, m = mf;

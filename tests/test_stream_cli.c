@@ -126,7 +126,11 @@ int main(void) {
     EXPECT(args, 0, "0 of 4096 hits differ");
     CHECK(strstr(output, "passes total") && strstr(output, "SIMD efficiency") && strstr(output, "1085") &&
           strstr(output, "grid/BVH time") && strstr(output, "64 along") == NULL);
+    /* the eye hits' shadow and reflection rays through both, checked too */
+    CHECK(strstr(output, "\nshadow   one thread") && strstr(output, "\nreflect  one thread") &&
+          strstr(output, "occluded), 0 differ") && strstr(output, "hit), 0 differ"));
     snprintf(args, sizeof args, "bench '%s' --stream --density 2 --oracle 0 --width 32", cornell);
     EXPECT(args, 0, "0 of 1024 hits differ");
+    CHECK(strstr(output, "occluded), 0 differ") && strstr(output, "hit), 0 differ"));
     return RP_TEST_END();
 }

@@ -330,6 +330,100 @@ static double time_rays(rp_scene *scene, const grid *g, rp_rayhit *rays, size_t 
     return ms > 0.0 ? (double)n / (ms * 1e3) : 0.0;
 }
 
+/* Mrays/s of one thread tracing occlusion rays one at a time, through the grid or the BVH. */
+static double time_shadow(rp_scene *scene, const grid *g, const rp_rayhit *rays, size_t n, rp_ray *out) {
+    double t0 = cli_now_ms();
+    for (size_t i = 0; i < n; i++) {
+        out[i] = rays[i].ray;
+        if (g)
+            grid_occluded1(g, &out[i], NULL);
+        else
+            rp_occluded1(scene, &out[i]);
+    }
+    double ms = cli_now_ms() - t0;
+    return ms > 0.0 ? (double)n / (ms * 1e3) : 0.0;
+}
+
+/* The secondary rays of the eye rays' hits (the BVH's), packed at the front of out: shadow rays
+ * to a point (segments ending just short of it) or mirror reflections about the
+ * geometric normal, both leaving the hit point on the side the eye ray came from (offset along
+ * the normal by 1e-4 of the scene's size plus 2^-18 of the point's magnitude). Returns their
+ * count. */
+static size_t secondary_rays(const rp_rayhit *eye, size_t n, const float light[3], float size, bool shadow,
+                             rp_rayhit *out) {
+    size_t m = 0;
+    for (size_t i = 0; i < n; i++) {
+        const rp_ray *r = &eye[i].ray;
+        const rp_hit *h = &eye[i].hit;
+        if (h->geom_id == RP_INVALID_ID) continue;
+        float d[3] = {r->dir_x, r->dir_y, r->dir_z}, nn[3] = {h->Ng_x, h->Ng_y, h->Ng_z};
+        float p[3] = {r->org_x + r->tfar * d[0], r->org_y + r->tfar * d[1], r->org_z + r->tfar * d[2]};
+        float len = sqrtf(nn[0] * nn[0] + nn[1] * nn[1] + nn[2] * nn[2]);
+        if (!(len > 0.0f)) continue;
+        float dn = (d[0] * nn[0] + d[1] * nn[1] + d[2] * nn[2]) / len;
+        float side = dn > 0.0f ? -1.0f : 1.0f, q[3], w[3], tfar = INFINITY;
+        for (int k = 0; k < 3; k++) {
+            nn[k] /= len;
+            q[k] = p[k] + side * nn[k] * (1e-4f * size + fabsf(p[k]) * 0x1p-18f);
+        }
+        if (shadow) {
+            for (int k = 0; k < 3; k++) w[k] = light[k] - q[k];
+            tfar = 0.999f;
+        } else {
+            for (int k = 0; k < 3; k++) w[k] = d[k] - 2.0f * dn * nn[k];
+        }
+        rp_rayhit *o = &out[m++];
+        memset(o, 0, sizeof *o);
+        o->ray = (rp_ray){.org_x = q[0], .org_y = q[1], .org_z = q[2], .dir_x = w[0], .dir_y = w[1], .dir_z = w[2],
+                          .tfar = tfar, .mask = 0xFFFFFFFFu};
+        o->hit.geom_id = o->hit.prim_id = o->hit.inst_id = RP_INVALID_ID;
+    }
+    return m;
+}
+
+/* The grid against the BVH on the eye hits' shadow and reflection rays, one thread, single rays:
+ * prints a line per kind and returns how many answers differ. */
+static size_t bench_secondary(rp_scene *scene, const grid *g, const loaded *l, const rp_rayhit *eye, size_t n,
+                              rp_rayhit *rays, rp_rayhit *a, rp_rayhit *b) {
+    const rp_scene_data *d = &l->data;
+    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t i = 0; i < d->vertex_count; i++)
+        for (int k = 0; k < 3; k++) lo[k] = fminf(lo[k], d->positions[3 * i + k]), hi[k] = fmaxf(hi[k], d->positions[3 * i + k]);
+    float size = fmaxf(hi[0] - lo[0], fmaxf(hi[1] - lo[1], hi[2] - lo[2]));
+    if (!(size > 0.0f && size < INFINITY)) size = 1.0f;
+    /* the first point light, else halfway from the scene's middle to the eye (inside a room, in
+     * front of an object) */
+    float light[3];
+    for (int k = 0; k < 3; k++) light[k] = 0.25f * (lo[k] + hi[k]) + 0.5f * l->cam.pinhole.eye[k];
+    if (d->light_count) memcpy(light, d->lights[0].position, sizeof light);
+    size_t differ_all = 0;
+    for (int kind = 0; kind < 2; kind++) {
+        size_t m = secondary_rays(eye, n, light, size, kind == 0, rays), differ = 0, hit = 0;
+        double mg, mb;
+        if (kind == 0) {
+            rp_ray *ra = (rp_ray *)a, *rb = (rp_ray *)b; /* an rp_ray fits in an rp_rayhit */
+            mg = time_shadow(scene, g, rays, m, ra), mb = time_shadow(scene, NULL, rays, m, rb);
+            for (size_t i = 0; i < m; i++) {
+                bool oa = ra[i].tfar == -INFINITY, ob = rb[i].tfar == -INFINITY;
+                differ += oa != ob, hit += ob;
+            }
+        } else {
+            mg = time_rays(scene, g, rays, m, a), mb = time_rays(scene, NULL, rays, m, b);
+            for (size_t i = 0; i < m; i++) {
+                differ += a[i].hit.geom_id != b[i].hit.geom_id || a[i].hit.prim_id != b[i].hit.prim_id ||
+                          memcmp(&a[i].ray.tfar, &b[i].ray.tfar, sizeof(float)) != 0;
+                hit += b[i].hit.geom_id != RP_INVALID_ID;
+            }
+        }
+        printf("%-8s one thread, single rays: grid %.2f Mrays/s, BVH (%s) %.2f Mrays/s, grid/BVH time %.2fx; "
+               "%zu rays (%zu %s), %zu differ\n",
+               kind == 0 ? "shadow" : "reflect", mg, kind == 0 ? "rp_occluded1" : "rp_intersect1", mb,
+               mg > 0.0 ? mb / mg : 0.0, m, hit, kind == 0 ? "occluded" : "hit", differ);
+        differ_all += differ;
+    }
+    return differ_all;
+}
+
 int cli_stream_bench(int argc, char **argv) {
     stream_opts o = {.max_depth = -1, .reflect_depth = -1, .refract_depth = -1};
     int rc = parse("bench", argc, argv, &o, true);
@@ -340,7 +434,7 @@ int cli_stream_bench(int argc, char **argv) {
     if (o.purcell && !o.has_fov && !o.has_eye && !o.has_look) o.fov = 11.0f, o.has_fov = true;
     loaded l;
     int status = CLI_EXIT_FAILURE;
-    rp_rayhit *hits = NULL, *a = NULL, *b = NULL;
+    rp_rayhit *hits = NULL, *a = NULL, *b = NULL, *sec = NULL;
     float *px = NULL;
     if (!load("bench", &o, 1024, 1024, &l)) goto done;
     o.sd.width = l.w, o.sd.height = l.h, o.sd.camera = &l.cam;
@@ -349,7 +443,8 @@ int cli_stream_bench(int argc, char **argv) {
     hits = malloc(n * sizeof(rp_rayhit));
     a = malloc(n * sizeof(rp_rayhit));
     b = malloc(n * sizeof(rp_rayhit));
-    if (!px || !hits || !a || !b) {
+    sec = malloc(n * sizeof(rp_rayhit));
+    if (!px || !hits || !a || !b || !sec) {
         fprintf(stderr, "raypack bench: out of memory for %zu rays\n", n);
         goto done;
     }
@@ -390,6 +485,8 @@ int cli_stream_bench(int argc, char **argv) {
     printf("primary  one thread, single rays: grid %.2f Mrays/s, BVH (rp_intersect1) %.2f Mrays/s, "
            "grid/BVH time %.2fx; %zu of %zu hits differ\n",
            mg, mb, mg > 0.0 ? mb / mg : 0.0, differ, n);
+    memcpy(hits, b, n * sizeof *b); /* the BVH's eye hits, where the secondary rays start */
+    differ += bench_secondary(scene, l.g, &l, hits, n, sec, a, b);
     if (o.purcell) {
         const stream_paper_row *p = &stream_paper_table2[stream_paper_table2_count - 1];
         double r = st.rays ? (double)st.rays : 1.0;
@@ -417,7 +514,7 @@ int cli_stream_bench(int argc, char **argv) {
     status = differ == 0 ? CLI_EXIT_OK : CLI_EXIT_FAILURE;
     if (differ) fprintf(stderr, "raypack bench: the grid's hits differ from the BVH's\n");
 done:
-    free(px), free(hits), free(a), free(b);
+    free(px), free(hits), free(a), free(b), free(sec);
     unload(&l);
     return status;
 }

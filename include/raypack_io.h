@@ -204,6 +204,10 @@ typedef struct rp_scene_load_desc {
      * parsed on the calling thread): 0 all hardware threads, 1 the calling thread alone. The
      * result is the same for every count, to the bit and in the same order, and so are errors. */
     int threads;
+    /* A point cloud (a scene of vertices alone: a PLY without faces, an OBJ of `v` lines) becomes a
+     * sphere at each finite vertex, of this radius; 0: half the median distance between
+     * neighbouring points (from a sample of 64), so a sampled surface is closed. */
+    float point_radius;
 } rp_scene_load_desc;
 /* Fills desc with the defaults. */
 RP_API void rp_scene_load_desc_defaults(rp_scene_load_desc *desc);

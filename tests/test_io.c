@@ -584,6 +584,46 @@ static void check_scene(const char *name, size_t tris, long spheres, long cones,
     rp_scene_data_free(&s);
 }
 
+/* Point clouds: vertices alone become spheres of the default material, half the neighbours'
+ * spacing in radius unless the caller gives one; non-finite vertices none; a mesh none. */
+static void test_points(void) {
+    char text[8192], err[512];
+    int at = snprintf(text, sizeof text, "ply\nformat ascii 1.0\nelement vertex 25\nproperty double x\n"
+                                         "property double y\nproperty double z\nend_header\n");
+    for (int i = 0; i < 25; i++) at += snprintf(text + at, sizeof text - (size_t)at, "%g %g 1\n", 0.5 * (i % 5), 0.5 * (i / 5));
+    write_text("points.ply", text);
+    rp_scene_data s;
+    bool ok = load("points.ply", &s, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (ok) {
+        CHECKF(s.triangle_count == 0 && s.sphere_count == 25 && s.material_count == 1, "%zu spheres", s.sphere_count);
+        if (s.sphere_count == 25)
+            CHECKF(s.spheres[7].radius == 0.25f && s.spheres[7].center[0] == 1.0f && s.spheres[7].center[1] == 0.5f &&
+                       s.spheres[7].center[2] == 1.0f && s.spheres[7].material == 0,
+                   "sphere 7: radius %g at %g %g %g", (double)s.spheres[7].radius, (double)s.spheres[7].center[0],
+                   (double)s.spheres[7].center[1], (double)s.spheres[7].center[2]);
+        rp_scene_data_free(&s);
+    }
+    char path[1024];
+    ok = rp_scene_data_load_ex(tmp_path("points.ply", path, sizeof path), &(rp_scene_load_desc){.point_radius = 2.0f}, &s,
+                               err, sizeof err);
+    CHECKF(ok && s.sphere_count == 25 && s.spheres[24].radius == 2.0f, "point_radius 2: %s", err);
+    if (ok) rp_scene_data_free(&s);
+    /* an OBJ of v lines; a single point; a mesh */
+    write_text("points.obj", "v 0 0 0\nv 3 0 0\nv 0 4 0\n");
+    ok = load("points.obj", &s, err, sizeof err);
+    CHECKF(ok && s.sphere_count == 3 && s.spheres[0].radius == 1.5f, "points.obj: %zu spheres, %s", s.sphere_count, err);
+    if (ok) rp_scene_data_free(&s);
+    write_text("point.obj", "v 2 0 0\n");
+    ok = load("point.obj", &s, err, sizeof err);
+    CHECKF(ok && s.sphere_count == 1 && s.spheres[0].radius > 0.0f, "point.obj: %s", err);
+    if (ok) rp_scene_data_free(&s);
+    write_text("tri_points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 5 5 5\nf 1 2 3\n");
+    ok = load("tri_points.obj", &s, err, sizeof err);
+    CHECKF(ok && s.triangle_count == 1 && s.sphere_count == 0, "a mesh with a loose vertex: %s", err);
+    if (ok) rp_scene_data_free(&s);
+}
+
 int main(void) {
     const char *t = getenv("RP_TEST_TMP");
     snprintf(tmp_dir, sizeof tmp_dir, "%s", t ? t : "/tmp/rp_test_io");
@@ -592,6 +632,7 @@ int main(void) {
     test_float_parsing();
     test_obj();
     test_ply();
+    test_points();
     test_nff_concave();
     test_aff();
     test_errors();
@@ -602,5 +643,6 @@ int main(void) {
     check_scene("stanford_bunny_bun_zipper.ply.gz", 69451, 0, 0, 0, 1, 0);
     check_scene("bart_museum5.tar.gz", 11308, 0, 8, 2, -1, 1);
     if (!rp_test_sanitized()) check_scene("dabrovic_sponza.obj.gz", 66454, 0, 0, 0, 1, 0);
+    check_scene("pointcloud/open3d_sinc_grid.ply", 0, 160801, 0, 0, 1, 0);
     return RP_TEST_END();
 }

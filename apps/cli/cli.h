@@ -68,6 +68,7 @@ typedef struct cli_render_setup {
     float eye[3], look[3], up[3], fov;
     bool has_anim_time;         /* --anim-time */
     float anim_time;
+    float point_radius;         /* --point-radius; 0: automatic */
     uint32_t lights[CLI_MAX_LIGHTS]; /* --lights */
     int light_count;            /* -1: all */
     const char *output;         /* -o (default raypack.png), checked writable */

@@ -58,6 +58,8 @@ static void render_usage(FILE *out) {
             "                         (--time is the progressive time budget)\n"
             "  --anim-flat            animated scenes: one flat structure instead of an instance\n"
             "                         per keyframed block (same image, for comparisons)\n"
+            "  --point-radius R       point clouds (vertices alone: a PLY without faces): a sphere of\n"
+            "                         radius R at each point [half the spacing of neighbours]\n"
             "  --anim-refit           animated scenes: keyframed blocks' vertices moved and their\n"
             "                         sub-scenes refitted each frame instead of instance transforms\n"
             "  --env FILE.hdr         lat-long environment (+y up) for direct, path and ir\n"
@@ -137,6 +139,7 @@ typedef struct render_options {
     int reflect_depth, refract_depth; /* -1: not given */
     bool has_anim_time, anim_flat, anim_refit;
     float anim_time;
+    float point_radius;               /* 0: automatic */
     uint32_t lights[CLI_MAX_LIGHTS];
     int light_count;                  /* -1: all lights */
 } render_options;
@@ -335,6 +338,9 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
             o->anim_flat = true;
         } else if (strcmp(a, "--anim-refit") == 0) {
             o->anim_refit = true;
+        } else if (strcmp(a, "--point-radius") == 0) {
+            VALUE();
+            if (!cli_parse_float(CMD, a, v, 0.0, 1e30, true, &o->point_radius)) return CLI_EXIT_USAGE;
         } else if (strcmp(a, "--lights") == 0) {
             VALUE();
             o->light_count = cli_parse_list(CMD, a, v, o->lights, CLI_MAX_LIGHTS);
@@ -622,7 +628,7 @@ int cli_render(int argc, char **argv) {
         /* stat, not open: opening a FIFO here would block, and the loader reads it once as a stream */
         if (!cli_scene_readable(CMD, o.scene)) return CLI_EXIT_FAILURE;
         char err[512] = "";
-        if (!rp_scene_data_load_ex(o.scene, &(rp_scene_load_desc){.threads = o.threads}, &data, err, sizeof err)) {
+        if (!rp_scene_data_load_ex(o.scene, &(rp_scene_load_desc){.threads = o.threads, .point_radius = o.point_radius}, &data, err, sizeof err)) {
             fprintf(stderr, "%s\n", err[0] ? err : "raypack render: cannot load the scene");
             return CLI_EXIT_FAILURE;
         }
@@ -894,6 +900,7 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
     out->height = o.height;
     out->spp = o.spp;
     out->threads = o.threads;
+    out->point_radius = o.point_radius;
     out->isa = o.isa;
     /* as cli_render fills its rp_render_desc */
     out->desc = (rp_render_desc){
@@ -944,7 +951,8 @@ bool cli_render_load(const char *cmd, const cli_render_setup *setup, rp_scene_da
     }
     fclose(probe);
     char err[512] = "";
-    if (rp_scene_data_load_ex(setup->scene, &(rp_scene_load_desc){.threads = setup->threads}, data, err, sizeof err))
+    if (rp_scene_data_load_ex(setup->scene, &(rp_scene_load_desc){.threads = setup->threads, .point_radius = setup->point_radius},
+                              data, err, sizeof err))
         return true;
     fprintf(stderr, "%s\n", err[0] ? err : "raypack: cannot load the scene");
     return false;

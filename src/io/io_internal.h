@@ -206,7 +206,11 @@ typedef struct io_load_opts {
     int threads;
     size_t chunk_bytes;
     size_t *chunks_taken; /* when not NULL: set to the number of chunks whose parallel result was used */
+    float point_radius;   /* rp_scene_load_desc.point_radius */
 } io_load_opts;
+/* A scene of vertices alone (a point cloud) gets a sphere of that radius (0: automatic) at each
+ * finite vertex (io_points.c); false when out of memory. */
+bool io_points_to_spheres(rp_scene_data *s, float radius);
 /* io_load_memory and rp_scene_data_load with those options. */
 bool io_load_memory_opts(const io_entry *files, size_t n, bool archive, const io_load_opts *opts, rp_scene_data *out,
                          char *err, size_t err_size);

@@ -429,6 +429,11 @@ static bool ctx_finish(io_ctx *ctx, bool ok, const char *path, rp_scene_data *ou
         rp_scene_data_free(out);
         return io_error(ctx, path, 0, "out of memory");
     }
+    if (!out->animation && out->vertex_count && !out->triangle_count && !out->sphere_count && !out->cone_count &&
+        !io_points_to_spheres(out, opts ? opts->point_radius : 0.0f)) {
+        rp_scene_data_free(out);
+        return io_error(ctx, path, 0, "out of memory");
+    }
     out->file_bytes = ctx->bytes;
     out->parse_ms = now_ms() - t0;
     return true;
@@ -470,7 +475,7 @@ bool io_load_file_opts(const char *path, const io_load_opts *opts, rp_scene_data
 
 bool rp_scene_data_load_ex(const char *path, const rp_scene_load_desc *desc, rp_scene_data *out, char *err,
                            size_t err_size) {
-    io_load_opts opts = {.threads = desc ? desc->threads : 0};
+    io_load_opts opts = {.threads = desc ? desc->threads : 0, .point_radius = desc ? desc->point_radius : 0.0f};
     return io_load_file_opts(path, &opts, out, err, err_size);
 }
 

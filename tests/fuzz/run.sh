@@ -5,7 +5,9 @@
 # crash reproducer in tests/fuzz/crashes/NAME. Prints executions per second and in total per parser;
 # exits non-zero if any harness crashed, leaked, hung (-timeout) or went past -rss_limit_mb. A
 # crash's input is left in build/fuzz/artifacts/NAME/: copy it to tests/fuzz/crashes/NAME/ with
-# the fix, so every later run (and CTest's replay) checks it.
+# the fix, so every later run (and CTest's replay) checks it. FUZZ_TIMEOUT (seconds, default 10) is
+# libFuzzer's per-input hang limit: raise it for long runs under nice beside other work, where a
+# starved process otherwise reports a hang that replays in a millisecond.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 SECONDS_EACH=${FUZZ_SECONDS:-60}
@@ -38,12 +40,12 @@ run_one() {
     # and CI fails only when the code changes, not when a random search gets lucky; else by time
     local budget=(-max_total_time="$SECONDS_EACH")
     [ -n "$runs" ] && budget=(-runs="$runs" -seed="${FUZZ_SEED:-1}")
-    ASAN_OPTIONS=$asan LSAN_OPTIONS=$lsan "$BIN/fuzz_$name" "${budget[@]}" -timeout=10 -rss_limit_mb=1024 -malloc_limit_mb=512 \
+    ASAN_OPTIONS=$asan LSAN_OPTIONS=$lsan "$BIN/fuzz_$name" "${budget[@]}" -timeout="${FUZZ_TIMEOUT:-10}" -rss_limit_mb=1024 -malloc_limit_mb=512 \
         -max_len=16384 -print_final_stats=1 -artifact_prefix="$art" "$work" "tests/fuzz/corpus/$name" \
         >"$OUT/$name.log" 2>&1
 }
 export -f run_one
-export BIN OUT SECONDS_EACH FUZZ_RUNS FUZZ_SEED FUZZ_RUNS_GLTF
+export BIN OUT SECONDS_EACH FUZZ_RUNS FUZZ_SEED FUZZ_RUNS_GLTF FUZZ_TIMEOUT
 
 status=0
 printf '%s\n' $NAMES | xargs -P "$JOBS" -I{} bash -c 'run_one {}' || status=1

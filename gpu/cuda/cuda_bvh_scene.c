@@ -57,7 +57,7 @@ bool rp_cuda_bvh_src_from_scene(const rp_scene *s, rp_cuda_bvh_src *out, char *e
     if (s->desc.accel != RP_ACCEL_BVH) return fail(err, err_size, "the GPU traces the BVH only (--accel bvh)");
     out->skipped = s->prim_count;
     bvh2 tree = {0};
-    if (s->tri_bvh2q.nodes && !bvh2q_to_bvh2(&s->device->alloc, &s->tri_bvh2q, &tree))
+    if (s->tri_bvh2q.nodes && !bvh2q_to_bvh2(&s->device->alloc, &s->tri_bvh2q, false, &tree))
         return fail(err, err_size, "out of memory");
     const bvh2 *b = &tree;
     bool empty = !b->nodes || !s->tris;

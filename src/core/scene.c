@@ -952,7 +952,7 @@ static bool scene_refit(rp_scene *s) {
     /* the float tree, refitted, then quantized again (its topology is the quantized one's) */
     bvh2 tree = {0};
     bvh2q q = {0};
-    if (ok) ok = bvh2q_to_bvh2(a, &s->tri_bvh2q, &tree);
+    if (ok) ok = bvh2q_to_bvh2(a, &s->tri_bvh2q, true, &tree);
     double cost = ok ? bvh2_refit_blocks(&tree, s->tris, REFIT_TRAV_COST) : 0.0;
     if (ok && cost > (double)s->desc.refit_max_growth * s->built_cost) ok = false;
     if (ok) bvh2_pad_boxes(&tree); /* as the build does */

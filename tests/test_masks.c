@@ -11,6 +11,7 @@
 #include <math.h>
 
 #include "mesh_gen.h"
+#include "query_got.h"
 #include "raypack.h"
 #include "ray_gen.h"
 #include "rp_test.h"
@@ -18,19 +19,6 @@
 #define GEOMS 4
 #define NRAYS 1024 /* 16 packets of 8 x 8 */
 #define SIDE 8
-
-typedef struct got {
-    float t, u, v, ng[3];
-    uint32_t geom, prim;
-    int occluded;
-} got;
-
-static bool same_got(const got *a, const got *b) {
-    if (a->geom != b->geom || a->occluded != b->occluded) return false;
-    if (a->geom == RP_INVALID_ID) return true;
-    return a->prim == b->prim && memcmp(&a->t, &b->t, 4) == 0 && a->u == b->u && a->v == b->v &&
-           a->ng[0] == b->ng[0] && a->ng[1] == b->ng[1] && a->ng[2] == b->ng[2];
-}
 
 /* Triangle i of the mesh is triangle i / GEOMS of geometry i % GEOMS. */
 static rp_scene *make_scene(rp_device *dev, rp_accel_type accel, const test_mesh *m, const uint32_t masks[GEOMS],
@@ -68,44 +56,6 @@ static got brute(const test_mesh *m, const uint32_t masks[GEOMS], const rp_ray *
     return b;
 }
 
-static void trace1(rp_scene *s, const rp_ray *r, got *g) {
-    rp_rayhit rh = {.ray = *r};
-    rh.hit.geom_id = RP_INVALID_ID;
-    rp_intersect1(s, &rh);
-    *g = (got){rh.ray.tfar, rh.hit.u, rh.hit.v, {rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z}, rh.hit.geom_id, rh.hit.prim_id, 0};
-    rp_ray o = *r;
-    rp_occluded1(s, &o);
-    g->occluded = o.tfar == -INFINITY;
-}
-
-#define TRACE_PACKET(W)                                                                           \
-    static void trace_##W(rp_scene *s, const rp_ray *rays, uint32_t n, got *out) {                \
-        for (uint32_t base = 0; base + W <= n; base += W) {                                       \
-            rp_rayhit##W p;                                                                       \
-            rp_ray##W sh;                                                                         \
-            int32_t valid[W];                                                                     \
-            memset(&p, 0, sizeof p);                                                              \
-            memset(&sh, 0, sizeof sh);                                                            \
-            for (int i = 0; i < W; i++) {                                                         \
-                const rp_ray *r = &rays[base + (uint32_t)i];                                      \
-                valid[i] = -1;                                                                    \
-                p.ray.org_x[i] = sh.org_x[i] = r->org_x, p.ray.org_y[i] = sh.org_y[i] = r->org_y; \
-                p.ray.org_z[i] = sh.org_z[i] = r->org_z, p.ray.dir_x[i] = sh.dir_x[i] = r->dir_x; \
-                p.ray.dir_y[i] = sh.dir_y[i] = r->dir_y, p.ray.dir_z[i] = sh.dir_z[i] = r->dir_z; \
-                p.ray.tnear[i] = sh.tnear[i] = r->tnear, p.ray.tfar[i] = sh.tfar[i] = r->tfar;    \
-                p.ray.mask[i] = sh.mask[i] = r->mask, p.hit.geom_id[i] = RP_INVALID_ID;           \
-            }                                                                                     \
-            rp_intersect##W(s, valid, &p);                                                        \
-            rp_occluded##W(s, valid, &sh);                                                        \
-            for (int i = 0; i < W; i++)                                                           \
-                out[base + (uint32_t)i] =                                                         \
-                    (got){p.ray.tfar[i], p.hit.u[i], p.hit.v[i], {p.hit.Ng_x[i], p.hit.Ng_y[i], p.hit.Ng_z[i]}, \
-                          p.hit.geom_id[i], p.hit.prim_id[i], sh.tfar[i] == -INFINITY};            \
-        }                                                                                         \
-    }
-TRACE_PACKET(4)
-TRACE_PACKET(8)
-TRACE_PACKET(16)
 
 /* n x n packets of consecutive rays, with their masks. */
 static void trace_n(rp_device *dev, rp_scene *s, rp_traversal trav, const rp_ray *rays, uint32_t n, got *out) {
@@ -138,23 +88,6 @@ static void trace_n(rp_device *dev, rp_scene *s, rp_traversal trav, const rp_ray
     rp_rayhit_n_free(dev, &p);
 }
 
-static void trace_array(rp_scene *s, const rp_ray *rays, uint32_t n, uint32_t flags, got *out) {
-    rp_rayhit *a = malloc(sizeof(rp_rayhit) * n);
-    rp_ray *o = malloc(sizeof(rp_ray) * n);
-    for (uint32_t i = 0; i < n; i++) {
-        a[i] = (rp_rayhit){.ray = rays[i]};
-        a[i].hit.geom_id = RP_INVALID_ID;
-        o[i] = rays[i];
-    }
-    rp_intersect_array(s, a, n, flags);
-    rp_occluded_array(s, o, n, flags);
-    for (uint32_t i = 0; i < n; i++)
-        out[i] = (got){a[i].ray.tfar, a[i].hit.u, a[i].hit.v, {a[i].hit.Ng_x, a[i].hit.Ng_y, a[i].hit.Ng_z},
-                       a[i].hit.geom_id, a[i].hit.prim_id, o[i].tfar == -INFINITY};
-    free(a);
-    free(o);
-}
-
 /* An instance of s under the identity: the same hits (the normal through the identity too). */
 static rp_scene *make_instance(rp_device *dev, rp_scene *s) {
     static const float id[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
@@ -170,7 +103,8 @@ static rp_scene *make_instance(rp_device *dev, rp_scene *s) {
 
 static uint32_t count_bad(const got *a, const got *b, uint32_t n) {
     uint32_t bad = 0;
-    for (uint32_t i = 0; i < n; i++) bad += !same_got(&a[i], &b[i]);
+    for (uint32_t i = 0; i < n; i++) /* a packet's dead lanes: 0xDEAD untouched, 0xBAD written */
+        bad += a[i].geom != 0xDEADu && (!same_got(&a[i], &b[i]) || a[i].occluded != b[i].occluded);
     return bad;
 }
 

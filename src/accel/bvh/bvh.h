@@ -77,8 +77,8 @@ void bvh2_pad_boxes(bvh2 *bvh);
  * bvh_node's index and count (a leaf's count is its tri4 blocks, at most 15). A pair is an inner
  * node of the float tree whose two children are leaves of one block each, in adjacent blocks:
  * stored as one leaf of those two blocks (the flag says so), which saves its two children's 32
- * bytes (2 in 5 of the binary nodes: 7363 of bunny's 18326 leaves are in such pairs) at the cost
- * of the packets' two child box tests there. Nodes are numbered from the root, an inner node's
+ * bytes (2 in 5 of the binary nodes: bunny's 18326 leaves make 7363 such pairs) at the cost of
+ * the packets' two child box tests there. Nodes are numbered from the root, an inner node's
  * children side by side, the pairs' children left out. */
 typedef struct bvh2q_node {
     uint16_t lo[3], hi[3];

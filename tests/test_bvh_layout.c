@@ -1,7 +1,8 @@
 // rp-test: labels=core timeout=120
 /* The compact layouts of the triangle BVH (accel/bvh/bvh.h): the quantized binary BVH's decoded
  * boxes hold the exact ones (boxes far from the origin, tiny, flat and point-like ones, and one
- * scene of a single box), with the same topology; the compact wide BVH holds, node for node, the
+ * scene of a single box), with the same topology (pairs of one-block leaves stored as one leaf and
+ * split again by bvh2q_to_bvh2); the compact wide BVH holds, node for node, the
  * children and boxes of the full-width one, each node as narrow as its children allow. */
 #include <math.h>
 #include <stdint.h>
@@ -39,33 +40,76 @@ static bool leaf_fn(void *user, const bvh_node *leaf, uint32_t *first, uint32_t 
     return true;
 }
 
+/* The float tree's leaves renumbered to blocks of 4 in leaf order, as scene.c leaves them (so
+ * sibling leaves of one block each lie in adjacent blocks and become pairs). */
+static uint32_t number_blocks(bvh_node *nodes, uint32_t i, uint32_t next) {
+    bvh_node *n = &nodes[i];
+    if (n->count) {
+        n->count = (n->count + 3) / 4, n->index = next;
+        return next + n->count;
+    }
+    next = number_blocks(nodes, n->index, next);
+    return number_blocks(nodes, n->index + 1, next);
+}
+
+/* Walks float node i of t and node j of the quantized tree together: the decoded boxes hold the
+ * exact ones, leaves keep their blocks and a pair is an inner node of two one-block leaves in
+ * adjacent blocks. Counts the bad planes, the moved leaves and the pairs. */
+static void walk_quant(const bvh2 *t, uint32_t i, const bvh2q *q, uint32_t j, uint32_t *bad, uint32_t *moved,
+                       uint32_t *pairs) {
+    const bvh_node *n = &t->nodes[i];
+    bvh_node d = bvh2q_decode(&q->nodes[j], q->org, q->scale);
+    for (int k = 0; k < 3; k++) *bad += !(d.lo[k] <= n->lo[k]) || !(d.hi[k] >= n->hi[k]);
+    if (q->nodes[j].ic & BVH2Q_PAIR) {
+        const bvh_node *l = &t->nodes[n->index], *r = l + 1;
+        (*pairs)++;
+        *moved += n->count != 0 || l->count != 1 || r->count != 1 || l->index != d.index || r->index != d.index + 1 ||
+                  d.count != 2;
+        return;
+    }
+    if (n->count || d.count) {
+        *moved += d.index != n->index || d.count != n->count;
+        return;
+    }
+    walk_quant(t, n->index, q, d.index, bad, moved, pairs);
+    walk_quant(t, n->index + 1, q, d.index + 1, bad, moved, pairs);
+}
+
+/* The same topology and leaves, node for node. */
+static uint32_t tree_diff(const bvh2 *a, uint32_t i, const bvh2 *b, uint32_t j) {
+    const bvh_node *x = &a->nodes[i], *y = &b->nodes[j];
+    if (x->count || y->count) return x->count != y->count || x->index != y->index;
+    return tree_diff(a, x->index, b, y->index) + tree_diff(a, x->index + 1, b, y->index + 1);
+}
+
+static uint32_t total_pairs; /* over every tree: the pairs are made and checked somewhere */
+
 static void check_quant(const sys_allocator *a, const bvh2 *b) {
-    /* the counts as scene.c leaves them: blocks of 4 */
     bvh2 t = *b;
     bvh_node *nodes = malloc((size_t)b->node_count * sizeof *nodes);
     memcpy(nodes, b->nodes, (size_t)b->node_count * sizeof *nodes);
-    for (uint32_t i = 0; i < b->node_count; i++)
-        if (nodes[i].count) nodes[i].count = (nodes[i].count + 3) / 4;
     t.nodes = nodes;
+    if (nodes[0].count || nodes[0].index) number_blocks(nodes, 0, 0);
     bvh2q q;
     CHECK(bvh2q_from_bvh2(a, &t, &q));
     if (!q.nodes) {
         free(nodes);
         return;
     }
-    uint32_t bad = 0, moved = 0;
-    for (uint32_t i = 0; i < t.node_count; i++) {
-        const bvh_node *n = &t.nodes[i];
-        if (i != 0 && n->count == 0 && n->index == 0) continue; /* unused */
-        bvh_node d = bvh2q_decode(&q.nodes[i], q.org, q.scale);
-        moved += d.index != n->index || d.count != n->count;
-        for (int k = 0; k < 3; k++) bad += !(d.lo[k] <= n->lo[k]) || !(d.hi[k] >= n->hi[k]);
-    }
+    uint32_t bad = 0, moved = 0, pairs = 0;
+    if (nodes[0].count || nodes[0].index) walk_quant(&t, 0, &q, 0, &bad, &moved, &pairs);
     CHECKF(bad == 0, "%u planes of decoded boxes cut into the exact boxes", bad);
     CHECK(moved == 0);
+    total_pairs += pairs;
+    CHECKF(q.node_count == 2 * t.leaf_count - 1 - 2 * pairs, "%u nodes for %u leaves and %u pairs", q.node_count,
+           t.leaf_count, pairs);
     bvh2 back;
-    CHECK(bvh2q_to_bvh2(a, &q, &back));
-    CHECK(back.node_count == t.node_count && back.depth == t.depth && back.leaf_count == t.leaf_count);
+    CHECK(bvh2q_to_bvh2(a, &q, true, &back));
+    CHECK(back.node_count == 2 * t.leaf_count - 1 && back.depth == t.depth && back.leaf_count == t.leaf_count);
+    CHECK(tree_diff(&t, 0, &back, 0) == 0);
+    bvh2_free(a, &back);
+    CHECK(bvh2q_to_bvh2(a, &q, false, &back));
+    CHECK(back.node_count == q.node_count && back.leaf_count == t.leaf_count - pairs);
     bvh2_free(a, &back);
     bvh2q_free(a, &q);
     free(nodes);
@@ -135,5 +179,6 @@ int main(void) {
                 bvh2_free(&a, &b);
                 free(p);
             }
+    CHECKF(total_pairs > 0, "no pairs of one-block leaves in any tree");
     return RP_TEST_END();
 }

@@ -6,21 +6,11 @@
 #include <math.h>
 
 #include "mesh_gen.h"
+#include "query_got.h"
 #include "raypack.h"
 #include "rp_test.h"
 
-typedef struct got {
-    float t, u, v, ng[3];
-    uint32_t geom, prim;
-    int occluded;
-} got;
-
-static bool same(const got *a, const got *b) {
-    if (a->geom != b->geom || a->occluded != b->occluded) return false;
-    if (a->geom == RP_INVALID_ID) return true;
-    return a->prim == b->prim && memcmp(&a->t, &b->t, 4) == 0 && a->u == b->u && a->v == b->v &&
-           a->ng[0] == b->ng[0] && a->ng[1] == b->ng[1] && a->ng[2] == b->ng[2];
-}
+static bool same(const got *a, const got *b) { return same_got(a, b) && a->occluded == b->occluded; }
 
 static void rays_make(rp_ray *r, uint32_t n, uint64_t seed) {
     test_rng g = {seed};

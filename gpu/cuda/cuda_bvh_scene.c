@@ -33,12 +33,13 @@ static bool put_leaf(const rp_scene *s, const bvh_node *leaf, rp_cuda_bvh_src *o
     uint32_t first = out->tri_count, n = 0;
     for (uint32_t b = leaf->index; b < leaf->index + leaf->count; b++) {
         const tri4 *tr = &s->tris[b];
-        for (int j = 0; j < 4; j++) {
-            if (!tr->mask[j]) continue; /* padding lanes (and mask-0 geometry, never hit) */
+        for (uint32_t lanes = tri4_lanes(tr); lanes; lanes &= lanes - 1) { /* not the padding lanes */
+            uint32_t j = simd_ctz(lanes), mask = s->geom_masks[tr->geom[j]];
+            if (!mask) continue; /* never hit */
             float *t = out->tris + 12 * (size_t)out->tri_count++;
             for (int v = 0; v < 3; v++)
                 for (int a = 0; a < 3; a++) t[4 * v + a] = tr->v[3 * v + a][j];
-            put_u32(t + 3, tr->geom[j]), put_u32(t + 7, tr->prim[j]), put_u32(t + 11, tr->mask[j]);
+            put_u32(t + 3, tr->geom[j]), put_u32(t + 7, tr->prim[j]), put_u32(t + 11, mask);
             n++;
         }
     }
@@ -56,7 +57,7 @@ bool rp_cuda_bvh_src_from_scene(const rp_scene *s, rp_cuda_bvh_src *out, char *e
     if (s->desc.accel != RP_ACCEL_BVH) return fail(err, err_size, "the GPU traces the BVH only (--accel bvh)");
     out->skipped = s->prim_count;
     bvh2 tree = {0};
-    if (s->tri_bvh2q.nodes && !bvh2q_to_bvh2(&s->device->alloc, &s->tri_bvh2q, &tree))
+    if (s->tri_bvh2q.nodes && !bvh2q_to_bvh2(&s->device->alloc, &s->tri_bvh2q, false, &tree))
         return fail(err, err_size, "out of memory");
     const bvh2 *b = &tree;
     bool empty = !b->nodes || !s->tris;

@@ -13,7 +13,7 @@ void accel_built_free(const sys_allocator *a, accel_built *b) {
 tri4 *accel_blocks_alloc(const sys_allocator *a, uint32_t count) {
     tri4 *t = sys_alloc(a, ((size_t)count + 1) * sizeof(tri4));
     if (!t) return NULL;
-    /* the padding block, as the BVH's: NaN vertices (no edge function exactly 0), mask 0 */
+    /* the padding block, as the BVH's: NaN vertices (no edge function exactly 0, never a hit) */
     tri4 *pad = &t[count];
     memset(pad, 0, sizeof *pad);
     for (int q = 0; q < 9; q++)
@@ -22,17 +22,13 @@ tri4 *accel_blocks_alloc(const sys_allocator *a, uint32_t count) {
 }
 
 void accel_fill_block(const accel_tri_input *in, const uint32_t *ids, uint32_t n, tri4 *dst) {
-    for (uint32_t lane = 0; lane < 4; lane++) {
-        if (lane >= n) { /* lane 0 again, never hit */
-            for (int q = 0; q < 9; q++) dst->v[q][lane] = dst->v[q][0];
-            dst->geom[lane] = dst->geom[0], dst->prim[lane] = dst->prim[0], dst->mask[lane] = 0;
-            continue;
-        }
+    for (uint32_t lane = 0; lane < n; lane++) {
         prim_ref r = in->refs[ids[lane]];
         float v[9];
         uint32_t mask;
         in->fetch(in->user, r, v, &mask);
         for (int q = 0; q < 9; q++) dst->v[q][lane] = v[q];
-        dst->geom[lane] = r.geom, dst->prim[lane] = r.prim, dst->mask[lane] = mask;
+        dst->geom[lane] = r.geom, dst->prim[lane] = r.prim;
     }
+    tri4_pad(dst, n); /* lane 0 again */
 }

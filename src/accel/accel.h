@@ -25,7 +25,7 @@ typedef struct accel_tri_input {
     /* Fills the blocks of positions [begin, end) of a leaf order, as the BVH's are filled (in
      * order, prefetching each triangle's reference, indices and vertices ahead): position p is
      * triangle refs[ids[p * stride]], in block block_of[p]; block_of[begin] starts a block, and
-     * a block's unused lanes repeat lane 0 with mask 0. */
+     * a block's unused lanes repeat lane 0 (tri4_pad). */
     void (*fill)(const void *user, const prim_ref *refs, const uint32_t *ids, size_t stride, const uint32_t *block_of,
                  uint32_t begin, uint32_t end, tri4 *blocks);
     const void *user;
@@ -36,7 +36,7 @@ typedef struct accel_tri_input {
 typedef struct accel_built {
     void *nodes;
     size_t node_bytes;
-    tri4 *blocks;           /* block_count blocks and one padding block (NaN, mask 0) */
+    tri4 *blocks;           /* block_count blocks and one padding block (NaN vertices) */
     uint32_t block_count;
     uint32_t root_depth;    /* levels (a single leaf: 1) */
     uint64_t nodes_total, inner_nodes, leaves, tri_refs;
@@ -61,7 +61,7 @@ void accel_built_free(const sys_allocator *a, accel_built *b);
 /* Allocates count tri4 blocks and the padding block after them; NULL when out of memory. */
 tri4 *accel_blocks_alloc(const sys_allocator *a, uint32_t count);
 /* Fills block `dst` (lanes 0..n-1, n in 1..4) with triangles ids[0..n) of the input; unused lanes
- * repeat lane 0 with mask 0 (never hit), as the BVH's blocks do. */
+ * repeat lane 0 (tri4_pad), as the BVH's blocks do. */
 void accel_fill_block(const accel_tri_input *in, const uint32_t *ids, uint32_t n, tri4 *dst);
 
 #endif

@@ -26,6 +26,7 @@ typedef struct alt_ray {
     float org[3], dir[3], rdir[3];
     float tnear;
     uint32_t mask;
+    const uint32_t *geom_masks; /* rp_accel.geom_masks when the ray needs the mask test, else NULL */
     int kx, ky, kz;
     float sx, sy, sz;
 } alt_ray;
@@ -40,11 +41,12 @@ typedef struct alt_hit {
 static inline float alt_up(float t) { return t > 0.0f ? t * ALT_UP : t * ALT_DN; }
 static inline float alt_dn(float t) { return t > 0.0f ? t * ALT_DN : t * ALT_UP; }
 
-static inline void alt_ray_setup(alt_ray *r, const rp_ray *ray) {
+static inline void alt_ray_setup(alt_ray *r, const rp_ray *ray, const rp_accel *acc) {
     static const int8_t next[3] = {1, 2, 0};
     const float d[3] = {ray->dir_x, ray->dir_y, ray->dir_z};
     r->org[0] = ray->org_x, r->org[1] = ray->org_y, r->org[2] = ray->org_z;
     r->tnear = ray->tnear, r->mask = ray->mask;
+    r->geom_masks = (ray->mask & acc->tri_mask_and) ? NULL : acc->geom_masks; /* as kernels.inc's leaf1_tri */
     float a0 = fabsf(d[0]), a1 = fabsf(d[1]), a2 = fabsf(d[2]);
     int z = a1 > a0;
     z = a2 > (z ? a1 : a0) ? 2 : z;
@@ -73,13 +75,12 @@ static inline bool alt_ray_box(const alt_ray *r, const float b[6], float tfar, f
 }
 
 /* One ray against blocks [first, first + count): closest hit (tie-break by (geom, prim)) or, with
- * any, true at the first hit. Unused lanes have mask 0, so the mask test is always made. */
+ * any, true at the first hit. Unused lanes repeat lane 0, so they find only its hit again. */
 static inline bool alt_leaf(const tri4 *blocks, const alt_ray *r, uint32_t first, uint32_t count, alt_hit *h,
                             bool any) {
     const int kx = r->kx, ky = r->ky, kz = r->kz;
     vf4 ox = vf4_splat(r->org[kx]), oy = vf4_splat(r->org[ky]), oz = vf4_splat(r->org[kz]);
     vf4 sx = vf4_splat(r->sx), sy = vf4_splat(r->sy), sz = vf4_splat(r->sz);
-    vi4 rmask = vi4_splat((int32_t)r->mask);
     for (uint32_t b = first; b < first + count; b++) {
         const tri4 *tr = &blocks[b];
         vf4 t, u, v;
@@ -88,8 +89,8 @@ static inline bool alt_leaf(const tri4 *blocks, const alt_ray *r, uint32_t first
                       vf4_load(tr->v[6 + kx]) - ox, vf4_load(tr->v[6 + ky]) - oy, vf4_load(tr->v[6 + kz]) - oz,
                       sx, sy, sz, &t, &u, &v);
         ok &= (t >= vf4_splat(r->tnear)) & (t <= vf4_splat(h->t));
-        ok &= (vi4_load(tr->mask) & rmask) != 0;
         uint32_t m = vi4_movemask(ok);
+        if (m && r->geom_masks) m &= tri4_mask_lanes(r->geom_masks, tr, r->mask);
         if (!m) continue;
         if (any) return true;
         do {
@@ -120,7 +121,7 @@ static inline bool alt_leaf(const tri4 *blocks, const alt_ray *r, uint32_t first
         const accel_built *s = acc->alt;                                                          \
         if (s && s->block_count) {                                                                \
             alt_ray r;                                                                            \
-            alt_ray_setup(&r, &rh->ray);                                                          \
+            alt_ray_setup(&r, &rh->ray, acc);                                                          \
             alt_hit h = {.t = rh->ray.tfar, .geom = RP_INVALID_ID, .prim = RP_INVALID_ID};        \
             TRAV(acc, s, &r, &h, false);                                                          \
             if (h.geom != RP_INVALID_ID) alt_write_hit(s, &h, rh);                                \
@@ -132,7 +133,7 @@ static inline bool alt_leaf(const tri4 *blocks, const alt_ray *r, uint32_t first
         const accel_built *s = acc->alt;                                                          \
         if (s && s->block_count) {                                                                \
             alt_ray r;                                                                            \
-            alt_ray_setup(&r, ray);                                                               \
+            alt_ray_setup(&r, ray, acc);                                                               \
             alt_hit h = {.t = ray->tfar, .geom = RP_INVALID_ID, .prim = RP_INVALID_ID};           \
             if (TRAV(acc, s, &r, &h, true)) {                                                     \
                 ray->tfar = -INFINITY;                                                            \
@@ -181,7 +182,7 @@ static inline void alt_write_hit(const accel_built *s, const alt_hit *h, rp_rayh
             if (!valid[i] || !(p->ray.tnear[i] <= p->ray.tfar[i])) continue;                      \
             live |= 1u << i;                                                                      \
             rp_ray one = ALT_LANE(&p->ray, i);                                                    \
-            alt_ray_setup(&r[i], &one);                                                           \
+            alt_ray_setup(&r[i], &one, acc);                                                           \
             h[i] = (alt_hit){.t = one.tfar, .geom = RP_INVALID_ID, .prim = RP_INVALID_ID};        \
         }                                                                                         \
         if (!live) return;                                                                        \
@@ -211,7 +212,7 @@ static inline void alt_write_hit(const accel_built *s, const alt_hit *h, rp_rayh
             if (!valid[i] || !(p->tnear[i] <= p->tfar[i])) continue;                              \
             live |= 1u << i;                                                                      \
             rp_ray one = ALT_LANE(p, i);                                                          \
-            alt_ray_setup(&r[i], &one);                                                           \
+            alt_ray_setup(&r[i], &one, acc);                                                           \
             h[i] = (alt_hit){.t = one.tfar, .geom = RP_INVALID_ID, .prim = RP_INVALID_ID};        \
         }                                                                                         \
         if (!live) return;                                                                        \

@@ -64,6 +64,8 @@ struct rp_scene {
                            * quantized (bvh.h) */
     tri4 *tris;
     size_t tri_block_count;
+    uint32_t *geom_masks; /* rp_accel.geom_masks: per geom_id, a triangle geometry's mask */
+    size_t geom_mask_count;
     prim_ref *prims;
     size_t prim_count;
     rp_scene_stats stats;

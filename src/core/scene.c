@@ -52,9 +52,10 @@ void scene_free_accel(rp_scene *s) {
     bvh2q_free(a, &s->tri_bvh2q);
     sys_free(a, s->tris, s->tri_block_count * sizeof(tri4));
     sys_free(a, s->prims, s->prim_count * sizeof(prim_ref));
+    sys_free(a, s->geom_masks, s->geom_mask_count * sizeof(uint32_t));
     accel_built_free(a, &s->alt);
-    s->tris = NULL, s->prims = NULL;
-    s->tri_block_count = s->prim_count = 0;
+    s->tris = NULL, s->prims = NULL, s->geom_masks = NULL;
+    s->tri_block_count = s->prim_count = s->geom_mask_count = 0;
     memset(&s->accel, 0, sizeof s->accel);
 }
 
@@ -295,9 +296,9 @@ static uint32_t pack_chunk_start(const tri_pack_ctx *c, uint32_t index) {
 }
 
 /* Fills the blocks of primitive positions [b, e) (block_of[b] starts a block): position p holds
- * triangle refs[ids[p * stride]] and goes to block block_of[p]. Unused lanes repeat lane 0 with
- * mask 0 (never hit): zeroed lanes made every edge function exactly 0, so each test of a partly
- * filled block took the watertight test's double-precision refinement. */
+ * triangle refs[ids[p * stride]] and goes to block block_of[p]. Unused lanes repeat lane 0
+ * (tri4_pad): zeroed lanes made every edge function exactly 0, so each test of a partly filled
+ * block took the watertight test's double-precision refinement. */
 static inline void tri_fill_range(const rp_scene *s, const prim_ref *refs, const uint32_t *ids, size_t stride,
                                   const uint32_t *block_of, tri4 *blocks, uint32_t b, uint32_t e) {
     uint32_t lane = 0;
@@ -322,12 +323,9 @@ static inline void tri_fill_range(const rp_scene *s, const prim_ref *refs, const
             t->v[3 * q + 1][lane] = v[q].y;
             t->v[3 * q + 2][lane] = v[q].z;
         }
-        t->geom[lane] = r.geom, t->prim[lane] = r.prim, t->mask[lane] = g->mask;
+        t->geom[lane] = r.geom, t->prim[lane] = r.prim;
         if (p + 1 < e && block_of[p + 1] == blk) continue;
-        for (uint32_t j = lane + 1; j < 4; j++) {
-            for (int q = 0; q < 9; q++) t->v[q][j] = t->v[q][0];
-            t->geom[j] = t->geom[0], t->prim[j] = t->prim[0], t->mask[j] = 0;
-        }
+        tri4_pad(t, lane + 1);
     }
 }
 
@@ -702,7 +700,7 @@ rp_error scene_build(rp_scene *s) {
             bool ok = sums && tri_pack_plan(a, &pc);
             /* one padding block past the end: the 8-lane leaf tests read a pair of blocks, and a
              * leaf's odd last block is paired with whatever follows it (those lanes masked off);
-             * NaN vertices, so no edge function is exactly 0 there (no refinement), mask 0 */
+             * NaN vertices, so no edge function is exactly 0 there (no refinement) and no hit */
             size_t alloc_blocks = (size_t)pc.block_count + 1;
             if (ok) pc.blocks = sys_alloc(a, alloc_blocks * sizeof(tri4));
             ok = ok && pc.blocks;
@@ -778,19 +776,31 @@ rp_error scene_build(rp_scene *s) {
     gather_free(a, &tris);
     gather_free(a, &prims);
     if (err != RP_ERROR_NONE) return err;
+    /* the triangle geometries' masks by geom_id, for the rays that need the mask test (the blocks
+     * keep none, traverse.h) */
+    s->geom_mask_count = s->geom_count ? s->geom_count : 1;
+    s->geom_masks = sys_alloc(a, s->geom_mask_count * sizeof(uint32_t));
+    if (!s->geom_masks) return RP_ERROR_OUT_OF_MEMORY;
+    s->geom_masks[0] = 0;
+    uint32_t tri_mask_and = 0xFFFFFFFFu;
+    for (uint32_t gi = 0; gi < s->geom_count; gi++) {
+        const rp_geometry *g = s->geoms[gi];
+        bool tri = g && g->type == RP_GEOMETRY_TRIANGLE;
+        s->geom_masks[gi] = tri ? g->mask : 0u;
+        if (tri) tri_mask_and &= g->mask;
+    }
+    if (st.triangles) st.bytes += s->geom_mask_count * sizeof(uint32_t);
     s->inst_depth = inst_depth;
     st.bvh_width = ops ? 2u : (uint32_t)width;
     st.accel = s->desc.accel;
     s->stats = st;
     s->bounds = (rp_bounds){bounds.lo.x, bounds.lo.y, bounds.lo.z, 0.0f, bounds.hi.x, bounds.hi.y, bounds.hi.z, 0.0f};
-    uint32_t tri_mask_and = 0xFFFFFFFFu;
-    for (uint32_t gi = 0; gi < s->geom_count; gi++)
-        if (s->geoms[gi] && s->geoms[gi]->type == RP_GEOMETRY_TRIANGLE) tri_mask_and &= s->geoms[gi]->mask;
     s->accel = (rp_accel){
         .width = width,
         .nodes = s->tri_bvh.nodes,
         .tris = s->tris,
         .tri_mask_and = tri_mask_and,
+        .geom_masks = s->geom_masks,
         .nodes2 = s->tri_bvh2q.nodes,
         .q_org = {s->tri_bvh2q.org[0], s->tri_bvh2q.org[1], s->tri_bvh2q.org[2]},
         .q_scale = {s->tri_bvh2q.scale[0], s->tri_bvh2q.scale[1], s->tri_bvh2q.scale[2]},
@@ -942,7 +952,7 @@ static bool scene_refit(rp_scene *s) {
     /* the float tree, refitted, then quantized again (its topology is the quantized one's) */
     bvh2 tree = {0};
     bvh2q q = {0};
-    if (ok) ok = bvh2q_to_bvh2(a, &s->tri_bvh2q, &tree);
+    if (ok) ok = bvh2q_to_bvh2(a, &s->tri_bvh2q, true, &tree);
     double cost = ok ? bvh2_refit_blocks(&tree, s->tris, REFIT_TRAV_COST) : 0.0;
     if (ok && cost > (double)s->desc.refit_max_growth * s->built_cost) ok = false;
     if (ok) bvh2_pad_boxes(&tree); /* as the build does */
@@ -968,7 +978,7 @@ static bool scene_refit(rp_scene *s) {
     s->stats.wide_nodes = s->tri_bvh.node_count;
     s->stats.sah_cost = cost;
     s->stats.bytes = s->tri_bvh.bytes + (s->tri_block_count - 1) * sizeof(tri4) +
-                     (size_t)s->tri_bvh2q.node_count * sizeof(bvh2q_node);
+                     (size_t)s->tri_bvh2q.node_count * sizeof(bvh2q_node) + s->geom_mask_count * sizeof(uint32_t);
     s->stats.refit = 1;
     return true;
 }

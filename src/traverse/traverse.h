@@ -8,15 +8,40 @@
 
 #include "raypack.h"
 
-/* Four triangles in SoA form, the leaf item of triangle BVHs. v[3*vertex + axis][lane].
- * Unused lanes repeat lane 0 with mask 0: a mask test rejects them, and kernels that skip it
- * (rp_accel.tri_mask_and) find at most a tie with lane 0, which lane 0 wins. */
+/* Four triangles in SoA form, the leaf item of triangle BVHs. v[3*vertex + axis][lane]; 176
+ * bytes, as Embree's Triangle4. Unused lanes repeat lane 0, vertices and ids (tri4_pad): a test
+ * of one finds at most lane 0's hit, the same (t, u, v, geom, prim), which cannot change a closest
+ * or any hit, and loops over single triangles skip them (tri4_lanes). Geometry masks are not kept
+ * per lane (they had been 16 bytes a block, 8% of the blocks): the rays that need the mask test
+ * (rp_accel.tri_mask_and) look each lane's geometry up in rp_accel.geom_masks. */
 typedef struct tri4 {
     float v[9][4];
     uint32_t geom[4];
     uint32_t prim[4];
-    uint32_t mask[4];
 } tri4;
+
+/* Makes lanes used..3 of a block copies of lane 0 (used in 1..4). */
+static inline void tri4_pad(tri4 *tr, uint32_t used) {
+    for (uint32_t j = used; j < 4; j++) {
+        for (int q = 0; q < 9; q++) tr->v[q][j] = tr->v[q][0];
+        tr->geom[j] = tr->geom[0], tr->prim[j] = tr->prim[0];
+    }
+}
+
+/* Bits of the lanes that hold a triangle of their own: lane 0 and those not repeating it. */
+static inline uint32_t tri4_lanes(const tri4 *tr) {
+    uint32_t m = 1;
+    for (uint32_t j = 1; j < 4; j++) m |= (uint32_t)(tr->geom[j] != tr->geom[0] || tr->prim[j] != tr->prim[0]) << j;
+    return m;
+}
+
+/* Bits of the lanes whose geometry's mask shares a bit with ray_mask (geom_masks: per geom_id,
+ * rp_accel.geom_masks). */
+static inline uint32_t tri4_mask_lanes(const uint32_t *geom_masks, const tri4 *tr, uint32_t ray_mask) {
+    uint32_t m = 0;
+    for (uint32_t j = 0; j < 4; j++) m |= (uint32_t)((geom_masks[tr->geom[j]] & ray_mask) != 0) << j;
+    return m;
+}
 
 /* Geometric normal of a hit triangle: (v1 - v0) x (v2 - v0), as Embree's Ng. */
 static inline void tri_normal(const tri4 *tr, uint32_t lane, float n[3]) {
@@ -48,6 +73,7 @@ struct rp_accel {
     const tri4 *tris;
     uint32_t tri_mask_and;     /* AND of the triangle geometries' masks: a ray sharing a bit with it
                                 * passes every mask test, so its leaves skip them */
+    const uint32_t *geom_masks; /* per geom_id: a triangle geometry's mask (others: 0), for the rest */
     const void *nodes2;        /* the binary BVH (bvh2q_node), leaves: tri4 blocks [index, index + count) */
     float q_org[3], q_scale[3]; /* its boxes' grid (bvh2q_decode) */
     /* spheres and user primitives: BVH4 of prim_refs */

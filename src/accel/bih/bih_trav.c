@@ -334,7 +334,7 @@ static void trace_block(const rp_accel *acc, rp_rayhit_n *pk, uint32_t base, uin
         rp_ray one = {.org_x = pk->org_x[q], .org_y = pk->org_y[q], .org_z = pk->org_z[q], .tnear = pk->tnear[q],
                       .dir_x = pk->dir_x[q], .dir_y = pk->dir_y[q], .dir_z = pk->dir_z[q], .tfar = pk->tfar[q],
                       .mask = pk->mask ? pk->mask[q] : 0xFFFFFFFFu};
-        alt_ray_setup(&r[i], &one);
+        alt_ray_setup(&r[i], &one, acc);
         h[i] = (alt_hit){.t = one.tfar, .geom = RP_INVALID_ID, .prim = RP_INVALID_ID};
         live[i / 32] |= 1u << (i % 32), nlive++;
     }

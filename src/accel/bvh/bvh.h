@@ -86,19 +86,25 @@ static inline float box_pad_hi(float x, float abs_pad) { return x + (fabsf(x) * 
  * beside the wide one in 16 bytes a node instead of 32: each box is quantized to 16 bits per plane
  * on a grid over the root's box, rounded outward (lower planes down, upper planes up, checked when
  * encoded, with one more step of margin), so a decoded box holds the exact one and no ray loses a
- * hit; a grid step is 1/65535 of the scene's extent. ic: index << 4 | count, as bvh_node's index
- * and count (a leaf's count is its tri4 blocks, at most 15). */
+ * hit; a grid step is 1/65535 of the scene's extent. ic: BVH2Q_PAIR | index << 4 | count, as
+ * bvh_node's index and count (a leaf's count is its tri4 blocks, at most 15). A pair is an inner
+ * node of the float tree whose two children are leaves of one block each, in adjacent blocks:
+ * stored as one leaf of those two blocks (the flag says so), which saves its two children's 32
+ * bytes (2 in 5 of the binary nodes: bunny's 18326 leaves make 7363 such pairs) at the cost of
+ * the packets' two child box tests there. Nodes are numbered from the root, an inner node's
+ * children side by side, the pairs' children left out. */
 typedef struct bvh2q_node {
     uint16_t lo[3], hi[3];
     uint32_t ic;
 } bvh2q_node;
 
-#define BVH2Q_MAX_INDEX ((1u << 28) - 1u)
+#define BVH2Q_MAX_INDEX ((1u << 27) - 1u) /* as BVHW_MAX_FIRST */
+#define BVH2Q_PAIR 0x80000000u
 
 typedef struct bvh2q {
     bvh2q_node *nodes;   /* 64-byte aligned; nodes[0] is the root */
-    uint32_t node_count; /* as bvh2's, unused nodes included */
-    uint32_t depth, leaf_count;
+    uint32_t node_count; /* no unused nodes */
+    uint32_t depth, leaf_count; /* of the float tree, pairs as two leaves */
     float org[3], scale[3]; /* a plane q decodes to org + q * scale (no fused multiply-add) */
 } bvh2q;
 
@@ -109,7 +115,7 @@ static inline bvh_node bvh2q_decode(const bvh2q_node *n, const float org[3], con
         d.lo[a] = org[a] + (float)n->lo[a] * scale[a];
         d.hi[a] = org[a] + (float)n->hi[a] * scale[a];
     }
-    d.index = n->ic >> 4;
+    d.index = n->ic >> 4 & BVH2Q_MAX_INDEX;
     d.count = n->ic & 15u;
     return d;
 }
@@ -131,7 +137,7 @@ static inline bvh_node bvh2q_decode8(const bvh2q_node *n, bvh2q_f32x8 o8, bvh2q_
     bvh2q_u16x8 q;
     memcpy(&q, n, sizeof q);
     bvh2q_f32x8 b = o8 + __builtin_convertvector(__builtin_convertvector(q, bvh2q_i32x8), bvh2q_f32x8) * s8;
-    bvh_node d = {{b[0], b[1], b[2]}, n->ic >> 4, {b[3], b[4], b[5]}, n->ic & 15u};
+    bvh_node d = {{b[0], b[1], b[2]}, n->ic >> 4 & BVH2Q_MAX_INDEX, {b[3], b[4], b[5]}, n->ic & 15u};
     return d;
 }
 
@@ -139,8 +145,10 @@ static inline bvh_node bvh2q_decode8(const bvh2q_node *n, bvh2q_f32x8 o8, bvh2q_
  * memory, when an index or a count does not fit, or when a box is not finite. */
 bool bvh2q_from_bvh2(const sys_allocator *alloc, const bvh2 *src, bvh2q *out);
 /* The float form of a quantized BVH (decoded, so conservative, boxes; no prims), for the refit
- * and the CUDA layout; free it with bvh2_free. */
-bool bvh2q_to_bvh2(const sys_allocator *alloc, const bvh2q *src, bvh2 *out);
+ * and the CUDA layout; free it with bvh2_free. split_pairs: each pair becomes the inner node and
+ * two leaves it was (the leaves with the pair's box: the refit recomputes them), so the tree is
+ * the encoded one again; else a pair is a leaf of two blocks. */
+bool bvh2q_to_bvh2(const sys_allocator *alloc, const bvh2q *src, bool split_pairs, bvh2 *out);
 void bvh2q_free(const sys_allocator *alloc, bvh2q *q);
 
 /* Wide node of width W (4, 8 or 16) is stored as floats bounds[6][W] (lo_x, hi_x, lo_y, hi_y,

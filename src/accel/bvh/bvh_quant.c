@@ -29,7 +29,17 @@ static bool quant_hi(float org, float scale, float x, uint16_t *out) {
     return true;
 }
 
-static bool used(const bvh_node *n, uint32_t i) { return i == 0 || n->count != 0 || n->index != 0; }
+/* An inner node whose children are leaves of one block each, the right one's next to the left's. */
+static bool is_pair(const bvh2 *src, const bvh_node *n) {
+    if (n->count) return false;
+    const bvh_node *l = &src->nodes[n->index], *r = l + 1;
+    return l->count == 1 && r->count == 1 && r->index == l->index + 1;
+}
+
+/* A node of the float tree and the place it goes to in the other tree. */
+typedef struct quant_move {
+    uint32_t from, to;
+} quant_move;
 
 bool bvh2q_from_bvh2(const sys_allocator *alloc, const bvh2 *src, bvh2q *out) {
     memset(out, 0, sizeof *out);
@@ -45,39 +55,77 @@ bool bvh2q_from_bvh2(const sys_allocator *alloc, const bvh2 *src, bvh2q *out) {
         if (decode1(lo, scale, 65535) < hi) return false;
         out->scale[a] = scale;
     }
-    size_t bytes = (size_t)src->node_count * sizeof(bvh2q_node);
+    bool empty = root->count == 0 && root->index == 0; /* an empty tree: a root without a box */
+    uint32_t pairs = 0;
+    for (uint32_t i = 0; i < src->node_count && !empty; i++) {
+        const bvh_node *n = &src->nodes[i];
+        pairs += (i == 0 || n->index != 0) && is_pair(src, n); /* unused nodes: count 0, index 0 */
+    }
+    uint32_t count = empty ? 1u : 2u * src->leaf_count - 1u - 2u * pairs;
+    size_t bytes = (size_t)count * sizeof(bvh2q_node);
+    size_t stack_cap = (size_t)src->depth + 2; /* a walk holds at most one node a level and the root's pair */
     out->nodes = sys_alloc(alloc, bytes);
-    if (!out->nodes) return false;
+    out->node_count = count; /* bvh2q_free's size */
+    quant_move *stack = sys_alloc(alloc, stack_cap * sizeof *stack);
+    if (!out->nodes || !stack) goto fail;
     memset(out->nodes, 0, bytes);
-    out->node_count = src->node_count;
     out->depth = src->depth;
     out->leaf_count = src->leaf_count;
-    for (uint32_t i = 0; i < src->node_count; i++) {
-        const bvh_node *n = &src->nodes[i];
-        bvh2q_node *q = &out->nodes[i];
-        if (!used(n, i)) continue; /* never a child: left zero, as the float tree's */
-        if (n->index > BVH2Q_MAX_INDEX || n->count > 15u) goto fail;
-        q->ic = n->index << 4 | n->count;
-        if (n->count == 0 && n->index == 0) continue; /* an empty tree's root: no box */
+    uint32_t sp = 0, next = 1;
+    if (!empty) stack[sp++] = (quant_move){0, 0};
+    while (sp) {
+        quant_move m = stack[--sp];
+        const bvh_node *n = &src->nodes[m.from];
+        uint32_t index = n->index, cnt = n->count, flag = 0;
+        if (is_pair(src, n)) {
+            index = src->nodes[n->index].index, cnt = 2, flag = BVH2Q_PAIR;
+        } else if (!cnt) {
+            if (sp + 2 > stack_cap || next + 2 > count) goto fail;
+            index = next, next += 2;
+            stack[sp++] = (quant_move){n->index + 1, index + 1};
+            stack[sp++] = (quant_move){n->index, index};
+        }
+        if (index > BVH2Q_MAX_INDEX || cnt > 15u) goto fail;
+        bvh2q_node *q = &out->nodes[m.to];
+        q->ic = flag | index << 4 | cnt;
         for (int a = 0; a < 3; a++)
             if (!quant_lo(out->org[a], out->scale[a], n->lo[a], &q->lo[a]) ||
                 !quant_hi(out->org[a], out->scale[a], n->hi[a], &q->hi[a]))
                 goto fail;
     }
-    return true;
+    sys_free(alloc, stack, stack_cap * sizeof *stack);
+    if (next == count) return true;
+    stack = NULL; /* the tree was not what its leaf count says */
 fail:
+    sys_free(alloc, stack, stack_cap * sizeof *stack);
     bvh2q_free(alloc, out);
     return false;
 }
 
-bool bvh2q_to_bvh2(const sys_allocator *alloc, const bvh2q *src, bvh2 *out) {
+bool bvh2q_to_bvh2(const sys_allocator *alloc, const bvh2q *src, bool split_pairs, bvh2 *out) {
     memset(out, 0, sizeof *out);
-    out->nodes = sys_alloc(alloc, (size_t)src->node_count * sizeof(bvh_node));
+    uint32_t pairs = 0;
+    for (uint32_t i = 0; i < src->node_count; i++) pairs += (src->nodes[i].ic & BVH2Q_PAIR) != 0;
+    uint32_t count = src->node_count + (split_pairs ? 2 * pairs : 0);
+    out->nodes = sys_alloc(alloc, (size_t)count * sizeof(bvh_node));
     if (!out->nodes) return false;
-    for (uint32_t i = 0; i < src->node_count; i++) out->nodes[i] = bvh2q_decode(&src->nodes[i], src->org, src->scale);
-    out->node_count = out->node_capacity = src->node_count;
+    /* the nodes where they are, each pair's two leaves after them */
+    uint32_t next = src->node_count;
+    for (uint32_t i = 0; i < src->node_count; i++) {
+        bvh_node d = bvh2q_decode(&src->nodes[i], src->org, src->scale);
+        if (split_pairs && (src->nodes[i].ic & BVH2Q_PAIR)) {
+            for (uint32_t k = 0; k < 2; k++) {
+                bvh_node *leaf = &out->nodes[next + k];
+                *leaf = d;
+                leaf->index = d.index + k, leaf->count = 1;
+            }
+            d.index = next, d.count = 0, next += 2;
+        }
+        out->nodes[i] = d;
+    }
+    out->node_count = out->node_capacity = count;
     out->depth = src->depth;
-    out->leaf_count = src->leaf_count;
+    out->leaf_count = split_pairs ? src->leaf_count : src->leaf_count - pairs;
     return true;
 }
 

@@ -136,20 +136,21 @@ static void scan(grid *g, double margin, bool fill, uint32_t *cursor, bool sat) 
 
 static grid *build_lists(grid *g, const grid_desc *desc_in);
 
-/* The grid of the tri4 blocks and of the primitives of g->prims / g->prim_box (set by the caller;
- * g allocated, its allocator set). */
-static grid *build(grid *g, const tri4 *blocks, size_t block_count, const grid_desc *desc_in) {
+/* The grid of the tri4 blocks' triangles (their geometries' masks: geom_masks, per geom_id) and of
+ * the primitives of g->prims / g->prim_box (set by the caller; g allocated, its allocator set). */
+static grid *build(grid *g, const tri4 *blocks, size_t block_count, const uint32_t *geom_masks,
+                   const grid_desc *desc_in) {
     const sys_allocator *alloc = &g->alloc;
     size_t n = 0;
-    for (size_t b = 0; b < block_count; b++)
-        for (int l = 0; l < 4; l++) n += blocks[b].mask[l] != 0;
+    for (size_t b = 0; b < block_count; b++) n += (size_t)simd_popcount(tri4_lanes(&blocks[b]));
     g->tri_capacity = n ? n : 1;
     g->tris = sys_alloc(alloc, g->tri_capacity * sizeof(grid_tri));
     if (!g->tris) goto fail;
     for (size_t b = 0; b < block_count; b++)
-        for (int l = 0; l < 4; l++) {
-            if (!blocks[b].mask[l]) continue;
-            grid_tri t = {.geom = blocks[b].geom[l], .prim = blocks[b].prim[l], .mask = blocks[b].mask[l]};
+        for (uint32_t lanes = tri4_lanes(&blocks[b]); lanes; lanes &= lanes - 1) {
+            uint32_t l = simd_ctz(lanes);
+            grid_tri t = {.geom = blocks[b].geom[l], .prim = blocks[b].prim[l], .mask = geom_masks[blocks[b].geom[l]]};
+            if (!t.mask) continue; /* never hit */
             for (int k = 0; k < 9; k++) t.v[k] = blocks[b].v[k][l];
             if (!tri_finite(t.v)) continue; /* the BVH never hits these either */
             g->tris[g->tri_count++] = t;
@@ -262,7 +263,9 @@ grid *grid_build_scene(rp_scene *scene, const grid_desc *desc, char *err, size_t
             return NULL;
         }
     }
-    if (build(g, scene->tris, scene->tri_block_count, desc)) return g;
+    /* the blocks without the padding block past their end */
+    size_t blocks = scene->tri_block_count ? scene->tri_block_count - 1 : 0;
+    if (build(g, scene->tris, blocks, scene->accel.geom_masks, desc)) return g;
     g = NULL; /* build freed it */
 oom:
     grid_free(g);
@@ -285,11 +288,12 @@ grid *grid_build_tris(const sys_allocator *alloc, const grid_tri *tris, uint32_t
     return build_lists(g, desc);
 }
 
-grid *grid_build_tri4(const sys_allocator *alloc, const tri4 *blocks, size_t block_count, const grid_desc *desc) {
+grid *grid_build_tri4(const sys_allocator *alloc, const tri4 *blocks, size_t block_count, const uint32_t *geom_masks,
+                      const grid_desc *desc) {
     grid *g = sys_calloc(alloc, sizeof(grid));
     if (!g) return NULL;
     g->alloc = *alloc;
-    return build(g, blocks, block_count, desc);
+    return build(g, blocks, block_count, geom_masks, desc);
 }
 
 size_t grid_bytes(const grid *g) {

@@ -64,9 +64,11 @@ typedef struct grid {
     double build_ms;
 } grid;
 
-/* Builds a grid over the live lanes (mask != 0) of tri4 blocks, copying their vertices. NULL when
- * out of memory. A grid of no triangles is valid (every ray misses). */
-grid *grid_build_tri4(const sys_allocator *alloc, const tri4 *blocks, size_t block_count, const grid_desc *desc);
+/* Builds a grid over the triangles of tri4 blocks (tri4_lanes) whose geometry's mask is not 0
+ * (geom_masks: per geom_id), copying their vertices. NULL when out of memory. A grid of no
+ * triangles is valid (every ray misses). */
+grid *grid_build_tri4(const sys_allocator *alloc, const tri4 *blocks, size_t block_count, const uint32_t *geom_masks,
+                      const grid_desc *desc);
 /* Builds a grid over count triangles (copied; non-finite ones are dropped, so g->tris[i] is
  * tris[i] when all are finite). NULL when out of memory. */
 grid *grid_build_tris(const sys_allocator *alloc, const grid_tri *tris, uint32_t count, const grid_desc *desc);

@@ -126,14 +126,15 @@ static bool grid_accel_build(const sys_allocator *a, sys_pool *pool, accel_tri_i
             uint32_t n = g->offsets[v + 1] - k < 4 ? g->offsets[v + 1] - k : 4;
             tri4 *dst = &tb[b];
             for (uint32_t lane = 0; lane < 4; lane++) {
-                /* unused lanes: lane 0 again, never hit (mask 0), as the BVH's blocks */
+                /* unused lanes: lane 0 again, as the BVH's blocks */
                 uint32_t i = g->items[k + (lane < n ? lane : 0)];
+                ids[4 * b + lane] = i;
+                if (lane >= n) continue;
                 const grid_tri *t = &g->tris[i];
                 for (int q = 0; q < 9; q++) dst->v[q][lane] = t->v[q];
                 dst->geom[lane] = t->geom, dst->prim[lane] = t->prim;
-                dst->mask[lane] = lane < n ? t->mask : 0;
-                ids[4 * b + lane] = i;
             }
+            tri4_pad(dst, n);
         }
     }
     first[g->voxel_count] = b;

@@ -28,6 +28,8 @@
 #include <string.h>
 
 #define PI_F 3.14159265358979323846f
+/* Scenes of at least this many triangles trace the shadow packets as SIMD rays (ir_frame_init). */
+#define IR_SIMD_MIN_TRIANGLES 4096
 
 static float max3(v3 c) { return fmaxf(c.x, fmaxf(c.y, c.z)); }
 
@@ -142,6 +144,15 @@ bool ir_frame_init(render_frame *f) {
     pf->per_set = ir->vpls > 0 ? ir->vpls : 16;
     pf->sets = pf->interleave * pf->interleave;
     pf->side = 8;
+    /* A set's 8x8 shadow rays to one VPL start 5 pixels apart: in a large scene they share few
+     * nodes, and the packet kernels' per-packet work (frustum, span, partition) costs more than it
+     * saves; each SIMD ray of 4x4 of them (one set, one VPL) through the wide BVH was faster
+     * (bart_kitchen, 110k triangles, 0.64-0.8x the frame's CPU time, docs/rendering.md). On few
+     * triangles the packet wins (cornell_original, 36: SIMD rays 1.15x). The threshold is the
+     * kernels' AUTO_SIMD_MIN_CELLS (4096 triangles); --traversal overrides it. */
+    pf->shadow_traversal = f->traversal[RP_RAY_SHADOW];
+    if (pf->shadow_traversal == RP_TRAVERSAL_AUTO && f->s->data && f->s->data->triangle_count >= IR_SIMD_MIN_TRIANGLES)
+        pf->shadow_traversal = RP_TRAVERSAL_SIMD;
     float c = ir->clamp == 0.0f ? 0.02f : ir->clamp;
     pf->clamp_d2 = c > 0.0f ? (c * f->s->radius) * (c * f->s->radius) : 0.0f;
     size_t np = (size_t)f->desc.width * (size_t)f->desc.height;
@@ -339,6 +350,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                                        v3_make(vp->dir_x[first], vp->dir_y[first], vp->dir_z[first]), vp->tfar[first]);
                 th->rays[RP_RAY_SHADOW] += live;
                 rp_query_n_desc qd = pbr_query(f, th, RP_RAY_SHADOW);
+                qd.traversal = pf->shadow_traversal;
                 if (vs[v].infinite) qd.frustum = RP_FRUSTUM_NONE; /* parallel rays: no common point */
                 qd.point[0] = vs[v].p.x;
                 qd.point[1] = vs[v].p.y;

@@ -90,6 +90,8 @@ static void trace(rp_device *dev, rp_scene *s, const rp_ray *rays, uint32_t n, g
                 g[b + (uint32_t)i] = (got){p.ray.tfar[i], p.hit.geom_id[i], p.hit.prim_id[i], p.hit.inst_id[i], o.tfar[i] == -INFINITY};
         }
     } else {
+        /* mode 2: 16x16 packets (auto); mode 3: the same as SIMD rays, which go into each instance */
+        rp_query_n_desc qd = {.traversal = mode == 3 ? RP_TRAVERSAL_SIMD : RP_TRAVERSAL_AUTO};
         rp_rayhit_n p;
         if (!rp_rayhit_n_alloc(dev, 16, &p)) return;
         for (uint32_t b = 0; b + 256 <= n; b += 256) {
@@ -99,10 +101,10 @@ static void trace(rp_device *dev, rp_scene *s, const rp_ray *rays, uint32_t n, g
                 p.dir_x[i] = r->dir_x, p.dir_y[i] = r->dir_y, p.dir_z[i] = r->dir_z;
                 p.tnear[i] = r->tnear, p.tfar[i] = r->tfar, p.geom_id[i] = RP_INVALID_ID, p.inst_id[i] = RP_INVALID_ID;
             }
-            rp_intersect_n(s, NULL, &p);
+            rp_intersect_n(s, &qd, &p);
             for (uint32_t i = 0; i < 256; i++) g[b + i] = (got){p.tfar[i], p.geom_id[i], p.prim_id[i], p.inst_id[i], 0};
             for (uint32_t i = 0; i < 256; i++) p.tfar[i] = rays[b + i].tfar;
-            rp_occluded_n(s, NULL, &p);
+            rp_occluded_n(s, &qd, &p);
             for (uint32_t i = 0; i < 256; i++) g[b + i].occ = p.tfar[i] == -INFINITY;
         }
         rp_rayhit_n_free(dev, &p);
@@ -161,7 +163,7 @@ int main(void) {
         uint32_t hits = 0;
         for (uint32_t i = 0; i < n; i++) hits += b[i].geom != RP_INVALID_ID;
         CHECKF(hits > n / 8, "accel %d: %u of %u rays hit the flattened scene", kind, hits, n);
-        for (int mode = 0; mode < 3; mode++) {
+        for (int mode = 0; mode < 4; mode++) {
             trace(dev, top, rays, n, a, mode);
             uint32_t bad = 0, far = 0;
             for (uint32_t i = 0; i < n; i++) {

@@ -333,6 +333,20 @@ int main(void) {
             rp_render_scene_release(s);
             rp_device_release(dt);
         }
+        /* Instant radiosity's shadow packets to VPLs (point frusta; SIMD rays on large scenes) give
+         * the image of the same rays one by one. */
+        {
+            rp_render_scene *is = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
+            static const rp_traversal ways[3] = {RP_TRAVERSAL_SIMD, RP_TRAVERSAL_PARTITION, RP_TRAVERSAL_SINGLE};
+            for (int k = 0; is && k < 3; k++) {
+                rp_render_desc rd = {.width = W, .height = H, .spp = 4, .integrator = RP_INTEGRATOR_IR, .traversal = ways[k]};
+                float *px = render(is, &rd);
+                CHECKF(px && ref[1] && memcmp(px, ref[1], (size_t)W * H * 3 * sizeof(float)) == 0,
+                       "instant radiosity: traversal %d differs from the auto packets", (int)ways[k]);
+                free(px);
+            }
+            rp_render_scene_release(is);
+        }
         float *img[1] = {ref[0]};
         free(ref[1]);
         /* Eye light through n x n packets gives the array tracer's image (1 and 3 samples). */

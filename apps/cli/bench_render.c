@@ -21,7 +21,8 @@ static void usage(FILE *out) {
             "usage: raypack bench --render SCENE... [options]\n"
             "\n"
             "Times frames of each integrator on each scene and prints ms a frame, fps, samples/s and\n"
-            "Mrays/s by ray kind (the whole frame's time, not the kernels' alone).\n"
+            "Mrays/s by ray kind (the whole frame's time, not the kernels' alone), and the process's CPU\n"
+            "time a frame (all threads).\n"
             "\n"
             "options:\n"
             "  --integrators LIST     comma-separated: eyelight,whitted,direct,path,ao,ir [all]\n"
@@ -33,6 +34,8 @@ static void usage(FILE *out) {
             "                         instant radiosity's settings [5, 16, 3: the issue's goal]\n"
             "  --eye X,Y,Z --look X,Y,Z --fov DEG\n"
             "                         camera (each replaces that part of the scene's)\n"
+            "  --anim-flat            an animated scene as one flat structure (refitted each frame)\n"
+            "                         instead of instances under a top level\n"
             "  --kernels              also time the frame's primary rays alone in the kernel\n"
             "                         (rp_intersect_n, 16x16 packets, auto traversal, primary frustum:\n"
             "                         raypack bench's n16_auto_frustum), taking turns with the frames,\n"
@@ -111,7 +114,7 @@ static int cmp_double(const void *a, const void *b) {
 
 int cli_bench_render(int argc, char **argv) {
     int w = 640, h = 480, spp = 1, frames = 5, threads = 0, inter = 0, vpls = 0, filter = 0;
-    bool kernels = false, has_eye = false, has_look = false, has_fov = false;
+    bool kernels = false, anim_flat = false, has_eye = false, has_look = false, has_fov = false;
     float eye[3], look[3], fov = 0.0f;
     bool use[N_INTEGRATORS];
     for (int k = 0; k < N_INTEGRATORS; k++) use[k] = true;
@@ -166,6 +169,8 @@ int cli_bench_render(int argc, char **argv) {
             if (!cli_parse_int(CMD, a, v, 1, 31, &filter)) return CLI_EXIT_USAGE;
         } else if (strcmp(a, "--kernels") == 0) {
             kernels = true;
+        } else if (strcmp(a, "--anim-flat") == 0) {
+            anim_flat = true;
         } else if (strcmp(a, "--eye") == 0 || strcmp(a, "--look") == 0) {
             VALUE();
             bool e = a[2] == 'e';
@@ -191,8 +196,8 @@ int cli_bench_render(int argc, char **argv) {
     if (!dev) return CLI_EXIT_FAILURE;
     float *px = malloc((size_t)w * (size_t)h * 3 * sizeof(float));
     int status = px ? CLI_EXIT_OK : CLI_EXIT_FAILURE;
-    printf("%-22s %-9s %10s %8s %12s %9s %9s %9s %9s %9s\n", "scene", "integr.", "ms/frame", "fps", "Msamples/s",
-           "Mrays/s", "primary", "shadow", "bounce", "refl+refr");
+    printf("%-22s %-9s %10s %8s %12s %9s %9s %9s %9s %9s %9s\n", "scene", "integr.", "ms/frame", "fps", "Msamples/s",
+           "Mrays/s", "primary", "shadow", "bounce", "refl+refr", "CPU ms");
     for (int si = 0; px && si < nscenes; si++) {
         rp_scene_data data;
         char err[512] = "";
@@ -201,7 +206,8 @@ int cli_bench_render(int argc, char **argv) {
             status = CLI_EXIT_FAILURE;
             continue;
         }
-        rp_render_scene *scene = rp_render_scene_new(dev, &data, NULL, err, sizeof err);
+        rp_render_scene *scene = rp_render_scene_new(dev, &data, &(rp_render_scene_desc){.flatten_animation = anim_flat},
+                                                     err, sizeof err);
         if (!scene) {
             fprintf(stderr, "raypack bench: %s\n", err);
             rp_scene_data_free(&data);
@@ -230,7 +236,7 @@ int cli_bench_render(int argc, char **argv) {
             rp_render_desc d = {.width = w, .height = h, .spp = spp, .integrator = INTEGRATORS[k].type,
                                 .ir = {.interleave = inter, .vpls = vpls, .filter = filter}, .camera = &cam};
             rp_render_stats st;
-            double ms = 0.0, cpu_frame[64], cpu_kernel[64];
+            double ms = 0.0, cpu = 0.0, cpu_frame[64], cpu_kernel[64];
             uint64_t rays[RP_RAY_KIND_COUNT] = {0};
             bool ok = rp_render(scene, &d, px, &st); /* warm-up */
             if (ok && krays) kernel_pass(rp_render_scene_core(scene), &cam, krays, packets, &pk);
@@ -240,6 +246,7 @@ int cli_bench_render(int argc, char **argv) {
                 ok = rp_render(scene, &d, px, &st);
                 double c1 = cpu_ms();
                 ms += st.render_ms;
+                cpu += c1 - c0;
                 for (int r = 0; r < RP_RAY_KIND_COUNT; r++) rays[r] += st.rays[r];
                 if (krays && fr < 64) {
                     kernel_pass(rp_render_scene_core(scene), &cam, krays, packets, &pk);
@@ -254,11 +261,11 @@ int cli_bench_render(int argc, char **argv) {
             }
             double per = ms / frames, s = ms * 1e-3, total = 0;
             for (int r = 0; r < RP_RAY_KIND_COUNT; r++) total += (double)rays[r];
-            printf("%-22.22s %-9s %10.1f %8.2f %12.3f %9.2f %9.2f %9.2f %9.2f %9.2f\n", base, INTEGRATORS[k].name, per,
+            printf("%-22.22s %-9s %10.1f %8.2f %12.3f %9.2f %9.2f %9.2f %9.2f %9.2f %9.1f\n", base, INTEGRATORS[k].name, per,
                    1e3 / per, (double)w * h * spp * frames / s * 1e-6, total / s * 1e-6,
                    (double)rays[RP_RAY_PRIMARY] / s * 1e-6, (double)rays[RP_RAY_SHADOW] / s * 1e-6,
                    (double)rays[RP_RAY_BOUNCE] / s * 1e-6,
-                   (double)(rays[RP_RAY_REFLECTION] + rays[RP_RAY_REFRACTION]) / s * 1e-6);
+                   (double)(rays[RP_RAY_REFLECTION] + rays[RP_RAY_REFRACTION]) / s * 1e-6, cpu / frames);
             if (krays) {
                 int n = frames < 64 ? frames : 64;
                 qsort(cpu_frame, (size_t)n, sizeof(double), cmp_double);
@@ -274,7 +281,8 @@ int cli_bench_render(int argc, char **argv) {
         rp_render_scene_release(scene);
         rp_scene_data_free(&data);
     }
-    printf("(%d threads, %dx%d, %d spp a frame, %d frames; Mrays/s by kind: that kind's rays over the whole frame time)\n",
+    printf("(%d threads, %dx%d, %d spp a frame, %d frames; Mrays/s by kind: that kind's rays over the whole frame time;\n"
+           " CPU ms: the process's CPU time a frame, all threads, which the machine's other load does not inflate)\n",
            rp_device_thread_count(dev), w, h, spp, frames);
     free(px);
     rp_device_release(dev);

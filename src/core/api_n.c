@@ -228,14 +228,64 @@ static bool instances_only(const rp_scene *s) {
     return true;
 }
 
+/* Which rays of a packet meet an instance's box (lower xyz, upper xyz): slab tests, branch free, in
+ * a function of its own so that its restrict parameters let the compiler's vectors through (rays
+ * not live start at tn0 = +inf, occluded ones end at tfar = -inf). Returns how many do. */
+static uint32_t instance_slabs(uint32_t n, const float box[6], const float *restrict ox, const float *restrict oy,
+                               const float *restrict oz, const float *restrict ix, const float *restrict iy,
+                               const float *restrict iz, const float *restrict tn0, const float *restrict tfar,
+                               int32_t *restrict valid) {
+    const float l0 = box[0], l1 = box[1], l2 = box[2], h0 = box[3], h1 = box[4], h2 = box[5];
+    uint32_t on_n = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        float t0 = tn0[i], t1 = tfar[i];
+        float a = (l0 - ox[i]) * ix[i], b = (h0 - ox[i]) * ix[i];
+        t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
+        a = (l1 - oy[i]) * iy[i], b = (h1 - oy[i]) * iy[i];
+        t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
+        a = (l2 - oz[i]) * iz[i], b = (h2 - oz[i]) * iz[i];
+        t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
+        int32_t on = t0 <= t1;
+        valid[i] = -on;
+        on_n += (uint32_t)on;
+    }
+    return on_n;
+}
+
+/* Points (with the translation) or directions of n rays through the 3x4 map m, as instance_ray maps
+ * them. */
+static void instance_map(uint32_t n, const float m[12], bool points, const float *restrict x, const float *restrict y,
+                         const float *restrict z, float *restrict ox, float *restrict oy, float *restrict oz) {
+    const float m0 = m[0], m1 = m[1], m2 = m[2], m3 = m[3], m4 = m[4], m5 = m[5], m6 = m[6], m7 = m[7], m8 = m[8],
+                m9 = m[9], m10 = m[10], m11 = m[11];
+    if (points) {
+        for (uint32_t i = 0; i < n; i++) {
+            ox[i] = m0 * x[i] + m1 * y[i] + m2 * z[i] + m3;
+            oy[i] = m4 * x[i] + m5 * y[i] + m6 * z[i] + m7;
+            oz[i] = m8 * x[i] + m9 * y[i] + m10 * z[i] + m11;
+        }
+        return;
+    }
+    for (uint32_t i = 0; i < n; i++) {
+        ox[i] = m0 * x[i] + m1 * y[i] + m2 * z[i];
+        oy[i] = m4 * x[i] + m5 * y[i] + m6 * z[i];
+        oz[i] = m8 * x[i] + m9 * y[i] + m10 * z[i];
+    }
+}
+
 /* The packet goes into each instance's scene in turn, mapped into its space as instance_ray maps a
  * single ray (scene.c), so the packet kernels walk the instanced scenes (their frusta cull the
  * instances it misses); a closer hit replaces a farther one, its normal mapped back by the inverse
- * transpose and inst_id the instance's geom_id (the outermost level writes last). */
+ * transpose and inst_id the instance's geom_id (the outermost level writes last). The scratch
+ * packet of a packet up to 16x16 is on the stack and each instance's box in this scene's space is
+ * the one its commit made (rp_geometry.box): with a heap copy and the boxes' corners mapped per
+ * packet, this took as long as the kernels on instant radiosity's 8x8 shadow packets (kitchen). */
 static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit_n *p, bool any) {
+    enum { SCRATCH = PACKET_ARRAYS + 5, STACK_RAYS = 16 * 16 };
     uint32_t count = p->n * p->n;
     size_t each = (size_t)count * 4;
-    char *mem = sys_alloc(&scene->device->alloc, each * (PACKET_ARRAYS + 5));
+    RP_ALIGN(64) char stack[SCRATCH * STACK_RAYS * 4];
+    char *mem = count <= STACK_RAYS ? stack : sys_alloc(&scene->device->alloc, each * SCRATCH);
     if (!mem) { /* no memory for the copy: the rays one by one, as the prim BVH takes them */
         trace_small(scene, RP_TRAVERSAL_SINGLE, p, any);
         return;
@@ -261,54 +311,20 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
     for (uint32_t gi = 0; gi < scene->geom_count; gi++) {
         const rp_geometry *g = scene->geoms[gi];
         if (!g || g->mask == 0) continue;
-        /* the instance's box in this scene's space, widened past the rounding of the mapping: rays
-         * that miss it cannot hit inside, so they (and an instance no ray reaches) are skipped */
-        const rp_bounds *cb = &g->inst->bounds;
-        if (!(cb->lower_x <= cb->upper_x)) continue;
-        float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-        for (int corner = 0; corner < 8; corner++) {
-            float c[3] = {corner & 1 ? cb->upper_x : cb->lower_x, corner & 2 ? cb->upper_y : cb->lower_y,
-                          corner & 4 ? cb->upper_z : cb->lower_z};
-            for (int r = 0; r < 3; r++) {
-                const float *x = g->xfm + 4 * r;
-                float v = x[0] * c[0] + x[1] * c[1] + x[2] * c[2] + x[3];
-                lo[r] = fminf(lo[r], v), hi[r] = fmaxf(hi[r], v);
-            }
-        }
-        for (int r = 0; r < 3; r++) {
-            float e = (fmaxf(fabsf(lo[r]), fabsf(hi[r])) + (hi[r] - lo[r])) * 1e-5f;
-            lo[r] -= e, hi[r] += e;
-        }
+        /* the instance's box (rays that miss it cannot hit inside, so they, and an instance no ray
+         * reaches, are skipped) */
+        if (!(g->box[0] <= g->box[3])) continue;
         const float *m = g->inv;
-        /* slab tests, branch free (the compiler's vectors): rays not live start at +inf, occluded
-         * ones end at -inf */
-        for (uint32_t i = 0; i < count; i++) {
-            float t0 = tn0[i], t1 = p->tfar[i];
-            float a = (lo[0] - p->org_x[i]) * ix[i], b = (hi[0] - p->org_x[i]) * ix[i];
-            t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
-            a = (lo[1] - p->org_y[i]) * iy[i], b = (hi[1] - p->org_y[i]) * iy[i];
-            t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
-            a = (lo[2] - p->org_z[i]) * iz[i], b = (hi[2] - p->org_z[i]) * iz[i];
-            t0 = fmax2(t0, fmin2(a, b)), t1 = fmin2(t1, fmax2(a, b));
-            valid[i] = t0 <= t1 ? -1 : 0;
-        }
-        uint32_t live_n = 0;
-        for (uint32_t i = 0; i < count; i++) {
-            bool on = valid[i] && p->tnear[i] <= p->tfar[i] && ((p->mask ? p->mask[i] : 0xFFFFFFFFu) & g->mask) != 0;
-            valid[i] = on ? -1 : 0;
-            if (!on) continue;
-            live_n++;
-            float ox = p->org_x[i], oy = p->org_y[i], oz = p->org_z[i], dx = p->dir_x[i], dy = p->dir_y[i], dz = p->dir_z[i];
-            q.org_x[i] = m[0] * ox + m[1] * oy + m[2] * oz + m[3];
-            q.org_y[i] = m[4] * ox + m[5] * oy + m[6] * oz + m[7];
-            q.org_z[i] = m[8] * ox + m[9] * oy + m[10] * oz + m[11];
-            q.dir_x[i] = m[0] * dx + m[1] * dy + m[2] * dz;
-            q.dir_y[i] = m[4] * dx + m[5] * dy + m[6] * dz;
-            q.dir_z[i] = m[8] * dx + m[9] * dy + m[10] * dz;
-            q.tnear[i] = p->tnear[i], q.tfar[i] = p->tfar[i];
-            q.geom_id[i] = RP_INVALID_ID;
-        }
+        uint32_t live_n = instance_slabs(count, g->box, p->org_x, p->org_y, p->org_z, ix, iy, iz, tn0, p->tfar, valid);
         if (!live_n) continue;
+        if (p->mask)
+            for (uint32_t i = 0; i < count; i++)
+                if (valid[i] && (p->mask[i] & g->mask) == 0) valid[i] = 0, live_n--;
+        instance_map(count, m, true, p->org_x, p->org_y, p->org_z, q.org_x, q.org_y, q.org_z);
+        instance_map(count, m, false, p->dir_x, p->dir_y, p->dir_z, q.dir_x, q.dir_y, q.dir_z);
+        memcpy(q.tnear, p->tnear, each);
+        memcpy(q.tfar, p->tfar, each);
+        for (uint32_t i = 0; i < count; i++) q.geom_id[i] = RP_INVALID_ID;
         rp_query_n_desc sd = *d;
         if (sd.frustum == RP_FRUSTUM_SHADOW) { /* the common end point, in the instance's space */
             float x = d->point[0], y = d->point[1], z = d->point[2];
@@ -331,17 +347,17 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
             p->geom_id[i] = q.geom_id[i], p->prim_id[i] = q.prim_id[i], p->inst_id[i] = gi;
         }
     }
-    sys_free(&scene->device->alloc, mem, each * (PACKET_ARRAYS + 5));
+    if (mem != stack) sys_free(&scene->device->alloc, mem, each * SCRATCH);
 }
 
 static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p, bool any) {
     rp_query_n_desc d = rp_query_n_desc_defaults(desc);
-    if (d.traversal == RP_TRAVERSAL_SINGLE || d.traversal == RP_TRAVERSAL_SIMD) {
-        trace_small(scene, d.traversal, p, any);
+    if (d.traversal != RP_TRAVERSAL_SINGLE && instances_only(scene)) {
+        trace_instances(scene, &d, p, any);
         return;
     }
-    if (instances_only(scene)) {
-        trace_instances(scene, &d, p, any);
+    if (d.traversal == RP_TRAVERSAL_SINGLE || d.traversal == RP_TRAVERSAL_SIMD) {
+        trace_small(scene, d.traversal, p, any);
         return;
     }
     /* the large-packet kernels walk the BVH; a kd-tree's or BIH's packet goes to its structure's

@@ -46,6 +46,8 @@ struct rp_geometry {
     uint32_t topo;        /* bumped by every change but moved vertices: a scene refits only if unchanged */
     rp_scene *inst;       /* RP_GEOMETRY_INSTANCE: the placed scene (retained) */
     float xfm[12], inv[12]; /* its object-to-parent map and the inverse, row-major 3x4 */
+    float box[6];         /* lower xyz, upper xyz: the placed scene's bounds in the parent's space,
+                           * widened past the rounding of the map; set by the parent's commit */
 };
 
 struct rp_scene {

@@ -138,9 +138,36 @@ static void scene_record_build(rp_scene *s) {
     s->attach_changed = false;
 }
 
+/* Each instance's box in this scene's space (rp_geometry.box), for the packets that go into the
+ * instances one at a time (api_n.c); empty (lower > upper) for an instance of an empty scene. */
+static void instance_boxes(rp_scene *s) {
+    for (uint32_t gi = 0; gi < s->geom_count; gi++) {
+        rp_geometry *g = s->geoms[gi];
+        if (!g || g->type != RP_GEOMETRY_INSTANCE || !g->inst) continue;
+        const rp_bounds *cb = &g->inst->bounds;
+        float *lo = g->box, *hi = g->box + 3;
+        for (int r = 0; r < 3; r++) lo[r] = INFINITY, hi[r] = -INFINITY;
+        if (!(cb->lower_x <= cb->upper_x)) continue;
+        for (int corner = 0; corner < 8; corner++) {
+            float c[3] = {corner & 1 ? cb->upper_x : cb->lower_x, corner & 2 ? cb->upper_y : cb->lower_y,
+                          corner & 4 ? cb->upper_z : cb->lower_z};
+            for (int r = 0; r < 3; r++) {
+                const float *x = g->xfm + 4 * r;
+                float v = x[0] * c[0] + x[1] * c[1] + x[2] * c[2] + x[3];
+                lo[r] = fminf(lo[r], v), hi[r] = fmaxf(hi[r], v);
+            }
+        }
+        for (int r = 0; r < 3; r++) {
+            float e = (fmaxf(fabsf(lo[r]), fabsf(hi[r])) + (hi[r] - lo[r])) * 1e-5f;
+            lo[r] -= e, hi[r] += e;
+        }
+    }
+}
+
 rp_error rp_scene_commit(rp_scene *scene) {
     if (!scene) return RP_ERROR_INVALID_ARGUMENT;
     double t0 = sys_seconds();
+    instance_boxes(scene);
     if (scene_refit(scene)) {
         scene->stats.build_ms = (sys_seconds() - t0) * 1e3;
         scene->committed = true;

@@ -28,6 +28,8 @@
 #include <string.h>
 
 #define PI_F 3.14159265358979323846f
+/* Scenes of at least this many triangles trace the shadow packets as SIMD rays (ir_frame_init). */
+#define IR_SIMD_MIN_TRIANGLES 4096
 
 static float max3(v3 c) { return fmaxf(c.x, fmaxf(c.y, c.z)); }
 
@@ -142,6 +144,15 @@ bool ir_frame_init(render_frame *f) {
     pf->per_set = ir->vpls > 0 ? ir->vpls : 16;
     pf->sets = pf->interleave * pf->interleave;
     pf->side = 8;
+    /* A set's 8x8 shadow rays to one VPL start 5 pixels apart: in a large scene they share few
+     * nodes, and the packet kernels' per-packet work (frustum, span, partition) costs more than it
+     * saves; each SIMD ray of 4x4 of them (one set, one VPL) through the wide BVH was faster
+     * (bart_kitchen, 110k triangles, 0.64-0.8x the frame's CPU time, docs/rendering.md). On few
+     * triangles the packet wins (cornell_original, 36: SIMD rays 1.15x). The threshold is the
+     * kernels' AUTO_SIMD_MIN_CELLS (4096 triangles); --traversal overrides it. */
+    pf->shadow_traversal = f->traversal[RP_RAY_SHADOW];
+    if (pf->shadow_traversal == RP_TRAVERSAL_AUTO && f->s->data && f->s->data->triangle_count >= IR_SIMD_MIN_TRIANGLES)
+        pf->shadow_traversal = RP_TRAVERSAL_SIMD;
     float c = ir->clamp == 0.0f ? 0.02f : ir->clamp;
     pf->clamp_d2 = c > 0.0f ? (c * f->s->radius) * (c * f->s->radius) : 0.0f;
     size_t np = (size_t)f->desc.width * (size_t)f->desc.height;
@@ -195,6 +206,47 @@ static inline bool vpl_contrib(const pbr_frame *pf, const ir_point *x, const ir_
     *wi_out = wi;
     *dist_out = v->infinite ? INFINITY : dist * (1.0f - 1e-4f);
     return true;
+}
+
+/* A set's shading points in the packet's lane order (structure of arrays), for lanes_to_vpl. */
+typedef struct ir_lanes {
+    float ox[64], oy[64], oz[64], nsx[64], nsy[64], nsz[64], ngx[64], ngy[64], ngz[64];
+    float lr[64], lg[64], lb[64];
+    int32_t lambert[64]; /* -1: a valid Lambert point, whose contribution the loop takes */
+} ir_lanes;
+
+static inline void lanes_to_vpl_(uint32_t n, const ir_lanes *restrict L, const ir_vpl *v, float clamp_d2,
+                                  const bool omni, float *restrict dx_out, float *restrict dy_out,
+                                  float *restrict dz_out, float *restrict tf_out, float *restrict cr,
+                                  float *restrict cg, float *restrict cb, int32_t *restrict live) {
+    const float px = v->p.x, py = v->p.y, pz = v->p.z, vnx = v->n.x, vny = v->n.y, vnz = v->n.z;
+    const float wr = v->power.x, wg = v->power.y, wb = v->power.z;
+    for (uint32_t i = 0; i < n; i++) {
+        float dx = px - L->ox[i], dy = py - L->oy[i], dz = pz - L->oz[i];
+        float d2 = dx * dx + dy * dy + dz * dz;
+        float dist = sqrtf(d2), inv = 1.0f / dist;
+        float wx = dx * inv, wy = dy * inv, wz = dz * inv;
+        float cx = wx * L->nsx[i] + wy * L->nsy[i] + wz * L->nsz[i];
+        float cn = wx * L->ngx[i] + wy * L->ngy[i] + wz * L->ngz[i];
+        float cv = omni ? 0.25f : -(vnx * wx + vny * wy + vnz * wz);
+        float g = d2 > clamp_d2 ? d2 : clamp_d2;
+        float k = cx * cv / (PI_F * g);
+        float r = L->lr[i] * wr * k, gg = L->lg[i] * wg * k, b = L->lb[i] * wb * k;
+        int32_t on = (d2 > 0.0f) & !(cx <= 0.0f) & !(cn <= 0.0f) & (cv > 0.0f) & ((r != 0.0f) | (gg != 0.0f) | (b != 0.0f));
+        live[i] = L->lambert[i] & -on;
+        dx_out[i] = wx, dy_out[i] = wy, dz_out[i] = wz;
+        tf_out[i] = dist * (1.0f - 1e-4f);
+        cr[i] = r, cg[i] = gg, cb[i] = b;
+    }
+}
+
+/* vpl_contrib for n lanes of Lambert points and a finite VPL at once, the same arithmetic in the
+ * same order (so the same bits), in the compiler's vectors: each lane's shadow ray (direction,
+ * tfar) goes into the packet, its contribution into c, and live says whether it has one. */
+static void lanes_to_vpl(uint32_t n, const ir_lanes *L, const ir_vpl *v, float clamp_d2, rp_rayhit_n *p, float *cr,
+                         float *cg, float *cb, int32_t *live) {
+    if (v3_is_zero(v->n)) lanes_to_vpl_(n, L, v, clamp_d2, true, p->dir_x, p->dir_y, p->dir_z, p->tfar, cr, cg, cb, live);
+    else lanes_to_vpl_(n, L, v, clamp_d2, false, p->dir_x, p->dir_y, p->dir_z, p->tfar, cr, cg, cb, live);
 }
 
 bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1) {
@@ -306,16 +358,45 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                 }
         }
     /* Each set's pixels of the tile against each of its VPLs: one P x P shadow packet per VPL. */
+    ir_lanes lanes;
+    RP_ALIGN(64) float cr[64], cg[64], cb[64];
     for (int ky = 0; ky < N; ky++)
         for (int kx = 0; kx < N; kx++) {
             int set = ((x0 + kx) % N) + N * ((y0 + ky) % N);
             const ir_vpl *vs = pf->vpls + ((size_t)f->pass * (size_t)pf->sets + (size_t)set) * (size_t)pf->per_set;
+            /* The set's points in lane order: origins into the packet once, the rest for lanes_to_vpl. */
+            uint32_t Q = (uint32_t)(P * P);
+            ir_lanes *L = &lanes;
+            rp_rayhit_n *vp = &pt->vpl_packet;
+            for (int b = 0; b < P; b++)
+                for (int a = 0; a < P; a++) {
+                    uint32_t q = lane[b * P + a];
+                    int lx = kx + N * a, ly = ky + N * b;
+                    const ir_point *x = &pt->points[ly * T + lx];
+                    bool ok = lx < tw && y0 + ly < y1 && x->valid;
+                    v3 o = ok ? x->org : v3_make(0, 0, 0), ns = ok ? x->ns : v3_make(0, 0, 1), ng = ok ? x->ng : ns;
+                    v3 lam = ok ? x->lambert : v3_make(0, 0, 0);
+                    L->ox[q] = o.x, L->oy[q] = o.y, L->oz[q] = o.z;
+                    L->nsx[q] = ns.x, L->nsy[q] = ns.y, L->nsz[q] = ns.z;
+                    L->ngx[q] = ng.x, L->ngy[q] = ng.y, L->ngz[q] = ng.z;
+                    L->lr[q] = lam.x, L->lg[q] = lam.y, L->lb[q] = lam.z;
+                    L->lambert[q] = ok && x->is_lambert ? -1 : 0;
+                    packet_set_ray(vp, q, o, v3_make(0, 0, 1), 0.0f);
+                }
             for (int v = 0; v < pf->per_set; v++) {
                 if (v3_is_zero(vs[v].power)) continue;
                 uint64_t live = 0;
+                if (!vs[v].infinite)
+                    lanes_to_vpl(Q, L, &vs[v], pf->clamp_d2, vp, cr, cg, cb, pt->vpl_valid);
                 for (int b = 0; b < P; b++)
                     for (int a = 0; a < P; a++) {
                         uint32_t q = lane[b * P + a];
+                        if (!vs[v].infinite && L->lambert[q]) {
+                            pt->vpl_contrib[q] = v3_make(cr[q], cg[q], cb[q]);
+                            live += pt->vpl_valid[q] != 0;
+                            continue;
+                        }
+                        /* other BSDFs and infinite VPLs: one lane at a time */
                         int lx = kx + N * a, ly = ky + N * b;
                         pt->vpl_valid[q] = 0;
                         const ir_point *x = &pt->points[ly * T + lx];
@@ -323,22 +404,16 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                         v3 wi;
                         float tfar;
                         if (!vpl_contrib(pf, x, &vs[v], &wi, &tfar, &pt->vpl_contrib[q])) continue;
-                        packet_set_ray(&pt->vpl_packet, q, x->org, wi, tfar);
+                        packet_set_ray(vp, q, x->org, wi, tfar);
                         pt->vpl_valid[q] = -1;
                         live++;
                     }
+                /* (Lanes that are not live hold rays of this tile's own points too, so nothing in
+                 * the packet depends on what the thread traced before.) */
                 if (!live) continue;
-                /* Lanes that are not live get a live lane's ray, so that nothing in the packet
-                 * depends on what the thread traced before (its stale lanes). */
-                uint32_t first = 0;
-                while (!pt->vpl_valid[first]) first++;
-                rp_rayhit_n *vp = &pt->vpl_packet;
-                for (uint32_t q = 0; q < (uint32_t)(P * P); q++)
-                    if (!pt->vpl_valid[q])
-                        packet_set_ray(vp, q, v3_make(vp->org_x[first], vp->org_y[first], vp->org_z[first]),
-                                       v3_make(vp->dir_x[first], vp->dir_y[first], vp->dir_z[first]), vp->tfar[first]);
                 th->rays[RP_RAY_SHADOW] += live;
                 rp_query_n_desc qd = pbr_query(f, th, RP_RAY_SHADOW);
+                qd.traversal = pf->shadow_traversal;
                 if (vs[v].infinite) qd.frustum = RP_FRUSTUM_NONE; /* parallel rays: no common point */
                 qd.point[0] = vs[v].p.x;
                 qd.point[1] = vs[v].p.y;

@@ -57,6 +57,7 @@ typedef struct pbr_frame {
     ir_vpl *vpls;
     int sets, per_set, interleave, side; /* side: rays per packet side of a set in a tile */
     float clamp_d2;                      /* minimum squared distance of the geometry term */
+    rp_traversal shadow_traversal;       /* of the shadow packets to VPLs (ir_frame_init) */
     /* full-frame buffers for the discontinuity buffer */
     v3 *raw, *albedo, *emit, *normal;
     float *depth;

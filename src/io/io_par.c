@@ -3,6 +3,7 @@
  * joins them before it returns (a few tens of microseconds against loads of milliseconds). */
 #include <pthread.h>
 #include <stdatomic.h>
+#include <string.h>
 #include <unistd.h>
 
 #include "io/io_internal.h"
@@ -47,4 +48,14 @@ void io_parallel_for(int threads, uint32_t count, io_task_fn fn, void *user) {
     }
     par_worker(&job);
     for (int t = 0; t < started; t++) pthread_join(tid[t], NULL);
+}
+
+size_t io_text_vertex_hint(const char *p, const char *end) {
+    size_t lines = 0, most = (size_t)(end - p) / 6 + 16;
+    for (; p < end && lines < most; lines++) {
+        const char *nl = memchr(p, '\n', (size_t)(end - p));
+        if (!nl) break;
+        p = nl + 1;
+    }
+    return lines < most ? lines + 16 : most;
 }

@@ -226,6 +226,9 @@ uint32_t io_chunk_count(const io_ctx *ctx, size_t size);
 /* The vertices a chunk of text [p, end) probably holds, for io_builder.hint: one a line (SPD, OBJ
  * and PLY write one a line), and no more than one per 6 bytes ("0 0 0\n"). */
 size_t io_text_vertex_hint(const char *p, const char *end);
+/* Cuts a text of `size` bytes into at most k pieces that start at line starts (the first at data),
+ * writing their starts in order to starts[0, k); returns how many there are (0 for an empty text). */
+uint32_t io_split_lines(const char *data, size_t size, uint32_t k, const char **starts);
 /* ---- animation (io_anim.c) ------------------------------------------------------------------ */
 
 /* Completes ctx->anim against the finished scene (per-vertex and per-normal nodes, rest copies)

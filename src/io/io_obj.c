@@ -465,17 +465,16 @@ static void obj_chunk_free(obj_chunk *c) {
 static void obj_par_start(io_ctx *ctx, obj_par *par, const char *data, size_t size) {
     memset(par, 0, sizeof *par);
     uint32_t k = io_chunk_count(ctx, size);
-    if (k < 2 || !(par->chunks = calloc(k, sizeof *par->chunks))) return;
-    const char *end = data + size;
-    for (uint32_t i = 0; i < k; i++) {
-        const char *s = data + (uint64_t)size * i / k;
-        if (s > data && s[-1] != '\n') {
-            const char *nl = memchr(s, '\n', (size_t)(end - s));
-            s = nl ? nl + 1 : end;
-        }
-        if (s >= end || (par->n && s <= par->chunks[par->n - 1].start)) continue;
-        par->chunks[par->n++].start = s;
+    const char **starts = NULL;
+    if (k < 2 || !(par->chunks = calloc(k, sizeof *par->chunks)) || !(starts = malloc(k * sizeof *starts))) {
+        free(par->chunks);
+        par->chunks = NULL;
+        return;
     }
+    const char *end = data + size;
+    par->n = io_split_lines(data, size, k, starts);
+    for (uint32_t i = 0; i < par->n; i++) par->chunks[i].start = starts[i];
+    free(starts);
     for (uint32_t i = 0; i < par->n; i++) par->chunks[i].limit = i + 1 < par->n ? par->chunks[i + 1].start : end;
     par->end = end;
     par->b = &ctx->b;

@@ -59,3 +59,18 @@ size_t io_text_vertex_hint(const char *p, const char *end) {
     }
     return lines < most ? lines + 16 : most;
 }
+
+uint32_t io_split_lines(const char *data, size_t size, uint32_t k, const char **starts) {
+    const char *end = data + size;
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < k; i++) {
+        const char *s = data + (uint64_t)size * i / k;
+        if (s > data && s[-1] != '\n') {
+            const char *nl = memchr(s, '\n', (size_t)(end - s));
+            s = nl ? nl + 1 : end;
+        }
+        if (s >= end || (n && s <= starts[n - 1])) continue;
+        starts[n++] = s;
+    }
+    return n;
+}

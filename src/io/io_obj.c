@@ -403,10 +403,34 @@ static bool obj_chunk_face(obj_chunk *c, const char *p) {
     return true;
 }
 
+/* Reserves the chunk's arrays for the statements its lines start with (faces of three corners),
+ * so that they grow without copies; a failure here is met again, and reported, when they grow. */
+static void obj_chunk_presize(obj_chunk *c) {
+    size_t v = 0, vn = 0, vt = 0, f = 0;
+    for (const char *p = c->start; p < c->limit;) {
+        const char *s = skip_blank(p);
+        if (s[0] == 'v') {
+            v += s[1] == ' ' || s[1] == '\t';
+            vn += s[1] == 'n';
+            vt += s[1] == 't';
+        } else {
+            f += s[0] == 'f';
+        }
+        const char *nl = memchr(s, '\n', (size_t)(c->limit - s));
+        p = nl ? nl + 1 : c->limit;
+    }
+    (void)(io_reserve((void **)&c->pos, &c->pos_cap, v, 3 * sizeof(float)) &&
+           io_reserve((void **)&c->nrm, &c->nrm_cap, vn, 3 * sizeof(float)) &&
+           io_reserve((void **)&c->uv, &c->uv_cap, vt, 2 * sizeof(float)) &&
+           io_reserve((void **)&c->faces, &c->face_cap, f + 1, sizeof(uint32_t)) &&
+           io_reserve((void **)&c->corners, &c->corner_cap, 9 * f, sizeof(int64_t)));
+}
+
 static void obj_chunk_task(void *user, uint32_t index) {
     obj_par *par = user;
     obj_chunk *c = &par->chunks[index];
     c->need[0] = c->need[1] = c->need[2] = INT64_MIN;
+    obj_chunk_presize(c);
     const char *p = c->start, *end = par->end;
     uint32_t line = 0;
     for (; p < c->limit; p = next_line(p, end), line++) {

@@ -86,6 +86,8 @@ typedef struct io_builder {
     float background[3];
     bool has_background;
     uint32_t default_material; /* IO_NONE until needed */
+    size_t hint; /* vertices the first reservation of pos, nrm and uv makes room for (triangles: half
+                  * as many); a parallel chunk's estimate from its lines, so it grows without copies */
 } io_builder;
 
 /* ---- load context ----------------------------------------------------------------------------- */
@@ -225,6 +227,12 @@ int io_threads_resolve(int threads);
 void io_parallel_for(int threads, uint32_t count, io_task_fn fn, void *user);
 /* Chunks a text of `size` bytes is parsed in (1: serially), from ctx->threads and chunk_bytes. */
 uint32_t io_chunk_count(const io_ctx *ctx, size_t size);
+/* The vertices a chunk of text [p, end) probably holds, for io_builder.hint: one a line (SPD, OBJ
+ * and PLY write one a line), and no more than one per 6 bytes ("0 0 0\n"). */
+size_t io_text_vertex_hint(const char *p, const char *end);
+/* Cuts a text of `size` bytes into at most k pieces that start at line starts (the first at data),
+ * writing their starts in order to starts[0, k); returns how many there are (0 for an empty text). */
+uint32_t io_split_lines(const char *data, size_t size, uint32_t k, const char **starts);
 /* ---- animation (io_anim.c) ------------------------------------------------------------------ */
 
 /* Completes ctx->anim against the finished scene (per-vertex and per-normal nodes, rest copies)

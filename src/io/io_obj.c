@@ -403,10 +403,34 @@ static bool obj_chunk_face(obj_chunk *c, const char *p) {
     return true;
 }
 
+/* Reserves the chunk's arrays for the statements its lines start with (faces of three corners),
+ * so that they grow without copies; a failure here is met again, and reported, when they grow. */
+static void obj_chunk_presize(obj_chunk *c) {
+    size_t v = 0, vn = 0, vt = 0, f = 0;
+    for (const char *p = c->start; p < c->limit;) {
+        const char *s = skip_blank(p);
+        if (s[0] == 'v') {
+            v += s[1] == ' ' || s[1] == '\t';
+            vn += s[1] == 'n';
+            vt += s[1] == 't';
+        } else {
+            f += s[0] == 'f';
+        }
+        const char *nl = memchr(s, '\n', (size_t)(c->limit - s));
+        p = nl ? nl + 1 : c->limit;
+    }
+    (void)(io_reserve((void **)&c->pos, &c->pos_cap, v, 3 * sizeof(float)) &&
+           io_reserve((void **)&c->nrm, &c->nrm_cap, vn, 3 * sizeof(float)) &&
+           io_reserve((void **)&c->uv, &c->uv_cap, vt, 2 * sizeof(float)) &&
+           io_reserve((void **)&c->faces, &c->face_cap, f + 1, sizeof(uint32_t)) &&
+           io_reserve((void **)&c->corners, &c->corner_cap, 9 * f, sizeof(int64_t)));
+}
+
 static void obj_chunk_task(void *user, uint32_t index) {
     obj_par *par = user;
     obj_chunk *c = &par->chunks[index];
     c->need[0] = c->need[1] = c->need[2] = INT64_MIN;
+    obj_chunk_presize(c);
     const char *p = c->start, *end = par->end;
     uint32_t line = 0;
     for (; p < c->limit; p = next_line(p, end), line++) {
@@ -465,17 +489,16 @@ static void obj_chunk_free(obj_chunk *c) {
 static void obj_par_start(io_ctx *ctx, obj_par *par, const char *data, size_t size) {
     memset(par, 0, sizeof *par);
     uint32_t k = io_chunk_count(ctx, size);
-    if (k < 2 || !(par->chunks = calloc(k, sizeof *par->chunks))) return;
-    const char *end = data + size;
-    for (uint32_t i = 0; i < k; i++) {
-        const char *s = data + (uint64_t)size * i / k;
-        if (s > data && s[-1] != '\n') {
-            const char *nl = memchr(s, '\n', (size_t)(end - s));
-            s = nl ? nl + 1 : end;
-        }
-        if (s >= end || (par->n && s <= par->chunks[par->n - 1].start)) continue;
-        par->chunks[par->n++].start = s;
+    const char **starts = NULL;
+    if (k < 2 || !(par->chunks = calloc(k, sizeof *par->chunks)) || !(starts = malloc(k * sizeof *starts))) {
+        free(par->chunks);
+        par->chunks = NULL;
+        return;
     }
+    const char *end = data + size;
+    par->n = io_split_lines(data, size, k, starts);
+    for (uint32_t i = 0; i < par->n; i++) par->chunks[i].start = starts[i];
+    free(starts);
     for (uint32_t i = 0; i < par->n; i++) par->chunks[i].limit = i + 1 < par->n ? par->chunks[i + 1].start : end;
     par->end = end;
     par->b = &ctx->b;

@@ -3,6 +3,7 @@
  * joins them before it returns (a few tens of microseconds against loads of milliseconds). */
 #include <pthread.h>
 #include <stdatomic.h>
+#include <string.h>
 #include <unistd.h>
 
 #include "io/io_internal.h"
@@ -47,4 +48,29 @@ void io_parallel_for(int threads, uint32_t count, io_task_fn fn, void *user) {
     }
     par_worker(&job);
     for (int t = 0; t < started; t++) pthread_join(tid[t], NULL);
+}
+
+size_t io_text_vertex_hint(const char *p, const char *end) {
+    size_t lines = 0, most = (size_t)(end - p) / 6 + 16;
+    for (; p < end && lines < most; lines++) {
+        const char *nl = memchr(p, '\n', (size_t)(end - p));
+        if (!nl) break;
+        p = nl + 1;
+    }
+    return lines < most ? lines + 16 : most;
+}
+
+uint32_t io_split_lines(const char *data, size_t size, uint32_t k, const char **starts) {
+    const char *end = data + size;
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < k; i++) {
+        const char *s = data + (uint64_t)size * i / k;
+        if (s > data && s[-1] != '\n') {
+            const char *nl = memchr(s, '\n', (size_t)(end - s));
+            s = nl ? nl + 1 : end;
+        }
+        if (s >= end || (n && s <= starts[n - 1])) continue;
+        starts[n++] = s;
+    }
+    return n;
 }

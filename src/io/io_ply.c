@@ -180,6 +180,22 @@ static bool ply_read_header(ply_file *f) {
 
 /* ---- values ----------------------------------------------------------------------------------- */
 
+/* The ASCII value of type t at p as a double (integers exactly); returns its end, or NULL when it
+ * is not one or is not followed by a blank, a newline or the text's end. */
+static const char *ply_ascii_token(const char *p, ply_type t, double *out) {
+    const char *q;
+    if (t == PLY_F32 || t == PLY_F64) {
+        float v = 0.0f;
+        q = io_parse_float(p, &v);
+        *out = v;
+    } else {
+        int64_t v = 0;
+        q = io_parse_int(p, &v);
+        *out = (double)v;
+    }
+    return q && (io_is_space(*q) || *q == '\n' || *q == '\0') ? q : NULL;
+}
+
 /* Next ASCII value as a double (integers exactly), NULL-free: false with the error written. */
 static bool ply_ascii_value(ply_file *f, ply_type t, double *out) {
     const char *p = f->p;
@@ -196,17 +212,8 @@ static bool ply_ascii_value(ply_file *f, ply_type t, double *out) {
         f->p = p;
         return io_error(f->ctx, f->shown, f->line, "unexpected end of file (truncated data?)");
     }
-    const char *q;
-    if (t == PLY_F32 || t == PLY_F64) {
-        float v = 0.0f;
-        q = io_parse_float(p, &v);
-        *out = v;
-    } else {
-        int64_t v = 0;
-        q = io_parse_int(p, &v);
-        *out = (double)v;
-    }
-    if (!q || !(io_is_space(*q) || *q == '\n' || *q == '\0')) {
+    const char *q = ply_ascii_token(p, t, out);
+    if (!q) {
         int len = 0;
         while (len < 24 && p[len] && !io_is_space(p[len]) && p[len] != '\n') len++;
         return io_error(f->ctx, f->shown, f->line, "expected a %s, got '%.*s'",
@@ -306,10 +313,8 @@ static bool ply_skip_list(ply_file *f, const ply_prop *pr) {
     return true;
 }
 
-static bool ply_read_vertices(ply_file *f, const ply_elem *el) {
-    io_ctx *ctx = f->ctx;
-    io_builder *b = &ctx->b;
-    if (el->count > UINT32_MAX - b->pos_n) return io_error(ctx, f->shown, el->line, "too many vertices");
+/* Sets has_normals and has_uv from the vertex element's properties; false without x, y and z. */
+static bool ply_vertex_uses(ply_file *f, const ply_elem *el) {
     bool has_xyz[3] = {false, false, false};
     for (size_t i = 0; i < el->prop_n; i++) {
         int u = el->props[i].use;
@@ -317,14 +322,45 @@ static bool ply_read_vertices(ply_file *f, const ply_elem *el) {
         if (u >= PLY_USE_NX && u <= PLY_USE_NZ) f->has_normals = true;
         if (u == PLY_USE_U || u == PLY_USE_V) f->has_uv = true;
     }
-    if (!has_xyz[0] || !has_xyz[1] || !has_xyz[2])
-        return io_error(ctx, f->shown, el->line, "vertex element without x, y and z properties");
-    /* Reserve no more than the data could hold, so a lying count fails on the data, not on malloc. */
+    return has_xyz[0] && has_xyz[1] && has_xyz[2];
+}
+
+/* Room for the element's vertices, but no more than the data could hold, so a lying count fails
+ * on the data, not on malloc. */
+static bool ply_reserve_vertices(ply_file *f, const ply_elem *el) {
+    io_ctx *ctx = f->ctx;
     size_t plausible = (size_t)(f->end - f->p) / 2 + 1;
     size_t n = el->count < plausible ? (size_t)el->count : plausible;
-    if (!builder_reserve_vertices(ctx, n) || (f->has_normals && !builder_reserve_normals(ctx, n)) ||
-        (f->has_uv && !builder_reserve_texcoords(ctx, n)))
-        return io_error(ctx, f->shown, el->line, "out of memory");
+    return builder_reserve_vertices(ctx, n) && (!f->has_normals || builder_reserve_normals(ctx, n)) &&
+           (!f->has_uv || builder_reserve_texcoords(ctx, n));
+}
+
+/* Stores a vertex's values by what each property feeds (nothing, or one coordinate). */
+static void ply_vertex_value(int use, double v, float xyz[3], float nrm[3], float uv[2]) {
+    switch (use) {
+    case PLY_USE_X: xyz[0] = (float)v; break;
+    case PLY_USE_Y: xyz[1] = (float)v; break;
+    case PLY_USE_Z: xyz[2] = (float)v; break;
+    case PLY_USE_NX: nrm[0] = (float)v; break;
+    case PLY_USE_NY: nrm[1] = (float)v; break;
+    case PLY_USE_NZ: nrm[2] = (float)v; break;
+    case PLY_USE_U: uv[0] = (float)v; break;
+    case PLY_USE_V: uv[1] = (float)v; break;
+    default: break;
+    }
+}
+
+static bool ply_vertex_finite(const float xyz[3], const float nrm[3], const float uv[2]) {
+    return isfinite(xyz[0]) && isfinite(xyz[1]) && isfinite(xyz[2]) && isfinite(nrm[0]) && isfinite(nrm[1]) &&
+           isfinite(nrm[2]) && isfinite(uv[0]) && isfinite(uv[1]);
+}
+
+static bool ply_read_vertices(ply_file *f, const ply_elem *el) {
+    io_ctx *ctx = f->ctx;
+    io_builder *b = &ctx->b;
+    if (el->count > UINT32_MAX - b->pos_n) return io_error(ctx, f->shown, el->line, "too many vertices");
+    if (!ply_vertex_uses(f, el)) return io_error(ctx, f->shown, el->line, "vertex element without x, y and z properties");
+    if (!ply_reserve_vertices(f, el)) return io_error(ctx, f->shown, el->line, "out of memory");
     f->vertex_base = b->pos_n;
     for (uint64_t k = 0; k < el->count; k++) {
         if (b->pos_n >= b->pos_cap && !builder_reserve_vertices(ctx, 1)) return io_error(ctx, f->shown, f->line, "out of memory");
@@ -343,20 +379,9 @@ static bool ply_read_vertices(ply_file *f, const ply_elem *el) {
             }
             double v;
             if (!ply_value(f, pr->type, &v)) return false;
-            switch (pr->use) {
-            case PLY_USE_X: xyz[0] = (float)v; break;
-            case PLY_USE_Y: xyz[1] = (float)v; break;
-            case PLY_USE_Z: xyz[2] = (float)v; break;
-            case PLY_USE_NX: nrm[0] = (float)v; break;
-            case PLY_USE_NY: nrm[1] = (float)v; break;
-            case PLY_USE_NZ: nrm[2] = (float)v; break;
-            case PLY_USE_U: uv[0] = (float)v; break;
-            case PLY_USE_V: uv[1] = (float)v; break;
-            default: break;
-            }
+            ply_vertex_value(pr->use, v, xyz, nrm, uv);
         }
-        if (!isfinite(xyz[0]) || !isfinite(xyz[1]) || !isfinite(xyz[2]) || !isfinite(nrm[0]) ||
-            !isfinite(nrm[1]) || !isfinite(nrm[2]) || !isfinite(uv[0]) || !isfinite(uv[1]))
+        if (!ply_vertex_finite(xyz, nrm, uv))
             return io_error(ctx, f->shown, line, "vertex %llu has a NaN or infinite value", (unsigned long long)k);
         memcpy(b->pos + 3 * b->pos_n++, xyz, sizeof xyz);
         if (f->has_normals) memcpy(b->nrm + 3 * b->nrm_n++, nrm, sizeof nrm);
@@ -364,6 +389,26 @@ static bool ply_read_vertices(ply_file *f, const ply_elem *el) {
     }
     f->vertex_count = el->count;
     return true;
+}
+
+/* The triangles of a face of n corners s[] (indices into pos): 3(n-2) corner numbers into tris;
+ * ring holds n, pts (unused for a triangle) 3n floats. */
+static void ply_triangulate(const float *pos, const uint32_t *s, uint32_t n, uint32_t *tris, uint32_t *ring, float *pts) {
+    if (n == 3) {
+        tris[0] = 0, tris[1] = 1, tris[2] = 2;
+        return;
+    }
+    for (uint32_t j = 0; j < n; j++) memcpy(pts + 3 * j, pos + 3 * (size_t)s[j], 3 * sizeof(float));
+    poly_triangulate(pts, n, tris, ring);
+}
+
+/* PLY normals and coordinates are per vertex: a corner's indices are its vertex's. */
+static void ply_corner_indices(const ply_file *f, const uint32_t v[3], uint32_t nn[3], uint32_t tt[3]) {
+    const io_builder *b = &f->ctx->b;
+    for (int j = 0; j < 3; j++) {
+        nn[j] = (uint32_t)(v[j] - f->vertex_base + (b->nrm_n - f->vertex_count));
+        tt[j] = (uint32_t)(v[j] - f->vertex_base + (b->uv_n - f->vertex_count));
+    }
 }
 
 static bool ply_read_faces(ply_file *f, const ply_elem *el, bool vertices_seen) {
@@ -397,29 +442,251 @@ static bool ply_read_faces(ply_file *f, const ply_elem *el, bool vertices_seen) 
                                     (unsigned long long)k, v, (unsigned long long)f->vertex_count);
                 s[j] = (uint32_t)(f->vertex_base + (size_t)v);
             }
-            uint32_t *tris = s + n, *ring = tris + 3 * (n - 2);
-            if (n == 3) {
-                tris[0] = 0, tris[1] = 1, tris[2] = 2;
-            } else {
-                float *pts = io_scratch_f(ctx, 3 * n);
-                if (!pts) return io_error(ctx, f->shown, line, "out of memory");
-                for (uint64_t j = 0; j < n; j++) memcpy(pts + 3 * j, b->pos + 3 * (size_t)s[j], 3 * sizeof(float));
-                poly_triangulate(pts, (uint32_t)n, tris, ring);
-            }
+            uint32_t *tris = s + n;
+            float *pts = n == 3 ? NULL : io_scratch_f(ctx, 3 * n);
+            if (n > 3 && !pts) return io_error(ctx, f->shown, line, "out of memory");
+            ply_triangulate(b->pos, s, (uint32_t)n, tris, tris + 3 * (n - 2), pts);
             for (uint64_t t = 0; t < n - 2; t++) {
                 uint32_t v[3] = {s[tris[3 * t]], s[tris[3 * t + 1]], s[tris[3 * t + 2]]};
-                /* PLY normals and coordinates are per vertex: their indices are the vertex's. */
                 uint32_t nn[3], tt[3];
-                for (int j = 0; j < 3; j++) {
-                    nn[j] = (uint32_t)(v[j] - f->vertex_base + (b->nrm_n - f->vertex_count));
-                    tt[j] = (uint32_t)(v[j] - f->vertex_base + (b->uv_n - f->vertex_count));
-                }
+                ply_corner_indices(f, v, nn, tt);
                 if (!builder_add_triangle(ctx, v, f->has_normals ? nn : NULL, f->has_uv ? tt : NULL, material))
                     return io_error(ctx, f->shown, line, "out of memory");
             }
         }
     }
     return true;
+}
+
+
+/* ---- parallel ASCII --------------------------------------------------------------------------- */
+
+/* A large ASCII file of a vertex element and then a face element (what scanners write: the bunny)
+ * is parsed in chunks cut at line starts, on the load's threads, when every record is a line of
+ * its own. A first pass counts each chunk's records (its lines that are not blank), so each chunk
+ * knows which record its first line holds; the second parses them, vertices straight into the
+ * scene's arrays, faces as lists of corners; the third triangulates the faces and writes their
+ * triangles in file order. Anything else (a record over two lines, a bad or non-finite value, an
+ * index out of range, more or fewer records than declared, an element of another name) leaves the
+ * whole body to the serial reader, which writes the error with its own message and line: the
+ * result, errors included, is the serial one to the bit. */
+
+typedef struct ply_chunk {
+    const char *start, *limit;
+    uint64_t first, records; /* its first record's number (vertices first, then faces) and count */
+    uint32_t *corners;       /* the faces' vertex indices, scene numbering */
+    size_t corner_n, corner_cap;
+    uint32_t *faces;         /* first corner of each face; one past the last at faces[face_n] */
+    size_t face_n, face_cap, tri_n, t0;
+    uint32_t *ring;          /* triangulation scratch for its largest face: tris, ring, points */
+    float *pts;
+    size_t most;             /* corners of its largest face */
+    bool failed;
+} ply_chunk;
+
+typedef struct ply_par {
+    ply_file *f;
+    const ply_elem *vert, *face; /* face NULL: vertices only */
+    ply_chunk *chunks;
+    uint32_t n;
+    const char *end;
+    uint32_t material;
+} ply_par;
+
+static const char *ply_skip_blank(const char *p) {
+    while (io_is_space(*p)) p++;
+    return p;
+}
+
+static void ply_count_task(void *user, uint32_t index) {
+    ply_par *par = user;
+    ply_chunk *c = &par->chunks[index];
+    for (const char *p = c->start; p < c->limit;) {
+        const char *s = ply_skip_blank(p);
+        if (s < c->limit && *s != '\n') c->records++;
+        const char *nl = s < c->limit ? memchr(s, '\n', (size_t)(c->limit - s)) : NULL;
+        p = nl ? nl + 1 : c->limit;
+    }
+}
+
+/* One vertex record on the line at s into the scene's arrays at vertex k; NULL when it is not one. */
+static const char *ply_chunk_vertex(const ply_par *par, const char *s, uint64_t k) {
+    const ply_file *f = par->f;
+    io_builder *b = &f->ctx->b;
+    float xyz[3] = {0, 0, 0}, nrm[3] = {0, 0, 0}, uv[2] = {0, 0};
+    for (size_t i = 0; i < par->vert->prop_n; i++) {
+        const ply_prop *pr = &par->vert->props[i];
+        double v;
+        if (!(s = ply_ascii_token(ply_skip_blank(s), pr->type, &v))) return NULL;
+        ply_vertex_value(pr->use, v, xyz, nrm, uv);
+    }
+    if (!ply_vertex_finite(xyz, nrm, uv)) return NULL;
+    memcpy(b->pos + 3 * (b->pos_n + k), xyz, sizeof xyz);
+    if (f->has_normals) memcpy(b->nrm + 3 * (b->nrm_n + k), nrm, sizeof nrm);
+    if (f->has_uv) memcpy(b->uv + 2 * (b->uv_n + k), uv, sizeof uv);
+    return s;
+}
+
+/* A list's size at s (no more values than the line could hold); NULL when it is not one. */
+static const char *ply_chunk_count(const ply_prop *pr, const char *s, const char *limit, uint64_t *n) {
+    double c;
+    if (!(s = ply_ascii_token(ply_skip_blank(s), pr->count_type, &c)) || c < 0 || c > (double)(limit - s)) return NULL;
+    *n = (uint64_t)c;
+    return s;
+}
+
+/* One face record on the line at s, its corners appended to the chunk; NULL when it is not one. */
+static const char *ply_chunk_face(const ply_par *par, ply_chunk *c, const char *s) {
+    const ply_elem *el = par->face;
+    const ply_file *f = par->f;
+    for (size_t i = 0; i < el->prop_n; i++) {
+        const ply_prop *pr = &el->props[i];
+        double v;
+        uint64_t n = 0;
+        if (pr->count_type == PLY_NONE) {
+            if (!(s = ply_ascii_token(ply_skip_blank(s), pr->type, &v))) return NULL;
+            continue;
+        }
+        if (!(s = ply_chunk_count(pr, s, c->limit, &n))) return NULL;
+        if ((int)i != el->face_list) {
+            for (uint64_t j = 0; j < n; j++)
+                if (!(s = ply_ascii_token(ply_skip_blank(s), pr->type, &v))) return NULL;
+            continue;
+        }
+        if (n < 3 || c->corner_n + n >= UINT32_MAX ||
+            !io_reserve((void **)&c->corners, &c->corner_cap, c->corner_n + n, sizeof(uint32_t)) ||
+            !io_reserve((void **)&c->faces, &c->face_cap, c->face_n + 2, sizeof(uint32_t)))
+            return NULL;
+        for (uint64_t j = 0; j < n; j++) {
+            if (!(s = ply_ascii_token(ply_skip_blank(s), pr->type, &v)) || v < 0 || v >= (double)f->vertex_count ||
+                v != floor(v))
+                return NULL;
+            c->corners[c->corner_n + j] = (uint32_t)(f->vertex_base + (size_t)v);
+        }
+        c->faces[c->face_n++] = (uint32_t)c->corner_n;
+        c->corner_n += n;
+        c->faces[c->face_n] = (uint32_t)c->corner_n;
+        c->tri_n += n - 2;
+        if (n > c->most) c->most = n;
+    }
+    return s;
+}
+
+static void ply_parse_task(void *user, uint32_t index) {
+    ply_par *par = user;
+    ply_chunk *c = &par->chunks[index];
+    uint64_t r = c->first, nv = par->vert->count, nf = par->face ? par->face->count : 0;
+    for (const char *p = c->start; p < c->limit && !c->failed;) {
+        const char *s = ply_skip_blank(p);
+        if (s < c->limit && *s != '\n') {
+            s = r < nv ? ply_chunk_vertex(par, s, r) : r - nv < nf ? ply_chunk_face(par, c, s) : NULL;
+            if (s) s = ply_skip_blank(s);
+            c->failed = !s || !(*s == '\n' || s == par->end);
+            r++;
+        }
+        const char *nl = s && s < c->limit ? memchr(s, '\n', (size_t)(c->limit - s)) : NULL;
+        p = nl ? nl + 1 : c->limit;
+    }
+    if (!c->failed && c->most > 3) { /* the scratch now, so the fill cannot fail */
+        c->ring = io_malloc(4 * c->most * sizeof(uint32_t));
+        c->pts = io_malloc(3 * c->most * sizeof(float));
+        c->failed = !c->ring || !c->pts;
+    }
+}
+
+static void ply_fill_task(void *user, uint32_t index) {
+    const ply_par *par = user;
+    const ply_chunk *c = &par->chunks[index];
+    const ply_file *f = par->f;
+    io_builder *b = &f->ctx->b;
+    uint32_t tri3[3];
+    size_t t = c->t0;
+    for (size_t i = 0; i < c->face_n; i++) {
+        const uint32_t *s = c->corners + c->faces[i];
+        uint32_t n = c->faces[i + 1] - c->faces[i], *tris = n == 3 ? tri3 : c->ring;
+        ply_triangulate(b->pos, s, n, tris, tris + 3 * (n - 2), c->pts);
+        for (uint32_t k = 0; k < n - 2; k++, t++) {
+            uint32_t v[3] = {s[tris[3 * k]], s[tris[3 * k + 1]], s[tris[3 * k + 2]]}, nn[3], tt[3];
+            ply_corner_indices(f, v, nn, tt);
+            memcpy(b->idx + 3 * t, v, sizeof v);
+            if (b->nidx) memcpy(b->nidx + 3 * t, nn, sizeof nn);
+            if (b->tidx) memcpy(b->tidx + 3 * t, tt, sizeof tt);
+            b->mat[t] = par->material;
+        }
+    }
+}
+
+/* The vertex and face elements parsed in parallel; false (with nothing changed but room reserved,
+ * and no error written) when the serial reader is to parse them. */
+static bool ply_par_run(ply_par *par) {
+    ply_file *f = par->f;
+    io_ctx *ctx = f->ctx;
+    io_builder *b = &ctx->b;
+    const char **starts = io_malloc(par->n * sizeof *starts);
+    if (!starts) return false;
+    par->n = io_split_lines(f->p, (size_t)(f->end - f->p), par->n, starts);
+    for (uint32_t i = 0; i < par->n; i++) {
+        par->chunks[i].start = starts[i];
+        par->chunks[i].limit = i + 1 < par->n ? starts[i + 1] : f->end;
+    }
+    free(starts);
+    io_parallel_for(ctx->threads, par->n, ply_count_task, par);
+    uint64_t records = 0;
+    for (uint32_t i = 0; i < par->n; i++) par->chunks[i].first = records, records += par->chunks[i].records;
+    if (records != par->vert->count + (par->face ? par->face->count : 0)) return false;
+    if (par->vert->count > UINT32_MAX - b->pos_n || !ply_reserve_vertices(f, par->vert) ||
+        b->pos_cap - b->pos_n < par->vert->count)
+        return false;
+    f->vertex_base = b->pos_n;
+    f->vertex_count = par->vert->count;
+    io_parallel_for(ctx->threads, par->n, ply_parse_task, par);
+    size_t tris = 0;
+    for (uint32_t i = 0; i < par->n; i++) {
+        if (par->chunks[i].failed) return false;
+        par->chunks[i].t0 = b->tri_n + tris;
+        tris += par->chunks[i].tri_n;
+    }
+    if (par->face && (par->material = builder_default_material(ctx)) == IO_NONE) return false;
+    /* from here on the serial reader's result: vertices counted, then the triangles */
+    size_t nv = (size_t)par->vert->count;
+    b->pos_n += nv;
+    if (f->has_normals) b->nrm_n += nv;
+    if (f->has_uv) b->uv_n += nv;
+    if (!builder_claim_triangles(ctx, tris, f->has_normals && tris, f->has_uv && tris)) {
+        io_error(ctx, f->shown, par->face ? par->face->line : par->vert->line, "out of memory");
+        return true;
+    }
+    io_parallel_for(ctx->threads, par->n, ply_fill_task, par);
+    ctx->chunks_taken += par->n;
+    f->p = f->end;
+    return true;
+}
+
+/* Parses the body in parallel when it suits (see above); true when it did (ctx->failed after an
+ * out-of-memory error), false when the serial reader is to. */
+static bool ply_par_load(ply_file *f) {
+    io_ctx *ctx = f->ctx;
+    ply_par par = {.f = f, .end = f->end};
+    if (f->format != PLY_ASCII || f->elem_n < 1 || f->elem_n > 2 || strcmp(f->elems[0].name, "vertex") != 0) return false;
+    par.vert = &f->elems[0];
+    for (size_t i = 0; i < par.vert->prop_n; i++)
+        if (par.vert->props[i].count_type != PLY_NONE) return false;
+    if (f->elem_n == 2) {
+        par.face = &f->elems[1];
+        if (strcmp(par.face->name, "face") != 0 || par.face->face_list < 0) return false;
+    }
+    if (!ply_vertex_uses(f, par.vert)) return false;
+    par.n = io_chunk_count(ctx, (size_t)(f->end - f->p));
+    if (par.n < 2 || !(par.chunks = io_calloc(par.n, sizeof *par.chunks))) return false;
+    bool done = ply_par_run(&par);
+    for (uint32_t i = 0; i < par.n; i++) {
+        free(par.chunks[i].corners);
+        free(par.chunks[i].faces);
+        free(par.chunks[i].ring);
+        free(par.chunks[i].pts);
+    }
+    free(par.chunks);
+    return done;
 }
 
 /* Declared counts against the bytes after the header, before any allocation or loop: every record
@@ -467,6 +734,15 @@ bool ply_load(io_ctx *ctx, const char *path) {
     f.p = buf.data;
     f.end = buf.data + buf.size;
     bool ok = ply_read_header(&f) && ply_check_counts(&f);
+    const char *body = f.p;
+    uint32_t body_line = f.line;
+    if (ok && ply_par_load(&f)) {
+        ok = !ctx->failed;
+        ply_free(&f);
+        vfs_buf_free(&buf);
+        return ok;
+    }
+    f.p = body, f.line = body_line, f.has_normals = f.has_uv = false;
     bool vertices_seen = false;
     for (size_t i = 0; ok && i < f.elem_n; i++) {
         const ply_elem *el = &f.elems[i];

@@ -83,24 +83,27 @@ uint32_t builder_default_material(io_ctx *ctx) {
     return ctx->b.default_material;
 }
 
+/* What an array's first reservation asks for: the builder's hint when that is more. */
+static size_t first_need(size_t cap, size_t need, size_t hint) { return cap == 0 && hint > need ? hint : need; }
+
 bool builder_reserve_vertices(io_ctx *ctx, size_t extra) {
     io_builder *b = &ctx->b;
-    return io_reserve((void **)&b->pos, &b->pos_cap, b->pos_n + extra, 3 * sizeof(float));
+    return io_reserve((void **)&b->pos, &b->pos_cap, first_need(b->pos_cap, b->pos_n + extra, b->hint), 3 * sizeof(float));
 }
 
 bool builder_reserve_normals(io_ctx *ctx, size_t extra) {
     io_builder *b = &ctx->b;
-    return io_reserve((void **)&b->nrm, &b->nrm_cap, b->nrm_n + extra, 3 * sizeof(float));
+    return io_reserve((void **)&b->nrm, &b->nrm_cap, first_need(b->nrm_cap, b->nrm_n + extra, b->hint), 3 * sizeof(float));
 }
 
 bool builder_reserve_texcoords(io_ctx *ctx, size_t extra) {
     io_builder *b = &ctx->b;
-    return io_reserve((void **)&b->uv, &b->uv_cap, b->uv_n + extra, 2 * sizeof(float));
+    return io_reserve((void **)&b->uv, &b->uv_cap, first_need(b->uv_cap, b->uv_n + extra, b->hint), 2 * sizeof(float));
 }
 
 bool builder_reserve_triangles(io_ctx *ctx, size_t extra) {
     io_builder *b = &ctx->b;
-    size_t need = b->tri_n + extra, cap = b->tri_cap;
+    size_t need = first_need(b->tri_cap, b->tri_n + extra, b->hint / 2), cap = b->tri_cap;
     if (need <= cap) return true;
     /* The four per-triangle arrays grow together; nidx/tidx only once they exist. */
     size_t c = cap;

@@ -219,11 +219,13 @@ int cli_animate(int argc, char **argv) {
     if (!upd) goto done;
     ren = upd + (last - first + 1);
     double sum_update = 0.0, sum_refit = 0.0, sum_top = 0.0, sum_render = 0.0, max_update = 0.0, sum_write = 0.0;
+    double sum_cpu = 0.0;
     uint64_t rays = 0;
     int done_frames = 0;
     for (int i = first; i <= last; i++) {
         float t = fps > 0.0f ? anim->start + (float)((double)i / fps) : rp_anim_frame_time(anim, i, count);
         rp_render_update_stats us;
+        double c0 = cli_cpu_ms();
         if (!rp_render_scene_set_time(scene, &data, t, &us)) {
             fprintf(stderr, "raypack animate: updating the scene to time %g failed\n", (double)t);
             goto done;
@@ -235,6 +237,7 @@ int cli_animate(int argc, char **argv) {
             fprintf(stderr, "raypack animate: rendering frame %d failed (out of memory?)\n", i);
             goto done;
         }
+        double cpu = cli_cpu_ms() - c0; /* update and render, every thread */
         uint64_t fr = 0;
         for (int k = 0; k < RP_RAY_KIND_COUNT; k++) fr += rs.rays[k];
         rays += fr;
@@ -253,15 +256,16 @@ int cli_animate(int argc, char **argv) {
         }
         double write_ms = cli_now_ms() - w0;
         sum_write += write_ms;
+        sum_cpu += cpu;
         sum_update += us.update_ms, sum_refit += us.refit_ms, sum_top += us.top_ms, sum_render += rs.render_ms;
         if (us.update_ms > max_update) max_update = us.update_ms;
         upd[done_frames] = us.update_ms, ren[done_frames] = rs.render_ms;
         done_frames++;
         if (!quiet)
             printf("frame %5d t %8.4f  update %7.3f ms (eval %.3f, refit %.3f, top %.3f; %u instances, %u refit, %u rebuilt)"
-                   "  render %8.1f ms  %.2f Mrays/s\n",
+                   "  render %8.1f ms  %.2f Mrays/s  cpu %.1f ms\n",
                    i, (double)t, us.update_ms, us.eval_ms, us.refit_ms, us.top_ms, us.instances, us.refits, us.rebuilds,
-                   rs.render_ms, rs.render_ms > 0.0 ? (double)fr / (rs.render_ms * 1e3) : 0.0);
+                   rs.render_ms, rs.render_ms > 0.0 ? (double)fr / (rs.render_ms * 1e3) : 0.0, cpu);
     }
     double total = sum_update + sum_render, n = done_frames > 0 ? done_frames : 1;
     qsort(upd, (size_t)done_frames, sizeof *upd, cmp_double);
@@ -275,6 +279,13 @@ int cli_animate(int argc, char **argv) {
            total > 0.0 ? 1e3 * n / total : 0.0, sum_render > 0.0 ? 1e3 * n / sum_render : 0.0,
            total > 0.0 ? 100.0 * sum_update / total : 0.0, sum_render > 0.0 ? (double)rays / (sum_render * 1e3) : 0.0,
            pattern ? "" : " (no images written)");
+    /* the machine's other jobs stretch the wall clock, not the CPU time: the rate the frames would
+     * reach on `threads` idle cores, were they spread evenly over them */
+    int nth = rp_device_thread_count(device);
+    printf("cpu      %.1f ms a frame (update and render, all %d threads): %.3f frames/s on %d idle cores, "
+           "%.2f Mrays per CPU second\n",
+           sum_cpu / n, nth, sum_cpu > 0.0 ? 1e3 * n * nth / sum_cpu : 0.0, nth,
+           sum_cpu > 0.0 ? (double)rays / (sum_cpu * 1e3) : 0.0);
     if (pattern) printf("written  %d images, %.1f ms a frame (not counted above)\n", done_frames, sum_write / n);
     status = CLI_EXIT_OK;
 done:

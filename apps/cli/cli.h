@@ -33,6 +33,9 @@ int cli_stream_bench(int argc, char **argv);
 bool cli_stream_wanted(int argc, char **argv, const char *flag, const char *value);
 /* Monotonic wall clock in milliseconds. */
 double cli_now_ms(void);
+/* CPU time of the whole process (all its threads) in milliseconds: what a frame costs whatever
+ * else the machine runs. */
+double cli_cpu_ms(void);
 /* Parses an integer flag value in [lo, hi]; prints "raypack CMD: FLAG expects ..." and returns false
  * on a bad value. */
 bool cli_parse_int(const char *cmd, const char *flag, const char *text, long lo, long hi, int *out);

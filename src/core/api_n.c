@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "core/core.h"
+#include "simd/simd.h"
 #include "traverse/packet_n.h"
 
 rp_query_n_desc rp_query_n_desc_defaults(const rp_query_n_desc *desc) {
@@ -252,6 +253,73 @@ static uint32_t instance_slabs(uint32_t n, const float box[6], const float *rest
     return on_n;
 }
 
+/* Bounds over a packet's live rays (tn0 finite) of what instance_slabs reads: origins, inverse
+ * directions, tn0 and tfar; from them one interval test per instance box can tell that no ray of
+ * the packet meets it (packet_misses_box) before the rays are tested one by one. */
+typedef struct {
+    float olo[3], ohi[3], ilo[3], ihi[3], tn0_min, tfar_max;
+} packet_bounds;
+
+/* One pass over the lanes, four at a time (count is a multiple of 16); lanes not live (tn0 +inf)
+ * count for nothing. */
+static void packet_bounds_make(uint32_t count, const rp_rayhit_n *p, const float *const inv[3], const float *tn0,
+                               packet_bounds *b) {
+    const float *arr[7] = {p->org_x, p->org_y, p->org_z, inv[0], inv[1], inv[2], p->tfar};
+    const vf4 inf = vf4_splat(INFINITY), ninf = vf4_splat(-INFINITY);
+    vf4 lo[7], hi[7], tmin = inf;
+    for (int k = 0; k < 7; k++) lo[k] = inf, hi[k] = ninf;
+    for (uint32_t i = 0; i < count; i += 4) {
+        vf4 t = vf4_load(tn0 + i);
+        vi4 on = t < inf;
+        tmin = vf4_min(tmin, t);
+        for (int k = 0; k < 7; k++) {
+            vf4 v = vf4_load(arr[k] + i);
+            lo[k] = vf4_min(lo[k], vf4_select(on, v, inf));
+            hi[k] = vf4_max(hi[k], vf4_select(on, v, ninf));
+        }
+    }
+    float l[7], h[7];
+    for (int k = 0; k < 7; k++) {
+        l[k] = fmin2(fmin2(lo[k][0], lo[k][1]), fmin2(lo[k][2], lo[k][3]));
+        h[k] = fmax2(fmax2(hi[k][0], hi[k][1]), fmax2(hi[k][2], hi[k][3]));
+    }
+    for (int k = 0; k < 3; k++) b->olo[k] = l[k], b->ohi[k] = h[k], b->ilo[k] = l[3 + k], b->ihi[k] = h[3 + k];
+    b->tfar_max = h[6];
+    b->tn0_min = fmin2(fmin2(tmin[0], tmin[1]), fmin2(tmin[2], tmin[3]));
+}
+
+/* True when no ray within the bounds b can pass instance_slabs' test against box: every ray's
+ * (l - o) * inv on an axis lies between the products at the corners of [l - ohi, l - olo] x
+ * [ilo, ihi] (rounding is monotone, so this holds for the float products too), so its entry is at
+ * least the lowest of those and its exit at most the highest; when the latest lowest entry (or
+ * tn0) is past the earliest highest exit (or tfar), every ray's test fails. NaN bounds cull
+ * nothing. */
+static bool packet_misses_box(const packet_bounds *b, const float box[6]) {
+    float enter = b->tn0_min, leave = b->tfar_max;
+    for (int k = 0; k < 3; k++) {
+        float lo = INFINITY, hi = -INFINITY;
+        for (int s = 0; s < 2; s++) {
+            float plane = box[3 * s + k];
+            float u0 = plane - b->ohi[k], u1 = plane - b->olo[k];
+            float c[4] = {u0 * b->ilo[k], u0 * b->ihi[k], u1 * b->ilo[k], u1 * b->ihi[k]};
+            for (int j = 0; j < 4; j++) lo = fmin2(lo, c[j]), hi = fmax2(hi, c[j]);
+        }
+        enter = fmax2(enter, lo), leave = fmin2(leave, hi);
+    }
+    return enter > leave;
+}
+
+/* 1 / d of n directions; a zero (or denormal) component becomes +-1e30, which never makes a NaN and
+ * keeps the slab tests conservative. One array at a time, branch free, so that it vectorizes. */
+static void inverse_dirs(uint32_t n, const float *restrict d, float *restrict inv) {
+    for (uint32_t i = 0; i < n; i++) {
+        float x = d[i];
+        bool ok = fabsf(x) > 1e-30f;
+        float r = 1.0f / (ok ? x : 1.0f); /* no division by zero, so no trap to keep it from vectorizing */
+        inv[i] = ok ? r : copysignf(1e30f, x);
+    }
+}
+
 /* Points (with the translation) or directions of n rays through the 3x4 map m, as instance_ray maps
  * them. */
 static void instance_map(uint32_t n, const float m[12], bool points, const float *restrict x, const float *restrict y,
@@ -270,6 +338,42 @@ static void instance_map(uint32_t n, const float m[12], bool points, const float
         ox[i] = m0 * x[i] + m1 * y[i] + m2 * z[i];
         oy[i] = m4 * x[i] + m5 * y[i] + m6 * z[i];
         oz[i] = m8 * x[i] + m9 * y[i] + m10 * z[i];
+    }
+}
+
+/* Shadow rays of a packet occluded in an instance (tfar -inf there) are occluded in the packet. */
+static void occluded_merge(uint32_t n, const int32_t *restrict valid, const float *restrict qtfar, float *restrict tfar) {
+    for (uint32_t i = 0; i < n; i++) {
+        int32_t hit = (valid[i] != 0) & (qtfar[i] == -INFINITY); /* & rather than &&: no branch */
+        tfar[i] = hit ? -INFINITY : tfar[i];
+    }
+}
+
+/* The hits q found in instance gi (valid lanes whose geom_id is set) replace p's, their normals
+ * mapped back by the inverse transpose of m: four lanes at a time (n is a multiple of 16), a lane
+ * without a new hit getting its own values back. */
+static void hits_merge(uint32_t n, const int32_t *valid, const float m[12], uint32_t gi, const rp_rayhit_n *q,
+                       rp_rayhit_n *p) {
+    const vf4 m0 = vf4_splat(m[0]), m1 = vf4_splat(m[1]), m2 = vf4_splat(m[2]), m4 = vf4_splat(m[4]),
+              m5 = vf4_splat(m[5]), m6 = vf4_splat(m[6]), m8 = vf4_splat(m[8]), m9 = vf4_splat(m[9]),
+              m10 = vf4_splat(m[10]);
+    const vi4 none = vi4_splat((int32_t)RP_INVALID_ID), zero = vi4_splat(0), inst = vi4_splat((int32_t)gi);
+    for (uint32_t i = 0; i < n; i += 4) {
+        vi4 g = vi4_load(q->geom_id + i);
+        vi4 hit = (vi4_load(valid + i) != zero) & (g != none);
+        if (vi4_movemask(hit) == 0) continue;
+        vf4 nx = vf4_load(q->Ng_x + i), ny = vf4_load(q->Ng_y + i), nz = vf4_load(q->Ng_z + i);
+        /* the products and sums in the order of the scalar m[0] * nx + m[4] * ny + m[8] * nz */
+        vf4 wx = m0 * nx + m4 * ny + m8 * nz, wy = m1 * nx + m5 * ny + m9 * nz, wz = m2 * nx + m6 * ny + m10 * nz;
+        vf4_store(p->tfar + i, vf4_select(hit, vf4_load(q->tfar + i), vf4_load(p->tfar + i)));
+        vf4_store(p->Ng_x + i, vf4_select(hit, wx, vf4_load(p->Ng_x + i)));
+        vf4_store(p->Ng_y + i, vf4_select(hit, wy, vf4_load(p->Ng_y + i)));
+        vf4_store(p->Ng_z + i, vf4_select(hit, wz, vf4_load(p->Ng_z + i)));
+        vf4_store(p->u + i, vf4_select(hit, vf4_load(q->u + i), vf4_load(p->u + i)));
+        vf4_store(p->v + i, vf4_select(hit, vf4_load(q->v + i), vf4_load(p->v + i)));
+        vi4_store(p->geom_id + i, vi4_select(hit, g, vi4_load(p->geom_id + i)));
+        vi4_store(p->prim_id + i, vi4_select(hit, vi4_load(q->prim_id + i), vi4_load(p->prim_id + i)));
+        vi4_store(p->inst_id + i, vi4_select(hit, inst, vi4_load(p->inst_id + i)));
     }
 }
 
@@ -300,20 +404,25 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
     int32_t *valid = (int32_t *)(void *)(mem + 16 * each);
     q.valid = valid;
     q.mask = p->mask;
-    /* the rays' inverse directions for the slab tests, once for every instance; a zero (or
-     * denormal) component becomes +-1e30, which never makes a NaN and keeps the test conservative */
+    /* the rays' inverse directions for the slab tests and the packet's bounds, once for every
+     * instance */
     float *ix = (float *)(void *)(mem + 17 * each), *iy = ix + count, *iz = iy + count, *tn0 = iz + count;
-    for (uint32_t i = 0; i < count; i++) {
-        tn0[i] = live(p, i) ? p->tnear[i] : INFINITY;
-        float dv[3] = {p->dir_x[i], p->dir_y[i], p->dir_z[i]}, *out[3] = {ix, iy, iz};
-        for (int r = 0; r < 3; r++) out[r][i] = fabsf(dv[r]) > 1e-30f ? 1.0f / dv[r] : copysignf(1e30f, dv[r]);
-    }
+    for (uint32_t i = 0; i < count; i++) tn0[i] = live(p, i) ? p->tnear[i] : INFINITY;
+    inverse_dirs(count, p->dir_x, ix);
+    inverse_dirs(count, p->dir_y, iy);
+    inverse_dirs(count, p->dir_z, iz);
+    const float *inv[3] = {ix, iy, iz};
+    packet_bounds pb;
+    packet_bounds_make(count, p, inv, tn0, &pb);
     for (uint32_t gi = 0; gi < scene->geom_count; gi++) {
         const rp_geometry *g = scene->geoms[gi];
         if (!g || g->mask == 0) continue;
         /* the instance's box (rays that miss it cannot hit inside, so they, and an instance no ray
          * reaches, are skipped) */
         if (!(g->box[0] <= g->box[3])) continue;
+        /* a packet the box's interval test culls skips the rays' tests (at most one of the kitchen's
+         * five car and wheel instances is met by a packet in ten) */
+        if (packet_misses_box(&pb, g->box)) continue;
         const float *m = g->inv;
         uint32_t live_n = instance_slabs(count, g->box, p->org_x, p->org_y, p->org_z, ix, iy, iz, tn0, p->tfar, valid);
         if (!live_n) continue;
@@ -331,21 +440,8 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
             for (int r = 0; r < 3; r++) sd.point[r] = m[4 * r] * x + m[4 * r + 1] * y + m[4 * r + 2] * z + m[4 * r + 3];
         }
         trace_usable(g->inst, &sd, &q, any);
-        for (uint32_t i = 0; i < count; i++) {
-            if (!valid[i]) continue;
-            if (any) {
-                if (q.tfar[i] == -INFINITY) p->tfar[i] = -INFINITY;
-                continue;
-            }
-            if (q.geom_id[i] == RP_INVALID_ID) continue;
-            float nx = q.Ng_x[i], ny = q.Ng_y[i], nz = q.Ng_z[i];
-            p->tfar[i] = q.tfar[i];
-            p->Ng_x[i] = m[0] * nx + m[4] * ny + m[8] * nz;
-            p->Ng_y[i] = m[1] * nx + m[5] * ny + m[9] * nz;
-            p->Ng_z[i] = m[2] * nx + m[6] * ny + m[10] * nz;
-            p->u[i] = q.u[i], p->v[i] = q.v[i];
-            p->geom_id[i] = q.geom_id[i], p->prim_id[i] = q.prim_id[i], p->inst_id[i] = gi;
-        }
+        if (any) occluded_merge(count, valid, q.tfar, p->tfar);
+        else hits_merge(count, valid, m, gi, &q, p);
     }
     if (mem != stack) sys_free(&scene->device->alloc, mem, each * SCRATCH);
 }

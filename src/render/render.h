@@ -124,12 +124,12 @@ typedef struct render_surface {
     v3 ng;       /* unit geometric normal, facing the incoming ray */
     v3 ns;       /* unit shading normal, same hemisphere as ng */
     v3 ns_raw;   /* unit shading normal as stored (for the normal AOV) */
-    float uv[2];
+    float uv[2];   /* texture coordinates, where has_uv: triangles with them whose material reads a texture */
     bool has_uv;
     bool entering; /* the ray hit the front side (outside) of the surface */
     uint32_t material;
-    v3 dpdu;     /* triangles with texture coordinates: the position's derivative along u (for
-                  * tangent-space normal maps), else 0 */
+    v3 dpdu;     /* triangles with texture coordinates whose material has a normal map: the position's
+                  * derivative along u (for the tangent-space normal map), else 0 */
 } render_surface;
 
 /* Cone user geometry callbacks (cone.c). */

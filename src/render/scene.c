@@ -200,22 +200,28 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
                                v3_scale(corner3(d->normals, d->normal_indices, prim, 1), b1)),
                         v3_scale(corner3(d->normals, d->normal_indices, prim, 2), b2));
         }
-        if (d->texcoords && d->texcoord_indices) {
+        uint32_t mat = d->tri_materials ? d->tri_materials[prim] : 0;
+        const rp_material *m = &s->materials[mat < (d->material_count > 0 ? d->material_count : 1) ? mat : 0];
+        /* texture coordinates only where the material reads a texture, and dp/du only where it has a
+         * normal map (they are all that read them): the rest of the hits skip four more arrays */
+        if (d->texcoords && d->texcoord_indices && (m->texture >= 0 || m->roughness_texture >= 0 || m->normal_texture >= 0)) {
             const uint32_t *ti = d->texcoord_indices + 3 * (size_t)prim;
             const float *t0 = d->texcoords + 2 * (size_t)ti[0], *t1 = d->texcoords + 2 * (size_t)ti[1],
                         *t2 = d->texcoords + 2 * (size_t)ti[2];
             out->uv[0] = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
             out->uv[1] = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
             out->has_uv = true;
-            /* dp/du from the triangle's edges and their uv differences (pbrt's Triangle) */
-            v3 p0 = corner3(d->positions, d->indices, prim, 0), p1 = corner3(d->positions, d->indices, prim, 1),
-               p2 = corner3(d->positions, d->indices, prim, 2);
-            float du02 = t0[0] - t2[0], du12 = t1[0] - t2[0], dv02 = t0[1] - t2[1], dv12 = t1[1] - t2[1];
-            float det = du02 * dv12 - dv02 * du12;
-            if (fabsf(det) > 1e-12f)
-                out->dpdu = v3_scale(v3_sub(v3_scale(v3_sub(p0, p2), dv12), v3_scale(v3_sub(p1, p2), dv02)), 1.0f / det);
+            if (m->normal_texture >= 0) {
+                /* dp/du from the triangle's edges and their uv differences (pbrt's Triangle) */
+                v3 p0 = corner3(d->positions, d->indices, prim, 0), p1 = corner3(d->positions, d->indices, prim, 1),
+                   p2 = corner3(d->positions, d->indices, prim, 2);
+                float du02 = t0[0] - t2[0], du12 = t1[0] - t2[0], dv02 = t0[1] - t2[1], dv12 = t1[1] - t2[1];
+                float det = du02 * dv12 - dv02 * du12;
+                if (fabsf(det) > 1e-12f)
+                    out->dpdu = v3_scale(v3_sub(v3_scale(v3_sub(p0, p2), dv12), v3_scale(v3_sub(p1, p2), dv02)), 1.0f / det);
+            }
         }
-        if (d->tri_materials) out->material = d->tri_materials[prim];
+        out->material = mat;
     } else if (hit->geom_id == s->geom_ids[RENDER_GEOM_SPHERES] && prim < d->sphere_count) {
         const rp_sphere_data *sp = &d->spheres[prim];
         ng = v3_sub(out->p, v3_load(sp->center));

@@ -237,19 +237,7 @@ done:
     return ok;
 }
 
-void scene_hit_flat(const rp_render_scene *s, rp_hit *h) {
-    if (!s->groups || h->inst_id == RP_INVALID_ID || h->geom_id == RP_INVALID_ID || h->inst_id >= s->group_count) return;
-    uint32_t gi = s->group_of_top[h->inst_id];
-    if (gi == RP_INVALID_ID) return;
-    const render_group *g = &s->groups[gi];
-    for (int k = 0; k < 3; k++)
-        if (g->sub_ids[k] == h->geom_id) {
-            h->prim_id = g->map[k][h->prim_id];
-            h->geom_id = s->geom_ids[k];
-            h->inst_id = RP_INVALID_ID;
-            return;
-        }
-}
+void scene_hit_flat(const rp_render_scene *s, rp_hit *h) { scene_ids_flat(s, &h->geom_id, &h->prim_id, &h->inst_id); }
 
 /* Lights follow the data (Whitted's and the physically based point and triangle lights). */
 static void update_lights(rp_render_scene *s) {

@@ -143,6 +143,22 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
 /* A hit inside an animated scene's instance rewritten to the flat build's geom_id and prim_id (and
  * inst_id RP_INVALID_ID); other hits unchanged. */
 void scene_hit_flat(const rp_render_scene *s, rp_hit *h);
+/* scene_hit_flat on the three ids alone, inline: scene_surface reads a hit's fields one at a time,
+ * as the packet tracers have just stored them (a copy of the whole record as 16-byte loads waited
+ * on those stores, a tenth of scene_surface on the kitchen's animation). */
+static inline void scene_ids_flat(const rp_render_scene *s, uint32_t *geom, uint32_t *prim, uint32_t *inst) {
+    if (!s->groups || *inst == RP_INVALID_ID || *geom == RP_INVALID_ID || *inst >= s->group_count) return;
+    uint32_t gi = s->group_of_top[*inst];
+    if (gi == RP_INVALID_ID) return;
+    const render_group *g = &s->groups[gi];
+    for (int k = 0; k < 3; k++)
+        if (g->sub_ids[k] == *geom) {
+            *prim = g->map[k][*prim];
+            *geom = s->geom_ids[k];
+            *inst = RP_INVALID_ID;
+            return;
+        }
+}
 /* Animated scenes (anim.c): one sub-scene and instance per keyframed block, `tpa` group and the
  * still rest; their bounds (and ray offsets) from the data; freeing them. */
 bool anim_build_geometry(rp_render_scene *s, const rp_scene_data *d, const rp_render_scene_desc *desc);

@@ -181,20 +181,19 @@ static v3 corner3(const float *a, const uint32_t *idx, uint32_t prim, int corner
 
 void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hit_in, render_surface *out) {
     const rp_scene_data *d = s->data;
-    rp_hit flat = *hit_in;
-    scene_hit_flat(s, &flat);
-    const rp_hit *hit = &flat;
+    uint32_t geom = hit_in->geom_id, prim = hit_in->prim_id, inst = hit_in->inst_id;
+    scene_ids_flat(s, &geom, &prim, &inst);
     v3 dir = v3_make(ray->dir_x, ray->dir_y, ray->dir_z);
     out->p = v3_madd(v3_make(ray->org_x, ray->org_y, ray->org_z), dir, ray->tfar);
-    v3 ng = v3_make(hit->Ng_x, hit->Ng_y, hit->Ng_z);
+    v3 ng = v3_make(hit_in->Ng_x, hit_in->Ng_y, hit_in->Ng_z);
     v3 ns = v3_make(0, 0, 0);
     out->has_uv = false;
     out->uv[0] = out->uv[1] = 0.0f;
     out->dpdu = v3_make(0, 0, 0);
     out->material = 0;
-    uint32_t prim = hit->prim_id;
-    if (hit->geom_id == s->geom_ids[RENDER_GEOM_TRIANGLES] && prim < d->triangle_count) {
-        float b0 = 1.0f - hit->u - hit->v, b1 = hit->u, b2 = hit->v;
+    if (geom == s->geom_ids[RENDER_GEOM_TRIANGLES] && prim < d->triangle_count) {
+        float u = hit_in->u, v = hit_in->v;
+        float b0 = 1.0f - u - v, b1 = u, b2 = v;
         if (d->normals && d->normal_indices) {
             ns = v3_add(v3_add(v3_scale(corner3(d->normals, d->normal_indices, prim, 0), b0),
                                v3_scale(corner3(d->normals, d->normal_indices, prim, 1), b1)),
@@ -222,11 +221,11 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
             }
         }
         out->material = mat;
-    } else if (hit->geom_id == s->geom_ids[RENDER_GEOM_SPHERES] && prim < d->sphere_count) {
+    } else if (geom == s->geom_ids[RENDER_GEOM_SPHERES] && prim < d->sphere_count) {
         const rp_sphere_data *sp = &d->spheres[prim];
         ng = v3_sub(out->p, v3_load(sp->center));
         out->material = sp->material;
-    } else if (hit->geom_id == s->geom_ids[RENDER_GEOM_CONES] && prim < d->cone_count) {
+    } else if (geom == s->geom_ids[RENDER_GEOM_CONES] && prim < d->cone_count) {
         out->material = d->cones[prim].material;
     }
     size_t nm = d->material_count > 0 ? d->material_count : 1;

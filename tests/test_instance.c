@@ -111,6 +111,92 @@ static void trace(rp_device *dev, rp_scene *s, const rp_ray *rays, uint32_t n, g
     }
 }
 
+/* Coherent 16x16 packets (narrow pinhole views) into a top level of 49 small instances, most of
+ * which a packet misses: packets into instances cull those by one interval test of the packet's
+ * bounds against each instance box before the rays' own slab tests. The packets' hits and
+ * occlusion, with lanes switched off and some rays cut short, views from outside and from among
+ * the instances, are the single rays' (rp_intersect1 / rp_occluded1 into the same instances). */
+static void coherent_packets(rp_device *dev, rp_scene *obj, int kind, int views) {
+    rp_scene *top = rp_scene_new(dev, NULL);
+    for (int i = 0; i < 7; i++)
+        for (int j = 0; j < 7; j++) {
+            float m[12];
+            xfm_make(m, 0.4f * (float)(i + j), 0.35f, -3.0f + (float)i, -3.0f + (float)j, 0.3f * (float)((i * j) % 3));
+            attach_instance(dev, top, obj, m);
+        }
+    CHECK(rp_scene_commit(top) == RP_ERROR_NONE);
+    rp_rayhit_n p;
+    if (!rp_rayhit_n_alloc(dev, 16, &p)) {
+        CHECK(!"packet allocated");
+        rp_scene_release(top);
+        return;
+    }
+    int32_t valid[256];
+    test_rng r = {91};
+    uint32_t total = 0, hits = 0, occluded = 0, bad = 0, far = 0;
+    for (int view = 0; view < views; view++) {
+        bool inside = view % 4 == 3; /* the eye among the instances, so some origins are in their boxes */
+        float eye[3] = {-4.0f + 8.0f * test_rng_float(&r), -4.0f + 8.0f * test_rng_float(&r),
+                        inside ? 0.3f : 3.0f + 2.0f * test_rng_float(&r)};
+        float look[3] = {-3.0f + 6.0f * test_rng_float(&r), -3.0f + 6.0f * test_rng_float(&r), inside ? 0.3f : 0.0f};
+        float f[3], up[3] = {0.0f, inside ? 0.0f : 1.0f, inside ? 1.0f : 0.0f}, rt[3], u[3];
+        for (int k = 0; k < 3; k++) f[k] = look[k] - eye[k];
+        rt[0] = f[1] * up[2] - f[2] * up[1], rt[1] = f[2] * up[0] - f[0] * up[2], rt[2] = f[0] * up[1] - f[1] * up[0];
+        u[0] = rt[1] * f[2] - rt[2] * f[1], u[1] = rt[2] * f[0] - rt[0] * f[2], u[2] = rt[0] * f[1] - rt[1] * f[0];
+        float lf = sqrtf(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]), lr = sqrtf(rt[0] * rt[0] + rt[1] * rt[1] + rt[2] * rt[2]),
+              lu = sqrtf(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+        float span = 0.02f + 0.2f * test_rng_float(&r); /* a patch of one to a few instances */
+        for (uint32_t q = 0; q < 256; q++) {
+            float a = ((float)(q % 16) / 15.0f - 0.5f) * span, b = ((float)(q / 16) / 15.0f - 0.5f) * span;
+            p.org_x[q] = eye[0], p.org_y[q] = eye[1], p.org_z[q] = eye[2];
+            p.dir_x[q] = f[0] / lf + a * rt[0] / lr + b * u[0] / lu;
+            p.dir_y[q] = f[1] / lf + a * rt[1] / lr + b * u[1] / lu;
+            p.dir_z[q] = f[2] / lf + a * rt[2] / lr + b * u[2] / lu;
+            p.tnear[q] = 0.0f;
+            valid[q] = view % 2 && q % 3 == 0 ? 0 : -1;
+        }
+        for (int pass = 0; pass < 2; pass++) { /* closest hits, then occlusion */
+            for (uint32_t q = 0; q < 256; q++) {
+                p.tfar[q] = q % 5 == 0 ? 0.6f * lf : INFINITY;
+                p.geom_id[q] = p.prim_id[q] = p.inst_id[q] = RP_INVALID_ID;
+            }
+            p.valid = valid;
+            rp_query_n_desc qd = {.frustum = RP_FRUSTUM_PRIMARY};
+            if (pass == 0) rp_intersect_n(top, &qd, &p);
+            else rp_occluded_n(top, &qd, &p);
+            for (uint32_t q = 0; q < 256; q++) {
+                rp_rayhit one = {.ray = {.org_x = p.org_x[q], .org_y = p.org_y[q], .org_z = p.org_z[q],
+                                         .dir_x = p.dir_x[q], .dir_y = p.dir_y[q], .dir_z = p.dir_z[q],
+                                         .tfar = q % 5 == 0 ? 0.6f * lf : INFINITY, .mask = ~0u}};
+                one.hit.geom_id = one.hit.prim_id = one.hit.inst_id = RP_INVALID_ID;
+                if (!valid[q]) { /* lanes switched off are left as they were */
+                    bad += p.geom_id[q] != RP_INVALID_ID || p.tfar[q] != one.ray.tfar;
+                    continue;
+                }
+                total++;
+                if (pass == 1) {
+                    rp_occluded1(top, &one.ray);
+                    bool o = one.ray.tfar == -INFINITY;
+                    occluded += o;
+                    bad += o != (p.tfar[q] == -INFINITY);
+                    continue;
+                }
+                rp_intersect1(top, &one);
+                hits += one.hit.geom_id != RP_INVALID_ID;
+                bool ok = p.geom_id[q] == one.hit.geom_id && p.prim_id[q] == one.hit.prim_id && p.inst_id[q] == one.hit.inst_id;
+                if (ok && one.hit.geom_id != RP_INVALID_ID && !(fabsf(p.tfar[q] - one.ray.tfar) <= 1e-5f * one.ray.tfar)) far++;
+                bad += !ok;
+            }
+        }
+    }
+    CHECKF(hits > total / 16 && hits < total / 2, "accel %d: %u hits of %u coherent rays (want a mix)", kind, hits, total);
+    CHECKF(occluded > 0, "accel %d: no coherent ray occluded", kind);
+    CHECKF(bad <= total / 1000 + 1, "accel %d: %u of %u coherent packet rays differ from single rays", kind, bad, total);
+    CHECKF(far == 0, "accel %d: %u coherent packet distances beyond 1e-5 of the single rays'", kind, far);
+    rp_rayhit_n_free(dev, &p);
+    rp_scene_release(top);
+}
+
 int main(void) {
     uint32_t n = rp_test_sanitized() ? 1024 : 8192;
     rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
@@ -123,6 +209,7 @@ int main(void) {
         rp_scene_attach(obj, g0), rp_scene_attach(obj, g1);
         rp_geometry_release(g0), rp_geometry_release(g1);
         CHECK(rp_scene_commit(obj) == RP_ERROR_NONE);
+        coherent_packets(dev, obj, kind, rp_test_sanitized() ? 16 : 64);
         /* two levels: a "group" of two objects, placed three times: instance ids 0..2 of the top */
         rp_scene *group = rp_scene_new(dev, NULL);
         float ga[12], gb[12];

@@ -309,6 +309,16 @@ static bool packet_misses_box(const packet_bounds *b, const float box[6]) {
     return enter > leave;
 }
 
+/* tnear of the live rays (live()), +inf for the others: branch free, so that it vectorizes. */
+static void live_tnear(uint32_t n, const rp_rayhit_n *p, float *restrict tn0) {
+    const float *restrict tn = p->tnear, *restrict tf = p->tfar;
+    const int32_t *restrict v = p->valid;
+    if (v)
+        for (uint32_t i = 0; i < n; i++) tn0[i] = (v[i] != 0) & (tn[i] <= tf[i]) ? tn[i] : INFINITY;
+    else
+        for (uint32_t i = 0; i < n; i++) tn0[i] = tn[i] <= tf[i] ? tn[i] : INFINITY;
+}
+
 /* 1 / d of n directions; a zero (or denormal) component becomes +-1e30, which never makes a NaN and
  * keeps the slab tests conservative. One array at a time, branch free, so that it vectorizes. */
 static void inverse_dirs(uint32_t n, const float *restrict d, float *restrict inv) {
@@ -407,7 +417,7 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
     /* the rays' inverse directions for the slab tests and the packet's bounds, once for every
      * instance */
     float *ix = (float *)(void *)(mem + 17 * each), *iy = ix + count, *iz = iy + count, *tn0 = iz + count;
-    for (uint32_t i = 0; i < count; i++) tn0[i] = live(p, i) ? p->tnear[i] : INFINITY;
+    live_tnear(count, p, tn0);
     inverse_dirs(count, p->dir_x, ix);
     inverse_dirs(count, p->dir_y, iy);
     inverse_dirs(count, p->dir_z, iz);

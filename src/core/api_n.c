@@ -314,7 +314,7 @@ static void live_tnear(uint32_t n, const rp_rayhit_n *p, float *restrict tn0) {
     const float *restrict tn = p->tnear, *restrict tf = p->tfar;
     const int32_t *restrict v = p->valid;
     if (v)
-        for (uint32_t i = 0; i < n; i++) tn0[i] = (v[i] != 0) & (tn[i] <= tf[i]) ? tn[i] : INFINITY;
+        for (uint32_t i = 0; i < n; i++) tn0[i] = ((v[i] != 0) & (tn[i] <= tf[i])) ? tn[i] : INFINITY;
     else
         for (uint32_t i = 0; i < n; i++) tn0[i] = tn[i] <= tf[i] ? tn[i] : INFINITY;
 }

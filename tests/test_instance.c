@@ -127,7 +127,7 @@ static void coherent_packets(rp_device *dev, rp_scene *obj, int kind, int views)
     CHECK(rp_scene_commit(top) == RP_ERROR_NONE);
     rp_rayhit_n p;
     if (!rp_rayhit_n_alloc(dev, 16, &p)) {
-        CHECK(!"packet allocated");
+        CHECKF(0, "accel %d: rp_rayhit_n_alloc failed", kind);
         rp_scene_release(top);
         return;
     }

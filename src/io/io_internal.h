@@ -193,6 +193,9 @@ void io_stream_release(io_stream *s);
 bool io_stream_drain(io_stream *s, io_ctx *ctx);
 /* Bytes inflated so far (all of them once the last block was handed out). */
 uint64_t io_stream_total(const io_stream *s);
+/* The inflated size the file's gzip trailer states (a multi-member file's last member only), for
+ * presizing; 0 when it is not plausible. */
+uint64_t io_stream_size_hint(const io_stream *s);
 void io_stream_close(io_stream *s);
 
 /* ---- builder (io_scene.c) --------------------------------------------------------------------- */

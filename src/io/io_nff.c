@@ -942,6 +942,7 @@ typedef struct nff_chunk {
     bool claimed;              /* taken by the serial pass: written into the scene at v0, n0, t0 */
     size_t v0, n0, t0;
     uint32_t *map;             /* chunk material -> scene material */
+    io_builder *keep;          /* where its arrays go when it is freed, for the next window's chunk */
 } nff_chunk;
 
 typedef struct nff_par {
@@ -1017,6 +1018,14 @@ static void nff_chunk_task(void *user, uint32_t index) {
 }
 
 static void nff_chunk_free(nff_chunk *c) {
+    if (c->keep) { /* the arrays that hold its geometry, kept mapped for the next window */
+        io_builder *b = &c->ctx.b, *k = c->keep;
+        k->pos = b->pos, k->pos_cap = b->pos_cap, k->nrm = b->nrm, k->nrm_cap = b->nrm_cap;
+        k->idx = b->idx, k->nidx = b->nidx, k->mat = b->mat, k->tri_cap = b->tri_cap;
+        b->pos = b->nrm = NULL, b->idx = b->nidx = b->mat = NULL;
+        b->pos_cap = b->nrm_cap = b->tri_cap = 0;
+        c->keep = NULL;
+    }
     free(c->map);
     c->map = NULL;
     c->claimed = false;
@@ -1026,8 +1035,10 @@ static void nff_chunk_free(nff_chunk *c) {
     memset(&c->ctx, 0, sizeof c->ctx);
 }
 
-/* Splits the file into chunks and parses them; leaves par->n at 0 (all serial) for small files. */
-static void nff_par_start(io_ctx *ctx, nff_par *par, const char *path, const char *data, size_t size) {
+/* Splits the file into chunks and parses them; leaves par->n at 0 (all serial) for small files.
+ * keep (a streamed file's windows: NULL otherwise) holds io_chunk_count builders whose arrays the
+ * chunks reuse and give back: a window's chunks then write into memory already mapped. */
+static void nff_par_start(io_ctx *ctx, nff_par *par, const char *path, const char *data, size_t size, io_builder *keep) {
     memset(par, 0, sizeof *par);
     uint32_t k = io_chunk_count(ctx, size);
     if (k < 2 || !(par->chunks = calloc(k, sizeof *par->chunks))) return;
@@ -1038,6 +1049,13 @@ static void nff_par_start(io_ctx *ctx, nff_par *par, const char *path, const cha
         nff_chunk *c = &par->chunks[par->n++];
         c->start = s;
         builder_init(&c->ctx.b);
+        if (keep) {
+            io_builder *b = &c->ctx.b, *kb = &keep[par->n - 1];
+            b->pos = kb->pos, b->pos_cap = kb->pos_cap, b->nrm = kb->nrm, b->nrm_cap = kb->nrm_cap;
+            b->idx = kb->idx, b->nidx = kb->nidx, b->mat = kb->mat, b->tri_cap = kb->tri_cap;
+            builder_init(kb);
+            c->keep = kb;
+        }
     }
     for (uint32_t i = 0; i < par->n; i++) par->chunks[i].limit = i + 1 < par->n ? par->chunks[i + 1].start : end;
     par->path = path;
@@ -1208,6 +1226,23 @@ static size_t nff_cut(const char *data, size_t size) {
     return last;
 }
 
+/* The scene's arrays sized for the whole file from its first window's chunks and the size the gzip
+ * trailer states, so that they are not grown (copied, and faulted in twice) window after window.
+ * Only address space: pages the file does not fill are never touched. */
+static void nff_presize(io_ctx *ctx, const nff_par *par, size_t window, uint64_t total) {
+    if (!window || total <= window) return;
+    size_t pos = 0, nrm = 0, tri = 0;
+    for (uint32_t i = 0; i < par->n; i++) {
+        const io_builder *cb = &par->chunks[i].ctx.b;
+        pos += cb->pos_n, nrm += cb->nrm_n, tri += cb->tri_n;
+    }
+    double scale = (double)total / (double)window * 1.03;
+    size_t most = (size_t)(total / 6 + 16); /* a vertex takes 6 bytes of text at least */
+    size_t p = (size_t)fmin((double)pos * scale, (double)most), n = (size_t)fmin((double)nrm * scale, (double)most);
+    size_t t = (size_t)fmin((double)tri * scale, (double)most);
+    (void)(builder_reserve_vertices(ctx, p) && (!nrm || builder_reserve_normals(ctx, n)) && builder_reserve_triangles(ctx, t));
+}
+
 /* Grows the window to hold [p, end) and the next block: copies both into *own (the tail may lie in
  * it already) and gives the blocks back. */
 static bool nff_window_append(char **own, size_t *own_cap, const char *p, size_t tail, const io_text *next) {
@@ -1248,10 +1283,24 @@ static bool nff_parse_stream(io_ctx *ctx, nff_state *st, const char *path, io_st
     held = 1;
     f.p = t.data, f.end = t.data + t.size, f.more = !t.last;
     size_t starved_at = 0; /* window size at the last starvation: the next window is at least twice it */
+    io_builder *keep = NULL; /* the chunks' arrays, from window to window */
+    uint32_t keep_n = 0;
     for (;;) {
         ctx->blocks++;
         nff_par par;
-        nff_par_start(ctx, &par, path, f.p, (size_t)(f.end - f.p));
+        uint32_t k = io_chunk_count(ctx, (size_t)(f.end - f.p));
+        if (k > keep_n) {
+            io_builder *g = io_realloc(keep, k * sizeof *keep);
+            if (!g) {
+                ok = io_error(ctx, f.shown, f.line, "out of memory");
+                break;
+            }
+            keep = g;
+            for (uint32_t i = keep_n; i < k; i++) builder_init(&keep[i]);
+            keep_n = k;
+        }
+        nff_par_start(ctx, &par, path, f.p, (size_t)(f.end - f.p), keep);
+        if (ctx->blocks == 1 && f.more) nff_presize(ctx, &par, (size_t)(f.end - f.p), io_stream_size_hint(s));
         starved_at = 0;
         for (;;) {
             nff_skip(&f);
@@ -1323,6 +1372,8 @@ static bool nff_parse_stream(io_ctx *ctx, nff_state *st, const char *path, io_st
     ctx->bytes += io_stream_total(s);
     io_stream_close(s);
     free(own);
+    for (uint32_t i = 0; i < keep_n; i++) builder_free(&keep[i]);
+    free(keep);
     return ok;
 }
 
@@ -1454,7 +1505,7 @@ static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path, const nff_fi
     int depth0 = st->depth;
     bool ok = true;
     nff_par par;
-    nff_par_start(ctx, &par, path, buf.data, buf.size);
+    nff_par_start(ctx, &par, path, buf.data, buf.size, NULL);
     for (;;) {
         nff_skip(&f);
         if (f.p >= f.end) break;

@@ -32,6 +32,7 @@ struct io_stream {
     size_t block;
     io_cut_fn cut;
     uint64_t limit, total;
+    uint64_t hint; /* the inflated size the gzip trailer states, when plausible; 0 otherwise */
     pthread_t tid;
     bool started;
     pthread_mutex_t mu;
@@ -62,12 +63,21 @@ static const char *stream_reason(const char *msg) {
     return colon ? colon + 3 : msg;
 }
 
-/* Makes room for cap bytes and the NUL in a slot; false when out of memory. */
-static bool slot_room(stream_slot *b, size_t cap) {
+/* Makes room for cap bytes and the NUL in a slot, keeping its first `keep` bytes; false when out of
+ * memory. An empty slot is allocated anew rather than copied (realloc would copy stale text). */
+static bool slot_room(stream_slot *b, size_t cap, size_t keep) {
     if (cap <= b->cap) return true;
-    size_t c = b->cap ? b->cap : cap;
+    size_t c = b->cap ? b->cap : cap + cap / 8; /* room for a carried line without growing */
     while (c < cap) c = c <= SIZE_MAX / 4 ? 2 * c : cap;
-    char *d = io_realloc(b->data, c + 1);
+    char *d;
+    if (keep) {
+        d = io_realloc(b->data, c + 1);
+    } else {
+        free(b->data);
+        b->data = NULL;
+        b->cap = 0;
+        d = io_malloc(c + 1);
+    }
     if (!d) return false;
     b->data = d;
     b->cap = c;
@@ -118,7 +128,7 @@ static void *stream_run(void *arg) {
         pthread_mutex_unlock(&s->mu);
         if (quit) return NULL;
         size_t want = s->carry_n + s->block;
-        if (!slot_room(b, want)) {
+        if (!slot_room(b, want, 0)) {
             stream_fail(s, "out of memory");
             return NULL;
         }
@@ -137,7 +147,7 @@ static void *stream_run(void *arg) {
             if (cut) break;
             /* no line start: a line longer than the block, which grows until it ends */
             want = b->size + s->block;
-            if (!slot_room(b, want)) {
+            if (!slot_room(b, want, b->size)) {
                 stream_fail(s, "out of memory");
                 return NULL;
             }
@@ -188,6 +198,13 @@ io_stream *io_stream_open(io_ctx *ctx, const char *path, size_t min_bytes, size_
     }
     gzbuffer(gz, 1u << 18);
     s->gz = gz;
+    /* deflate expands at most 1032:1: a trailer claiming more lies (and a multi-member file's
+     * trailer only gives its last member's size, so this is a hint for presizing, no more) */
+    unsigned char t[4];
+    if (st.st_size >= 18 && pread(fd, t, 4, st.st_size - 4) == 4) {
+        uint64_t n = (uint64_t)t[0] | (uint64_t)t[1] << 8 | (uint64_t)t[2] << 16 | (uint64_t)t[3] << 24;
+        if (n / 1032 <= (uint64_t)st.st_size && n <= ctx->limits.max_file_bytes) s->hint = n;
+    }
     s->block = block ? block : IO_STREAM_BLOCK;
     s->cut = cut ? cut : io_cut_lines;
     s->limit = ctx->limits.max_file_bytes;
@@ -242,6 +259,8 @@ bool io_stream_drain(io_stream *s, io_ctx *ctx) {
 }
 
 uint64_t io_stream_total(const io_stream *s) { return s->total; }
+
+uint64_t io_stream_size_hint(const io_stream *s) { return s->hint; }
 
 void io_stream_close(io_stream *s) {
     if (!s) return;

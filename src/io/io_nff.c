@@ -991,7 +991,8 @@ static void nff_chunk_task(void *user, uint32_t index) {
     st->material = 0;
     nff_file f = {.ctx = ctx, .st = st, .path = par->path, .p = c->start, .end = par->end, .line = 0};
     io_builder *b = &ctx->b;
-    b->hint = io_text_vertex_hint(c->start, c->limit);
+    /* counting lines is a pass over the text: not done again for arrays kept from a window before */
+    b->hint = b->pos_cap ? (size_t)(c->limit - c->start) / 16 + 16 : io_text_vertex_hint(c->start, c->limit);
     for (;;) {
         nff_skip(&f);
         const char *cmd = f.p;

@@ -5,8 +5,8 @@
  * transform and keyframed blocks, a `k` block given twice, a mesh, `tpa`, an include) loaded with
  * blocks of 1 to 97 bytes, so that blocks end on every line, on 1 and 3 threads, bit for bit;
  * errors in the last lines with the same message and line; the same text in three gzip members; a
- * truncated and a corrupt gzip file (the same message, naming the file); and the shared teapot and
- * rings. */
+ * truncated and a corrupt gzip file (the same message, naming the file); OBJ likewise (its statements
+ * are single lines); and the shared teapot, Sponza and rings. */
 #include <sys/stat.h>
 #include <zlib.h>
 
@@ -183,6 +183,62 @@ static void check_errors(void) {
     }
 }
 
+/* OBJ streamed likewise: every statement, CRLF, a face on a line longer than most blocks, a
+ * material library; errors in the last lines. */
+static const char obj_good[] =
+    "# a streamed OBJ file\n"
+    "mtllib a.mtl\n"
+    "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+    "vt 0 0\nvt 1 0\nvt 1 1\nvt 0.5\n"
+    "vn 0 0 1\nvn 0 0 -1\n"
+    "f 1 2 3\n"
+    "f 1/1 2/2 3/3 4/4\n"
+    "usemtl red\n"
+    "f 1//1 2//1 3//1\n"
+    "f -4/-4/-2 -3/-3/-2 -2/-2/-2\n"
+    "\n   \t\n"
+    "g group\no object\ns 1\n"
+    "v 2 0 0\r\nv 2 1 0\r\n"
+    "f -1 -2 1#comment\r\n"
+    "usemtl nosuch\n"
+    "f 1 2 -1\n"
+    "usemtl blue\n"
+    "v 0 2 0\nv 1 3 0\nv 2 2 0\nv 2 4 0\nv 0 4 0\n"
+    "f -5 -4 -3 -2 -1\n"
+    "f 1 2 3 4 5 6 7 8 9 10 11 1 2 3 4 5 6 7 8 9 10 11 1 2 3 4 5 6 7 8 9 10 11 1 2 3 4 5 6 7 8 9 10 11\n"
+    "f 1/1/1 2/2 3/3/2\n"
+    "usemtl red\n"
+    "f 3 2 1";
+
+static void check_obj(void) {
+    char path[1024], mtl[1024];
+    static const char lib[] = "newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 1\n";
+    write_file(tmp_path("a.mtl", mtl, sizeof mtl), lib, sizeof lib - 1);
+    write_gz(tmp_path("good.obj.gz", path, sizeof path), obj_good, 1);
+    check_streamed(path, NULL);
+    write_gz(tmp_path("multi.obj.gz", path, sizeof path), obj_good, 3);
+    check_streamed(path, NULL);
+    unsigned lines = 1;
+    for (const char *c = obj_good; *c; c++) lines += *c == '\n';
+    struct {
+        const char *tail, *error;
+        unsigned line;
+    } bad[] = {
+        {"\nf 1 2 99\n", "vertex index 99 out of range (11 defined so far)", 1},
+        {"\nv 1 2 3\r\nvn 1 x 3\r\n", "vn: expected a finite number, got 'x'", 2},
+        {"\nbogus 1", "unknown statement 'bogus'", 1},
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        static char text[sizeof obj_good + 64];
+        char want[1400];
+        snprintf(text, sizeof text, "%s%s", obj_good, bad[i].tail);
+        tmp_path("bad.obj.gz", path, sizeof path);
+        write_gz(path, text, 1);
+        snprintf(want, sizeof want, "%s:%u: error: %s", path, lines + bad[i].line, bad[i].error);
+        check_streamed(path, want);
+    }
+}
+
 /* A truncated and a corrupt gzip file: both loads fail with the same message, naming the file. */
 static void check_broken_gzip(void) {
     char path[1024], cut[1024];
@@ -237,8 +293,8 @@ static void check_shared(const char *name, bool small_blocks) {
         char why[128] = "";
         CHECKF(same_scene(&whole, &s, why, sizeof why), "%s (threads %d, block %zu): %s", name, o.threads, o.stream_block, why);
         CHECKF(blocks >= 1, "%s: not streamed", name);
-        printf("%-24s threads %d, blocks of %7zu bytes: %5zu blocks, %zu triangles: streamed = whole\n", name, o.threads,
-               o.stream_block ? o.stream_block : IO_STREAM_BLOCK, blocks, s.triangle_count);
+        printf("%-24s threads %d, blocks of %7zu bytes (0: chosen): %5zu blocks, %zu triangles: streamed = whole\n", name, o.threads,
+               o.stream_block, blocks, s.triangle_count);
         rp_scene_data_free(&s);
     }
     rp_scene_data_free(&whole);
@@ -250,8 +306,10 @@ int main(void) {
     mkdir(tmp_dir, 0755);
     check_good();
     check_errors();
+    check_obj();
     check_broken_gzip();
     check_shared("spd_teapot.nff.gz", true);
+    check_shared("dabrovic_sponza.obj.gz", true);
     if (!rp_test_sanitized()) check_shared("spd_rings_s5.nff.gz", false); /* 36 MB of text: several default blocks */
     return RP_TEST_END();
 }

@@ -177,11 +177,12 @@ typedef struct io_text {
 typedef size_t (*io_cut_fn)(const char *data, size_t size);
 /* The default cut: after the last newline. */
 size_t io_cut_lines(const char *data, size_t size);
-#define IO_STREAM_BLOCK ((size_t)8 << 20) /* text inflated per block (a block holds at most 4 at once) */
+#define IO_STREAM_BLOCK ((size_t)8 << 20)     /* most text inflated per block (4 blocks at once at most) */
+#define IO_STREAM_MIN_BLOCK ((size_t)1 << 20) /* least: blocks are an eighth of the file between the two */
 #define IO_STREAM_MIN_BYTES ((size_t)1 << 20) /* gzip files smaller than this are read whole */
 /* Starts streaming path when it is a regular gzip file of at least min_bytes (compressed) on disk;
  * NULL otherwise (or when out of memory): the caller then reads it whole, with vfs_read's errors.
- * block: text inflated per block (0: IO_STREAM_BLOCK; the tests cut every line with a few bytes);
+ * block: text inflated per block (0: chosen from the size; the tests cut every line with a few bytes);
  * cut: NULL for io_cut_lines. ctx->limits.max_file_bytes caps the inflated size. */
 io_stream *io_stream_open(io_ctx *ctx, const char *path, size_t min_bytes, size_t block, io_cut_fn cut);
 /* The next block, waiting for it; false when the file is bad (ctx->why says why, in vfs_read's

@@ -205,7 +205,11 @@ io_stream *io_stream_open(io_ctx *ctx, const char *path, size_t min_bytes, size_
         uint64_t n = (uint64_t)t[0] | (uint64_t)t[1] << 8 | (uint64_t)t[2] << 16 | (uint64_t)t[3] << 24;
         if (n / 1032 <= (uint64_t)st.st_size && n <= ctx->limits.max_file_bytes) s->hint = n;
     }
-    s->block = block ? block : IO_STREAM_BLOCK;
+    /* about eight blocks a file, so a smaller file's inflating overlaps its parsing too */
+    s->block = block ? block : s->hint / 8 < IO_STREAM_MIN_BLOCK ? IO_STREAM_MIN_BLOCK
+                             : s->hint / 8 > IO_STREAM_BLOCK   ? IO_STREAM_BLOCK
+                                                               : (size_t)(s->hint / 8);
+
     s->cut = cut ? cut : io_cut_lines;
     s->limit = ctx->limits.max_file_bytes;
     pthread_mutex_init(&s->mu, NULL);

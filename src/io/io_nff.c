@@ -1478,7 +1478,7 @@ static bool nff_command(nff_file *f) {
 static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path, const nff_file *from, const char *as_written) {
     /* a large gzip'd scene on disk is streamed; includes and archive entries are read whole */
     if (!from && !ctx->vfs.archive && ctx->stream >= 0 && (ctx->stream > 0 || ctx->threads > 1)) {
-        io_stream *s = io_stream_open(ctx, path, ctx->stream > 0 ? 0 : IO_STREAM_MIN_BYTES, ctx->stream_block, nff_cut);
+        io_stream *s = io_stream_open(ctx, path, ctx->stream > 0 ? 0 : IO_STREAM_MIN_TEXT, ctx->stream_block, nff_cut);
         if (s) return nff_parse_stream(ctx, st, path, s);
     }
     nff_file f = {.ctx = ctx, .st = st, .path = path, .line = 1, .saved_key_at = SIZE_MAX};

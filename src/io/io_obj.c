@@ -741,7 +741,7 @@ bool obj_load(io_ctx *ctx, const char *path) {
     size_t first_mtl = ctx->b.material_n;
     /* a large gzip'd file on disk is streamed (archive entries are in memory already) */
     if (!ctx->vfs.archive && ctx->stream >= 0 && (ctx->stream > 0 || ctx->threads > 1)) {
-        io_stream *s = io_stream_open(ctx, path, ctx->stream > 0 ? 0 : IO_STREAM_MIN_BYTES, ctx->stream_block, NULL);
+        io_stream *s = io_stream_open(ctx, path, ctx->stream > 0 ? 0 : IO_STREAM_MIN_TEXT, ctx->stream_block, NULL);
         if (s) return obj_stream(&f, s, &material, first_mtl);
     }
     io_buf buf;

@@ -179,13 +179,25 @@ size_t io_cut_lines(const char *data, size_t size) {
     return 0;
 }
 
-io_stream *io_stream_open(io_ctx *ctx, const char *path, size_t min_bytes, size_t block, io_cut_fn cut) {
+io_stream *io_stream_open(io_ctx *ctx, const char *path, size_t min_text, size_t block, io_cut_fn cut) {
     int fd = open(path, O_RDONLY | O_CLOEXEC);
     if (fd < 0) return NULL;
     struct stat st;
     unsigned char magic[2];
-    if (fstat(fd, &st) != 0 || !S_ISREG(st.st_mode) || (uint64_t)st.st_size < min_bytes ||
-        pread(fd, magic, 2, 0) != 2 || magic[0] != 0x1f || magic[1] != 0x8b) {
+    if (fstat(fd, &st) != 0 || !S_ISREG(st.st_mode) || pread(fd, magic, 2, 0) != 2 || magic[0] != 0x1f ||
+        magic[1] != 0x8b) {
+        close(fd);
+        return NULL;
+    }
+    /* deflate expands at most 1032:1: a trailer claiming more lies (and a multi-member file's
+     * trailer only gives its last member's size, so this is a hint, for choosing and presizing) */
+    uint64_t hint = 0;
+    unsigned char t[4];
+    if (st.st_size >= 18 && pread(fd, t, 4, st.st_size - 4) == 4) {
+        uint64_t n = (uint64_t)t[0] | (uint64_t)t[1] << 8 | (uint64_t)t[2] << 16 | (uint64_t)t[3] << 24;
+        if (n / 1032 <= (uint64_t)st.st_size && n <= ctx->limits.max_file_bytes) hint = n;
+    }
+    if (hint < min_text) {
         close(fd);
         return NULL;
     }
@@ -198,13 +210,7 @@ io_stream *io_stream_open(io_ctx *ctx, const char *path, size_t min_bytes, size_
     }
     gzbuffer(gz, 1u << 18);
     s->gz = gz;
-    /* deflate expands at most 1032:1: a trailer claiming more lies (and a multi-member file's
-     * trailer only gives its last member's size, so this is a hint for presizing, no more) */
-    unsigned char t[4];
-    if (st.st_size >= 18 && pread(fd, t, 4, st.st_size - 4) == 4) {
-        uint64_t n = (uint64_t)t[0] | (uint64_t)t[1] << 8 | (uint64_t)t[2] << 16 | (uint64_t)t[3] << 24;
-        if (n / 1032 <= (uint64_t)st.st_size && n <= ctx->limits.max_file_bytes) s->hint = n;
-    }
+    s->hint = hint;
     /* about eight blocks a file, so a smaller file's inflating overlaps its parsing too */
     s->block = block ? block : s->hint / 8 < IO_STREAM_MIN_BLOCK ? IO_STREAM_MIN_BLOCK
                              : s->hint / 8 > IO_STREAM_BLOCK   ? IO_STREAM_BLOCK

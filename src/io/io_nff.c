@@ -1038,8 +1038,12 @@ static void nff_chunk_free(nff_chunk *c) {
 
 /* Splits the file into chunks and parses them; leaves par->n at 0 (all serial) for small files.
  * keep (a streamed file's windows: NULL otherwise) holds io_chunk_count builders whose arrays the
- * chunks reuse and give back: a window's chunks then write into memory already mapped. */
-static void nff_par_start(io_ctx *ctx, nff_par *par, const char *path, const char *data, size_t size, io_builder *keep) {
+ * chunks reuse and give back: a window's chunks then write into memory already mapped. total, when
+ * more than size (a streamed file's first window), is the file's size: the scene's arrays are then
+ * sized for the whole file from this window's counts, not grown (copied, and faulted in twice)
+ * window after window; only address space, pages the file does not fill are never touched. */
+static void nff_par_start(io_ctx *ctx, nff_par *par, const char *path, const char *data, size_t size, io_builder *keep,
+                          uint64_t total) {
     memset(par, 0, sizeof *par);
     uint32_t k = io_chunk_count(ctx, size);
     if (k < 2 || !(par->chunks = calloc(k, sizeof *par->chunks))) return;
@@ -1067,6 +1071,11 @@ static void nff_par_start(io_ctx *ctx, nff_par *par, const char *path, const cha
     for (uint32_t i = 0; i < par->n; i++) {
         const io_builder *cb = &par->chunks[i].ctx.b;
         pos += cb->pos_n, nrm += cb->nrm_n, tri += cb->tri_n;
+    }
+    if (total > size) {
+        double scale = (double)total / (double)size * 1.03, most = (double)(total / 6 + 16);
+        pos = (size_t)fmin((double)pos * scale, most), tri = (size_t)fmin((double)tri * scale, most);
+        nrm = (size_t)fmin((double)nrm * scale, most);
     }
     (void)(builder_reserve_vertices(ctx, pos) && builder_reserve_normals(ctx, nrm) && builder_reserve_triangles(ctx, tri));
 }
@@ -1227,23 +1236,6 @@ static size_t nff_cut(const char *data, size_t size) {
     return last;
 }
 
-/* The scene's arrays sized for the whole file from its first window's chunks and the size the gzip
- * trailer states, so that they are not grown (copied, and faulted in twice) window after window.
- * Only address space: pages the file does not fill are never touched. */
-static void nff_presize(io_ctx *ctx, const nff_par *par, size_t window, uint64_t total) {
-    if (!window || total <= window) return;
-    size_t pos = 0, nrm = 0, tri = 0;
-    for (uint32_t i = 0; i < par->n; i++) {
-        const io_builder *cb = &par->chunks[i].ctx.b;
-        pos += cb->pos_n, nrm += cb->nrm_n, tri += cb->tri_n;
-    }
-    double scale = (double)total / (double)window * 1.03;
-    size_t most = (size_t)(total / 6 + 16); /* a vertex takes 6 bytes of text at least */
-    size_t p = (size_t)fmin((double)pos * scale, (double)most), n = (size_t)fmin((double)nrm * scale, (double)most);
-    size_t t = (size_t)fmin((double)tri * scale, (double)most);
-    (void)(builder_reserve_vertices(ctx, p) && (!nrm || builder_reserve_normals(ctx, n)) && builder_reserve_triangles(ctx, t));
-}
-
 /* Grows the window to hold [p, end) and the next block: copies both into *own (the tail may lie in
  * it already) and gives the blocks back. */
 static bool nff_window_append(char **own, size_t *own_cap, const char *p, size_t tail, const io_text *next) {
@@ -1300,8 +1292,8 @@ static bool nff_parse_stream(io_ctx *ctx, nff_state *st, const char *path, io_st
             for (uint32_t i = keep_n; i < k; i++) builder_init(&keep[i]);
             keep_n = k;
         }
-        nff_par_start(ctx, &par, path, f.p, (size_t)(f.end - f.p), keep);
-        if (ctx->blocks == 1 && f.more) nff_presize(ctx, &par, (size_t)(f.end - f.p), io_stream_size_hint(s));
+        nff_par_start(ctx, &par, path, f.p, (size_t)(f.end - f.p), keep,
+                      ctx->blocks == 1 && f.more ? io_stream_size_hint(s) : 0);
         starved_at = 0;
         for (;;) {
             nff_skip(&f);
@@ -1506,7 +1498,7 @@ static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path, const nff_fi
     int depth0 = st->depth;
     bool ok = true;
     nff_par par;
-    nff_par_start(ctx, &par, path, buf.data, buf.size, NULL);
+    nff_par_start(ctx, &par, path, buf.data, buf.size, NULL, 0);
     for (;;) {
         nff_skip(&f);
         if (f.p >= f.end) break;

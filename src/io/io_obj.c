@@ -487,7 +487,9 @@ static void obj_chunk_free(obj_chunk *c) {
     memset(c, 0, sizeof *c);
 }
 
-static void obj_par_start(io_ctx *ctx, obj_par *par, const char *data, size_t size) {
+/* total, when more than size (a streamed file's first window), is the file's size: the scene's
+ * arrays are then sized for the whole file from this window's counts (only address space). */
+static void obj_par_start(io_ctx *ctx, obj_par *par, const char *data, size_t size, uint64_t total) {
     memset(par, 0, sizeof *par);
     uint32_t k = io_chunk_count(ctx, size);
     const char **starts = NULL;
@@ -508,6 +510,11 @@ static void obj_par_start(io_ctx *ctx, obj_par *par, const char *data, size_t si
     for (uint32_t i = 0; i < par->n; i++) {
         const obj_chunk *c = &par->chunks[i];
         pos += c->pos_n, nrm += c->nrm_n, uv += c->uv_n, tri += c->tri_n;
+    }
+    if (total > size) {
+        double scale = (double)total / (double)size * 1.03, most = (double)(total / 6 + 16);
+        pos = (size_t)fmin((double)pos * scale, most), nrm = (size_t)fmin((double)nrm * scale, most);
+        uv = (size_t)fmin((double)uv * scale, most), tri = (size_t)fmin((double)tri * scale, most);
     }
     (void)(builder_reserve_vertices(ctx, pos) && builder_reserve_normals(ctx, nrm) &&
            builder_reserve_texcoords(ctx, uv) && builder_reserve_triangles(ctx, tri));
@@ -617,19 +624,7 @@ static bool obj_lines(obj_file *f, const char *p, const char *end, uint32_t *mat
     io_builder *b = &ctx->b;
     bool ok = true;
     obj_par par;
-    obj_par_start(ctx, &par, p, (size_t)(end - p));
-    if (par.n && total > (uint64_t)(end - p)) { /* only address space: pages not filled are never touched */
-        size_t pos = 0, nrm = 0, uv = 0, tri = 0;
-        for (uint32_t i = 0; i < par.n; i++) {
-            const obj_chunk *c = &par.chunks[i];
-            pos += c->pos_n, nrm += c->nrm_n, uv += c->uv_n, tri += c->tri_n;
-        }
-        double scale = (double)total / (double)(end - p) * 1.03, most = (double)(total / 6 + 16);
-        (void)(builder_reserve_vertices(ctx, (size_t)fmin((double)pos * scale, most)) &&
-               (!nrm || builder_reserve_normals(ctx, (size_t)fmin((double)nrm * scale, most))) &&
-               (!uv || builder_reserve_texcoords(ctx, (size_t)fmin((double)uv * scale, most))) &&
-               builder_reserve_triangles(ctx, (size_t)fmin((double)tri * scale, most)));
-    }
+    obj_par_start(ctx, &par, p, (size_t)(end - p), total);
     for (; ok && p < end; p = next_line(p, end), f->line++) {
         while (ok && p < end && par.n && obj_par_take(f, &par, &p, material, first_mtl, &ok)) {}
         if (!ok || p >= end) break;

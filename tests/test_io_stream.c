@@ -267,6 +267,11 @@ static void check_broken_gzip(void) {
     for (size_t i = size / 2; i < size / 2 + 16; i++) gz[i] ^= 0x55;
     write_file(cut, gz, size);
     check_streamed(cut, want);
+    /* more text than RP_MAX_FILE_BYTES allows: refused as the whole read refuses it */
+    setenv("RP_MAX_FILE_BYTES", "1k", 1);
+    snprintf(want, sizeof want, "%s:0: error: cannot open: more than 1024 bytes (decompressed)", path);
+    check_streamed(path, want);
+    unsetenv("RP_MAX_FILE_BYTES");
 }
 
 /* A shared scene: whole against streamed with the default blocks and with 4 kB blocks. */

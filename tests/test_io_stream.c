@@ -171,6 +171,7 @@ static void check_errors(void) {
         {"\nl 1 2 3\n0.5 0.5\n", "unexpected end of file, expected l colour", 3},
         {"\np 99\n0 0 0\n1 0 0\n0 1 0\n", "unexpected end of file, expected polygon vertices", 1},
         {"\nm vertices 3\n0 0 0\n1 0 0\n0 1 0\ntriangles 1\n0 1 5\n", "mesh triangle 0: index out of range", 6},
+        {"\nxs 1 1 1 0 0 1 0 0 0 0\n", "expected '{' after xs", 2},
     };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         static char text[sizeof nff_good + 256];

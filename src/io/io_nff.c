@@ -193,7 +193,7 @@ static bool nff_expect(nff_file *f, char c, const char *after) {
         f->p++;
         return true;
     }
-    if (f->p >= f->end) return nff_eof_error(f, "'{'");
+    if (f->p >= f->end && f->more) return nff_eof_error(f, "'{'"); /* starved: a window ends here */
     return io_error(f->ctx, f->shown, f->line, "expected '%c' after %s", c, after);
 }
 

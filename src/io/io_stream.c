@@ -132,7 +132,7 @@ static void *stream_run(void *arg) {
             stream_fail(s, "out of memory");
             return NULL;
         }
-        memcpy(b->data, s->carry, s->carry_n);
+        if (s->carry_n) memcpy(b->data, s->carry, s->carry_n);
         b->size = s->carry_n;
         s->carry_n = 0;
         bool eof = false;

@@ -127,8 +127,9 @@ static void *stream_run(void *arg) {
         stream_slot *b = &s->slot[s->made % STREAM_SLOTS];
         pthread_mutex_unlock(&s->mu);
         if (quit) return NULL;
-        size_t want = s->carry_n + s->block;
-        if (!slot_room(b, want, 0)) {
+        /* the first block smaller, so that parsing starts sooner (the rest inflate meanwhile) */
+        size_t want = s->carry_n + (s->made == 0 && s->block > IO_STREAM_MIN_BLOCK ? s->block / 4 : s->block);
+        if (!slot_room(b, s->carry_n + s->block, 0)) { /* sized for every block the slot will hold */
             stream_fail(s, "out of memory");
             return NULL;
         }

@@ -176,7 +176,7 @@ static void *stream_run(void *arg) {
 
 size_t io_cut_lines(const char *data, size_t size) {
     for (size_t i = size; i > 0; i--)
-        if (data[i - 1] == '\n') return i < size ? i : size;
+        if (data[i - 1] == '\n') return i;
     return 0;
 }
 

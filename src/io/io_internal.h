@@ -124,6 +124,9 @@ typedef struct io_ctx {
     int threads;        /* resolved: threads that parse a large file's chunks (1: serial) */
     size_t chunk_bytes; /* chunk size for the parallel parsers; 0: chosen from the file and threads */
     size_t chunks_taken; /* chunks whose parallel result was used (for the tests) */
+    int stream;          /* gzip'd NFF and OBJ read in blocks (io_stream): 0 when large and threads > 1, 1 always, -1 never */
+    size_t stream_block; /* text per block; 0: IO_STREAM_BLOCK */
+    size_t blocks;       /* blocks a streamed load parsed (for the tests) */
     rp_animation_data *anim; /* what the AFF loader parsed of an animation, finished by anim_finish */
 } io_ctx;
 
@@ -156,6 +159,50 @@ void vfs_display(const io_vfs *vfs, const char *path, char *out, size_t size);
 const char *vfs_find_basename(const io_vfs *vfs, const char *name);
 /* Lower-case extension of path after stripping ".gz" ("obj", "tar", ...); "" if none. */
 void vfs_extension(const char *path, char *ext, size_t size);
+
+/* ---- streamed gzip text (io_stream.c) --------------------------------------------------------- */
+
+/* A gzip'd text file inflated block by block on a thread of its own while the caller parses the
+ * block before (io_stream.c); the text is never held whole. */
+typedef struct io_stream io_stream;
+/* One block: complete lines (a last block may end without a newline), data[size] == '\0'. Valid
+ * until io_stream_release gives it back; blocks are given back in the order they came. */
+typedef struct io_text {
+    const char *data;
+    size_t size;
+    bool last; /* the file ends with this block */
+} io_text;
+/* Where a block of size bytes ends: a line start in (0, size], the rest carried to the next block;
+ * 0 when there is none (the block then grows). */
+typedef size_t (*io_cut_fn)(const char *data, size_t size);
+/* The default cut: after the last newline. */
+size_t io_cut_lines(const char *data, size_t size);
+#define IO_STREAM_BLOCK ((size_t)8 << 20)     /* most text inflated per block (4 blocks at once at most) */
+#define IO_STREAM_MIN_BLOCK ((size_t)1 << 20) /* least: blocks are an eighth of the file between the two */
+/* Gzip files of less text than this (as their trailer states) are read whole: libdeflate inflates
+ * 3-4x faster than zlib's stream, and below some tens of MB that saves more than the page faults
+ * on the whole text cost (the Conference room's 12 MB loaded slower streamed, the rings' 36 MB
+ * faster; docs/loading.md). */
+#define IO_STREAM_MIN_TEXT ((size_t)24 << 20)
+/* Starts streaming path when it is a regular gzip file on disk whose trailer states at least
+ * min_text bytes of text (0: any gzip file); NULL otherwise (or when out of memory): the caller
+ * then reads it whole, with vfs_read's errors.
+ * block: text inflated per block (0: chosen from the size; the tests cut every line with a few bytes);
+ * cut: NULL for io_cut_lines. ctx->limits.max_file_bytes caps the inflated size. */
+io_stream *io_stream_open(io_ctx *ctx, const char *path, size_t min_text, size_t block, io_cut_fn cut);
+/* The next block, waiting for it; false when the file is bad (ctx->why says why, in vfs_read's
+ * words: "corrupt or truncated gzip data (...)", the size limit, ...). */
+bool io_stream_next(io_stream *s, io_ctx *ctx, io_text *out);
+void io_stream_release(io_stream *s);
+/* Reads the rest of the file (after a parse error: whether the file itself was good, which a
+ * whole-buffer read would have said first); false with ctx->why when it was not. */
+bool io_stream_drain(io_stream *s, io_ctx *ctx);
+/* Bytes inflated so far (all of them once the last block was handed out). */
+uint64_t io_stream_total(const io_stream *s);
+/* The inflated size the file's gzip trailer states (a multi-member file's last member only), for
+ * presizing; 0 when it is not plausible. */
+uint64_t io_stream_size_hint(const io_stream *s);
+void io_stream_close(io_stream *s);
 
 /* ---- builder (io_scene.c) --------------------------------------------------------------------- */
 
@@ -209,6 +256,9 @@ typedef struct io_load_opts {
     size_t chunk_bytes;
     size_t *chunks_taken; /* when not NULL: set to the number of chunks whose parallel result was used */
     float point_radius;   /* rp_scene_load_desc.point_radius */
+    int stream;           /* io_ctx.stream: 0 chosen per file, 1 stream every gzip'd NFF and OBJ on disk, -1 never */
+    size_t stream_block;  /* io_ctx.stream_block (the tests: a few bytes, so blocks cut every line) */
+    size_t *blocks;       /* when not NULL: set to the number of blocks a streamed load parsed */
 } io_load_opts;
 /* A scene of vertices alone (a point cloud) gets a sphere of that radius (0: automatic) at each
  * finite vertex (io_points.c); false when out of memory. */

@@ -76,6 +76,12 @@ typedef struct nff_file {
     char shown[IO_PATH_MAX + 256];
     const char *p, *end;
     uint32_t line;
+    /* A streamed file (io_stream) is parsed a window at a time: `more` says the file goes on after
+     * end. A command that needs text past end sets `starved` and fails without an error message;
+     * the stream loop undoes what it did (nff_mark) and parses it again on a larger window. */
+    bool more, starved;
+    nff_keys saved_key;    /* a `k` block's earlier keys of the same name, overwritten by a starved one */
+    size_t saved_key_at;   /* index of saved_key in st->keys; SIZE_MAX: none */
 } nff_file;
 
 /* ---- tokens ----------------------------------------------------------------------------------- */
@@ -115,7 +121,12 @@ static const char *nff_preview(const nff_file *f, const char *p, char *buf, size
     return buf;
 }
 
+/* At the end of the text: an error, or in a window that the file goes on after, starvation. */
 static bool nff_eof_error(nff_file *f, const char *what) {
+    if (f->more) {
+        f->starved = true;
+        return false;
+    }
     return io_error(f->ctx, f->shown, f->line, "unexpected end of file, expected %s (truncated file?)", what);
 }
 
@@ -171,6 +182,7 @@ static bool nff_word(nff_file *f, char *out, size_t size, const char *what) {
 /* True when the next token starts like a number (optional light colours). */
 static bool nff_number_next(nff_file *f) {
     nff_skip(f);
+    if (f->p >= f->end && f->more) f->starved = true;
     char c = *f->p;
     return io_is_digit(c) || ((c == '-' || c == '+' || c == '.') && (io_is_digit(f->p[1]) || f->p[1] == '.'));
 }
@@ -181,7 +193,17 @@ static bool nff_expect(nff_file *f, char c, const char *after) {
         f->p++;
         return true;
     }
+    if (f->p >= f->end && f->more) return nff_eof_error(f, "'{'"); /* starved: a window ends here */
     return io_error(f->ctx, f->shown, f->line, "expected '%c' after %s", c, after);
+}
+
+/* Whether n items of at least `per` bytes of text each can follow: counts a file cannot hold are
+ * refused before anything is allocated for them. In a window the file goes on after, a count too
+ * large for the window starves the command instead (it is parsed again on a larger window). */
+static bool nff_fits(nff_file *f, int64_t n, size_t per) {
+    if ((uint64_t)n <= (uint64_t)(f->end - f->p) / per + 1) return true;
+    if (f->more) f->starved = true;
+    return false;
 }
 
 /* ---- transforms ------------------------------------------------------------------------------- */
@@ -408,8 +430,10 @@ static bool nff_animated_triangle(nff_file *f) {
     io_builder *b = &ctx->b;
     int64_t n;
     if (!nff_int(f, &n, "tpa")) return false;
-    if (n < 1 || (uint64_t)n > (uint64_t)(f->end - f->p) / 38 + 1)
+    if (n < 1 || !nff_fits(f, n, 38)) {
+        if (f->starved) return false;
         return io_error(ctx, f->shown, f->line, "tpa: bad keyframe count %lld (at least 1)", (long long)n);
+    }
     uint32_t line = f->line;
     if (!io_reserve((void **)&st->tpa_keys, &st->tpak_cap, st->tpak_n + 19 * (size_t)n, sizeof(float)) ||
         !io_reserve((void **)&st->tpas, &st->tpa_cap, st->tpa_n + 1, sizeof(rp_anim_tpa)))
@@ -494,7 +518,8 @@ static bool nff_light(nff_file *f, bool animated) {
     l.type = RP_LIGHT_DATA_POINT;
     l.color[0] = l.color[1] = l.color[2] = 1.0f;
     if (!nff_floats(f, l.position, 3, "l")) return false;
-    if (nff_number_next(f) && !nff_floats(f, l.color, 3, "l colour")) return false;
+    bool colour = nff_number_next(f);
+    if (f->starved || (colour && !nff_floats(f, l.color, 3, "l colour"))) return false;
     xf_point(nff_top(f), l.position);
     io_builder *b = &f->ctx->b;
     if (!io_reserve((void **)&b->lights, &b->light_cap, b->light_n + 1, sizeof l))
@@ -543,6 +568,7 @@ static bool nff_viewpoint(nff_file *f) {
     uint32_t line_at = f->line, line_up = f->line;
     for (;;) {
         nff_skip(f);
+        if (f->p >= f->end && f->more) return nff_eof_error(f, "viewpoint");
         const char *p = f->p;
         size_t n = 0;
         while (!nff_delim(p[n])) n++;
@@ -620,16 +646,16 @@ static bool nff_mesh(nff_file *f) {
     if (!nff_word(f, word, sizeof word, "mesh 'vertices'")) return false;
     if (strcmp(word, "vertices") != 0) return io_error(ctx, f->shown, f->line, "mesh: expected 'vertices', got '%s'", word);
     if (!nff_int(f, &nv, "vertices")) return false;
-    if (nv < 0 || (uint64_t)nv > (uint64_t)(f->end - f->p) / 6 + 1) return io_error(ctx, f->shown, f->line, "mesh: bad vertex count %lld", (long long)nv);
+    if (nv < 0 || !nff_fits(f, nv, 6)) return f->starved ? false : io_error(ctx, f->shown, f->line, "mesh: bad vertex count %lld", (long long)nv);
     size_t v0 = b->pos_n, n0 = b->nrm_n, t0 = b->uv_n;
     if (!nff_vertices(f, (size_t)nv, false, false, "mesh vertex")) return false;
     b->pos_n += (size_t)nv;
     if (!nff_word(f, word, sizeof word, "mesh 'normals', 'texturecoords' or 'triangles'")) return false;
     if (strcmp(word, "normals") == 0) {
         if (!nff_int(f, &nn, "normals")) return false;
-        if (nn < 0 || (uint64_t)nn > (uint64_t)(f->end - f->p) / 6 + 1 || b->nrm_n + (size_t)nn >= UINT32_MAX ||
+        if (nn < 0 || !nff_fits(f, nn, 6) || b->nrm_n + (size_t)nn >= UINT32_MAX ||
             !builder_reserve_normals(ctx, (size_t)nn))
-            return io_error(ctx, f->shown, f->line, "mesh: bad normal count %lld", (long long)nn);
+            return f->starved ? false : io_error(ctx, f->shown, f->line, "mesh: bad normal count %lld", (long long)nn);
         const nff_xf *x = nff_top(f);
         for (int64_t i = 0; i < nn; i++) {
             float *v = b->nrm + 3 * b->nrm_n;
@@ -644,9 +670,9 @@ static bool nff_mesh(nff_file *f) {
         char tex[256];
         if (!nff_int(f, &nt, "texturecoords")) return false;
         if (!nff_word(f, tex, sizeof tex, "texture name")) return false;
-        if (nt < 0 || (uint64_t)nt > (uint64_t)(f->end - f->p) / 4 + 1 || b->uv_n + (size_t)nt >= UINT32_MAX ||
+        if (nt < 0 || !nff_fits(f, nt, 4) || b->uv_n + (size_t)nt >= UINT32_MAX ||
             !builder_reserve_texcoords(ctx, (size_t)nt))
-            return io_error(ctx, f->shown, f->line, "mesh: bad texture coordinate count %lld", (long long)nt);
+            return f->starved ? false : io_error(ctx, f->shown, f->line, "mesh: bad texture coordinate count %lld", (long long)nt);
         uint32_t line = f->line;
         for (int64_t i = 0; i < nt; i++) {
             if (!nff_floats(f, b->uv + 2 * b->uv_n, 2, "mesh texture coordinate")) return false;
@@ -662,8 +688,8 @@ static bool nff_mesh(nff_file *f) {
     if (material == IO_NONE) return io_error(ctx, f->shown, f->line, "out of memory");
     if (strcmp(word, "triangles") != 0) return io_error(ctx, f->shown, f->line, "mesh: expected 'triangles', got '%s'", word);
     if (!nff_int(f, &ntri, "triangles")) return false;
-    if (ntri < 0 || (uint64_t)ntri > (uint64_t)(f->end - f->p) / 6 + 1)
-        return io_error(ctx, f->shown, f->line, "mesh: bad triangle count %lld", (long long)ntri);
+    if (ntri < 0 || !nff_fits(f, ntri, 6))
+        return f->starved ? false : io_error(ctx, f->shown, f->line, "mesh: bad triangle count %lld", (long long)ntri);
     if (!builder_reserve_triangles(ctx, (size_t)ntri)) return io_error(ctx, f->shown, f->line, "out of memory");
     /* Per triangle: vertex indices, then normal indices, then texture coordinate indices. */
     for (int64_t k = 0; k < ntri; k++) {
@@ -751,6 +777,9 @@ static bool nff_keyframes(nff_file *f) {
         if (!io_reserve((void **)&st->keys, &st->key_cap, st->key_n + 1, sizeof(nff_keys)))
             return io_error(ctx, f->shown, f->line, "out of memory");
         k = &st->keys[st->key_n++];
+    } else if (f->more) { /* kept for nff_undo, should this block starve */
+        f->saved_key = *k;
+        f->saved_key_at = (size_t)(k - st->keys);
     }
     memset(k, 0, sizeof *k);
     snprintf(k->name, sizeof k->name, "%s", name);
@@ -775,9 +804,11 @@ static bool nff_keyframes(nff_file *f) {
         if (seen[ch]) return io_error(ctx, f->shown, line, "'%s' keyframes given twice for '%s'", word, name);
         seen[ch] = true;
         int64_t least = ch == 3 ? 1 : 4;
-        if (n < least || (uint64_t)n > (uint64_t)(f->end - f->p) / 4 + 1)
+        if (n < least || !nff_fits(f, n, 4)) {
+            if (f->starved) return false;
             return io_error(ctx, f->shown, line, "%s: %lld keyframes (at least %lld%s)", word, (long long)n, (long long)least,
                             ch == 3 ? "" : ": the first and last only shape the spline's ends");
+        }
         float prev = -INFINITY;
         if (ch == 3) {
             if (!io_reserve((void **)&st->vis_t, &st->vis_cap, st->vis_n + (size_t)n, sizeof(float)) ||
@@ -911,6 +942,7 @@ typedef struct nff_chunk {
     bool claimed;              /* taken by the serial pass: written into the scene at v0, n0, t0 */
     size_t v0, n0, t0;
     uint32_t *map;             /* chunk material -> scene material */
+    io_builder *keep;          /* where its arrays go when it is freed, for the next window's chunk */
 } nff_chunk;
 
 typedef struct nff_par {
@@ -959,7 +991,8 @@ static void nff_chunk_task(void *user, uint32_t index) {
     st->material = 0;
     nff_file f = {.ctx = ctx, .st = st, .path = par->path, .p = c->start, .end = par->end, .line = 0};
     io_builder *b = &ctx->b;
-    b->hint = io_text_vertex_hint(c->start, c->limit);
+    /* counting lines is a pass over the text: not done again for arrays kept from a window before */
+    b->hint = b->pos_cap ? (size_t)(c->limit - c->start) / 16 + 16 : io_text_vertex_hint(c->start, c->limit);
     for (;;) {
         nff_skip(&f);
         const char *cmd = f.p;
@@ -986,6 +1019,14 @@ static void nff_chunk_task(void *user, uint32_t index) {
 }
 
 static void nff_chunk_free(nff_chunk *c) {
+    if (c->keep) { /* the arrays that hold its geometry, kept mapped for the next window */
+        io_builder *b = &c->ctx.b, *k = c->keep;
+        k->pos = b->pos, k->pos_cap = b->pos_cap, k->nrm = b->nrm, k->nrm_cap = b->nrm_cap;
+        k->idx = b->idx, k->nidx = b->nidx, k->mat = b->mat, k->tri_cap = b->tri_cap;
+        b->pos = b->nrm = NULL, b->idx = b->nidx = b->mat = NULL;
+        b->pos_cap = b->nrm_cap = b->tri_cap = 0;
+        c->keep = NULL;
+    }
     free(c->map);
     c->map = NULL;
     c->claimed = false;
@@ -995,8 +1036,14 @@ static void nff_chunk_free(nff_chunk *c) {
     memset(&c->ctx, 0, sizeof c->ctx);
 }
 
-/* Splits the file into chunks and parses them; leaves par->n at 0 (all serial) for small files. */
-static void nff_par_start(io_ctx *ctx, nff_par *par, const char *path, const char *data, size_t size) {
+/* Splits the file into chunks and parses them; leaves par->n at 0 (all serial) for small files.
+ * keep (a streamed file's windows: NULL otherwise) holds io_chunk_count builders whose arrays the
+ * chunks reuse and give back: a window's chunks then write into memory already mapped. total, when
+ * more than size (a streamed file's first window), is the file's size: the scene's arrays are then
+ * sized for the whole file from this window's counts, not grown (copied, and faulted in twice)
+ * window after window; only address space, pages the file does not fill are never touched. */
+static void nff_par_start(io_ctx *ctx, nff_par *par, const char *path, const char *data, size_t size, io_builder *keep,
+                          uint64_t total) {
     memset(par, 0, sizeof *par);
     uint32_t k = io_chunk_count(ctx, size);
     if (k < 2 || !(par->chunks = calloc(k, sizeof *par->chunks))) return;
@@ -1007,6 +1054,13 @@ static void nff_par_start(io_ctx *ctx, nff_par *par, const char *path, const cha
         nff_chunk *c = &par->chunks[par->n++];
         c->start = s;
         builder_init(&c->ctx.b);
+        if (keep) {
+            io_builder *b = &c->ctx.b, *kb = &keep[par->n - 1];
+            b->pos = kb->pos, b->pos_cap = kb->pos_cap, b->nrm = kb->nrm, b->nrm_cap = kb->nrm_cap;
+            b->idx = kb->idx, b->nidx = kb->nidx, b->mat = kb->mat, b->tri_cap = kb->tri_cap;
+            builder_init(kb);
+            c->keep = kb;
+        }
     }
     for (uint32_t i = 0; i < par->n; i++) par->chunks[i].limit = i + 1 < par->n ? par->chunks[i + 1].start : end;
     par->path = path;
@@ -1017,6 +1071,11 @@ static void nff_par_start(io_ctx *ctx, nff_par *par, const char *path, const cha
     for (uint32_t i = 0; i < par->n; i++) {
         const io_builder *cb = &par->chunks[i].ctx.b;
         pos += cb->pos_n, nrm += cb->nrm_n, tri += cb->tri_n;
+    }
+    if (total > size) {
+        double scale = (double)total / (double)size * 1.03, most = (double)(total / 6 + 16);
+        pos = (size_t)fmin((double)pos * scale, most), tri = (size_t)fmin((double)tri * scale, most);
+        nrm = (size_t)fmin((double)nrm * scale, most);
     }
     (void)(builder_reserve_vertices(ctx, pos) && builder_reserve_normals(ctx, nrm) && builder_reserve_triangles(ctx, tri));
 }
@@ -1112,6 +1171,203 @@ static bool nff_par_take(nff_file *f, nff_par *par, bool *ok) {
     f->p = c->stop;
     f->line += c->lines;
     return true;
+}
+
+/* ---- streamed files ---------------------------------------------------------------------------- */
+
+static bool nff_command(nff_file *f);
+
+/* What a command may change before it finds that it needs text past its window, so that it can be
+ * undone and parsed again on a larger window. Materials, textures and the default material are not
+ * in it: a command adds them only after reading all it reads (`f`, `fm`) or finds them again when
+ * parsed again (a texture and its material are shared by name). */
+typedef struct nff_mark {
+    size_t pos_n, nrm_n, uv_n, tri_n, sphere_n, cone_n, light_n;
+    size_t anim_n, key_n, akey_n, vis_n, tpa_n, tpak_n;
+    int depth, detail;
+    rp_camera_data camera;
+    float background[3], start, end;
+    bool has_background, has_range;
+    int32_t frames;
+} nff_mark;
+
+static void nff_mark_set(nff_file *f, nff_mark *m) {
+    const io_builder *b = &f->ctx->b;
+    const nff_state *st = f->st;
+    m->pos_n = b->pos_n, m->nrm_n = b->nrm_n, m->uv_n = b->uv_n, m->tri_n = b->tri_n;
+    m->sphere_n = b->sphere_n, m->cone_n = b->cone_n, m->light_n = b->light_n;
+    m->anim_n = st->anim_n, m->key_n = st->key_n, m->akey_n = st->akey_n, m->vis_n = st->vis_n;
+    m->tpa_n = st->tpa_n, m->tpak_n = st->tpak_n;
+    m->depth = st->depth, m->detail = st->detail;
+    m->camera = b->camera;
+    memcpy(m->background, b->background, sizeof m->background);
+    m->has_background = b->has_background;
+    m->has_range = st->has_range, m->start = st->start, m->end = st->end, m->frames = st->frames;
+    f->saved_key_at = SIZE_MAX;
+}
+
+static void nff_undo(nff_file *f, const nff_mark *m) {
+    io_builder *b = &f->ctx->b;
+    nff_state *st = f->st;
+    b->pos_n = m->pos_n, b->nrm_n = m->nrm_n, b->uv_n = m->uv_n, b->tri_n = m->tri_n;
+    b->sphere_n = m->sphere_n, b->cone_n = m->cone_n, b->light_n = m->light_n;
+    st->anim_n = m->anim_n, st->key_n = m->key_n, st->akey_n = m->akey_n, st->vis_n = m->vis_n;
+    st->tpa_n = m->tpa_n, st->tpak_n = m->tpak_n;
+    st->depth = m->depth, st->detail = m->detail;
+    b->camera = m->camera;
+    memcpy(b->background, m->background, sizeof m->background);
+    b->has_background = m->has_background;
+    st->has_range = m->has_range, st->start = m->start, st->end = m->end, st->frames = m->frames;
+    if (f->saved_key_at != SIZE_MAX && f->saved_key_at < st->key_n) st->keys[f->saved_key_at] = f->saved_key;
+    f->starved = false;
+}
+
+/* Where a block of an SPD file ends: before the last `p`, `pp` or `f` line in its last 64 kB, so
+ * that a window ends with a whole polygon list (nothing carried over to parse again); else after
+ * its last newline. */
+static size_t nff_cut(const char *data, size_t size) {
+    size_t last = io_cut_lines(data, size);
+    if (!last) return 0;
+    size_t floor = size > (64u << 10) ? size - (64u << 10) : 0;
+    for (size_t i = last; i > floor && i > 0;) {
+        if (data[i - 1] == '\n' && i + 3 <= size && nff_sync_line(data + i)) return i;
+        i--;
+    }
+    return last;
+}
+
+/* Grows the window to hold [p, end) and the next block: copies both into *own (the tail may lie in
+ * it already) and gives the blocks back. */
+static bool nff_window_append(char **own, size_t *own_cap, const char *p, size_t tail, const io_text *next) {
+    size_t need = tail + next->size + 1;
+    size_t off = *own && p >= *own && p < *own + *own_cap ? (size_t)(p - *own) : SIZE_MAX;
+    if (need > *own_cap) {
+        size_t c = *own_cap ? *own_cap : need;
+        while (c < need) c = c <= SIZE_MAX / 4 ? 2 * c : need;
+        char *d = io_realloc(*own, c);
+        if (!d) return false;
+        if (off != SIZE_MAX) p = d + off;
+        *own = d;
+        *own_cap = c;
+    }
+    memmove(*own, p, tail);
+    memcpy(*own + tail, next->data, next->size);
+    (*own)[tail + next->size] = '\0';
+    return true;
+}
+
+/* nff_parse for a gzip'd file on disk read as a stream (io_stream): the same commands, errors and
+ * line numbers, window by window. A window is a block of the stream where it can be (no copy), or
+ * a command that went past the end of one block (a polygon list over a block boundary, a line
+ * longer than a block) with the following block. Each window's polygon lists are parsed in
+ * parallel chunks as a whole file's are, while the stream's thread inflates the next blocks. */
+static bool nff_parse_stream(io_ctx *ctx, nff_state *st, const char *path, io_stream *s) {
+    nff_file f = {.ctx = ctx, .st = st, .path = path, .line = 1, .saved_key_at = SIZE_MAX};
+    vfs_display(&ctx->vfs, path, f.shown, sizeof f.shown);
+    char *own = NULL; /* the window when it is not a block */
+    size_t own_cap = 0;
+    int held = 0; /* blocks not given back yet */
+    bool ok = true, stream_bad = false;
+    io_text t;
+    if (!io_stream_next(s, ctx, &t)) {
+        io_stream_close(s);
+        return io_error(ctx, f.shown, 0, "cannot open: %s", ctx->why);
+    }
+    held = 1;
+    f.p = t.data, f.end = t.data + t.size, f.more = !t.last;
+    size_t starved_at = 0; /* window size at the last starvation: the next window is at least twice it */
+    io_builder *keep = NULL; /* the chunks' arrays, from window to window */
+    uint32_t keep_n = 0;
+    for (;;) {
+        ctx->blocks++;
+        nff_par par;
+        uint32_t k = io_chunk_count(ctx, (size_t)(f.end - f.p));
+        if (k > keep_n) {
+            io_builder *g = io_realloc(keep, k * sizeof *keep);
+            if (!g) {
+                ok = io_error(ctx, f.shown, f.line, "out of memory");
+                break;
+            }
+            keep = g;
+            for (uint32_t i = keep_n; i < k; i++) builder_init(&keep[i]);
+            keep_n = k;
+        }
+        nff_par_start(ctx, &par, path, f.p, (size_t)(f.end - f.p), keep,
+                      ctx->blocks == 1 && f.more ? io_stream_size_hint(s) : 0);
+        starved_at = 0;
+        for (;;) {
+            nff_skip(&f);
+            if (f.p >= f.end) break;
+            if (par.n && nff_par_take(&f, &par, &ok)) {
+                if (!ok) break;
+                continue;
+            }
+            if (*f.p == '\0' || *f.p == '{') {
+                ok = io_error(ctx, f.shown, f.line, "%s", *f.p ? "unexpected '{'" : "binary data (NUL byte) in a text file");
+                break;
+            }
+            const char *cmd = f.p;
+            uint32_t line = f.line;
+            nff_mark m;
+            nff_mark_set(&f, &m);
+            if (!(ok = nff_command(&f))) {
+                if (f.starved) {
+                    nff_undo(&f, &m);
+                    f.p = cmd, f.line = line;
+                    starved_at = (size_t)(f.end - f.p);
+                    ok = true;
+                }
+                break;
+            }
+        }
+        if (ok && par.n && !nff_par_fill(ctx, &par)) ok = io_error(ctx, f.shown, f.line, "out of memory");
+        nff_par_end(&par);
+        if (!ok || !f.more) break;
+        /* the next window: the command left over (if any) and one block, or more blocks when it
+         * starved (so a command much longer than a block is not parsed again block after block) */
+        size_t tail = f.p < f.end ? (size_t)(f.end - f.p) : 0;
+        const char *p = f.p;
+        do {
+            if (!io_stream_next(s, ctx, &t)) {
+                stream_bad = true;
+                break;
+            }
+            held++;
+            if (tail == 0) { /* the block itself */
+                while (held > 1) io_stream_release(s), held--;
+                f.p = t.data, f.end = t.data + t.size;
+            } else {
+                if (!nff_window_append(&own, &own_cap, p, tail, &t)) {
+                    ok = io_error(ctx, f.shown, f.line, "out of memory");
+                    break;
+                }
+                while (held > 0) io_stream_release(s), held--;
+                tail += t.size;
+                p = own;
+                f.p = own, f.end = own + tail;
+            }
+            f.more = !t.last;
+        } while (f.more && starved_at && (size_t)(f.end - f.p) < 2 * starved_at);
+        if (!ok || stream_bad) break;
+    }
+    if (ok && !stream_bad && st->depth > 0) {
+        const nff_level *lv = &st->stack[st->depth];
+        ok = io_error(ctx, f.shown, f.line, "end of file inside the transform block opened at line %u", lv->line);
+    }
+    while (held > 0) io_stream_release(s), held--;
+    /* a parse error in a file that turns out corrupt or too large is reported as the whole-buffer
+     * read reports it: the file first */
+    if (!stream_bad && !ok) stream_bad = !io_stream_drain(s, ctx);
+    if (stream_bad) {
+        ctx->failed = false;
+        ok = io_error(ctx, f.shown, 0, "cannot open: %s", ctx->why);
+    }
+    ctx->bytes += io_stream_total(s);
+    io_stream_close(s);
+    free(own);
+    for (uint32_t i = 0; i < keep_n; i++) builder_free(&keep[i]);
+    free(keep);
+    return ok;
 }
 
 /* ---- files ------------------------------------------------------------------------------------ */
@@ -1212,7 +1468,12 @@ static bool nff_command(nff_file *f) {
 /* Parses one file; `from` is the file whose `i` line includes it (NULL for the scene itself), where
  * errors about reading it are reported. */
 static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path, const nff_file *from, const char *as_written) {
-    nff_file f = {.ctx = ctx, .st = st, .path = path, .line = 1};
+    /* a large gzip'd scene on disk is streamed; includes and archive entries are read whole */
+    if (!from && !ctx->vfs.archive && ctx->stream >= 0 && (ctx->stream > 0 || ctx->threads > 1)) {
+        io_stream *s = io_stream_open(ctx, path, ctx->stream > 0 ? 0 : IO_STREAM_MIN_TEXT, ctx->stream_block, nff_cut);
+        if (s) return nff_parse_stream(ctx, st, path, s);
+    }
+    nff_file f = {.ctx = ctx, .st = st, .path = path, .line = 1, .saved_key_at = SIZE_MAX};
     vfs_display(&ctx->vfs, path, f.shown, sizeof f.shown);
     io_buf buf;
     if (!vfs_read(ctx, path, &buf)) {
@@ -1237,7 +1498,7 @@ static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path, const nff_fi
     int depth0 = st->depth;
     bool ok = true;
     nff_par par;
-    nff_par_start(ctx, &par, path, buf.data, buf.size);
+    nff_par_start(ctx, &par, path, buf.data, buf.size, NULL, 0);
     for (;;) {
         nff_skip(&f);
         if (f.p >= f.end) break;

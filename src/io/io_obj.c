@@ -2,6 +2,7 @@
  * texture coordinates go to the builder as they come (OBJ indexes them globally, so the builder's
  * arrays are the file's); faces are triangulated as they are read. Objects, groups and smoothing
  * groups do not change the geometry and are skipped. */
+#include <math.h>
 #include <stdio.h>
 
 #include "io/io_internal.h"
@@ -486,7 +487,9 @@ static void obj_chunk_free(obj_chunk *c) {
     memset(c, 0, sizeof *c);
 }
 
-static void obj_par_start(io_ctx *ctx, obj_par *par, const char *data, size_t size) {
+/* total, when more than size (a streamed file's first window), is the file's size: the scene's
+ * arrays are then sized for the whole file from this window's counts (only address space). */
+static void obj_par_start(io_ctx *ctx, obj_par *par, const char *data, size_t size, uint64_t total) {
     memset(par, 0, sizeof *par);
     uint32_t k = io_chunk_count(ctx, size);
     const char **starts = NULL;
@@ -507,6 +510,11 @@ static void obj_par_start(io_ctx *ctx, obj_par *par, const char *data, size_t si
     for (uint32_t i = 0; i < par->n; i++) {
         const obj_chunk *c = &par->chunks[i];
         pos += c->pos_n, nrm += c->nrm_n, uv += c->uv_n, tri += c->tri_n;
+    }
+    if (total > size) {
+        double scale = (double)total / (double)size * 1.03, most = (double)(total / 6 + 16);
+        pos = (size_t)fmin((double)pos * scale, most), nrm = (size_t)fmin((double)nrm * scale, most);
+        uv = (size_t)fmin((double)uv * scale, most), tri = (size_t)fmin((double)tri * scale, most);
     }
     (void)(builder_reserve_vertices(ctx, pos) && builder_reserve_normals(ctx, nrm) &&
            builder_reserve_texcoords(ctx, uv) && builder_reserve_triangles(ctx, tri));
@@ -608,65 +616,61 @@ static void obj_fill_task(void *user, uint32_t index) {
     }
 }
 
-bool obj_load(io_ctx *ctx, const char *path) {
-    obj_file f = {.ctx = ctx, .path = path, .line = 1};
-    vfs_display(&ctx->vfs, path, f.shown, sizeof f.shown);
-    io_buf buf;
-    if (!vfs_read(ctx, path, &buf)) return io_error(ctx, f.shown, 0, "cannot open: %s", ctx->why);
-    ctx->bytes += buf.size;
+/* Parses the lines [p, end): a whole file, or a window of one streamed (whole lines, the line
+ * numbers going on from the window before). *material is the current material before and after;
+ * total, when not 0, the file's size, for presizing the scene's arrays from this first window. */
+static bool obj_lines(obj_file *f, const char *p, const char *end, uint32_t *material, size_t first_mtl, uint64_t total) {
+    io_ctx *ctx = f->ctx;
     io_builder *b = &ctx->b;
-    const char *p = buf.data, *end = buf.data + buf.size;
-    uint32_t material = IO_NONE;
-    size_t first_mtl = b->material_n;
     bool ok = true;
     obj_par par;
-    obj_par_start(ctx, &par, buf.data, buf.size);
-    for (; ok && p < end; p = next_line(p, end), f.line++) {
-        while (ok && p < end && par.n && obj_par_take(&f, &par, &p, &material, first_mtl, &ok)) {}
+    obj_par_start(ctx, &par, p, (size_t)(end - p), total);
+    for (; ok && p < end; p = next_line(p, end), f->line++) {
+        while (ok && p < end && par.n && obj_par_take(f, &par, &p, material, first_mtl, &ok)) {}
         if (!ok || p >= end) break;
         p = skip_blank(p);
         if (at_eol(p)) {
-            if (*p == '\0' && p < end) ok = io_error(ctx, f.shown, f.line, "binary data in a text file");
+            if (*p == '\0' && p < end) ok = io_error(ctx, f->shown, f->line, "binary data in a text file");
             continue;
         }
         if (p[0] == 'v' && (p[1] == ' ' || p[1] == '\t')) {
             if (b->pos_n >= b->pos_cap && (b->pos_n >= UINT32_MAX || !builder_reserve_vertices(ctx, 1))) {
-                ok = io_error(ctx, f.shown, f.line, "out of memory");
+                ok = io_error(ctx, f->shown, f->line, "out of memory");
                 break;
             }
             float *v = b->pos + 3 * b->pos_n;
             const char *q = p + 1;
-            ok = (q = obj_float(&f, q, &v[0], "v")) && (q = obj_float(&f, q, &v[1], "v")) &&
-                 (q = obj_float(&f, q, &v[2], "v"));
+            ok = (q = obj_float(f, q, &v[0], "v")) && (q = obj_float(f, q, &v[1], "v")) &&
+                 (q = obj_float(f, q, &v[2], "v"));
             b->pos_n++;
         } else if (p[0] == 'f' && (p[1] == ' ' || p[1] == '\t')) {
-            ok = obj_face(&f, p + 1, material);
+            ok = obj_face(f, p + 1, *material);
         } else if (p[0] == 'v' && p[1] == 'n' && is_delim(p[2])) {
             if (b->nrm_n >= b->nrm_cap && (b->nrm_n >= UINT32_MAX || !builder_reserve_normals(ctx, 1))) {
-                ok = io_error(ctx, f.shown, f.line, "out of memory");
+                ok = io_error(ctx, f->shown, f->line, "out of memory");
                 break;
             }
             float *v = b->nrm + 3 * b->nrm_n;
             const char *q = p + 2;
-            ok = (q = obj_float(&f, q, &v[0], "vn")) && (q = obj_float(&f, q, &v[1], "vn")) &&
-                 (q = obj_float(&f, q, &v[2], "vn"));
+            ok = (q = obj_float(f, q, &v[0], "vn")) && (q = obj_float(f, q, &v[1], "vn")) &&
+                 (q = obj_float(f, q, &v[2], "vn"));
             b->nrm_n++;
         } else if (p[0] == 'v' && p[1] == 't' && is_delim(p[2])) {
             if (b->uv_n >= b->uv_cap && (b->uv_n >= UINT32_MAX || !builder_reserve_texcoords(ctx, 1))) {
-                ok = io_error(ctx, f.shown, f.line, "out of memory");
+                ok = io_error(ctx, f->shown, f->line, "out of memory");
                 break;
             }
             float *v = b->uv + 2 * b->uv_n;
             const char *q = p + 2;
             v[1] = 0.0f;
-            ok = (q = obj_float(&f, q, &v[0], "vt")) != NULL;
-            if (ok && !at_eol(skip_blank(q))) ok = obj_float(&f, q, &v[1], "vt") != NULL;
+            ok = (q = obj_float(f, q, &v[0], "vt")) != NULL;
+            if (ok && !at_eol(skip_blank(q))) ok = obj_float(f, q, &v[1], "vt") != NULL;
             b->uv_n++;
         } else if (word_is(p, "usemtl")) {
             char name[256];
             rest_of_line(p + 6, name, sizeof name);
             /* A name no library defines falls back to the default material, as most readers do. */
-            material = obj_find_material(ctx, first_mtl, name);
+            *material = obj_find_material(ctx, first_mtl, name);
         } else if (word_is(p, "mtllib")) {
             /* One or more library names, each relative to the OBJ file. */
             const char *q = p + 6;
@@ -677,11 +681,11 @@ bool obj_load(io_ctx *ctx, const char *path) {
                 while (!is_delim(*q)) q++;
                 char rel[IO_PATH_MAX], full[IO_PATH_MAX], shown[IO_PATH_MAX + 256];
                 snprintf(rel, sizeof rel, "%.*s", (int)(q - s), s);
-                vfs_join(&ctx->vfs, path, rel, full, sizeof full);
+                vfs_join(&ctx->vfs, f->path, rel, full, sizeof full);
                 vfs_display(&ctx->vfs, full, shown, sizeof shown);
                 io_buf mb;
                 if (!vfs_read(ctx, full, &mb)) {
-                    ok = io_error(ctx, f.shown, f.line, "cannot open material library '%s' (%s): %s", rel, shown, ctx->why);
+                    ok = io_error(ctx, f->shown, f->line, "cannot open material library '%s' (%s): %s", rel, shown, ctx->why);
                     break;
                 }
                 ok = mtl_parse(ctx, full, shown, &mb);
@@ -691,11 +695,54 @@ bool obj_load(io_ctx *ctx, const char *path) {
         } else if (!obj_skippable(p)) {
             int len = 0;
             while (len < 24 && !is_delim(p[len])) len++;
-            ok = io_error(ctx, f.shown, f.line, "unknown statement '%.*s'", len, p);
+            ok = io_error(ctx, f->shown, f->line, "unknown statement '%.*s'", len, p);
         }
     }
     if (ok && par.n) io_parallel_for(ctx->threads, par.n, obj_fill_task, &par);
     obj_par_end(&par);
+    return ok;
+}
+
+/* obj_load for a gzip'd file on disk read as a stream (io_stream): window after window of whole
+ * lines, inflated on a thread of its own while the window before is parsed; the same result and
+ * errors (a corrupt file's first, as a whole read reports it). */
+static bool obj_stream(obj_file *f, io_stream *s, uint32_t *material, size_t first_mtl) {
+    io_ctx *ctx = f->ctx;
+    bool ok = true, bad = false;
+    for (;;) {
+        io_text t;
+        if (!io_stream_next(s, ctx, &t)) {
+            bad = true;
+            break;
+        }
+        ok = obj_lines(f, t.data, t.data + t.size, material, first_mtl, ctx->blocks++ ? 0 : io_stream_size_hint(s));
+        io_stream_release(s);
+        if (!ok || t.last) break;
+    }
+    if (!bad && !ok) bad = !io_stream_drain(s, ctx);
+    if (bad) {
+        ctx->failed = false;
+        ok = io_error(ctx, f->shown, 0, "cannot open: %s", ctx->why);
+    }
+    ctx->bytes += io_stream_total(s);
+    io_stream_close(s);
+    return ok;
+}
+
+bool obj_load(io_ctx *ctx, const char *path) {
+    obj_file f = {.ctx = ctx, .path = path, .line = 1};
+    vfs_display(&ctx->vfs, path, f.shown, sizeof f.shown);
+    uint32_t material = IO_NONE;
+    size_t first_mtl = ctx->b.material_n;
+    /* a large gzip'd file on disk is streamed (archive entries are in memory already) */
+    if (!ctx->vfs.archive && ctx->stream >= 0 && (ctx->stream > 0 || ctx->threads > 1)) {
+        io_stream *s = io_stream_open(ctx, path, ctx->stream > 0 ? 0 : IO_STREAM_MIN_TEXT, ctx->stream_block, NULL);
+        if (s) return obj_stream(&f, s, &material, first_mtl);
+    }
+    io_buf buf;
+    if (!vfs_read(ctx, path, &buf)) return io_error(ctx, f.shown, 0, "cannot open: %s", ctx->why);
+    ctx->bytes += buf.size;
+    bool ok = obj_lines(&f, buf.data, buf.data + buf.size, &material, first_mtl, 0);
     vfs_buf_free(&buf);
     return ok;
 }

@@ -397,6 +397,8 @@ static void ctx_init(io_ctx *ctx, const io_load_opts *opts, char *err, size_t er
     ctx->b.default_material = IO_NONE;
     ctx->threads = io_threads_resolve(opts ? opts->threads : 0);
     ctx->chunk_bytes = opts ? opts->chunk_bytes : 0;
+    ctx->stream = opts ? opts->stream : 0;
+    ctx->stream_block = opts ? opts->stream_block : 0;
     ctx->limits.max_includes = env_limit("RP_MAX_INCLUDES", IO_DEFAULT_MAX_INCLUDES);
     ctx->limits.max_include_bytes = env_limit("RP_MAX_INCLUDE_BYTES", IO_DEFAULT_MAX_INCLUDE_BYTES);
     ctx->limits.max_file_bytes = env_limit("RP_MAX_FILE_BYTES", IO_DEFAULT_MAX_FILE_BYTES);
@@ -414,6 +416,7 @@ static bool load_archive_main(io_ctx *ctx, const char *path) {
 /* After the loader: defaults, clean-up, and the builder's arrays handed to out. */
 static bool ctx_finish(io_ctx *ctx, bool ok, const char *path, rp_scene_data *out, double t0, const io_load_opts *opts) {
     if (opts && opts->chunks_taken) *opts->chunks_taken = ctx->chunks_taken;
+    if (opts && opts->blocks) *opts->blocks = ctx->blocks;
     if (ok && ctx->b.material_n == 0) builder_default_material(ctx);
     if (ok && ctx->b.material_n == 0) ok = io_error(ctx, path, 0, "out of memory");
     if (ok && !builder_fill_missing(ctx)) ok = io_error(ctx, path, 0, "out of memory");

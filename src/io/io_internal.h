@@ -125,6 +125,8 @@ typedef struct io_ctx {
     size_t chunk_bytes; /* chunk size for the parallel parsers; 0: chosen from the file and threads */
     size_t chunks_taken; /* chunks whose parallel result was used (for the tests) */
     rp_animation_data *anim; /* what the AFF loader parsed of an animation, finished by anim_finish */
+    rp_volume_data *volume;  /* what vdb_load read, handed to rp_scene_data.volume */
+    const char *volume_grid; /* rp_scene_load_desc.volume_grid */
 } io_ctx;
 
 /* Records the first error as "file:line: error: message"; always returns false. */
@@ -209,6 +211,7 @@ typedef struct io_load_opts {
     size_t chunk_bytes;
     size_t *chunks_taken; /* when not NULL: set to the number of chunks whose parallel result was used */
     float point_radius;   /* rp_scene_load_desc.point_radius */
+    const char *volume_grid; /* rp_scene_load_desc.volume_grid */
 } io_load_opts;
 /* A scene of vertices alone (a point cloud) gets a sphere of that radius (0: automatic) at each
  * finite vertex (io_points.c); false when out of memory. */
@@ -258,6 +261,8 @@ bool ply_load(io_ctx *ctx, const char *path);
 bool nff_load(io_ctx *ctx, const char *path);
 /* glTF and the other formats of assimp (io_assimp.c); assimp_can_load takes an extension ("glb"). */
 bool assimp_load(io_ctx *ctx, const char *path);
+/* An OpenVDB file's density grid into ctx->volume (io_volume.c); errors name `shown`. */
+bool vdb_load(io_ctx *ctx, const char *path, const char *shown);
 bool assimp_can_load(const char *ext);
 
 /* ---- numbers ---------------------------------------------------------------------------------- */

@@ -271,7 +271,8 @@ typedef struct rp_render_desc {
                                  * are jittered from (pixel, sample index) */
     rp_integrator_type integrator;
     rp_aov aov;                 /* with RP_INTEGRATOR_AOV; AOVs trace the pixel centre only */
-    int max_depth;              /* Whitted: reflection/refraction bounces; path: bounces; 0: 5,
+    int max_depth;              /* Whitted: reflection/refraction bounces; path: bounces (and
+                                 * scattering events in a medium); 0: 5 (64 with a medium),
                                  * negative: none */
     int reflect_depth;          /* Whitted: a hit at depth d (primary: 0) spawns a reflection ray
                                  * only when d < reflect_depth; 0: max_depth, negative: none */

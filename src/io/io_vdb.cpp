@@ -7,6 +7,8 @@
 #include <cstdio>
 #include <cstring>
 #include <exception>
+#include <fstream>
+#include <ios>
 #include <new>
 #include <string>
 
@@ -15,7 +17,7 @@
 // make openvdb::initialize() crash inside libopenvdb. Only this file's own functions stay hidden.
 #pragma GCC visibility push(default)
 #include <openvdb/openvdb.h>
-#include <openvdb/io/File.h>
+#include <openvdb/io/Stream.h>
 #pragma GCC visibility pop
 
 #include "io/io_volume.h"
@@ -52,16 +54,35 @@ openvdb::FloatGrid::Ptr pick_grid(const openvdb::GridPtrVec &grids, const char *
 
 bool read_grid(const char *path, const char *wanted, rp_volume_data *v, std::string *fail) {
     openvdb::initialize(); // idempotent and thread-safe: registers the grid types
-    if (FILE *f = std::fopen(path, "rb")) {
-        std::fclose(f);
-    } else {
+    std::ifstream is(path, std::ios::binary);
+    if (!is) {
         *fail = std::string("cannot open: ") + std::strerror(errno);
         return false;
     }
-    openvdb::io::File file(path);
-    file.open(false); // read everything now: the file is closed before the copy
-    openvdb::GridPtrVecPtr grids = file.getGrids();
-    file.close();
+    unsigned char magic[8] = {0};
+    is.read(reinterpret_cast<char *>(magic), sizeof magic);
+    // OpenVDB's magic number, 0x56444220 ("VDB "), as a little-endian int64
+    static const unsigned char vdb_magic[8] = {0x20, 0x42, 0x44, 0x56, 0, 0, 0, 0};
+    if (is.gcount() != 8 || std::memcmp(magic, vdb_magic, 8) != 0) {
+        *fail = "not an OpenVDB file (no VDB magic number at its start)";
+        return false;
+    }
+    is.seekg(0);
+    // A short read throws (std::ios_base::failure) instead of leaving OpenVDB with a half-read
+    // grid: io::File reads a truncated file without complaint.
+    is.exceptions(std::ios::failbit | std::ios::badbit);
+    openvdb::GridPtrVecPtr grids;
+    try {
+        openvdb::io::Stream stream(is, false); // every grid read now
+        grids = stream.getGrids();
+    } catch (const std::ios_base::failure &) {
+        *fail = "truncated or corrupt OpenVDB file (read past its end)";
+        return false;
+    }
+    if (!grids) {
+        *fail = "no grids in the file";
+        return false;
+    }
     openvdb::FloatGrid::Ptr grid = pick_grid(*grids, wanted, fail);
     if (!grid) return false;
     std::string name = grid->getName();

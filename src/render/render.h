@@ -469,6 +469,8 @@ v3 eyelight_shade(const rp_rayhit *rh);
 bool eyelight_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
                     int s);
 v3 aov_shade(const render_frame *f, const rp_ray *ray, const rp_hit *hit);
+/* The default max_depth of scenes with a participating medium. */
+#define RENDER_MEDIUM_DEPTH 64
 /* Eye light and Whitted with a participating medium: its opacity along the primary ray (up to its
  * hit) over the colour seen behind it (integrator/volume.c). */
 v3 volume_composite(const render_frame *f, const rp_ray *ray, v3 behind);

@@ -151,6 +151,9 @@ static void choose_traversal(const rp_render_desc *d, rp_traversal out[RP_RAY_KI
  * bounce, ambient occlusion's distance. */
 rp_render_desc render_desc_resolve(const rp_render_scene *scene, const rp_render_desc *desc) {
     rp_render_desc dd = rp_render_desc_defaults(desc);
+    /* light in a dense medium scatters many times: its default depth is deeper (Russian roulette
+     * ends most paths long before) */
+    if (scene->medium && (!desc || desc->max_depth == 0)) dd.max_depth = RENDER_MEDIUM_DEPTH;
     bool pbr = dd.integrator == RP_INTEGRATOR_DIRECT || dd.integrator == RP_INTEGRATOR_PATH ||
                dd.integrator == RP_INTEGRATOR_IR || dd.integrator == RP_INTEGRATOR_AO;
     if (pbr && dd.packet < 0) dd.packet = 16; /* the physically based integrators always trace packets */

@@ -7,6 +7,7 @@
  * (.gltf, .glb) and the other formats assimp reads (FBX, COLLADA, 3DS, STL, ...) through assimp,
  * from plain files: node hierarchies flattened, the first camera, point lights, and materials with
  * the base colour (factor x texture, external or embedded) as kd and the emissive colour as ke.
+ * OpenVDB (.vdb): a float density grid as a volume (rp_volume_data), no surfaces.
  *
  * Ownership: every array in rp_scene_data is owned by it and freed by rp_scene_data_free.
  */

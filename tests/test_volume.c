@@ -72,6 +72,8 @@ static void test_load(void) {
     size_t cells = (size_t)v->dims[0] * v->dims[1] * v->dims[2];
     CHECK(v->dims[0] == 16 && v->dims[1] == 11 && v->dims[2] == 20);
     CHECKF(v->brick_count > 0 && v->brick_count < cells, "%u bricks of %zu", v->brick_count, cells);
+    printf("cloud: %llu active voxels, %u of %zu bricks stored\n", (unsigned long long)v->active_voxels, v->brick_count,
+           cells);
     size_t nonzero = 0, stored = 0;
     for (size_t i = 0; i < cells; i++) stored += v->brick_slot[i] != RP_VOLUME_EMPTY;
     for (size_t i = 0; i < (size_t)v->brick_count * 512; i++) nonzero += v->density[i] > 0.0f;

@@ -212,7 +212,7 @@ static bool walk_next(const render_medium *m, brick_walk *w, float *a, float *b,
     if (w->done) return false;
     int k = w->tnext[0] < w->tnext[1] ? (w->tnext[0] < w->tnext[2] ? 0 : 2) : (w->tnext[1] < w->tnext[2] ? 1 : 2);
     *a = w->t;
-    *b = fminf(w->tnext[k], w->tend);
+    *b = fmaxf(*a, fminf(w->tnext[k], w->tend)); /* never backwards, whatever rounding did to the first cell */
     *mu = m->majorant[((size_t)w->c[2] * v->dims[1] + (size_t)w->c[1]) * v->dims[0] + (size_t)w->c[0]];
     w->t = *b;
     if (w->tnext[k] >= w->tend) {

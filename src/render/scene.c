@@ -11,6 +11,9 @@ rp_render_scene_desc rp_render_scene_desc_defaults(const rp_render_scene_desc *d
     memset(&d, 0, sizeof d);
     if (desc) d = *desc;
     d.accel = rp_scene_desc_defaults(&d.accel);
+    if (d.medium.density_scale == 0.0f) d.medium.density_scale = 1.0f;
+    if (d.medium.albedo[0] == 0.0f && d.medium.albedo[1] == 0.0f && d.medium.albedo[2] == 0.0f)
+        d.medium.albedo[0] = d.medium.albedo[1] = d.medium.albedo[2] = 1.0f;
     return d;
 }
 

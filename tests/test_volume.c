@@ -253,6 +253,41 @@ static void test_furnace(void) {
         rp_render_scene_release(s);
         rp_scene_data_free(&d);
     }
+    /* Surfaces in the medium: a white (kd 1) sphere inside it does not change the furnace. */
+    {
+        rp_scene_data d;
+        rp_render_scene_release(homogeneous(dev, &d, (rp_medium_desc){0})); /* d's volume, then surfaces */
+        d.sphere_count = 1;
+        d.spheres = calloc(1, sizeof *d.spheres);
+        d.spheres[0] = (rp_sphere_data){.center = {2.6f, 3.6f, 4.6f}, .radius = 0.8f, .material = 0};
+        d.material_count = 1;
+        d.materials = calloc(1, sizeof *d.materials);
+        for (int c = 0; c < 3; c++) d.materials[0].kd[c] = 1.0f;
+        d.materials[0].ior = 1.0f;
+        d.materials[0].illum = -1;
+        d.materials[0].map_kd = -1;
+        char err[256] = "";
+        rp_render_scene *s = rp_render_scene_new(dev, &d, &(rp_render_scene_desc){.medium = {.density_scale = SIGMA / 0.5f},
+                                                                                 .environment_scale = {1, 1, 1}},
+                                                 err, sizeof err);
+        CHECKF(s != NULL, "%s", err);
+        rp_camera cam = {.type = RP_CAMERA_PINHOLE};
+        cam.pinhole = (rp_pinhole_camera){.eye = {2.6f, 3.6f, 9.0f}, .look = {2.6f, 3.6f, 4.6f}, .up = {0, 1, 0},
+                                          .fov_deg = 30};
+        int spp = rp_test_sanitized() ? 16 : 64;
+        rp_render_desc rd = {.width = 24, .height = 24, .spp = spp, .integrator = RP_INTEGRATOR_PATH, .camera = &cam};
+        float *px = s ? render(s, &rd) : NULL;
+        CHECK(px != NULL);
+        if (px) {
+            double m = mean_of(px, 24 * 24 * 3), mid = px[(12 * 24 + 12) * 3];
+            printf("furnace with a white sphere in the medium: mean radiance %.4f at %d spp\n", m, spp);
+            CHECKF(fabs(m - 1.0) < 0.02, "furnace with a sphere: mean radiance %.4f, want 1 within 2%%", m);
+            CHECKF(fabs(mid - 1.0) < 0.5, "furnace with a sphere: the middle pixel %.4f", mid);
+            free(px);
+        }
+        rp_render_scene_release(s);
+        rp_scene_data_free(&d);
+    }
     rp_device_release(dev);
 }
 

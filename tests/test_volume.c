@@ -2,8 +2,9 @@
  * non-VDB and truncated files; the homogeneous medium's transmittance by ratio tracking, delta
  * tracking and ray marching against exp(-sigma_t d), through the brick DDA (one brick of larger
  * majorant on the way); the volumetric furnace (an albedo-1 medium under a uniform environment of
- * radiance 1 looks like radiance 1, and so does a white sphere inside it); and the cloud rendered by the path tracer (not black, not
- * uniform, the same on 1 and 2 threads) and by the other integrators (not black). */
+ * radiance 1 looks like radiance 1, and so does a white sphere inside it); and the cloud rendered
+ * by the path tracer (not black, not uniform, the same on 1 and 2 threads) and by the other
+ * integrators (not black). */
 #include "../src/io/io_volume.h"
 #include "../src/render/medium.h"
 #include "rp_test.h"

@@ -243,6 +243,11 @@ RP_API void rp_scene_load_desc_defaults(rp_scene_load_desc *desc);
 /* rp_scene_data_load with options (desc NULL: the defaults, what rp_scene_data_load uses). */
 RP_API bool rp_scene_data_load_ex(const char *path, const rp_scene_load_desc *desc, rp_scene_data *out, char *err,
                                   size_t err_size);
+/* Gives a scene a homogeneous medium filling the box lo-hi: a volume of 16^3 voxels of density 1
+ * whose centres span the box (so the density is 1 inside it and fades to 0 within a sixteenth of
+ * its size outside). Replaces the scene's volume, if any; false when out of memory or the box is
+ * empty or not finite. */
+RP_API bool rp_scene_data_add_medium_box(rp_scene_data *scene, const float lo[3], const float hi[3]);
 /* Frees every array of a loaded scene and zeroes it. */
 RP_API void rp_scene_data_free(rp_scene_data *scene);
 /* Moves an animated scene's flat arrays (positions, normals, spheres, cones, lights, camera) and

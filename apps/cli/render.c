@@ -66,6 +66,8 @@ static void render_usage(FILE *out) {
             "  --albedo A|R,G,B       volumes: single-scattering albedo, in [0, 1] [1]\n"
             "  --hg-g G               volumes: Henyey-Greenstein asymmetry, in (-1, 1) [0, isotropic]\n"
             "  --vdb-grid NAME        volumes: the float grid to read [density, else the first]\n"
+            "  --medium-box X0,Y0,Z0,X1,Y1,Z1  a homogeneous medium (density 1 x --density-scale)\n"
+            "                         filling that box, in any scene (fog in a room)\n"
             "  --env FILE.hdr         lat-long environment (+y up) for direct, path and ir\n"
             "  --env-scale R,G,B      multiplies --env; without --env, a constant environment\n"
             "  --exposure EV          PNG/PPM: multiply by 2^EV before the tone map [0]\n"
@@ -146,6 +148,8 @@ typedef struct render_options {
     float point_radius;               /* 0: automatic */
     rp_medium_desc medium;            /* --density-scale, --albedo, --hg-g (rp_medium_desc's zeros: defaults) */
     const char *volume_grid;          /* --vdb-grid */
+    bool has_medium_box;              /* --medium-box */
+    float medium_box[6];
     uint32_t lights[CLI_MAX_LIGHTS];
     int light_count;                  /* -1: all lights */
 } render_options;
@@ -369,6 +373,26 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
         } else if (strcmp(a, "--hg-g") == 0) {
             VALUE();
             if (!cli_parse_float(CMD, a, v, -0.99, 0.99, false, &o->medium.hg_g)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--medium-box") == 0) {
+            VALUE();
+            char lo[256], hi[256];
+            const char *c3 = v;
+            for (int k = 0; k < 3 && c3; k++) c3 = strchr(c3 + (k ? 1 : 0), ',');
+            if (!c3 || (size_t)(c3 - v) >= sizeof lo || strlen(c3 + 1) >= sizeof hi) {
+                fprintf(stderr, "raypack render: --medium-box expects X0,Y0,Z0,X1,Y1,Z1, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
+            memcpy(lo, v, (size_t)(c3 - v));
+            lo[c3 - v] = '\0';
+            strcpy(hi, c3 + 1);
+            if (!cli_parse_vec3(CMD, a, lo, o->medium_box) || !cli_parse_vec3(CMD, a, hi, o->medium_box + 3))
+                return CLI_EXIT_USAGE;
+            for (int k = 0; k < 3; k++)
+                if (!(o->medium_box[3 + k] > o->medium_box[k])) {
+                    fprintf(stderr, "raypack render: --medium-box: the second corner must be above the first on every axis, got '%s'\n", v);
+                    return CLI_EXIT_USAGE;
+                }
+            o->has_medium_box = true;
         } else if (strcmp(a, "--vdb-grid") == 0) {
             VALUE();
             o->volume_grid = v;
@@ -667,6 +691,12 @@ int cli_render(int argc, char **argv) {
         }
     }
     double load_ms = cli_now_ms() - t0;
+    if (o.has_medium_box && !rp_scene_data_add_medium_box(&data, o.medium_box, o.medium_box + 3)) {
+        fprintf(stderr, "raypack render: out of memory for --medium-box\n");
+        if (builtin) rp_default_scene_free(&data);
+        else rp_scene_data_free(&data);
+        return CLI_EXIT_FAILURE;
+    }
     {
         cli_render_setup anim = {.has_anim_time = o.has_anim_time, .anim_time = o.anim_time, .light_count = o.light_count};
         memcpy(anim.lights, o.lights, sizeof o.lights);

@@ -83,6 +83,32 @@ void io_volume_free(rp_volume_data *v) {
     free(v);
 }
 
+bool rp_scene_data_add_medium_box(rp_scene_data *scene, const float lo[3], const float hi[3]) {
+    enum { N = 16 };
+    if (!scene) return false;
+    for (int a = 0; a < 3; a++)
+        if (!(isfinite(lo[a]) && isfinite(hi[a]) && hi[a] > lo[a])) return false;
+    rp_volume_data *v = io_calloc(1, sizeof *v);
+    if (!v) return false;
+    /* voxel centres 0 .. N - 1 on the box's faces */
+    const float xfm[12] = {(hi[0] - lo[0]) / (N - 1), 0, 0, lo[0], 0, (hi[1] - lo[1]) / (N - 1), 0, lo[1],
+                           0, 0, (hi[2] - lo[2]) / (N - 1), lo[2]};
+    const int32_t vlo[3] = {0, 0, 0}, vhi[3] = {N - 1, N - 1, N - 1};
+    bool ok = io_volume_begin(v, vlo, vhi, xfm);
+    for (int32_t k = 0; ok && k < N; k++)
+        for (int32_t j = 0; ok && j < N; j++)
+            for (int32_t i = 0; ok && i < N; i++) ok = io_volume_set(v, i, j, k, 1.0f);
+    ok = ok && io_volume_finish(v);
+    if (!ok) {
+        io_volume_free(v);
+        return false;
+    }
+    snprintf(v->grid_name, sizeof v->grid_name, "box");
+    io_volume_free(scene->volume);
+    scene->volume = v;
+    return true;
+}
+
 #ifndef RP_IO_HAVE_OPENVDB
 bool io_vdb_read(const char *path, const char *grid, rp_volume_data *v, char *why, size_t why_size) {
     (void)path, (void)grid, (void)v;

@@ -85,6 +85,17 @@ static void test_load(void) {
     rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 1});
     rp_render_scene *s = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
     CHECKF(s != NULL, "%s", err);
+    /* trilinear density at world points against OpenVDB's own (tools::BoxSampler::wsSample) */
+    static const float ref[][4] = {
+        {-143.8792f, -27.0214f, 12.9467f, 0.812875f}, {40.4712f, 133.8053f, -116.2615f, 0.513955f},
+        {-1.2332f, 68.7028f, 28.8300f, 0.5f},          {85.0351f, -22.8262f, 73.1404f, 0.736978f},
+        {139.7428f, -16.7398f, 59.8821f, 0.099863f},   {-11.9118f, 41.3670f, 137.8564f, 0.0f},
+        {-103.4089f, -14.0215f, 105.8058f, 0.161827f}, {-56.5312f, -28.7273f, -11.1999f, 0.745404f}};
+    for (size_t i = 0; s && i < sizeof ref / sizeof ref[0]; i++) {
+        float got = medium_sigma_t(s->medium, v3_make(ref[i][0], ref[i][1], ref[i][2]));
+        CHECKF(fabsf(got - ref[i][3]) < 5e-5f, "density at (%g, %g, %g): %.6f, OpenVDB's %.6f", ref[i][0], ref[i][1],
+               ref[i][2], got, ref[i][3]);
+    }
     rp_bounds b;
     CHECK(s && rp_render_scene_medium(s, &b));
     if (s) {

@@ -185,9 +185,9 @@ static bool walk_start(const render_medium *m, v3 org, v3 dir, float tmax, brick
     v3 p = v3_madd(w->o, w->d, t0); /* a cell off by one through rounding only makes an empty segment */
     for (int a = 0; a < 3; a++) {
         float o = v3_at(w->o, a), d = v3_at(w->d, a), base = (float)v->origin[a];
-        int32_t c = (int32_t)floorf((v3_at(p, a) - base) / (float)B);
-        if (c < 0) c = 0;
-        if (c >= (int32_t)v->dims[a]) c = (int32_t)v->dims[a] - 1;
+        /* clamped as a float: converting one beyond int32's range would be undefined */
+        float cf = fminf(fmaxf(floorf((v3_at(p, a) - base) / (float)B), 0.0f), (float)(v->dims[a] - 1));
+        int32_t c = (int32_t)cf;
         w->c[a] = c;
         if (d > 0.0f) {
             w->step[a] = 1;

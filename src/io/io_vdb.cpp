@@ -99,6 +99,10 @@ bool read_grid(const char *path, const char *wanted, rp_volume_data *v, std::str
         xfm[4 * a + 3] = static_cast<float>(m[3][a]);
     }
     std::snprintf(v->grid_name, sizeof v->grid_name, "%s", name.c_str());
+    if (grid->activeVoxelCount() > (openvdb::Index64(1) << 30)) { // 4 GiB of densities, at least
+        *fail = "grid '" + name + "' has too many active voxels (" + std::to_string(grid->activeVoxelCount()) + ")";
+        return false;
+    }
     openvdb::CoordBBox box = grid->evalActiveVoxelBoundingBox();
     if (box.empty()) return true; // no active voxel: the caller says so
     int32_t lo[3] = {box.min().x(), box.min().y(), box.min().z()};

@@ -968,6 +968,8 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
     out->threads = o.threads;
     out->point_radius = o.point_radius;
     out->volume_grid = o.volume_grid;
+    out->has_medium_box = o.has_medium_box;
+    memcpy(out->medium_box, o.medium_box, sizeof o.medium_box);
     out->isa = o.isa;
     /* as cli_render fills its rp_render_desc */
     out->desc = (rp_render_desc){
@@ -1005,10 +1007,18 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
     return CLI_EXIT_OK;
 }
 
+/* --medium-box on loaded data; false (with a message, data freed) when out of memory. */
+static bool add_medium_box(const char *cmd, const cli_render_setup *setup, rp_scene_data *data) {
+    if (!setup->has_medium_box || rp_scene_data_add_medium_box(data, setup->medium_box, setup->medium_box + 3)) return true;
+    fprintf(stderr, "raypack %s: out of memory for --medium-box\n", cmd);
+    cli_render_unload(setup, data);
+    return false;
+}
+
 bool cli_render_load(const char *cmd, const cli_render_setup *setup, rp_scene_data *data) {
     memset(data, 0, sizeof *data);
     if (!setup->scene) {
-        if (rp_default_scene(data)) return true;
+        if (rp_default_scene(data)) return add_medium_box(cmd, setup, data);
         fprintf(stderr, "raypack %s: out of memory building the default scene\n", cmd);
         return false;
     }
@@ -1022,7 +1032,7 @@ bool cli_render_load(const char *cmd, const cli_render_setup *setup, rp_scene_da
     if (rp_scene_data_load_ex(setup->scene, &(rp_scene_load_desc){.threads = setup->threads, .point_radius = setup->point_radius,
                                                                   .volume_grid = setup->volume_grid},
                               data, err, sizeof err))
-        return true;
+        return add_medium_box(cmd, setup, data);
     fprintf(stderr, "%s\n", err[0] ? err : "raypack: cannot load the scene");
     return false;
 }

@@ -1,10 +1,11 @@
 # The two commands of the README: `make demo` and `make test`. Both install what they need first.
 JOBS ?= $(shell nproc)
+# libopenvdb-dev reads .vdb volumes; its headers include Boost's, which Debian's package does not pull in (libboost-dev).
 DEPS := build-essential cmake pkg-config zlib1g-dev libstb-dev libembree-dev libarchive-dev clang libclang-rt-14-dev \
         libassimp-dev libdeflate-dev python3-dev python3-cffi python3-numpy python3-pytest python3-pip python3-setuptools \
         openmpi-bin libopenmpi-dev \
         libsdl2-dev xvfb xauth \
-        libopenexr-dev
+        libopenexr-dev libopenvdb-dev libboost-dev
 SUDO := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 
 .PHONY: all deps release asan tsan demo test test-release test-asan test-tsan test-fuzz fuzz bench install clean

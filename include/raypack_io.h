@@ -7,6 +7,7 @@
  * (.gltf, .glb) and the other formats assimp reads (FBX, COLLADA, 3DS, STL, ...) through assimp,
  * from plain files: node hierarchies flattened, the first camera, point lights, and materials with
  * the base colour (factor x texture, external or embedded) as kd and the emissive colour as ke.
+ * OpenVDB (.vdb): a float density grid as a volume (rp_volume_data), no surfaces.
  *
  * Ownership: every array in rp_scene_data is owned by it and freed by rp_scene_data_free.
  */
@@ -158,6 +159,30 @@ typedef struct rp_animation_data {
     rp_camera_data rest_camera; /* the `v` viewpoint */
 } rp_animation_data;
 
+/* ---- volumes (OpenVDB) ---------------------------------------------------------------------------
+ * A density grid read from a .vdb file (src/io/io_vdb.cpp), stored as a sparse brick grid: the
+ * index-space box of the active voxels, widened by one voxel on every side (trilinear lookups
+ * ramp down to 0 there), is cut into bricks of RP_VOLUME_BRICK^3 voxels; a dense table over the
+ * bricks gives each one's slot in `density`, or RP_VOLUME_EMPTY for a brick without active
+ * voxels, which is not stored. Voxel (i, j, k) of index space is centred at index coordinates
+ * (i, j, k), as in OpenVDB; index_to_world maps index coordinates to the world (the grid's linear
+ * transform). Inactive voxels read as 0, and so do negative, NaN and infinite values. */
+#define RP_VOLUME_BRICK 8
+#define RP_VOLUME_EMPTY UINT32_MAX
+typedef struct rp_volume_data {
+    char grid_name[64];          /* the grid read */
+    float index_to_world[12];    /* 3x4 affine, row-major: world = M (i, j, k, 1) */
+    int32_t active_min[3], active_max[3]; /* active voxels' bounding box, inclusive */
+    uint64_t active_voxels;      /* voxels copied (OpenVDB's active voxel count) */
+    int32_t origin[3];           /* index of brick (0, 0, 0)'s first voxel: active_min - 1 */
+    uint32_t dims[3];            /* bricks per axis, covering [active_min - 1, active_max + 1] */
+    uint32_t *brick_slot;        /* dims[0] * dims[1] * dims[2], x fastest: slot or RP_VOLUME_EMPTY */
+    uint32_t brick_count;        /* bricks stored */
+    float *density;              /* brick_count * RP_VOLUME_BRICK^3, x fastest within a brick */
+    float *brick_max;            /* brick_count: the largest density of each stored brick */
+    float max_density;           /* over the whole grid */
+} rp_volume_data;
+
 typedef struct rp_scene_data {
     /* Triangle mesh: positions are indexed by `indices`; normals and texcoords, when present, have
      * their own per-corner index arrays (OBJ style), NULL when absent. */
@@ -192,6 +217,7 @@ typedef struct rp_scene_data {
     size_t file_bytes;          /* bytes parsed, after decompression */
     double parse_ms;            /* wall time of rp_scene_data_load */
     rp_animation_data *animation; /* AFF animation, owned by the scene; NULL for a still scene */
+    rp_volume_data *volume;     /* a participating medium's density (.vdb), owned; NULL: none */
 } rp_scene_data;
 
 /* Loads a scene file (format from the extension; .gz and .tar(.gz) are unpacked transparently).
@@ -208,12 +234,20 @@ typedef struct rp_scene_load_desc {
      * sphere at each finite vertex, of this radius; 0: half the median distance between
      * neighbouring points (from a sample of 64), so a sampled surface is closed. */
     float point_radius;
+    /* A .vdb file: the float grid to read; NULL or "": the one named "density", else the first
+     * float grid of the file. */
+    const char *volume_grid;
 } rp_scene_load_desc;
 /* Fills desc with the defaults. */
 RP_API void rp_scene_load_desc_defaults(rp_scene_load_desc *desc);
 /* rp_scene_data_load with options (desc NULL: the defaults, what rp_scene_data_load uses). */
 RP_API bool rp_scene_data_load_ex(const char *path, const rp_scene_load_desc *desc, rp_scene_data *out, char *err,
                                   size_t err_size);
+/* Gives a scene a homogeneous medium filling the box lo-hi: a volume of 16^3 voxels of density 1
+ * whose centres span the box (so the density is 1 inside it and fades to 0 within a sixteenth of
+ * its size outside). Replaces the scene's volume, if any; false when out of memory or the box is
+ * empty or not finite. */
+RP_API bool rp_scene_data_add_medium_box(rp_scene_data *scene, const float lo[3], const float hi[3]);
 /* Frees every array of a loaded scene and zeroes it. */
 RP_API void rp_scene_data_free(rp_scene_data *scene);
 /* Moves an animated scene's flat arrays (positions, normals, spheres, cones, lights, camera) and

@@ -137,8 +137,20 @@ typedef struct rp_light_source {
 
 typedef struct rp_render_scene rp_render_scene;
 
+/* The participating medium of a scene whose data holds a volume (rp_scene_data.volume, a .vdb):
+ * extinction sigma_t = density_scale * density per world unit (the grid's world units), of which
+ * the fraction albedo scatters (the rest is absorbed), by the Henyey-Greenstein phase function of
+ * asymmetry hg_g. docs/rendering.md says what each integrator does with it. */
+typedef struct rp_medium_desc {
+    float density_scale;  /* 0: 1 */
+    float albedo[3];      /* single-scattering albedo in [0, 1]; all 0: 1, 1, 1 (cloud droplets
+                           * barely absorb); a black medium: any negative value, clamped to 0 */
+    float hg_g;           /* asymmetry in (-1, 1), clamped to 0.99 in magnitude; 0: isotropic */
+} rp_medium_desc;
+
 typedef struct rp_render_scene_desc {
     rp_scene_desc accel;  /* acceleration structure settings of the core scene */
+    rp_medium_desc medium; /* with a volume in the data */
     /* Environment of the physically based integrators: a lat-long Radiance .hdr (+y up, u = 0.5 at
      * -z; the radiance arriving from each direction) times environment_scale, or, without a file,
      * the constant radiance environment_scale (all 0: no environment). */
@@ -169,6 +181,9 @@ RP_API void rp_render_scene_release(rp_render_scene *scene);
 RP_API rp_scene *rp_render_scene_core(rp_render_scene *scene);
 /* The scene file's camera, or one that frames the scene's bounds when the file had none. */
 RP_API rp_camera rp_render_scene_default_camera(rp_render_scene *scene);
+/* True when the scene holds a participating medium (its data had a volume); its world box in
+ * *bounds when bounds is not NULL. */
+RP_API bool rp_render_scene_medium(const rp_render_scene *scene, rp_bounds *bounds);
 /* The physically based lights of the scene (area triangles, point, spot, directional,
  * environment; valid while the render scene lives) and their count. */
 RP_API const rp_light_source *rp_render_scene_lights(const rp_render_scene *scene, size_t *count);
@@ -256,7 +271,8 @@ typedef struct rp_render_desc {
                                  * are jittered from (pixel, sample index) */
     rp_integrator_type integrator;
     rp_aov aov;                 /* with RP_INTEGRATOR_AOV; AOVs trace the pixel centre only */
-    int max_depth;              /* Whitted: reflection/refraction bounces; path: bounces; 0: 5,
+    int max_depth;              /* Whitted: reflection/refraction bounces; path: bounces (and
+                                 * scattering events in a medium); 0: 5 (64 with a medium),
                                  * negative: none */
     int reflect_depth;          /* Whitted: a hit at depth d (primary: 0) spawns a reflection ray
                                  * only when d < reflect_depth; 0: max_depth, negative: none */

@@ -72,6 +72,9 @@ typedef struct cli_render_setup {
     bool has_anim_time;         /* --anim-time */
     float anim_time;
     float point_radius;         /* --point-radius; 0: automatic */
+    const char *volume_grid;    /* --vdb-grid; NULL: density, else the first float grid */
+    bool has_medium_box;        /* --medium-box: a homogeneous medium in that box (lo xyz, hi xyz) */
+    float medium_box[6];
     uint32_t lights[CLI_MAX_LIGHTS]; /* --lights */
     int light_count;            /* -1: all */
     const char *output;         /* -o (default raypack.png), checked writable */

@@ -135,6 +135,17 @@ int cli_info(int argc, char **argv) {
     for (size_t i = 0; i < d.light_count && i < 16; i++)
         printf("  point at (%g, %g, %g), colour (%g, %g, %g)\n", d.lights[i].position[0], d.lights[i].position[1],
                d.lights[i].position[2], d.lights[i].color[0], d.lights[i].color[1], d.lights[i].color[2]);
+    rp_bounds mb;
+    if (d.volume && rp_render_scene_medium(rs, &mb)) {
+        const rp_volume_data *v = d.volume;
+        printf("volume      grid '%s': %llu active voxels in (%d, %d, %d) - (%d, %d, %d), %u of %u bricks of %d^3 "
+               "stored, max density %g\n",
+               v->grid_name, (unsigned long long)v->active_voxels, v->active_min[0], v->active_min[1], v->active_min[2],
+               v->active_max[0], v->active_max[1], v->active_max[2], v->brick_count, v->dims[0] * v->dims[1] * v->dims[2],
+               RP_VOLUME_BRICK, v->max_density);
+        printf("            world box (%g, %g, %g) - (%g, %g, %g)\n", mb.lower_x, mb.lower_y, mb.lower_z, mb.upper_x,
+               mb.upper_y, mb.upper_z);
+    }
     rp_camera cam = rp_render_scene_default_camera(rs);
     printf("camera      %s: eye (%g, %g, %g) look (%g, %g, %g) up (%g, %g, %g) fov %g", d.camera.valid ? "file" : "framed",
            cam.pinhole.eye[0], cam.pinhole.eye[1], cam.pinhole.eye[2], cam.pinhole.look[0], cam.pinhole.look[1],

@@ -62,6 +62,12 @@ static void render_usage(FILE *out) {
             "                         radius R at each point [half the spacing of neighbours]\n"
             "  --anim-refit           animated scenes: keyframed blocks' vertices moved and their\n"
             "                         sub-scenes refitted each frame instead of instance transforms\n"
+            "  --density-scale S      volumes (.vdb): extinction = S x density per world unit [1]\n"
+            "  --albedo A|R,G,B       volumes: single-scattering albedo, in [0, 1] [1]\n"
+            "  --hg-g G               volumes: Henyey-Greenstein asymmetry, in (-1, 1) [0, isotropic]\n"
+            "  --vdb-grid NAME        volumes: the float grid to read [density, else the first]\n"
+            "  --medium-box X0,Y0,Z0,X1,Y1,Z1  a homogeneous medium (density 1 x --density-scale)\n"
+            "                         filling that box, in any scene (fog in a room)\n"
             "  --env FILE.hdr         lat-long environment (+y up) for direct, path and ir\n"
             "  --env-scale R,G,B      multiplies --env; without --env, a constant environment\n"
             "  --exposure EV          PNG/PPM: multiply by 2^EV before the tone map [0]\n"
@@ -140,6 +146,10 @@ typedef struct render_options {
     bool has_anim_time, anim_flat, anim_refit;
     float anim_time;
     float point_radius;               /* 0: automatic */
+    rp_medium_desc medium;            /* --density-scale, --albedo, --hg-g (rp_medium_desc's zeros: defaults) */
+    const char *volume_grid;          /* --vdb-grid */
+    bool has_medium_box;              /* --medium-box */
+    float medium_box[6];
     uint32_t lights[CLI_MAX_LIGHTS];
     int light_count;                  /* -1: all lights */
 } render_options;
@@ -341,6 +351,51 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
         } else if (strcmp(a, "--point-radius") == 0) {
             VALUE();
             if (!cli_parse_float(CMD, a, v, 0.0, 1e30, true, &o->point_radius)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--density-scale") == 0) {
+            VALUE();
+            if (!cli_parse_float(CMD, a, v, 0.0, 1e6, true, &o->medium.density_scale)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--albedo") == 0) {
+            VALUE();
+            float al[3];
+            if (strchr(v, ',')) {
+                if (!cli_parse_vec3(CMD, a, v, al)) return CLI_EXIT_USAGE;
+            } else {
+                if (!cli_parse_float(CMD, a, v, 0.0, 1.0, false, &al[0])) return CLI_EXIT_USAGE;
+                al[1] = al[2] = al[0];
+            }
+            for (int k = 0; k < 3; k++) {
+                if (!(al[k] >= 0.0f && al[k] <= 1.0f)) {
+                    fprintf(stderr, "raypack render: --albedo expects values in [0, 1], got '%s'\n", v);
+                    return CLI_EXIT_USAGE;
+                }
+                o->medium.albedo[k] = al[k] == 0.0f ? -1.0f : al[k]; /* rp_medium_desc: negative is black */
+            }
+        } else if (strcmp(a, "--hg-g") == 0) {
+            VALUE();
+            if (!cli_parse_float(CMD, a, v, -0.99, 0.99, false, &o->medium.hg_g)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--medium-box") == 0) {
+            VALUE();
+            char lo[256], hi[256];
+            const char *c3 = v;
+            for (int k = 0; k < 3 && c3; k++) c3 = strchr(c3 + (k ? 1 : 0), ',');
+            if (!c3 || (size_t)(c3 - v) >= sizeof lo || strlen(c3 + 1) >= sizeof hi) {
+                fprintf(stderr, "raypack render: --medium-box expects X0,Y0,Z0,X1,Y1,Z1, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
+            memcpy(lo, v, (size_t)(c3 - v));
+            lo[c3 - v] = '\0';
+            strcpy(hi, c3 + 1);
+            if (!cli_parse_vec3(CMD, a, lo, o->medium_box) || !cli_parse_vec3(CMD, a, hi, o->medium_box + 3))
+                return CLI_EXIT_USAGE;
+            for (int k = 0; k < 3; k++)
+                if (!(o->medium_box[3 + k] > o->medium_box[k])) {
+                    fprintf(stderr, "raypack render: --medium-box: the second corner must be above the first on every axis, got '%s'\n", v);
+                    return CLI_EXIT_USAGE;
+                }
+            o->has_medium_box = true;
+        } else if (strcmp(a, "--vdb-grid") == 0) {
+            VALUE();
+            o->volume_grid = v;
         } else if (strcmp(a, "--lights") == 0) {
             VALUE();
             o->light_count = cli_parse_list(CMD, a, v, o->lights, CLI_MAX_LIGHTS);
@@ -628,12 +683,20 @@ int cli_render(int argc, char **argv) {
         /* stat, not open: opening a FIFO here would block, and the loader reads it once as a stream */
         if (!cli_scene_readable(CMD, o.scene)) return CLI_EXIT_FAILURE;
         char err[512] = "";
-        if (!rp_scene_data_load_ex(o.scene, &(rp_scene_load_desc){.threads = o.threads, .point_radius = o.point_radius}, &data, err, sizeof err)) {
+        if (!rp_scene_data_load_ex(o.scene, &(rp_scene_load_desc){.threads = o.threads, .point_radius = o.point_radius,
+                                                                  .volume_grid = o.volume_grid},
+                                   &data, err, sizeof err)) {
             fprintf(stderr, "%s\n", err[0] ? err : "raypack render: cannot load the scene");
             return CLI_EXIT_FAILURE;
         }
     }
     double load_ms = cli_now_ms() - t0;
+    if (o.has_medium_box && !rp_scene_data_add_medium_box(&data, o.medium_box, o.medium_box + 3)) {
+        fprintf(stderr, "raypack render: out of memory for --medium-box\n");
+        if (builtin) rp_default_scene_free(&data);
+        else rp_scene_data_free(&data);
+        return CLI_EXIT_FAILURE;
+    }
     {
         cli_render_setup anim = {.has_anim_time = o.has_anim_time, .anim_time = o.anim_time, .light_count = o.light_count};
         memcpy(anim.lights, o.lights, sizeof o.lights);
@@ -653,7 +716,7 @@ int cli_render(int argc, char **argv) {
     double t1 = cli_now_ms();
     char err[512] = "";
     rp_render_scene_desc sdesc = {.accel = {.accel = o.accel, .grid_density = o.grid_density}, .environment = o.env, .flatten_animation = o.anim_flat,
-                                  .refit_blocks = o.anim_refit};
+                                  .refit_blocks = o.anim_refit, .medium = o.medium};
     if (o.has_env_scale) memcpy(sdesc.environment_scale, o.env_scale, sizeof o.env_scale);
     scene = rp_render_scene_new(device, &data, &sdesc, err, sizeof err);
     if (!scene) {
@@ -711,7 +774,10 @@ int cli_render(int argc, char **argv) {
     if (sst.rejected_prims)
         fprintf(stderr, "raypack render: warning: %llu primitives with NaN/Inf coordinates (an overflowing "
                         "transform?) left out\n", (unsigned long long)sst.rejected_prims);
-    if (sst.triangles + sst.spheres + sst.user_prims == 0)
+    if (o.integrator == RP_INTEGRATOR_IR && !o.use_aov && data.volume)
+        fprintf(stderr, "raypack render: note: instant radiosity makes no VPLs in a medium: the volume is rendered "
+                        "with direct lighting (single scattering)\n");
+    if (sst.triangles + sst.spheres + sst.user_prims == 0 && !data.volume)
         fprintf(stderr, "raypack render: warning: the scene has nothing to hit; the image is its background\n");
 
     rp_render_desc desc = {
@@ -901,6 +967,9 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
     out->spp = o.spp;
     out->threads = o.threads;
     out->point_radius = o.point_radius;
+    out->volume_grid = o.volume_grid;
+    out->has_medium_box = o.has_medium_box;
+    memcpy(out->medium_box, o.medium_box, sizeof o.medium_box);
     out->isa = o.isa;
     /* as cli_render fills its rp_render_desc */
     out->desc = (rp_render_desc){
@@ -914,7 +983,8 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
         .ao_distance = o.ao_distance,
     };
     out->scene_desc = (rp_render_scene_desc){.accel = {.accel = o.accel, .grid_density = o.grid_density}, .environment = o.env,
-                                             .flatten_animation = o.anim_flat, .refit_blocks = o.anim_refit};
+                                             .flatten_animation = o.anim_flat, .refit_blocks = o.anim_refit,
+                                             .medium = o.medium};
     out->has_anim_time = o.has_anim_time;
     out->anim_time = o.anim_time;
     out->light_count = o.light_count;
@@ -937,10 +1007,18 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
     return CLI_EXIT_OK;
 }
 
+/* --medium-box on loaded data; false (with a message, data freed) when out of memory. */
+static bool add_medium_box(const char *cmd, const cli_render_setup *setup, rp_scene_data *data) {
+    if (!setup->has_medium_box || rp_scene_data_add_medium_box(data, setup->medium_box, setup->medium_box + 3)) return true;
+    fprintf(stderr, "raypack %s: out of memory for --medium-box\n", cmd);
+    cli_render_unload(setup, data);
+    return false;
+}
+
 bool cli_render_load(const char *cmd, const cli_render_setup *setup, rp_scene_data *data) {
     memset(data, 0, sizeof *data);
     if (!setup->scene) {
-        if (rp_default_scene(data)) return true;
+        if (rp_default_scene(data)) return add_medium_box(cmd, setup, data);
         fprintf(stderr, "raypack %s: out of memory building the default scene\n", cmd);
         return false;
     }
@@ -951,9 +1029,10 @@ bool cli_render_load(const char *cmd, const cli_render_setup *setup, rp_scene_da
     }
     fclose(probe);
     char err[512] = "";
-    if (rp_scene_data_load_ex(setup->scene, &(rp_scene_load_desc){.threads = setup->threads, .point_radius = setup->point_radius},
+    if (rp_scene_data_load_ex(setup->scene, &(rp_scene_load_desc){.threads = setup->threads, .point_radius = setup->point_radius,
+                                                                  .volume_grid = setup->volume_grid},
                               data, err, sizeof err))
-        return true;
+        return add_medium_box(cmd, setup, data);
     fprintf(stderr, "%s\n", err[0] ? err : "raypack: cannot load the scene");
     return false;
 }

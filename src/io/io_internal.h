@@ -128,6 +128,8 @@ typedef struct io_ctx {
     size_t stream_block; /* text per block; 0: IO_STREAM_BLOCK */
     size_t blocks;       /* blocks a streamed load parsed (for the tests) */
     rp_animation_data *anim; /* what the AFF loader parsed of an animation, finished by anim_finish */
+    rp_volume_data *volume;  /* what vdb_load read, handed to rp_scene_data.volume */
+    const char *volume_grid; /* rp_scene_load_desc.volume_grid */
 } io_ctx;
 
 /* Records the first error as "file:line: error: message"; always returns false. */
@@ -259,6 +261,7 @@ typedef struct io_load_opts {
     int stream;           /* io_ctx.stream: 0 chosen per file, 1 stream every gzip'd NFF and OBJ on disk, -1 never */
     size_t stream_block;  /* io_ctx.stream_block (the tests: a few bytes, so blocks cut every line) */
     size_t *blocks;       /* when not NULL: set to the number of blocks a streamed load parsed */
+    const char *volume_grid; /* rp_scene_load_desc.volume_grid */
 } io_load_opts;
 /* A scene of vertices alone (a point cloud) gets a sphere of that radius (0: automatic) at each
  * finite vertex (io_points.c); false when out of memory. */
@@ -308,6 +311,8 @@ bool ply_load(io_ctx *ctx, const char *path);
 bool nff_load(io_ctx *ctx, const char *path);
 /* glTF and the other formats of assimp (io_assimp.c); assimp_can_load takes an extension ("glb"). */
 bool assimp_load(io_ctx *ctx, const char *path);
+/* An OpenVDB file's density grid into ctx->volume (io_volume.c); errors name `shown`. */
+bool vdb_load(io_ctx *ctx, const char *path, const char *shown);
 bool assimp_can_load(const char *ext);
 
 /* ---- numbers ---------------------------------------------------------------------------------- */

@@ -6,6 +6,7 @@
 #include <time.h>
 
 #include "io/io_internal.h"
+#include "io/io_volume.h"
 
 bool io_error(io_ctx *ctx, const char *file, uint32_t line, const char *fmt, ...) {
     if (ctx->failed) return false; /* the first error is the one that explains the others */
@@ -342,8 +343,9 @@ static bool load_scene_file(io_ctx *ctx, const char *path, const char *shown) {
     if (strcmp(ext, "obj") == 0) return obj_load(ctx, path);
     if (strcmp(ext, "ply") == 0) return ply_load(ctx, path);
     if (strcmp(ext, "nff") == 0 || strcmp(ext, "aff") == 0) return nff_load(ctx, path);
+    if (strcmp(ext, "vdb") == 0) return vdb_load(ctx, path, shown);
     if (assimp_can_load(ext)) return assimp_load(ctx, path);
-    return io_error(ctx, shown, 0, "unknown scene format '.%s' (expected .obj, .ply, .nff, .aff, .tar, .gltf, .glb or another format assimp reads)", ext);
+    return io_error(ctx, shown, 0, "unknown scene format '.%s' (expected .obj, .ply, .nff, .aff, .tar, .vdb, .gltf, .glb or another format assimp reads)", ext);
 }
 
 static void move_out(io_builder *b, rp_scene_data *out) {
@@ -399,6 +401,7 @@ static void ctx_init(io_ctx *ctx, const io_load_opts *opts, char *err, size_t er
     ctx->chunk_bytes = opts ? opts->chunk_bytes : 0;
     ctx->stream = opts ? opts->stream : 0;
     ctx->stream_block = opts ? opts->stream_block : 0;
+    ctx->volume_grid = opts ? opts->volume_grid : NULL;
     ctx->limits.max_includes = env_limit("RP_MAX_INCLUDES", IO_DEFAULT_MAX_INCLUDES);
     ctx->limits.max_include_bytes = env_limit("RP_MAX_INCLUDE_BYTES", IO_DEFAULT_MAX_INCLUDE_BYTES);
     ctx->limits.max_file_bytes = env_limit("RP_MAX_FILE_BYTES", IO_DEFAULT_MAX_FILE_BYTES);
@@ -428,9 +431,13 @@ static bool ctx_finish(io_ctx *ctx, bool ok, const char *path, rp_scene_data *ou
         builder_free(&ctx->b);
         anim_free(ctx->anim);
         ctx->anim = NULL;
+        io_volume_free(ctx->volume);
+        ctx->volume = NULL;
         return false;
     }
     move_out(&ctx->b, out);
+    out->volume = ctx->volume;
+    ctx->volume = NULL;
     if (!anim_finish(ctx, out)) {
         rp_scene_data_free(out);
         return io_error(ctx, path, 0, "out of memory");
@@ -481,7 +488,8 @@ bool io_load_file_opts(const char *path, const io_load_opts *opts, rp_scene_data
 
 bool rp_scene_data_load_ex(const char *path, const rp_scene_load_desc *desc, rp_scene_data *out, char *err,
                            size_t err_size) {
-    io_load_opts opts = {.threads = desc ? desc->threads : 0, .point_radius = desc ? desc->point_radius : 0.0f};
+    io_load_opts opts = {.threads = desc ? desc->threads : 0, .point_radius = desc ? desc->point_radius : 0.0f,
+                         .volume_grid = desc ? desc->volume_grid : NULL};
     return io_load_file_opts(path, &opts, out, err, err_size);
 }
 
@@ -532,5 +540,6 @@ void rp_scene_data_free(rp_scene_data *scene) {
     free(scene->textures);
     free(scene->lights);
     anim_free(scene->animation);
+    io_volume_free(scene->volume);
     memset(scene, 0, sizeof *scene);
 }

@@ -201,5 +201,11 @@ void rp_default_scene_free(rp_scene_data *scene) {
     for (size_t i = 0; scene->textures && i < scene->texture_count; i++) free(scene->textures[i].rgb);
     free(scene->textures);
     free(scene->lights);
+    if (scene->volume) { /* a medium given to the room (raypack render --medium-box) */
+        free(scene->volume->brick_slot);
+        free(scene->volume->density);
+        free(scene->volume->brick_max);
+        free(scene->volume);
+    }
     memset(scene, 0, sizeof *scene);
 }

@@ -116,6 +116,7 @@ struct rp_render_scene {
     bool anim_still_ok;
     uint32_t *anim_moving;         /* ... and the vertices that move */
     size_t anim_moving_n;
+    struct render_medium *medium;  /* the participating medium (medium.h), NULL: none */
 };
 
 /* Result of turning a hit into a shading point. */
@@ -484,5 +485,10 @@ v3 eyelight_shade(const rp_rayhit *rh);
 bool eyelight_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
                     int s);
 v3 aov_shade(const render_frame *f, const rp_ray *ray, const rp_hit *hit);
+/* The default max_depth of scenes with a participating medium. */
+#define RENDER_MEDIUM_DEPTH 64
+/* Eye light and Whitted with a participating medium: its opacity along the primary ray (up to its
+ * hit) over the colour seen behind it (integrator/volume.c). */
+v3 volume_composite(const render_frame *f, const rp_ray *ray, v3 behind);
 
 #endif

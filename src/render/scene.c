@@ -1,4 +1,5 @@
 /* Render scene: core geometries from the loaders' flat data, materials, lights, shading points. */
+#include "medium.h"
 #include "render.h"
 
 #include <stdio.h>
@@ -10,6 +11,9 @@ rp_render_scene_desc rp_render_scene_desc_defaults(const rp_render_scene_desc *d
     memset(&d, 0, sizeof d);
     if (desc) d = *desc;
     d.accel = rp_scene_desc_defaults(&d.accel);
+    if (d.medium.density_scale == 0.0f) d.medium.density_scale = 1.0f;
+    if (d.medium.albedo[0] == 0.0f && d.medium.albedo[1] == 0.0f && d.medium.albedo[2] == 0.0f)
+        d.medium.albedo[0] = d.medium.albedo[1] = d.medium.albedo[2] = 1.0f;
     return d;
 }
 
@@ -26,6 +30,8 @@ static void scene_free(rp_render_scene *s) {
     free(s->lights);
     free(s->cones);
     light_scene_free(s);
+    medium_free(s->medium);
+    free(s->medium);
     free(s);
 }
 
@@ -136,6 +142,20 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
         return fail(s, err, err_size, msg);
     }
     rp_scene_get_bounds(s->scene, &s->bounds);
+    if (data->volume) {
+        s->medium = malloc(sizeof *s->medium);
+        if (!s->medium || !medium_init(s->medium, data->volume, &dd.medium)) return fail(s, err, err_size, "out of memory");
+        /* the scene's box holds the medium's: framing, ray offsets and the environment's power */
+        const rp_bounds *mb = &s->medium->bounds;
+        rp_bounds *sb = &s->bounds;
+        bool none = !(sb->lower_x <= sb->upper_x && sb->lower_y <= sb->upper_y && sb->lower_z <= sb->upper_z);
+        sb->lower_x = none ? mb->lower_x : fminf(sb->lower_x, mb->lower_x);
+        sb->lower_y = none ? mb->lower_y : fminf(sb->lower_y, mb->lower_y);
+        sb->lower_z = none ? mb->lower_z : fminf(sb->lower_z, mb->lower_z);
+        sb->upper_x = none ? mb->upper_x : fmaxf(sb->upper_x, mb->upper_x);
+        sb->upper_y = none ? mb->upper_y : fmaxf(sb->upper_y, mb->upper_y);
+        sb->upper_z = none ? mb->upper_z : fmaxf(sb->upper_z, mb->upper_z);
+    }
     /* Offsets of secondary rays scale with the largest coordinate: float spacing grows with it. */
     const rp_bounds *b = &s->bounds;
     const float bv[6] = {b->lower_x, b->lower_y, b->lower_z, b->upper_x, b->upper_y, b->upper_z};
@@ -154,6 +174,12 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
 }
 
 void rp_render_scene_release(rp_render_scene *scene) { scene_free(scene); }
+
+bool rp_render_scene_medium(const rp_render_scene *scene, rp_bounds *bounds) {
+    if (!scene || !scene->medium) return false;
+    if (bounds) *bounds = scene->medium->bounds;
+    return true;
+}
 
 rp_scene *rp_render_scene_core(rp_render_scene *scene) { return scene ? scene->scene : NULL; }
 

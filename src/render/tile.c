@@ -106,6 +106,7 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
             v3 c = d->integrator == RP_INTEGRATOR_EYELIGHT ? eyelight_shade(&th->rayhits[i])
                    : d->integrator == RP_INTEGRATOR_AOV    ? aov_shade(f, &th->rayhits[i].ray, &th->rayhits[i].hit)
                                                            : whitted_shade(f, th, &th->rayhits[i].ray, &th->rayhits[i].hit, 0, 1.0f);
+            if (f->s->medium && d->integrator != RP_INTEGRATOR_AOV) c = volume_composite(f, &th->rayhits[i].ray, c);
             th->accum[3 * i + 0] += c.x;
             th->accum[3 * i + 1] += c.y;
             th->accum[3 * i + 2] += c.z;
@@ -150,9 +151,14 @@ static void choose_traversal(const rp_render_desc *d, rp_traversal out[RP_RAY_KI
  * bounce, ambient occlusion's distance. */
 rp_render_desc render_desc_resolve(const rp_render_scene *scene, const rp_render_desc *desc) {
     rp_render_desc dd = rp_render_desc_defaults(desc);
+    /* light in a dense medium scatters many times: its default depth is deeper (Russian roulette
+     * ends most paths long before) */
+    if (scene->medium && (!desc || desc->max_depth == 0)) dd.max_depth = RENDER_MEDIUM_DEPTH;
     bool pbr = dd.integrator == RP_INTEGRATOR_DIRECT || dd.integrator == RP_INTEGRATOR_PATH ||
                dd.integrator == RP_INTEGRATOR_IR || dd.integrator == RP_INTEGRATOR_AO;
     if (pbr && dd.packet < 0) dd.packet = 16; /* the physically based integrators always trace packets */
+    /* instant radiosity makes no VPLs in a medium: direct lighting renders it (integrator/volume.c) */
+    if (scene->medium && dd.integrator == RP_INTEGRATOR_IR) dd.integrator = RP_INTEGRATOR_DIRECT;
     if (dd.integrator == RP_INTEGRATOR_DIRECT) dd.max_depth = 1;
     /* Whitted's depths per ray kind: given ones replace max_depth for their kind, which then covers
      * both; resolved to a positive depth or -1 (none) */
@@ -202,7 +208,9 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     rp_render_desc dd = render_desc_resolve(scene, desc);
     bool pbr = dd.integrator == RP_INTEGRATOR_DIRECT || dd.integrator == RP_INTEGRATOR_PATH ||
                dd.integrator == RP_INTEGRATOR_IR || dd.integrator == RP_INTEGRATOR_AO;
-    bool packets = (dd.integrator == RP_INTEGRATOR_WHITTED || dd.integrator == RP_INTEGRATOR_EYELIGHT) && dd.packet > 0;
+    /* with a medium, eye light and Whitted go ray by ray, each composited with the medium's opacity */
+    bool packets = (dd.integrator == RP_INTEGRATOR_WHITTED || dd.integrator == RP_INTEGRATOR_EYELIGHT) && dd.packet > 0 &&
+                   !scene->medium;
     if ((packets || pbr) && dd.packet != 4 && dd.packet != 8 && dd.packet != 16 && dd.packet != 32) return false;
     switch (dd.traversal) {
     case RP_TRAVERSAL_AUTO:

@@ -18,13 +18,6 @@ void path_add_px(render_thread *th, uint32_t pixel, v3 c) {
     th->accum[3 * pixel + 2] += c.z;
 }
 
-static void rayhit_reset(rp_rayhit *rh, v3 org, v3 dir) {
-    render_ray_init(&rh->ray, org, dir, INFINITY);
-    rh->hit.geom_id = RP_INVALID_ID;
-    rh->hit.prim_id = RP_INVALID_ID;
-    rh->hit.inst_id = RP_INVALID_ID;
-}
-
 /* Shades one path vertex: adds emission and a light sample's contribution (queued as a shadow ray),
  * and samples the bounce into *next. Returns false when the path ends. */
 bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, const rp_rayhit *rh, rp_rayhit *next,
@@ -34,6 +27,16 @@ bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, const r
     bool ao = f->desc.integrator == RP_INTEGRATOR_AO;
     v3 dir = v3_make(rh->ray.dir_x, rh->ray.dir_y, rh->ray.dir_z);
     uint32_t base = 2u + (uint32_t)st->depth * 8u;
+    if (s->medium) {
+        if (!ao) {
+            int r = volume_path_vertex(f, th, st, rh, next, nshadow);
+            if (r >= 0) return r > 0;
+        } else if (st->depth == 0) { /* the medium's opacity, then what shows through it */
+            float a = volume_primary_opacity(f, &rh->ray);
+            path_add_px(th, st->pixel, v3_scale(st->beta, a));
+            st->beta = v3_scale(st->beta, 1.0f - a);
+        }
+    }
     if (rh->hit.geom_id == RP_INVALID_ID) {
         if (ao || s->env_light < 0) return false;
         v3 le = light_env_radiance(s, dir);
@@ -52,7 +55,7 @@ bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, const r
         if (v3_dot(wi, sf.ng) <= 0.0f) return false;
         uint32_t k = (*nshadow)++;
         render_ray_init(&pt->shadow[k], v3_madd(sf.p, sf.ng, eps), wi, f->desc.ao_distance);
-        pt->shadow_L[k] = v3_make(1, 1, 1);
+        pt->shadow_L[k] = st->beta; /* 1, less a medium's opacity in front */
         pt->shadow_pixel[k] = st->pixel;
         return false;
     }
@@ -94,9 +97,10 @@ bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, const r
                 float pl = pmf * ls.pdf;
                 float w = ls.delta ? 1.0f : pbr_mis(pl, bsdf_pdf(&bsdf, wo, wl));
                 v3 c = v3_scale(v3_mul(v3_mul(st->beta, fv), ls.L), w / pl);
+                float tfar = isfinite(ls.dist) ? ls.dist * (1.0f - 1e-4f) - eps : INFINITY;
+                if (s->medium && max3(c) > 0.0f) c = v3_scale(c, volume_shadow_transmittance(f, st, from, ls.wi, tfar));
                 if (max3(c) > 0.0f) {
                     uint32_t k = (*nshadow)++;
-                    float tfar = isfinite(ls.dist) ? ls.dist * (1.0f - 1e-4f) - eps : INFINITY;
                     render_ray_init(&pt->shadow[k], from, ls.wi, tfar);
                     pt->shadow_L[k] = c;
                     pt->shadow_pixel[k] = st->pixel;
@@ -121,7 +125,7 @@ bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, const r
         if (!(sampler_at(&st->rng, base + 6) < q)) return false;
         st->beta = v3_scale(st->beta, 1.0f / q);
     }
-    rayhit_reset(next, transmit ? v3_madd(sf.p, sf.ng, -eps) : above, wi);
+    pbr_rayhit_reset(next, transmit ? v3_madd(sf.p, sf.ng, -eps) : above, wi);
     return true;
 }
 

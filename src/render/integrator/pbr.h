@@ -77,6 +77,23 @@ bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, const r
 void path_add_px(render_thread *th, uint32_t pixel, v3 c);
 /* path.c: path tracing, direct lighting and ambient occlusion of one tile (sums into th->accum). */
 bool path_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1);
+/* A ray from org along dir with no hit yet (tnear 0, tfar inf). */
+static inline void pbr_rayhit_reset(rp_rayhit *rh, v3 org, v3 dir) {
+    render_ray_init(&rh->ray, org, dir, INFINITY);
+    rh->hit.geom_id = RP_INVALID_ID;
+    rh->hit.prim_id = RP_INVALID_ID;
+    rh->hit.inst_id = RP_INVALID_ID;
+}
+/* volume.c, with a participating medium: delta tracking along rh's ray up to its hit; at a real
+ * collision the medium vertex (albedo, NEE with ratio tracking, phase sampling into *next, Russian
+ * roulette). Returns -1 when the ray got through (shade its hit as usual), 0 when the path ends,
+ * 1 when *next holds the bounce. */
+int volume_path_vertex(const render_frame *f, render_thread *th, pbr_path *st, const rp_rayhit *rh, rp_rayhit *next,
+                       uint32_t *nshadow);
+/* Ratio-tracking transmittance of a surface vertex's shadow ray. */
+float volume_shadow_transmittance(const render_frame *f, const pbr_path *st, v3 org, v3 dir, float tfar);
+/* The medium's opacity 1 - T along a primary ray up to its hit (ray marching, deterministic). */
+float volume_primary_opacity(const render_frame *f, const rp_ray *ray);
 /* instant_radiosity.c */
 bool ir_frame_init(render_frame *f);
 bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1);

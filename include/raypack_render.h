@@ -222,8 +222,10 @@ typedef enum rp_integrator_type {
 } rp_integrator_type;
 
 /* Instant radiosity (Keller 1997; Wald et al. 2002, interleaved sampling and the discontinuity
- * buffer). Every sample of a frame traces fresh VPLs: interleave^2 sets of vpls each; pixel (x, y)
- * sees set (x mod N) + N (y mod N). */
+ * buffer). Every sample of a frame traces fresh VPLs: interleave^2 sets of vpls each; every N x N
+ * block of pixels sees each set once, pixel (x, y) set (x mod N) + N (y mod N) when the filter is N
+ * wide or more, else in an order hashed from the block and the sample (so the error is noise, not
+ * a pattern of period N). */
 typedef struct rp_ir_desc {
     int interleave;   /* N of N x N interleaved sampling; 0: 5 */
     int vpls;         /* VPLs per set (= per pixel and sample); 0: 16 */

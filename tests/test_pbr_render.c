@@ -51,6 +51,38 @@ static void make_sphere(rp_scene_data *d, float r, int nt, int np, bool inward) 
     d->materials[0].illum = -1;
 }
 
+static int cmp_double(const void *a, const void *b) {
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* How periodic the noise of two samples' images a and b is, period n: in windows of 4n x 4n
+ * pixels, the variance of the n x n classes' means ((x mod n, y mod n)) of the difference a - b
+ * (luminance; the picture cancels, the noise of both stays) over the variance that the window's
+ * own pixel variance would give them (the F statistic), averaged over the windows that have noise.
+ * About 1 for noise; a pattern that repeats every n pixels (over a window at least, its phase and
+ * amplitude may wander over the image) makes it large. */
+static double periodicity(const float *a, const float *b, int w, int h, int n) {
+    int side = 4 * n, windows = 0;
+    double sum = 0.0;
+    for (int wy = 0; wy + side <= h; wy += side)
+        for (int wx = 0; wx + side <= w; wx += side) {
+            double cls[256] = {0}, all = 0.0, all2 = 0.0;
+            for (int y = wy; y < wy + side; y++)
+                for (int x = wx; x < wx + side; x++) {
+                    size_t i = ((size_t)y * (size_t)w + (size_t)x) * 3;
+                    double l = 0.2126 * (a[i] - b[i]) + 0.7152 * (a[i + 1] - b[i + 1]) + 0.0722 * (a[i + 2] - b[i + 2]);
+                    cls[(x % n) + n * (y % n)] += l / 16.0, all += l, all2 += l * l;
+                }
+            double N = (double)side * side, m = all / N, var = all2 / N - m * m, vm = 0.0;
+            if (!(var > 1e-12)) continue;
+            for (int c = 0; c < n * n; c++) vm += (cls[c] - m) * (cls[c] - m);
+            sum += vm / (n * n) / (var / 16.0);
+            windows++;
+        }
+    return windows ? sum / windows : 0.0;
+}
+
 static double mean_of(const float *px, int n, int channels) {
     double s = 0.0;
     for (int i = 0; i < n * channels; i++) s += px[i];
@@ -347,6 +379,23 @@ int main(void) {
             }
             rp_render_scene_release(is);
         }
+        /* Interleaved sampling under a narrower filter (5 x 5 sets, 3 x 3 window, the defaults) orders
+         * each block's sets at random. With (x mod 5, y mod 5) in every block a grid of dots showed in
+         * one sample's image, and the statistic was 3.4 (period 7: 1.0); shuffled 0.8 (each block
+         * still holds every set once, so the classes are more alike than noise would make them). */
+        {
+            rp_render_scene *is = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
+            rp_render_desc rd = {.width = 160, .height = 160, .spp = 1, .integrator = RP_INTEGRATOR_IR};
+            float *a = is ? render(is, &rd) : NULL;
+            rd.sample_start = 1;
+            float *b = is ? render(is, &rd) : NULL;
+            double per = a && b ? periodicity(a, b, 160, 160, 5) : 1e9, per7 = a && b ? periodicity(a, b, 160, 160, 7) : 1e9;
+            printf("instant radiosity, 5x5 sets, 3x3 filter: period-5 statistic %.2f (period 7: %.2f)\n", per, per7);
+            CHECKF(a && b && per < 2.0, "instant radiosity: the image repeats every 5 pixels (statistic %.2f)", per);
+            free(a);
+            free(b);
+            rp_render_scene_release(is);
+        }
         float *img[1] = {ref[0]};
         free(ref[1]);
         /* Eye light through n x n packets gives the array tracer's image (1 and 3 samples). */
@@ -394,6 +443,7 @@ int main(void) {
             float *pt = render(s, &pd), *ir = render(s, &id), *ir4 = render(s, &id4);
             CHECK(pt && ir && ir4);
             if (pt && ir && ir4) {
+                double errs[64];
                 double mp = mean_of(pt, w * hh, 3), mi = mean_of(ir, w * hh, 3), m4 = mean_of(ir4, w * hh, 3), worst = 0.0;
                 for (int by = 0; by < hh; by += 8)
                     for (int bx = 0; bx < w; bx += 8) {
@@ -406,21 +456,29 @@ int main(void) {
                                 }
                         if (!(sp > 0.05 * 64 * 3 * mp)) continue; /* the black outside the box */
                         double e = fabs(si / sp - 1.0);
+                        errs[nb] = e;
                         worst = fmax(worst, e);
                         nb++;
                         far += e > 0.03;
                     }
-                printf("cornell_original: path mean %.4f, instant radiosity mean %.4f (4 VPLs a set: %.4f), "
-                       "worst of %d 8x8 blocks %.3f, %d blocks off by more than 3%%\n", mp, mi, m4, nb, worst, far);
-                /* Stated error, from the noise left at these sample counts (measured: means within
-                 * 0.5%, worst block 5.5%, 3 of 36 blocks beyond 3%; unclamped VPLs beside a concave
-                 * corner have a large variance). Before IR spread its primary rays, its mean was 14%
-                 * below (pixel centres miss the light's edges); filling sets to the brim lost 6% of the
-                 * indirect light at 4 VPLs a set. */
-                CHECKF(fabs(mi / mp - 1.0) < 0.02, "IR mean %.4f vs path %.4f: more than 2%% apart", mi, mp);
-                CHECKF(fabs(m4 / mi - 1.0) < 0.03, "IR mean with 4 VPLs a set %.4f vs 256: %.4f", m4, mi);
-                CHECKF(nb >= 30 && worst < 0.08, "an 8x8 block of IR is %.1f%% off the path traced one", 100 * worst);
-                CHECKF(far <= nb / 6, "%d of %d 8x8 blocks of IR are more than 3%% off", far, nb);
+                qsort(errs, (size_t)nb, sizeof errs[0], cmp_double);
+                double med = errs[nb / 2], p90 = errs[nb * 9 / 10];
+                printf("cornell_original: path mean %.4f, instant radiosity mean %.4f (4 VPLs a set: %.4f); 8x8 "
+                       "blocks' errors: median %.3f, 90th percentile %.3f, worst %.3f of %d, %d beyond 3%%\n",
+                       mp, mi, m4, med, p90, worst, nb, far);
+                /* Stated error, from the noise left at these sample counts. Unclamped VPLs have a
+                 * heavy tail (a VPL beside a concave corner lights a few pixels of its set very
+                 * brightly), so the worst block is not a statistic to bound: over 12 runs of other
+                 * samples (sample_start 0, 1000, ..) the worst block was 5-26% off while the median
+                 * block was 0.6-1.3% and the 90th percentile 2.4-3.9% off, and the means 1.2% below to
+                 * 2.4% above the path tracer's. A bias of a few percent over the image or over a
+                 * tenth of it (the corners, say) still fails. Before IR spread its primary rays, its
+                 * mean was 14% below (pixel centres miss the light's edges); filling sets to the brim
+                 * lost 6% of the indirect light at 4 VPLs a set. */
+                CHECKF(fabs(mi / mp - 1.0) < 0.035, "IR mean %.4f vs path %.4f: more than 3.5%% apart", mi, mp);
+                CHECKF(fabs(m4 / mi - 1.0) < 0.035, "IR mean with 4 VPLs a set %.4f vs 256: %.4f", m4, mi);
+                CHECKF(nb >= 30 && med < 0.025, "the median 8x8 block of IR is %.1f%% off the path traced one", 100 * med);
+                CHECKF(p90 < 0.06, "a tenth of the 8x8 blocks of IR are %.1f%% or more off the path traced one", 100 * p90);
             }
             free(pt);
             free(ir);

@@ -248,6 +248,11 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
         f->ry0 = f->ry0 - r > 0 ? f->ry0 - r : 0;
         f->rx1 = f->rx1 + r < dd.width ? f->rx1 + r : dd.width;
         f->ry1 = f->ry1 + r < dd.height ? f->ry1 + r : dd.height;
+        /* Tiles start on the interleaving's N x N blocks, whose pixels see the N^2 sets in an order
+         * of the block's own (ir_tile), so a region starts on a block too. */
+        int n = dd.ir.interleave > 0 ? dd.ir.interleave : 5;
+        f->rx0 -= f->rx0 % n;
+        f->ry0 -= f->ry0 % n;
     }
     f->s = scene;
     f->desc = dd;

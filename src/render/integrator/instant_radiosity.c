@@ -1,7 +1,8 @@
 /* Instant radiosity (Keller 1997) with interleaved sampling and the discontinuity buffer (Wald,
  * Kollig, Benthin, Keller, Slusallek 2002; the survey's sec. 4.4). Every sample of a frame traces
- * fresh light paths: N x N sets of VPLs, each from its own light paths. Pixel (x, y) gathers set
- * (x mod N) + N (y mod N); a tile of (N n) x (N n) pixels thus holds n x n pixels of each set, and
+ * fresh light paths: N x N sets of VPLs, each from its own light paths. Every N x N block of pixels
+ * gathers each set once (pixel (x, y) set (x mod N) + N (y mod N), or a shuffle of it, ir_tile); a
+ * tile of (N n) x (N n) pixels thus holds n x n pixels of each set, and
  * the shadow rays from those pixels to one VPL all meet at the VPL: they are traced as one coherent
  * n x n packet with a point frustum (rp_occluded_n), the point of interleaving for a packet tracer.
  *
@@ -357,78 +358,99 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                     pf->valid[gi] = pt_->valid ? 1 : 0;
                 }
         }
+    /* Which pixel of each N x N block sees which set: (x mod N, y mod N) when the filter's window
+     * spans a block, as in Wald et al. 2002. A narrower window (the 3x3 default under 5x5 sets)
+     * would average the same sets at the same place of every block, so each set's error would
+     * repeat with period N and show as a grid of dots; then every block of every sample orders
+     * its sets at random (a shuffle hashed from the block and the sample), and the error is noise.
+     * Blocks are the image's (tiles and regions start on them, tile.c), so the order does not
+     * depend on the tiling. at[set]: the pixel in the tile, one per block, a packet lane each. */
+    int rad = ir_filter_radius(&f->desc), NN = N * N;
+    bool shuffle = N > 1 && 2 * rad + 1 < N;
+    for (int b = 0; b < P; b++)
+        for (int a = 0; a < P; a++) {
+            uint16_t *at = pt->ir_at + (size_t)(b * P + a) * (size_t)NN;
+            for (int k = 0; k < NN; k++) at[k] = (uint16_t)((N * b + k / N) * T + N * a + k % N);
+            if (!shuffle) continue;
+            uint32_t h = render_hash((uint32_t)(x0 / N + a) ^
+                                     render_hash((uint32_t)(y0 / N + b) ^ render_hash(sample ^ 0x5bd1e995u)));
+            for (int k = NN - 1; k > 0; k--) {
+                h = render_hash(h + (uint32_t)k);
+                int j = (int)(((uint64_t)h * (uint64_t)(k + 1)) >> 32);
+                uint16_t t = at[k];
+                at[k] = at[j], at[j] = t;
+            }
+        }
     /* Each set's pixels of the tile against each of its VPLs: one P x P shadow packet per VPL. */
     ir_lanes lanes;
     RP_ALIGN(64) float cr[64], cg[64], cb[64];
-    for (int ky = 0; ky < N; ky++)
-        for (int kx = 0; kx < N; kx++) {
-            int set = ((x0 + kx) % N) + N * ((y0 + ky) % N);
-            const ir_vpl *vs = pf->vpls + ((size_t)f->pass * (size_t)pf->sets + (size_t)set) * (size_t)pf->per_set;
-            /* The set's points in lane order: origins into the packet once, the rest for lanes_to_vpl. */
-            uint32_t Q = (uint32_t)(P * P);
-            ir_lanes *L = &lanes;
-            rp_rayhit_n *vp = &pt->vpl_packet;
+    for (int set = 0; set < NN; set++) {
+        const ir_vpl *vs = pf->vpls + ((size_t)f->pass * (size_t)pf->sets + (size_t)set) * (size_t)pf->per_set;
+        /* The set's points in lane order: origins into the packet once, the rest for lanes_to_vpl. */
+        uint32_t Q = (uint32_t)(P * P);
+        ir_lanes *L = &lanes;
+        rp_rayhit_n *vp = &pt->vpl_packet;
+        for (int b = 0; b < P; b++)
+            for (int a = 0; a < P; a++) {
+                uint32_t q = lane[b * P + a];
+                int li = pt->ir_at[(size_t)(b * P + a) * (size_t)NN + (size_t)set], lx = li % T, ly = li / T;
+                const ir_point *x = &pt->points[li];
+                bool ok = lx < tw && y0 + ly < y1 && x->valid;
+                v3 o = ok ? x->org : v3_make(0, 0, 0), ns = ok ? x->ns : v3_make(0, 0, 1), ng = ok ? x->ng : ns;
+                v3 lam = ok ? x->lambert : v3_make(0, 0, 0);
+                L->ox[q] = o.x, L->oy[q] = o.y, L->oz[q] = o.z;
+                L->nsx[q] = ns.x, L->nsy[q] = ns.y, L->nsz[q] = ns.z;
+                L->ngx[q] = ng.x, L->ngy[q] = ng.y, L->ngz[q] = ng.z;
+                L->lr[q] = lam.x, L->lg[q] = lam.y, L->lb[q] = lam.z;
+                L->lambert[q] = ok && x->is_lambert ? -1 : 0;
+                packet_set_ray(vp, q, o, v3_make(0, 0, 1), 0.0f);
+            }
+        for (int v = 0; v < pf->per_set; v++) {
+            if (v3_is_zero(vs[v].power)) continue;
+            uint64_t live = 0;
+            if (!vs[v].infinite)
+                lanes_to_vpl(Q, L, &vs[v], pf->clamp_d2, vp, cr, cg, cb, pt->vpl_valid);
             for (int b = 0; b < P; b++)
                 for (int a = 0; a < P; a++) {
                     uint32_t q = lane[b * P + a];
-                    int lx = kx + N * a, ly = ky + N * b;
-                    const ir_point *x = &pt->points[ly * T + lx];
-                    bool ok = lx < tw && y0 + ly < y1 && x->valid;
-                    v3 o = ok ? x->org : v3_make(0, 0, 0), ns = ok ? x->ns : v3_make(0, 0, 1), ng = ok ? x->ng : ns;
-                    v3 lam = ok ? x->lambert : v3_make(0, 0, 0);
-                    L->ox[q] = o.x, L->oy[q] = o.y, L->oz[q] = o.z;
-                    L->nsx[q] = ns.x, L->nsy[q] = ns.y, L->nsz[q] = ns.z;
-                    L->ngx[q] = ng.x, L->ngy[q] = ng.y, L->ngz[q] = ng.z;
-                    L->lr[q] = lam.x, L->lg[q] = lam.y, L->lb[q] = lam.z;
-                    L->lambert[q] = ok && x->is_lambert ? -1 : 0;
-                    packet_set_ray(vp, q, o, v3_make(0, 0, 1), 0.0f);
+                    if (!vs[v].infinite && L->lambert[q]) {
+                        pt->vpl_contrib[q] = v3_make(cr[q], cg[q], cb[q]);
+                        live += pt->vpl_valid[q] != 0;
+                        continue;
+                    }
+                    /* other BSDFs and infinite VPLs: one lane at a time */
+                    int li = pt->ir_at[(size_t)(b * P + a) * (size_t)NN + (size_t)set], lx = li % T, ly = li / T;
+                    pt->vpl_valid[q] = 0;
+                    const ir_point *x = &pt->points[li];
+                    if (lx >= tw || y0 + ly >= y1 || !x->valid) continue;
+                    v3 wi;
+                    float tfar;
+                    if (!vpl_contrib(pf, x, &vs[v], &wi, &tfar, &pt->vpl_contrib[q])) continue;
+                    packet_set_ray(vp, q, x->org, wi, tfar);
+                    pt->vpl_valid[q] = -1;
+                    live++;
                 }
-            for (int v = 0; v < pf->per_set; v++) {
-                if (v3_is_zero(vs[v].power)) continue;
-                uint64_t live = 0;
-                if (!vs[v].infinite)
-                    lanes_to_vpl(Q, L, &vs[v], pf->clamp_d2, vp, cr, cg, cb, pt->vpl_valid);
-                for (int b = 0; b < P; b++)
-                    for (int a = 0; a < P; a++) {
-                        uint32_t q = lane[b * P + a];
-                        if (!vs[v].infinite && L->lambert[q]) {
-                            pt->vpl_contrib[q] = v3_make(cr[q], cg[q], cb[q]);
-                            live += pt->vpl_valid[q] != 0;
-                            continue;
-                        }
-                        /* other BSDFs and infinite VPLs: one lane at a time */
-                        int lx = kx + N * a, ly = ky + N * b;
-                        pt->vpl_valid[q] = 0;
-                        const ir_point *x = &pt->points[ly * T + lx];
-                        if (lx >= tw || y0 + ly >= y1 || !x->valid) continue;
-                        v3 wi;
-                        float tfar;
-                        if (!vpl_contrib(pf, x, &vs[v], &wi, &tfar, &pt->vpl_contrib[q])) continue;
-                        packet_set_ray(vp, q, x->org, wi, tfar);
-                        pt->vpl_valid[q] = -1;
-                        live++;
-                    }
-                /* (Lanes that are not live hold rays of this tile's own points too, so nothing in
-                 * the packet depends on what the thread traced before.) */
-                if (!live) continue;
-                th->rays[RP_RAY_SHADOW] += live;
-                rp_query_n_desc qd = pbr_query(f, th, RP_RAY_SHADOW);
-                qd.traversal = pf->shadow_traversal;
-                if (vs[v].infinite) qd.frustum = RP_FRUSTUM_NONE; /* parallel rays: no common point */
-                qd.point[0] = vs[v].p.x;
-                qd.point[1] = vs[v].p.y;
-                qd.point[2] = vs[v].p.z;
-                pt->vpl_packet.valid = pt->vpl_valid;
-                rp_occluded_n(s->scene, &qd, &pt->vpl_packet);
-                for (int b = 0; b < P; b++)
-                    for (int a = 0; a < P; a++) {
-                        uint32_t q = lane[b * P + a];
-                        if (!pt->vpl_valid[q] || pt->vpl_packet.tfar[q] < 0.0f) continue;
-                        int li = (ky + N * b) * T + kx + N * a;
-                        pt->ir_sum[li] = v3_add(pt->ir_sum[li], pt->vpl_contrib[q]);
-                    }
-            }
+            /* (Lanes that are not live hold rays of this tile's own points too, so nothing in
+             * the packet depends on what the thread traced before.) */
+            if (!live) continue;
+            th->rays[RP_RAY_SHADOW] += live;
+            rp_query_n_desc qd = pbr_query(f, th, RP_RAY_SHADOW);
+            qd.traversal = pf->shadow_traversal;
+            if (vs[v].infinite) qd.frustum = RP_FRUSTUM_NONE; /* parallel rays: no common point */
+            qd.point[0] = vs[v].p.x;
+            qd.point[1] = vs[v].p.y;
+            qd.point[2] = vs[v].p.z;
+            pt->vpl_packet.valid = pt->vpl_valid;
+            rp_occluded_n(s->scene, &qd, &pt->vpl_packet);
+            for (int b = 0; b < P; b++)
+                for (int a = 0; a < P; a++) {
+                    uint32_t q = lane[b * P + a];
+                    if (!pt->vpl_valid[q] || pt->vpl_packet.tfar[q] < 0.0f) continue;
+                    int li = pt->ir_at[(size_t)(b * P + a) * (size_t)NN + (size_t)set];
+                    pt->ir_sum[li] = v3_add(pt->ir_sum[li], pt->vpl_contrib[q]);
+                }
         }
+    }
     /* The pass's buffers: the VPL sum over the albedo (or as is, where there is none). */
     for (int ly = 0; ly < y1 - y0; ly++)
         for (int lx = 0; lx < tw; lx++) {

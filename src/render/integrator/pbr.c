@@ -70,9 +70,10 @@ bool pbr_thread_init(const render_frame *f, render_thread *th) {
     if (ok && ir) {
         pt->points = calloc(nn, sizeof *pt->points);
         pt->ir_sum = calloc(nn, sizeof *pt->ir_sum);
+        pt->ir_at = calloc(nn, sizeof *pt->ir_at); /* (tile / N)^2 blocks of N^2 sets */
         pt->vpl_valid = calloc((size_t)side * side, sizeof *pt->vpl_valid);
         pt->vpl_contrib = calloc((size_t)side * side, sizeof *pt->vpl_contrib);
-        ok = pt->points && pt->ir_sum && pt->vpl_valid && pt->vpl_contrib &&
+        ok = pt->points && pt->ir_sum && pt->ir_at && pt->vpl_valid && pt->vpl_contrib &&
              rp_rayhit_n_alloc(f->s->device, side, &pt->vpl_packet);
     }
     return ok;
@@ -91,6 +92,7 @@ void pbr_thread_free(const render_frame *f, render_thread *th) {
     free(pt->shadow_pixel);
     free(pt->points);
     free(pt->ir_sum);
+    free(pt->ir_at);
     free(pt->vpl_valid);
     free(pt->vpl_contrib);
     free(pt);

@@ -46,6 +46,7 @@ typedef struct pbr_thread {
     uint32_t *shadow_pixel;
     ir_point *points;       /* tile^2 */
     v3 *ir_sum;             /* tile^2: sum of VPL contributions */
+    uint16_t *ir_at;        /* (tile / N)^2 x N^2: per block of the tile and set, the pixel (ly tile + lx) */
     rp_rayhit_n vpl_packet; /* a set's shadow rays towards one VPL */
     int32_t *vpl_valid;
     v3 *vpl_contrib;

@@ -299,6 +299,36 @@ int main(void) {
         CHECK(!same_file(mine, theirs));
     }
 
+    /* Volumes with their flags, loaded by every rank and broadcast (format 3 carries the volume; a
+     * broadcast scene lost it before): the cloud (when OpenVDB was found) and a --medium-box. */
+    {
+        char vbuf[1024], vref[1200], vargs[4096];
+        const char *cloud = rp_test_scene("volume_wdas_cloud/wdas_cloud_sixteenth.vdb", vbuf, sizeof vbuf);
+        const char *box = "--medium-box 100,0,100,400,300,400 --albedo 0.7,0.8,0.9 --hg-g 0.4";
+        const char *vol[2][2] = {{cloud, "--density-scale 3 --albedo 0.8 --hg-g 0.3"}, {NULL, box}};
+        char cornell[1024];
+        const char *cb = rp_test_scene("cornell_box/cornell_box.obj", cornell, sizeof cornell);
+        vol[1][0] = cb;
+        for (int i = 0; i < 2; i++) {
+            if (!vol[i][0]) continue;
+            file_in_tmp(vref, sizeof vref, i ? "vol_box_ref.pfm" : "vol_cloud_ref.pfm");
+            snprintf(vargs, sizeof vargs, "'%s' render '%s' --integrator path --spp 1 --width 48 --height 40 %s -o '%s' --quiet",
+                     exe, vol[i][0], vol[i][1], vref);
+            if (run(vargs) != 0) {
+                CHECKF(i == 0 && strstr(output, "without OpenVDB"), "volume reference:\n%s", output);
+                continue;
+            }
+            for (int bc = 0; bc < 2; bc++) {
+                file_in_tmp(got, sizeof got, bc ? "vol_bcast.pfm" : "vol.pfm");
+                snprintf(args, sizeof args, "'%s' --mpi %s --integrator path --spp 1 --width 48 --height 40 --mpi-tile 16 %s -o '%s'",
+                         vol[i][0], bc ? "--mpi-bcast" : "", vol[i][1], got);
+                int vrc = run_mpi("", 3, args);
+                CHECKF(vrc == 0 && same_file(vref, got), "%s%s -np 3: exit %d, the image differs:\n%s",
+                       i ? "a --medium-box" : "the cloud", bc ? " with --mpi-bcast" : "", vrc, output);
+            }
+        }
+    }
+
     /* A client kills itself (SIGKILL) holding two tiles mid-frame: they go to the others. */
     file_in_tmp(got, sizeof got, "killed.pfm");
     snprintf(args, sizeof args, "'%s' --mpi %s -o '%s' --mpi-timeout 2", kitchen, SIZE, got);

@@ -1,5 +1,5 @@
 /* The MPI renderer's byte formats (apps/mpi/wire.c), without MPI: every shared scene kind (meshes
- * with normals, texcoords and textures, spheres, cones, BART animations) survives
+ * with normals, texcoords and textures, spheres, cones, BART animations, volumes) survives
  * wire_scene_pack/unpack array for array and renders the same image (an animation at two more
  * times); truncated and corrupted messages are refused with a message (never a crash); tiles of
  * real pixels and of odd floats (NaN, infinities, denormals) come back bit for bit, and broken
@@ -78,7 +78,21 @@ static void check_animation(const char *name, const rp_scene_data *s, const rp_s
     CHECK(same_n(a->rest_lights, b->rest_lights, s->light_count * sizeof *a->rest_lights));
 }
 
-/* A corrupted animation (made so before packing) is refused naming what is wrong. */
+/* The volume's fields and arrays. */
+static void check_volume(const char *name, const rp_scene_data *s, const rp_scene_data *u) {
+    const rp_volume_data *a = s->volume, *b = u->volume;
+    CHECKF(!a == !b, "%s: volume %s", name, a ? "lost" : "appeared");
+    if (!a || !b) return;
+    size_t cells = (size_t)a->dims[0] * a->dims[1] * a->dims[2], voxels = (size_t)RP_VOLUME_BRICK * RP_VOLUME_BRICK * RP_VOLUME_BRICK;
+    CHECK(strcmp(a->grid_name, b->grid_name) == 0 && same(a->index_to_world, b->index_to_world, sizeof a->index_to_world));
+    CHECK(same(a->active_min, b->active_min, sizeof a->active_min) && same(a->active_max, b->active_max, sizeof a->active_max));
+    CHECK(a->active_voxels == b->active_voxels && same(a->origin, b->origin, sizeof a->origin) &&
+          same(a->dims, b->dims, sizeof a->dims) && a->brick_count == b->brick_count && a->max_density == b->max_density);
+    CHECK(same(a->brick_slot, b->brick_slot, cells * 4) && same_n(a->brick_max, b->brick_max, a->brick_count * 4));
+    CHECK(same_n(a->density, b->density, a->brick_count * voxels * 4));
+}
+
+/* A corrupted animation or volume (made so before packing) is refused naming what is wrong. */
 static void check_bad_animation(const char *name, rp_scene_data *s, const char *what) {
     uint8_t *buf = NULL;
     size_t size = 0;
@@ -122,6 +136,7 @@ static void check_scene(const char *name, rp_scene_data *s) {
     CHECK(u.camera.valid == s->camera.valid && same(u.camera.eye, s->camera.eye, sizeof u.camera.eye) &&
           u.camera.width == s->camera.width && u.has_background == s->has_background);
     check_animation(name, s, &u);
+    check_volume(name, s, &u);
     float *a = render(s), *b = render(&u);
     CHECKF(a && b && memcmp(a, b, sizeof(float) * W * H * 3) == 0, "%s: the unpacked scene renders differently",
            name);
@@ -163,6 +178,22 @@ static void check_scene(const char *name, rp_scene_data *s) {
         }
     }
 
+    if (s->volume && s->volume->brick_count) {
+        rp_volume_data *v = s->volume;
+        size_t cells = (size_t)v->dims[0] * v->dims[1] * v->dims[2], k = 0;
+        while (k < cells && v->brick_slot[k] == RP_VOLUME_EMPTY) k++;
+        uint32_t keep = v->brick_slot[k];
+        v->brick_slot[k] = v->brick_count; /* a slot past the bricks */
+        check_bad_animation(name, s, "volume bricks");
+        v->brick_slot[k] = keep;
+        float d = v->density[5];
+        v->density[5] = NAN;
+        check_bad_animation(name, s, "volume densities");
+        v->density[5] = -1.0f;
+        check_bad_animation(name, s, "volume densities");
+        v->density[5] = d;
+    }
+
     /* Truncated anywhere: refused, with the reason. */
     int refused = 0, cuts = 0;
     for (size_t cut = 0; cut < size; cut += 1 + size / 97) {
@@ -174,7 +205,7 @@ static void check_scene(const char *name, rp_scene_data *s) {
     CHECKF(refused == cuts, "%s: %d of %d truncations refused", name, refused, cuts);
     /* A vertex index past the positions (the last index of the first triangle). */
     if (s->triangle_count) {
-        size_t at = 36 + 8 + 3 * s->vertex_count * 4 + 8 + (s->normals ? 3 * s->normal_count * 4 : 0) + 8 +
+        size_t at = 40 + 8 + 3 * s->vertex_count * 4 + 8 + (s->normals ? 3 * s->normal_count * 4 : 0) + 8 +
                     (s->texcoords ? 2 * s->texcoord_count * 4 : 0) + 8;
         uint32_t big = (uint32_t)s->vertex_count;
         memcpy(buf + at + 8, &big, 4);
@@ -233,6 +264,22 @@ int main(void) {
         CHECKF(rp_scene_data_load(path, &data, err, sizeof err), "%s", err);
         check_scene(scenes[i], &data);
         rp_scene_data_free(&data);
+    }
+    /* volumes: a --medium-box in a mesh scene, and the shared cloud (when OpenVDB was found) */
+    const char *box = rp_test_scene("cornell_box/cornell_box.obj", buf, sizeof buf);
+    rp_scene_data data;
+    if (box && rp_scene_data_load(box, &data, err, sizeof err)) {
+        CHECK(rp_scene_data_add_medium_box(&data, (const float[3]){100, 0, 100}, (const float[3]){400, 300, 400}));
+        check_scene("cornell_box with a medium box", &data);
+        rp_scene_data_free(&data);
+    }
+    const char *cloud = rp_test_scene("volume_wdas_cloud/wdas_cloud_sixteenth.vdb", buf, sizeof buf);
+    if (cloud && rp_scene_data_load(cloud, &data, err, sizeof err)) {
+        check_scene("wdas_cloud_sixteenth.vdb", &data);
+        rp_scene_data_free(&data);
+    } else {
+        CHECKF(strstr(err, "without OpenVDB") != NULL, "the cloud: %s", err);
+        printf("the cloud skipped: %s\n", err);
     }
     float odd[] = {NAN, INFINITY, -INFINITY, 1e-40f, -0.0f, 0.0f, 3.5f, -1e30f, 1.0f, 0.25f};
     check_tile(odd, sizeof odd / sizeof odd[0]);

@@ -52,6 +52,18 @@ rp_device *cli_device_new(const char *cmd, int threads, int isa);
 /* Parses an --accel value: bvh, kdtree, bih or grid (rp_accel_type); prints an error and returns false
  * on anything else. */
 bool cli_parse_accel(const char *cmd, const char *flag, const char *text, rp_accel_type *out);
+/* The volume flags of `raypack render` (view and render --mpi too): --density-scale, --albedo,
+ * --hg-g, --medium-box and --vdb-grid. */
+typedef struct cli_medium_opts {
+    rp_medium_desc medium;   /* rp_medium_desc's zeros: the defaults */
+    const char *vdb_grid;    /* --vdb-grid; NULL: density, else the first float grid */
+    bool has_box;            /* --medium-box: a homogeneous medium in box (lo xyz, hi xyz) */
+    float box[6];
+} cli_medium_opts;
+/* True when flag a is one of them (each takes a value). */
+bool cli_is_medium_flag(const char *a);
+/* Parses flag a's value v into m; false after printing why. */
+bool cli_parse_medium_flag(const char *cmd, const char *a, const char *v, cli_medium_opts *m);
 /* The name of an rp_device_desc.isa code ("avx512", ...). */
 const char *cli_isa_name(int isa);
 /* Returns the value following flag argv[*i], advancing *i, or NULL after printing an error. */

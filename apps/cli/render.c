@@ -146,10 +146,7 @@ typedef struct render_options {
     bool has_anim_time, anim_flat, anim_refit;
     float anim_time;
     float point_radius;               /* 0: automatic */
-    rp_medium_desc medium;            /* --density-scale, --albedo, --hg-g (rp_medium_desc's zeros: defaults) */
-    const char *volume_grid;          /* --vdb-grid */
-    bool has_medium_box;              /* --medium-box */
-    float medium_box[6];
+    cli_medium_opts vol;              /* --density-scale, --albedo, --hg-g, --medium-box, --vdb-grid */
     uint32_t lights[CLI_MAX_LIGHTS];
     int light_count;                  /* -1: all lights */
 } render_options;
@@ -351,51 +348,9 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
         } else if (strcmp(a, "--point-radius") == 0) {
             VALUE();
             if (!cli_parse_float(CMD, a, v, 0.0, 1e30, true, &o->point_radius)) return CLI_EXIT_USAGE;
-        } else if (strcmp(a, "--density-scale") == 0) {
+        } else if (cli_is_medium_flag(a)) {
             VALUE();
-            if (!cli_parse_float(CMD, a, v, 0.0, 1e6, true, &o->medium.density_scale)) return CLI_EXIT_USAGE;
-        } else if (strcmp(a, "--albedo") == 0) {
-            VALUE();
-            float al[3];
-            if (strchr(v, ',')) {
-                if (!cli_parse_vec3(CMD, a, v, al)) return CLI_EXIT_USAGE;
-            } else {
-                if (!cli_parse_float(CMD, a, v, 0.0, 1.0, false, &al[0])) return CLI_EXIT_USAGE;
-                al[1] = al[2] = al[0];
-            }
-            for (int k = 0; k < 3; k++) {
-                if (!(al[k] >= 0.0f && al[k] <= 1.0f)) {
-                    fprintf(stderr, "raypack render: --albedo expects values in [0, 1], got '%s'\n", v);
-                    return CLI_EXIT_USAGE;
-                }
-                o->medium.albedo[k] = al[k] == 0.0f ? -1.0f : al[k]; /* rp_medium_desc: negative is black */
-            }
-        } else if (strcmp(a, "--hg-g") == 0) {
-            VALUE();
-            if (!cli_parse_float(CMD, a, v, -0.99, 0.99, false, &o->medium.hg_g)) return CLI_EXIT_USAGE;
-        } else if (strcmp(a, "--medium-box") == 0) {
-            VALUE();
-            char lo[256], hi[256];
-            const char *c3 = v;
-            for (int k = 0; k < 3 && c3; k++) c3 = strchr(c3 + (k ? 1 : 0), ',');
-            if (!c3 || (size_t)(c3 - v) >= sizeof lo || strlen(c3 + 1) >= sizeof hi) {
-                fprintf(stderr, "raypack render: --medium-box expects X0,Y0,Z0,X1,Y1,Z1, got '%s'\n", v);
-                return CLI_EXIT_USAGE;
-            }
-            memcpy(lo, v, (size_t)(c3 - v));
-            lo[c3 - v] = '\0';
-            strcpy(hi, c3 + 1);
-            if (!cli_parse_vec3(CMD, a, lo, o->medium_box) || !cli_parse_vec3(CMD, a, hi, o->medium_box + 3))
-                return CLI_EXIT_USAGE;
-            for (int k = 0; k < 3; k++)
-                if (!(o->medium_box[3 + k] > o->medium_box[k])) {
-                    fprintf(stderr, "raypack render: --medium-box: the second corner must be above the first on every axis, got '%s'\n", v);
-                    return CLI_EXIT_USAGE;
-                }
-            o->has_medium_box = true;
-        } else if (strcmp(a, "--vdb-grid") == 0) {
-            VALUE();
-            o->volume_grid = v;
+            if (!cli_parse_medium_flag(CMD, a, v, &o->vol)) return CLI_EXIT_USAGE;
         } else if (strcmp(a, "--lights") == 0) {
             VALUE();
             o->light_count = cli_parse_list(CMD, a, v, o->lights, CLI_MAX_LIGHTS);
@@ -684,14 +639,14 @@ int cli_render(int argc, char **argv) {
         if (!cli_scene_readable(CMD, o.scene)) return CLI_EXIT_FAILURE;
         char err[512] = "";
         if (!rp_scene_data_load_ex(o.scene, &(rp_scene_load_desc){.threads = o.threads, .point_radius = o.point_radius,
-                                                                  .volume_grid = o.volume_grid},
+                                                                  .volume_grid = o.vol.vdb_grid},
                                    &data, err, sizeof err)) {
             fprintf(stderr, "%s\n", err[0] ? err : "raypack render: cannot load the scene");
             return CLI_EXIT_FAILURE;
         }
     }
     double load_ms = cli_now_ms() - t0;
-    if (o.has_medium_box && !rp_scene_data_add_medium_box(&data, o.medium_box, o.medium_box + 3)) {
+    if (o.vol.has_box && !rp_scene_data_add_medium_box(&data, o.vol.box, o.vol.box + 3)) {
         fprintf(stderr, "raypack render: out of memory for --medium-box\n");
         if (builtin) rp_default_scene_free(&data);
         else rp_scene_data_free(&data);
@@ -716,7 +671,7 @@ int cli_render(int argc, char **argv) {
     double t1 = cli_now_ms();
     char err[512] = "";
     rp_render_scene_desc sdesc = {.accel = {.accel = o.accel, .grid_density = o.grid_density}, .environment = o.env, .flatten_animation = o.anim_flat,
-                                  .refit_blocks = o.anim_refit, .medium = o.medium};
+                                  .refit_blocks = o.anim_refit, .medium = o.vol.medium};
     if (o.has_env_scale) memcpy(sdesc.environment_scale, o.env_scale, sizeof o.env_scale);
     scene = rp_render_scene_new(device, &data, &sdesc, err, sizeof err);
     if (!scene) {
@@ -967,9 +922,9 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
     out->spp = o.spp;
     out->threads = o.threads;
     out->point_radius = o.point_radius;
-    out->volume_grid = o.volume_grid;
-    out->has_medium_box = o.has_medium_box;
-    memcpy(out->medium_box, o.medium_box, sizeof o.medium_box);
+    out->volume_grid = o.vol.vdb_grid;
+    out->has_medium_box = o.vol.has_box;
+    memcpy(out->medium_box, o.vol.box, sizeof o.vol.box);
     out->isa = o.isa;
     /* as cli_render fills its rp_render_desc */
     out->desc = (rp_render_desc){
@@ -984,7 +939,7 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
     };
     out->scene_desc = (rp_render_scene_desc){.accel = {.accel = o.accel, .grid_density = o.grid_density}, .environment = o.env,
                                              .flatten_animation = o.anim_flat, .refit_blocks = o.anim_refit,
-                                             .medium = o.medium};
+                                             .medium = o.vol.medium};
     out->has_anim_time = o.has_anim_time;
     out->anim_time = o.anim_time;
     out->light_count = o.light_count;

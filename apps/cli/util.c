@@ -208,3 +208,53 @@ const char *cli_camera_problem(const float eye[3], const float look[3], const fl
     if (!(cc > 1e-10 * dd * uu)) return "the up vector is parallel to the view direction";
     return NULL;
 }
+
+bool cli_is_medium_flag(const char *a) {
+    return strcmp(a, "--density-scale") == 0 || strcmp(a, "--albedo") == 0 || strcmp(a, "--hg-g") == 0 ||
+           strcmp(a, "--medium-box") == 0 || strcmp(a, "--vdb-grid") == 0;
+}
+
+bool cli_parse_medium_flag(const char *cmd, const char *a, const char *v, cli_medium_opts *m) {
+    if (strcmp(a, "--density-scale") == 0) return cli_parse_float(cmd, a, v, 0.0, 1e6, true, &m->medium.density_scale);
+    if (strcmp(a, "--hg-g") == 0) return cli_parse_float(cmd, a, v, -0.99, 0.99, false, &m->medium.hg_g);
+    if (strcmp(a, "--vdb-grid") == 0) {
+        m->vdb_grid = v;
+        return true;
+    }
+    if (strcmp(a, "--albedo") == 0) {
+        float al[3];
+        if (strchr(v, ',')) {
+            if (!cli_parse_vec3(cmd, a, v, al)) return false;
+        } else {
+            if (!cli_parse_float(cmd, a, v, 0.0, 1.0, false, &al[0])) return false;
+            al[1] = al[2] = al[0];
+        }
+        for (int k = 0; k < 3; k++) {
+            if (!(al[k] >= 0.0f && al[k] <= 1.0f)) {
+                fprintf(stderr, "raypack %s: --albedo expects values in [0, 1], got '%s'\n", cmd, v);
+                return false;
+            }
+            m->medium.albedo[k] = al[k] == 0.0f ? -1.0f : al[k]; /* rp_medium_desc: negative is black */
+        }
+        return true;
+    }
+    /* --medium-box X0,Y0,Z0,X1,Y1,Z1 */
+    char lo[256], hi[256];
+    const char *c3 = v;
+    for (int k = 0; k < 3 && c3; k++) c3 = strchr(c3 + (k ? 1 : 0), ',');
+    if (!c3 || (size_t)(c3 - v) >= sizeof lo || strlen(c3 + 1) >= sizeof hi) {
+        fprintf(stderr, "raypack %s: --medium-box expects X0,Y0,Z0,X1,Y1,Z1, got '%s'\n", cmd, v);
+        return false;
+    }
+    memcpy(lo, v, (size_t)(c3 - v));
+    lo[c3 - v] = '\0';
+    strcpy(hi, c3 + 1);
+    if (!cli_parse_vec3(cmd, a, lo, m->box) || !cli_parse_vec3(cmd, a, hi, m->box + 3)) return false;
+    for (int k = 0; k < 3; k++)
+        if (!(m->box[3 + k] > m->box[k])) {
+            fprintf(stderr, "raypack %s: --medium-box: the second corner must be above the first on every axis, got '%s'\n", cmd, v);
+            return false;
+        }
+    m->has_box = true;
+    return true;
+}

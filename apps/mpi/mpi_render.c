@@ -54,7 +54,9 @@ static void mpi_usage(FILE *out) {
             "  --integrator whitted|eyelight|direct|path|ir|ao, --max-depth N, --packet N, --threads N,\n"
             "  --isa NAME, --ir-interleave N, --ir-vpls N, --ir-filter N, --ir-clamp C, --ao-distance D,\n"
             "  --env FILE.hdr (read by every rank), --env-scale R,G,B, --exposure EV, --tonemap srgb|aces,\n"
-            "  --eye X,Y,Z --look X,Y,Z --up X,Y,Z --fov DEG, --quiet\n"
+            "  --eye X,Y,Z --look X,Y,Z --up X,Y,Z --fov DEG, --density-scale S, --albedo A|R,G,B,\n"
+            "  --hg-g G, --vdb-grid NAME, --medium-box X0,Y0,Z0,X1,Y1,Z1 (volumes travel with --mpi-bcast),\n"
+            "  --quiet\n"
             "MPI options:\n"
             "  --mpi                  distributed rendering (needed)\n"
             "  --mpi-bcast            only rank 0 reads SCENE and sends its data to every client on its\n"
@@ -164,6 +166,9 @@ static int parse_mpi_options(int argc, char **argv, mpir_options *o, bool *help)
                 fprintf(stderr, "raypack render: --tonemap expects srgb or aces, got '%s'\n", v);
                 return CLI_EXIT_USAGE;
             }
+        } else if (cli_is_medium_flag(a)) {
+            VALUE();
+            if (!cli_parse_medium_flag(MPIR_CMD, a, v, &o->vol)) return CLI_EXIT_USAGE;
         } else if (strcmp(a, "--env") == 0) {
             VALUE();
             o->env = v;

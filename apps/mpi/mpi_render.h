@@ -11,6 +11,7 @@
 
 #include "raypack.h"
 #include "raypack_io.h"
+#include "cli.h"
 #include "raypack_render.h"
 #include "wire.h"
 
@@ -104,6 +105,7 @@ typedef struct mpir_options {
     int ir_interleave, ir_vpls, ir_filter;
     float ir_clamp, ao_distance, exposure;
     rp_tonemap tonemap;
+    cli_medium_opts vol;   /* --density-scale, --albedo, --hg-g, --medium-box, --vdb-grid */
     const char *env;       /* every rank reads it, with --mpi-bcast too */
     bool has_env_scale;
     float env_scale[3];
@@ -129,8 +131,9 @@ typedef struct mpir_tile_worker {
     double render_cpu_ms;  /* of the last tile */
 } mpir_tile_worker;
 
-/* Loads SCENE (NULL: the built-in room) into s->data; false with a message in err. */
-bool mpir_scene_load(mpir_scene *s, const char *path, char *err, size_t err_size);
+/* Loads o->scene (NULL: the built-in room) into s->data with o->vol's --vdb-grid and --medium-box;
+ * false with a message in err. */
+bool mpir_scene_load(mpir_scene *s, const mpir_options *o, char *err, size_t err_size);
 /* Makes the device and commits the render scene of s->data; false with a message in err. */
 bool mpir_scene_build(mpir_scene *s, const mpir_options *o, int threads, char *err, size_t err_size);
 /* The per-frame scene update, on rank 0 and every client before a frame's tiles render (a client

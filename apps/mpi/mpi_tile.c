@@ -29,7 +29,7 @@ bool mpir_scene_build(mpir_scene *rs, const mpir_options *o, int threads, char *
         snprintf(err, err_size, "cannot create the device (--threads %d, --isa)", threads);
         return false;
     }
-    rp_render_scene_desc sd = {.environment = o->env};
+    rp_render_scene_desc sd = {.environment = o->env, .medium = o->vol.medium};
     if (o->has_env_scale) memcpy(sd.environment_scale, o->env_scale, sizeof o->env_scale);
     rs->scene = rp_render_scene_new(rs->device, &rs->data, &sd, err, err_size);
     return rs->scene != NULL;
@@ -42,10 +42,18 @@ bool mpir_scene_frame(mpir_scene *rs, float time, char *err, size_t err_size) {
     return false;
 }
 
-bool mpir_scene_load(mpir_scene *rs, const char *path, char *err, size_t err_size) {
+/* --medium-box on the loaded data (before a broadcast, which then carries it). */
+static bool add_box(mpir_scene *rs, const mpir_options *o, char *err, size_t err_size) {
+    if (!o->vol.has_box || rp_scene_data_add_medium_box(&rs->data, o->vol.box, o->vol.box + 3)) return true;
+    snprintf(err, err_size, "out of memory for --medium-box");
+    return false;
+}
+
+bool mpir_scene_load(mpir_scene *rs, const mpir_options *o, char *err, size_t err_size) {
+    const char *path = o->scene;
     if (!path) {
         rs->builtin = true;
-        if (rp_default_scene(&rs->data)) return true;
+        if (rp_default_scene(&rs->data)) return add_box(rs, o, err, err_size);
         snprintf(err, err_size, "out of memory building the default scene");
         return false;
     }
@@ -55,7 +63,11 @@ bool mpir_scene_load(mpir_scene *rs, const char *path, char *err, size_t err_siz
         return false;
     }
     fclose(probe);
-    if (rp_scene_data_load(path, &rs->data, err, err_size)) return true;
+    rp_scene_load_desc ld;
+    rp_scene_load_desc_defaults(&ld);
+    ld.volume_grid = o->vol.vdb_grid;
+    if (rp_scene_data_load_ex(path, &ld, &rs->data, err, err_size))
+        return add_box(rs, o, err, err_size);
     if (!err[0]) snprintf(err, err_size, "cannot load the scene %s", path);
     return false;
 }

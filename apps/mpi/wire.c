@@ -3,6 +3,8 @@
  * an animated scene its rp_animation_data (format 2 on). */
 #include "wire.h"
 
+#include <float.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -10,8 +12,9 @@
 
 #define WIRE_MAGIC 0x43535052u /* "RPSC" */
 /* 1: the flat arrays only; 2: and the animation (an animated scene sent as format 1 stood still at
- * its start on every client) */
-#define WIRE_VERSION 2u
+ * its start on every client); 3: and the volume (a .vdb or --medium-box sent as format 2 was
+ * missing on every client) */
+#define WIRE_VERSION 3u
 
 typedef struct writer {
     uint8_t *buf;
@@ -45,12 +48,12 @@ static void put_array(writer *w, const void *p, size_t count, size_t elem) {
 }
 
 /* The struct sizes a message's arrays are made of: the ends must agree on every layout. */
-enum { WIRE_STRUCTS = 7 };
+enum { WIRE_STRUCTS = 8 };
 static void struct_sizes(uint32_t out[WIRE_STRUCTS]) {
     const uint32_t sizes[WIRE_STRUCTS] = {(uint32_t)sizeof(rp_material_data), (uint32_t)sizeof(rp_texture_data),
                                           (uint32_t)sizeof(rp_light_data),    (uint32_t)sizeof(rp_camera_data),
                                           (uint32_t)sizeof(rp_anim_node),     (uint32_t)sizeof(rp_anim_key),
-                                          (uint32_t)sizeof(rp_anim_tpa)};
+                                          (uint32_t)sizeof(rp_anim_tpa),      (uint32_t)sizeof(rp_volume_data)};
     memcpy(out, sizes, sizeof sizes);
 }
 
@@ -92,6 +95,18 @@ static void put_animation(writer *w, const rp_scene_data *s) {
     put_array(w, a->rest_lights, s->light_count, sizeof(rp_light_data));
 }
 
+#define BRICK_VOXELS ((size_t)RP_VOLUME_BRICK * RP_VOLUME_BRICK * RP_VOLUME_BRICK)
+
+/* The volume: its struct (pointers cleared), then its three arrays. */
+static void put_volume(writer *w, const rp_volume_data *v) {
+    rp_volume_data head = *v;
+    head.brick_slot = NULL, head.density = NULL, head.brick_max = NULL;
+    put(w, &head, sizeof head);
+    put_array(w, v->brick_slot, (size_t)v->dims[0] * v->dims[1] * v->dims[2], sizeof(uint32_t));
+    put_array(w, v->density, (size_t)v->brick_count * BRICK_VOXELS, sizeof(float));
+    put_array(w, v->brick_max, v->brick_count, sizeof(float));
+}
+
 bool wire_scene_pack(const rp_scene_data *s, uint8_t **out, size_t *size) {
     writer w = {0};
     uint32_t head[2 + WIRE_STRUCTS] = {WIRE_MAGIC, WIRE_VERSION};
@@ -125,6 +140,9 @@ bool wire_scene_pack(const rp_scene_data *s, uint8_t **out, size_t *size) {
     uint8_t animated = s->animation != NULL;
     put(&w, &animated, 1);
     if (animated) put_animation(&w, s);
+    uint8_t volume = s->volume != NULL;
+    put(&w, &volume, 1);
+    if (volume) put_volume(&w, s->volume);
     if (w.failed) {
         free(w.buf);
         return false;
@@ -278,6 +296,51 @@ static void get_animation(reader *r, rp_scene_data *s) {
         r->what = "animation block indices";
 }
 
+static bool finite_nonneg(const float *x, size_t n) {
+    for (size_t i = 0; i < n; i++)
+        if (!(x[i] >= 0.0f && x[i] <= FLT_MAX)) return false;
+    return true;
+}
+
+/* The volume after the animation; NULL in r->what when it fits and holds what the loader
+ * guarantees (every brick slot inside the bricks, densities finite and not negative). */
+static void get_volume(reader *r, rp_scene_data *s) {
+    rp_volume_data *v = calloc(1, sizeof *v);
+    if (!v) {
+        r->what = "memory";
+        return;
+    }
+    s->volume = v; /* rp_scene_data_free frees it, and its arrays, on failure */
+    if (!get(r, v, sizeof *v, "volume")) return;
+    v->brick_slot = NULL, v->density = NULL, v->brick_max = NULL;
+    v->grid_name[sizeof v->grid_name - 1] = '\0';
+    uint64_t cells = (uint64_t)v->dims[0] * v->dims[1] * v->dims[2];
+    if (!v->dims[0] || !v->dims[1] || !v->dims[2] || cells > UINT32_MAX || v->brick_count > cells ||
+        !finite_nonneg(&v->max_density, 1)) {
+        r->what = "volume";
+        return;
+    }
+    for (int k = 0; k < 12; k++)
+        if (!isfinite(v->index_to_world[k])) r->what = "volume transform";
+    void *p;
+    get_array(r, &p, sizeof(uint32_t), (size_t)cells, NULL, "volume bricks");
+    v->brick_slot = p;
+    get_array(r, &p, sizeof(float), (size_t)v->brick_count * BRICK_VOXELS, NULL, "volume densities");
+    v->density = p;
+    get_array(r, &p, sizeof(float), v->brick_count, NULL, "volume brick maxima");
+    v->brick_max = p;
+    if (r->what) return;
+    if (!v->brick_slot || (v->brick_count && (!v->density || !v->brick_max))) {
+        r->what = "volume bricks";
+        return;
+    }
+    for (size_t i = 0; !r->what && i < (size_t)cells; i++)
+        if (v->brick_slot[i] != RP_VOLUME_EMPTY && v->brick_slot[i] >= v->brick_count) r->what = "volume bricks";
+    if (!r->what && (!finite_nonneg(v->density, (size_t)v->brick_count * BRICK_VOXELS) ||
+                     !finite_nonneg(v->brick_max, v->brick_count)))
+        r->what = "volume densities";
+}
+
 static bool indices_below(const uint32_t *idx, size_t n, size_t limit) {
     for (size_t i = 0; idx && i < n; i++)
         if (idx[i] >= limit) return false;
@@ -301,9 +364,10 @@ bool wire_scene_unpack(const uint8_t *buf, size_t size, rp_scene_data *s, char *
     struct_sizes(want);
     if (!get(&r, head + 2, sizeof want, "header") || memcmp(head + 2, want, sizeof want) != 0) {
         snprintf(err, err_size, "scene message of format %u with structs of other sizes (material, texture, light, "
-                                "camera, block, key, tpa: %u/%u/%u/%u/%u/%u/%u bytes; here %u/%u/%u/%u/%u/%u/%u)",
-                 head[1], head[2], head[3], head[4], head[5], head[6], head[7], head[8], want[0], want[1], want[2],
-                 want[3], want[4], want[5], want[6]);
+                                "camera, block, key, tpa, volume: %u/%u/%u/%u/%u/%u/%u/%u bytes; here "
+                                "%u/%u/%u/%u/%u/%u/%u/%u)",
+                 head[1], head[2], head[3], head[4], head[5], head[6], head[7], head[8], head[9], want[0], want[1],
+                 want[2], want[3], want[4], want[5], want[6], want[7]);
         return false;
     }
     size_t n = 0, tris = 0;
@@ -368,6 +432,9 @@ bool wire_scene_unpack(const uint8_t *buf, size_t size, rp_scene_data *s, char *
     uint8_t animated = 0;
     if (get(&r, &animated, 1, "animation flag") && animated > 1) r.what = "animation flag";
     if (animated == 1 && !r.what) get_animation(&r, s);
+    uint8_t volume = 0;
+    if (!r.what && get(&r, &volume, 1, "volume flag") && volume > 1) r.what = "volume flag";
+    if (volume == 1 && !r.what) get_volume(&r, s);
     if (!r.what && r.left) r.what = "trailing bytes";
     /* The renderer trusts a loader's indices; these came over the wire, so check them. */
     if (!r.what) {

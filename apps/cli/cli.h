@@ -59,11 +59,17 @@ typedef struct cli_medium_opts {
     const char *vdb_grid;    /* --vdb-grid; NULL: density, else the first float grid */
     bool has_box;            /* --medium-box: a homogeneous medium in box (lo xyz, hi xyz) */
     float box[6];
+    const char *volume;      /* --volume FILE.vdb: its volume added to the scene's surfaces */
+    bool has_fit;            /* --volume-fit: the volume scaled (uniformly) and moved into fit */
+    float fit[6];
 } cli_medium_opts;
 /* True when flag a is one of them (each takes a value). */
 bool cli_is_medium_flag(const char *a);
 /* Parses flag a's value v into m; false after printing why. */
 bool cli_parse_medium_flag(const char *cmd, const char *a, const char *v, cli_medium_opts *m);
+/* Applies --volume, --volume-fit and --medium-box to loaded data (the scene's own volume, if any,
+ * replaced); false with the reason in err. */
+bool cli_apply_medium(const cli_medium_opts *m, rp_scene_data *data, char *err, size_t err_size);
 /* The name of an rp_device_desc.isa code ("avx512", ...). */
 const char *cli_isa_name(int isa);
 /* Returns the value following flag argv[*i], advancing *i, or NULL after printing an error. */
@@ -84,9 +90,7 @@ typedef struct cli_render_setup {
     bool has_anim_time;         /* --anim-time */
     float anim_time;
     float point_radius;         /* --point-radius; 0: automatic */
-    const char *volume_grid;    /* --vdb-grid; NULL: density, else the first float grid */
-    bool has_medium_box;        /* --medium-box: a homogeneous medium in that box (lo xyz, hi xyz) */
-    float medium_box[6];
+    cli_medium_opts vol;        /* --vdb-grid, --medium-box, --volume, --volume-fit (and the medium) */
     uint32_t lights[CLI_MAX_LIGHTS]; /* --lights */
     int light_count;            /* -1: all */
     const char *output;         /* -o (default raypack.png), checked writable */

@@ -68,6 +68,10 @@ static void render_usage(FILE *out) {
             "  --vdb-grid NAME        volumes: the float grid to read [density, else the first]\n"
             "  --medium-box X0,Y0,Z0,X1,Y1,Z1  a homogeneous medium (density 1 x --density-scale)\n"
             "                         filling that box, in any scene (fog in a room)\n"
+            "  --volume FILE.vdb      the volume of a .vdb file in this scene, beside its surfaces\n"
+            "                         (in the .vdb's own world units unless --volume-fit)\n"
+            "  --volume-fit X0,Y0,Z0,X1,Y1,Z1  scales the volume uniformly and centres it in that box\n"
+            "                         (--density-scale stays per world unit of the scene)\n"
             "  --env FILE.hdr         lat-long environment (+y up) for direct, path and ir\n"
             "  --env-scale R,G,B      multiplies --env; without --env, a constant environment\n"
             "  --exposure EV          PNG/PPM: multiply by 2^EV before the tone map [0]\n"
@@ -646,8 +650,9 @@ int cli_render(int argc, char **argv) {
         }
     }
     double load_ms = cli_now_ms() - t0;
-    if (o.vol.has_box && !rp_scene_data_add_medium_box(&data, o.vol.box, o.vol.box + 3)) {
-        fprintf(stderr, "raypack render: out of memory for --medium-box\n");
+    char merr[640] = "";
+    if (!cli_apply_medium(&o.vol, &data, merr, sizeof merr)) {
+        fprintf(stderr, "raypack render: %s\n", merr);
         if (builtin) rp_default_scene_free(&data);
         else rp_scene_data_free(&data);
         return CLI_EXIT_FAILURE;
@@ -922,9 +927,7 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
     out->spp = o.spp;
     out->threads = o.threads;
     out->point_radius = o.point_radius;
-    out->volume_grid = o.vol.vdb_grid;
-    out->has_medium_box = o.vol.has_box;
-    memcpy(out->medium_box, o.vol.box, sizeof o.vol.box);
+    out->vol = o.vol;
     out->isa = o.isa;
     /* as cli_render fills its rp_render_desc */
     out->desc = (rp_render_desc){
@@ -962,10 +965,12 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
     return CLI_EXIT_OK;
 }
 
-/* --medium-box on loaded data; false (with a message, data freed) when out of memory. */
+/* --volume, --volume-fit and --medium-box on loaded data; false (with a message, data freed) when
+ * they fail. */
 static bool add_medium_box(const char *cmd, const cli_render_setup *setup, rp_scene_data *data) {
-    if (!setup->has_medium_box || rp_scene_data_add_medium_box(data, setup->medium_box, setup->medium_box + 3)) return true;
-    fprintf(stderr, "raypack %s: out of memory for --medium-box\n", cmd);
+    char err[640] = "";
+    if (cli_apply_medium(&setup->vol, data, err, sizeof err)) return true;
+    fprintf(stderr, "raypack %s: %s\n", cmd, err);
     cli_render_unload(setup, data);
     return false;
 }
@@ -985,7 +990,7 @@ bool cli_render_load(const char *cmd, const cli_render_setup *setup, rp_scene_da
     fclose(probe);
     char err[512] = "";
     if (rp_scene_data_load_ex(setup->scene, &(rp_scene_load_desc){.threads = setup->threads, .point_radius = setup->point_radius,
-                                                                  .volume_grid = setup->volume_grid},
+                                                                  .volume_grid = setup->vol.vdb_grid},
                               data, err, sizeof err))
         return add_medium_box(cmd, setup, data);
     fprintf(stderr, "%s\n", err[0] ? err : "raypack: cannot load the scene");

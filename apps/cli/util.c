@@ -211,7 +211,29 @@ const char *cli_camera_problem(const float eye[3], const float look[3], const fl
 
 bool cli_is_medium_flag(const char *a) {
     return strcmp(a, "--density-scale") == 0 || strcmp(a, "--albedo") == 0 || strcmp(a, "--hg-g") == 0 ||
-           strcmp(a, "--medium-box") == 0 || strcmp(a, "--vdb-grid") == 0;
+           strcmp(a, "--medium-box") == 0 || strcmp(a, "--vdb-grid") == 0 || strcmp(a, "--volume") == 0 ||
+           strcmp(a, "--volume-fit") == 0;
+}
+
+/* "X0,Y0,Z0,X1,Y1,Z1", the second corner above the first on every axis. */
+static bool parse_box(const char *cmd, const char *a, const char *v, float box[6]) {
+    char lo[256], hi[256];
+    const char *c3 = v;
+    for (int k = 0; k < 3 && c3; k++) c3 = strchr(c3 + (k ? 1 : 0), ',');
+    if (!c3 || (size_t)(c3 - v) >= sizeof lo || strlen(c3 + 1) >= sizeof hi) {
+        fprintf(stderr, "raypack %s: %s expects X0,Y0,Z0,X1,Y1,Z1, got '%s'\n", cmd, a, v);
+        return false;
+    }
+    memcpy(lo, v, (size_t)(c3 - v));
+    lo[c3 - v] = '\0';
+    strcpy(hi, c3 + 1);
+    if (!cli_parse_vec3(cmd, a, lo, box) || !cli_parse_vec3(cmd, a, hi, box + 3)) return false;
+    for (int k = 0; k < 3; k++)
+        if (!(box[3 + k] > box[k])) {
+            fprintf(stderr, "raypack %s: %s: the second corner must be above the first on every axis, got '%s'\n", cmd, a, v);
+            return false;
+        }
+    return true;
 }
 
 bool cli_parse_medium_flag(const char *cmd, const char *a, const char *v, cli_medium_opts *m) {
@@ -221,40 +243,91 @@ bool cli_parse_medium_flag(const char *cmd, const char *a, const char *v, cli_me
         m->vdb_grid = v;
         return true;
     }
-    if (strcmp(a, "--albedo") == 0) {
-        float al[3];
-        if (strchr(v, ',')) {
-            if (!cli_parse_vec3(cmd, a, v, al)) return false;
-        } else {
-            if (!cli_parse_float(cmd, a, v, 0.0, 1.0, false, &al[0])) return false;
-            al[1] = al[2] = al[0];
-        }
-        for (int k = 0; k < 3; k++) {
-            if (!(al[k] >= 0.0f && al[k] <= 1.0f)) {
-                fprintf(stderr, "raypack %s: --albedo expects values in [0, 1], got '%s'\n", cmd, v);
-                return false;
-            }
-            m->medium.albedo[k] = al[k] == 0.0f ? -1.0f : al[k]; /* rp_medium_desc: negative is black */
-        }
+    if (strcmp(a, "--volume") == 0) {
+        m->volume = v;
         return true;
     }
-    /* --medium-box X0,Y0,Z0,X1,Y1,Z1 */
-    char lo[256], hi[256];
-    const char *c3 = v;
-    for (int k = 0; k < 3 && c3; k++) c3 = strchr(c3 + (k ? 1 : 0), ',');
-    if (!c3 || (size_t)(c3 - v) >= sizeof lo || strlen(c3 + 1) >= sizeof hi) {
-        fprintf(stderr, "raypack %s: --medium-box expects X0,Y0,Z0,X1,Y1,Z1, got '%s'\n", cmd, v);
-        return false;
+    if (strcmp(a, "--volume-fit") == 0) return (m->has_fit = parse_box(cmd, a, v, m->fit));
+    if (strcmp(a, "--medium-box") == 0) return (m->has_box = parse_box(cmd, a, v, m->box));
+    /* --albedo A or R,G,B */
+    float al[3];
+    if (strchr(v, ',')) {
+        if (!cli_parse_vec3(cmd, a, v, al)) return false;
+    } else {
+        if (!cli_parse_float(cmd, a, v, 0.0, 1.0, false, &al[0])) return false;
+        al[1] = al[2] = al[0];
     }
-    memcpy(lo, v, (size_t)(c3 - v));
-    lo[c3 - v] = '\0';
-    strcpy(hi, c3 + 1);
-    if (!cli_parse_vec3(cmd, a, lo, m->box) || !cli_parse_vec3(cmd, a, hi, m->box + 3)) return false;
-    for (int k = 0; k < 3; k++)
-        if (!(m->box[3 + k] > m->box[k])) {
-            fprintf(stderr, "raypack %s: --medium-box: the second corner must be above the first on every axis, got '%s'\n", cmd, v);
+    for (int k = 0; k < 3; k++) {
+        if (!(al[k] >= 0.0f && al[k] <= 1.0f)) {
+            fprintf(stderr, "raypack %s: --albedo expects values in [0, 1], got '%s'\n", cmd, v);
             return false;
         }
-    m->has_box = true;
+        m->medium.albedo[k] = al[k] == 0.0f ? -1.0f : al[k]; /* rp_medium_desc: negative is black */
+    }
+    return true;
+}
+
+/* Scales v's index-to-world map uniformly and moves it so that its active voxels' world box (their
+ * cells' corners) is centred in box and touches it on its tightest axis. */
+static void fit_volume(rp_volume_data *v, const float box[6]) {
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    const float *M = v->index_to_world;
+    for (int c = 0; c < 8; c++) {
+        double p[3];
+        for (int k = 0; k < 3; k++) p[k] = (c >> k & 1) ? v->active_max[k] + 0.5 : v->active_min[k] - 0.5;
+        for (int r = 0; r < 3; r++) {
+            double w = (double)M[4 * r] * p[0] + (double)M[4 * r + 1] * p[1] + (double)M[4 * r + 2] * p[2] + M[4 * r + 3];
+            lo[r] = fmin(lo[r], w), hi[r] = fmax(hi[r], w);
+        }
+    }
+    double s = INFINITY;
+    for (int k = 0; k < 3; k++) s = fmin(s, (box[3 + k] - box[k]) / (hi[k] - lo[k]));
+    float out[12];
+    for (int r = 0; r < 3; r++) {
+        double t = 0.5 * (box[r] + box[3 + r]) - s * 0.5 * (lo[r] + hi[r]);
+        for (int c = 0; c < 3; c++) out[4 * r + c] = (float)(s * M[4 * r + c]);
+        out[4 * r + 3] = (float)(s * M[4 * r + 3] + t);
+    }
+    memcpy(v->index_to_world, out, sizeof out);
+}
+
+bool cli_apply_medium(const cli_medium_opts *m, rp_scene_data *data, char *err, size_t err_size) {
+    if (m->volume && m->has_box) {
+        snprintf(err, err_size, "--volume and --medium-box: a scene holds one volume, give one of them");
+        return false;
+    }
+    if (m->volume) {
+        rp_scene_load_desc ld;
+        rp_scene_load_desc_defaults(&ld);
+        ld.volume_grid = m->vdb_grid;
+        rp_scene_data vd;
+        char why[512] = "";
+        if (!rp_scene_data_load_ex(m->volume, &ld, &vd, why, sizeof why)) {
+            snprintf(err, err_size, "--volume: %s", why[0] ? why : m->volume);
+            return false;
+        }
+        if (!vd.volume) {
+            snprintf(err, err_size, "--volume %s: the file holds no volume (a .vdb is wanted)", m->volume);
+            rp_scene_data_free(&vd);
+            return false;
+        }
+        rp_volume_data *v = vd.volume;
+        vd.volume = NULL;
+        rp_scene_data_free(&vd);
+        rp_scene_data own = {.volume = data->volume};
+        rp_scene_data_free(&own); /* the scene's own volume, if any */
+        data->volume = v;
+    }
+    if (m->has_fit) {
+        if (!data->volume || !data->volume->active_voxels) {
+            snprintf(err, err_size, "--volume-fit: the scene has no volume to fit (give --volume FILE.vdb)");
+            return false;
+        }
+        fit_volume(data->volume, m->fit);
+    }
+    if (m->has_box && !rp_scene_data_add_medium_box(data, m->box, m->box + 3)) {
+        snprintf(err, err_size, "out of memory for --medium-box");
+        return false;
+    }
     return true;
 }

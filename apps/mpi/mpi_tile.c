@@ -42,11 +42,10 @@ bool mpir_scene_frame(mpir_scene *rs, float time, char *err, size_t err_size) {
     return false;
 }
 
-/* --medium-box on the loaded data (before a broadcast, which then carries it). */
+/* --volume, --volume-fit and --medium-box on the loaded data (before a broadcast, which then
+ * carries the volume). */
 static bool add_box(mpir_scene *rs, const mpir_options *o, char *err, size_t err_size) {
-    if (!o->vol.has_box || rp_scene_data_add_medium_box(&rs->data, o->vol.box, o->vol.box + 3)) return true;
-    snprintf(err, err_size, "out of memory for --medium-box");
-    return false;
+    return cli_apply_medium(&o->vol, &rs->data, err, err_size);
 }
 
 bool mpir_scene_load(mpir_scene *rs, const mpir_options *o, char *err, size_t err_size) {

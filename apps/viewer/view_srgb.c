@@ -59,7 +59,8 @@ static uint32_t pixel_scalar(const float *c) {
 }
 
 /* The reference for the others: per channel sum += add, then the code of sum * inv. */
-static void pixels_scalar(float *sum, const float *add, float inv, uint32_t *out, int n) {
+static void pixels_scalar(float *sum, const float *add, float inv, uint32_t *out, int n, bool stream) {
+    (void)stream;
     for (int i = 0; i < n; i++) {
         float c[3];
         for (int k = 0; k < 3; k++) {
@@ -75,10 +76,12 @@ static void pixels_scalar(float *sum, const float *add, float inv, uint32_t *out
 #define VIEW_SRGB_X86 1
 
 /* 16 bytes of RGB (4 pixels, the last 4 bytes unused) to 4 xRGB8888 words: SSSE3's byte shuffle. */
-__attribute__((target("avx2"))) static inline void rgb4_to_xrgb(const uint8_t *rgb, uint32_t *out) {
+__attribute__((target("avx2"))) static inline void rgb4_to_xrgb(const uint8_t *rgb, uint32_t *out, bool stream) {
     const __m128i order = _mm_setr_epi8(2, 1, 0, -1, 5, 4, 3, -1, 8, 7, 6, -1, 11, 10, 9, -1);
-    __m128i p = _mm_shuffle_epi8(_mm_loadu_si128((const __m128i *)rgb), order);
-    _mm_storeu_si128((__m128i *)out, _mm_or_si128(p, _mm_set1_epi32((int)0xFF000000u)));
+    __m128i p = _mm_or_si128(_mm_shuffle_epi8(_mm_loadu_si128((const __m128i *)rgb), order),
+                             _mm_set1_epi32((int)0xFF000000u));
+    if (stream) _mm_stream_si128((__m128i *)out, p);
+    else _mm_storeu_si128((__m128i *)out, p);
 }
 
 /* The table lookup of view_srgb8 on 8 lanes: clamp (max first: NaN becomes 0), bucket, gather. */
@@ -103,7 +106,8 @@ __attribute__((target("avx2"))) static inline void store_bytes8(__m256i c, uint8
 }
 
 __attribute__((target("avx2"))) static void pixels_avx2(float *sum, const float *add, float inv, uint32_t *out,
-                                                        int n) {
+                                                        int n, bool stream) {
+    stream = stream && ((uintptr_t)out & 15u) == 0;
     const __m256 s = _mm256_set1_ps(inv);
     int i = 0;
     for (; i + 8 <= n; i += 8) { /* 8 pixels: 24 floats, 3 vectors */
@@ -117,10 +121,10 @@ __attribute__((target("avx2"))) static void pixels_avx2(float *sum, const float 
             }
             store_bytes8(codes8(_mm256_mul_ps(v, s)), rgb + 8 * k);
         }
-        rgb4_to_xrgb(rgb, out + i);
-        rgb4_to_xrgb(rgb + 12, out + i + 4);
+        rgb4_to_xrgb(rgb, out + i, stream);
+        rgb4_to_xrgb(rgb + 12, out + i + 4, stream);
     }
-    pixels_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i);
+    pixels_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i, false);
 }
 
 __attribute__((target("avx512f,avx2"))) static inline __m512i codes16(__m512 v) {
@@ -135,12 +139,27 @@ __attribute__((target("avx512f,avx2"))) static inline __m512i codes16(__m512 v) 
     return _mm512_mask_add_epi32(c, step, c, _mm512_set1_epi32(1));
 }
 
+/* 16 pixels' codes, channels interleaved as the floats were (c0: R0 G0 B0 R1 .., c2: .. B15), to
+ * 16 xRGB8888 words, in registers: each channel gathered by a two-source permute, the lanes past
+ * the 32nd from c2. (Bytes stored and reloaded 12 apart would stall on store forwarding.) */
+__attribute__((target("avx512f,avx2"))) static inline __m512i xrgb16(__m512i c0, __m512i c1, __m512i c2) {
+    const __m512i r = _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 33, 36, 39, 42, 45);
+    const __m512i one = _mm512_set1_epi32(1), two = _mm512_set1_epi32(2);
+    __m512i g = _mm512_add_epi32(r, one), b = _mm512_add_epi32(r, two);
+    /* lanes whose channel lies in c2 (index 32 and up): R from pixel 11, G from 11, B from 10 */
+    __m512i R = _mm512_mask_permutexvar_epi32(_mm512_permutex2var_epi32(c0, r, c1), 0xF800, r, c2);
+    __m512i G = _mm512_mask_permutexvar_epi32(_mm512_permutex2var_epi32(c0, g, c1), 0xF800, g, c2);
+    __m512i B = _mm512_mask_permutexvar_epi32(_mm512_permutex2var_epi32(c0, b, c1), 0xFC00, b, c2);
+    __m512i x = _mm512_or_si512(_mm512_slli_epi32(R, 16), _mm512_slli_epi32(G, 8));
+    return _mm512_or_si512(_mm512_or_si512(x, B), _mm512_set1_epi32((int)0xFF000000u));
+}
+
 __attribute__((target("avx512f,avx2"))) static void pixels_avx512(float *sum, const float *add, float inv,
-                                                                  uint32_t *out, int n) {
+                                                                  uint32_t *out, int n, bool stream) {
     const __m512 s = _mm512_set1_ps(inv);
     int i = 0;
     for (; i + 16 <= n; i += 16) { /* 16 pixels: 48 floats, 3 vectors */
-        uint8_t rgb[64];
+        __m512i c[3];
         for (int k = 0; k < 3; k++) {
             float *p = sum + 3 * i + 16 * k;
             __m512 v = _mm512_loadu_ps(p);
@@ -148,15 +167,17 @@ __attribute__((target("avx512f,avx2"))) static void pixels_avx512(float *sum, co
                 v = _mm512_add_ps(v, _mm512_loadu_ps(add + 3 * i + 16 * k));
                 _mm512_storeu_ps(p, v);
             }
-            _mm_storeu_si128((__m128i *)(rgb + 16 * k), _mm512_cvtepi32_epi8(codes16(_mm512_mul_ps(v, s))));
+            c[k] = codes16(_mm512_mul_ps(v, s));
         }
-        for (int q = 0; q < 4; q++) rgb4_to_xrgb(rgb + 12 * q, out + i + 4 * q);
+        __m512i px = xrgb16(c[0], c[1], c[2]);
+        if (stream && ((uintptr_t)(out + i) & 63u) == 0) _mm512_stream_si512((void *)(out + i), px);
+        else _mm512_storeu_si512(out + i, px);
     }
-    pixels_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i);
+    pixels_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i, false);
 }
 #endif
 
-static void (*pixels_fn)(float *, const float *, float, uint32_t *, int) = pixels_scalar;
+static void (*pixels_fn)(float *, const float *, float, uint32_t *, int, bool) = pixels_scalar;
 
 const char *view_srgb_select(int isa) {
     pixels_fn = pixels_scalar;
@@ -179,5 +200,15 @@ const char *view_srgb_select(int isa) {
 }
 
 void view_srgb_pixels(float *sum, const float *add, float inv, uint32_t *out, int n) {
-    pixels_fn(sum, add, inv, out, n);
+    pixels_fn(sum, add, inv, out, n, false);
+}
+
+void view_srgb_pixels_stream(float *sum, const float *add, float inv, uint32_t *out, int n) {
+    pixels_fn(sum, add, inv, out, n, true);
+}
+
+void view_srgb_fence(void) {
+#ifdef VIEW_SRGB_X86
+    _mm_sfence();
+#endif
 }

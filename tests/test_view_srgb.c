@@ -2,8 +2,9 @@
 /* The viewer's float to 8-bit sRGB conversion (apps/viewer/view_srgb.c, compiled in here so the test
  * builds without SDL2): the table equals the PNG writer's formula at every code's threshold and on
  * every 16th float in [0, 1]; each instruction set's view_srgb_pixels and view_srgb_pixels_stream
- * (scalar, AVX2, AVX-512, as the CPU has them; the streaming one from every alignment) equals the table on every float in [0, 1] (every 31st under sanitizers), on NaN,
- * infinities, negatives and values above 1, and accumulates sum += add, sum * inv bit for bit as
+ * (scalar, AVX2, AVX-512, as the CPU has them; the streaming one from every alignment) equals the
+ * table on every float in [0, 1] (every 31st under sanitizers), on NaN, infinities, negatives and
+ * values above 1, and accumulates sum += add, sum * inv bit for bit as
  * the scalar loop does, for row lengths that leave every tail. */
 #include <math.h>
 #include <stdint.h>
@@ -112,7 +113,8 @@ static void test_isa(int isa, uint32_t stride) {
 
 int main(void) {
     view_srgb_init();
-    CHECKF(view_srgb_exact, "the table could not be built (libm's powf steps by two within a bucket)");
+    CHECKF(view_srgb_exact, "the table could not be built (libm's powf steps by two within a float's ulp)");
+    printf("table: %d words\n", view_srgb_table_words());
     test_thresholds();
     uint32_t stride = rp_test_sanitized() ? 31u : 1u;
     /* 1: scalar; 8: AVX2 and 16: AVX-512 where the CPU has them (select says which ran) */

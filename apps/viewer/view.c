@@ -544,8 +544,8 @@ static void present_rect(const present_job *j, int x0, int y0, int x1, int y1, b
         float inv = j->samples == 1 ? 1.0f : 1.0f / (float)j->samples;
         for (int y = y0; y < y1; y++) {
             size_t at = (size_t)y * (size_t)v->w + (size_t)x0;
-            view_srgb_pixels_stream(v->sum + at * 3, add && j->add ? v->frame + at * 3 : NULL, inv,
-                                    v->out + (size_t)y * (size_t)v->out_pitch + (size_t)x0, n);
+            view_srgb_pixels(v->sum + at * 3, add && j->add ? v->frame + at * 3 : NULL, inv,
+                             v->out + (size_t)y * (size_t)v->out_pitch + (size_t)x0, n);
         }
         return;
     }
@@ -553,7 +553,7 @@ static void present_rect(const present_job *j, int x0, int y0, int x1, int y1, b
     for (int y = y0; y < y1; y++) {
         float *row = v->frame + ((size_t)y * (size_t)j->fw + (size_t)x0) * 3;
         if (s == 1) {
-            view_srgb_pixels_stream(row, NULL, 1.0f, v->out + (size_t)y * (size_t)v->out_pitch + (size_t)x0, n);
+            view_srgb_pixels(row, NULL, 1.0f, v->out + (size_t)y * (size_t)v->out_pitch + (size_t)x0, n);
             continue;
         }
         view_srgb_pixels(row, NULL, 1.0f, line, n);
@@ -572,7 +572,6 @@ static void present_tile(void *user, int x0, int y0, int x1, int y1, uint32_t th
     uint32_t *line = j->v->lines + (size_t)thread * (size_t)j->v->w;
     if (atomic_load_explicit(&j->free, memory_order_acquire)) { /* the usual case: no lock */
         present_rect(j, x0, y0, x1, y1, true, line);
-        view_srgb_fence();
         j->busy_ms[8 * thread] += cli_now_ms() - t0;
         return;
     }
@@ -596,7 +595,6 @@ static void present_tile(void *user, int x0, int y0, int x1, int y1, uint32_t th
     pthread_mutex_unlock(&j->lock);
     if (now) {
         present_rect(j, x0, y0, x1, y1, true, line);
-        view_srgb_fence();
     } else if (j->accumulate && j->add) {
         /* add the frame now, while it is in cache; the pixels come later, from the sum */
         for (int y = y0; y < y1; y++) {
@@ -621,7 +619,6 @@ static void present_release(present_job *j) {
         const int *t = j->waiting[i];
         present_rect(j, t[0], t[1], t[2], t[3], false, line);
     }
-    view_srgb_fence();
 }
 
 /* Darkens a box and writes the overlay's lines into it. */

@@ -92,8 +92,7 @@ static uint32_t pixel_scalar(const float *c) {
 }
 
 /* The reference for the others: per channel sum += add, then the code of sum * inv. */
-static void pixels_scalar(float *sum, const float *add, float inv, uint32_t *out, int n, bool stream) {
-    (void)stream;
+static void pixels_scalar(float *sum, const float *add, float inv, uint32_t *out, int n) {
     for (int i = 0; i < n; i++) {
         float c[3];
         for (int k = 0; k < 3; k++) {
@@ -109,12 +108,11 @@ static void pixels_scalar(float *sum, const float *add, float inv, uint32_t *out
 #define VIEW_SRGB_X86 1
 
 /* 16 bytes of RGB (4 pixels, the last 4 bytes unused) to 4 xRGB8888 words: SSSE3's byte shuffle. */
-__attribute__((target("avx2"))) static inline void rgb4_to_xrgb(const uint8_t *rgb, uint32_t *out, bool stream) {
+__attribute__((target("avx2"))) static inline void rgb4_to_xrgb(const uint8_t *rgb, uint32_t *out) {
     const __m128i order = _mm_setr_epi8(2, 1, 0, -1, 5, 4, 3, -1, 8, 7, 6, -1, 11, 10, 9, -1);
     __m128i p = _mm_or_si128(_mm_shuffle_epi8(_mm_loadu_si128((const __m128i *)rgb), order),
                              _mm_set1_epi32((int)0xFF000000u));
-    if (stream) _mm_stream_si128((__m128i *)out, p);
-    else _mm_storeu_si128((__m128i *)out, p);
+    _mm_storeu_si128((__m128i *)out, p);
 }
 
 /* The table lookup of view_srgb8 on 8 lanes: clamp (max first: NaN becomes 2^-13), the octave's
@@ -145,8 +143,7 @@ __attribute__((target("avx2"))) static inline void store_bytes8(__m256i c, uint8
 }
 
 __attribute__((target("avx2"))) static void pixels_avx2(float *sum, const float *add, float inv, uint32_t *out,
-                                                        int n, bool stream) {
-    stream = stream && ((uintptr_t)out & 15u) == 0;
+                                                        int n) {
     const __m256 s = _mm256_set1_ps(inv);
     const __m256i sh0 = _mm256_loadu_si256((const __m256i *)view_srgb_shift),
                   sh1 = _mm256_loadu_si256((const __m256i *)(view_srgb_shift + 8)),
@@ -164,10 +161,10 @@ __attribute__((target("avx2"))) static void pixels_avx2(float *sum, const float 
             }
             store_bytes8(codes8(_mm256_mul_ps(v, s), sh0, sh1, f0, f1), rgb + 8 * k);
         }
-        rgb4_to_xrgb(rgb, out + i, stream);
-        rgb4_to_xrgb(rgb + 12, out + i + 4, stream);
+        rgb4_to_xrgb(rgb, out + i);
+        rgb4_to_xrgb(rgb + 12, out + i + 4);
     }
-    pixels_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i, false);
+    pixels_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i);
 }
 
 __attribute__((target("avx512f,avx2"))) static inline __m512i codes16(__m512 v, __m512i shift, __m512i first) {
@@ -238,7 +235,7 @@ __attribute__((target("avx512f,avx2"))) static inline __m512i xrgb16(__m512i c0,
 }
 
 __attribute__((target("avx512f,avx2,fma"))) static void pixels_avx512(float *sum, const float *add, float inv,
-                                                                  uint32_t *out, int n, bool stream) {
+                                                                  uint32_t *out, int n) {
     const __m512 s = _mm512_set1_ps(inv);
     const __m512i shift = _mm512_loadu_si512(view_srgb_shift), first = _mm512_loadu_si512(view_srgb_first);
     const __m512 pow2 = _mm512_loadu_ps(view_srgb_pow2);
@@ -255,14 +252,13 @@ __attribute__((target("avx512f,avx2,fma"))) static void pixels_avx512(float *sum
             c[k] = codes16_poly(_mm512_mul_ps(v, s), pow2, shift, first);
         }
         __m512i px = xrgb16(c[0], c[1], c[2]);
-        if (stream && ((uintptr_t)(out + i) & 63u) == 0) _mm512_stream_si512((void *)(out + i), px);
-        else _mm512_storeu_si512(out + i, px);
+        _mm512_storeu_si512(out + i, px);
     }
-    pixels_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i, false);
+    pixels_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i);
 }
 #endif
 
-static void (*pixels_fn)(float *, const float *, float, uint32_t *, int, bool) = pixels_scalar;
+static void (*pixels_fn)(float *, const float *, float, uint32_t *, int) = pixels_scalar;
 
 const char *view_srgb_select(int isa) {
     pixels_fn = pixels_scalar;
@@ -285,15 +281,5 @@ const char *view_srgb_select(int isa) {
 }
 
 void view_srgb_pixels(float *sum, const float *add, float inv, uint32_t *out, int n) {
-    pixels_fn(sum, add, inv, out, n, false);
-}
-
-void view_srgb_pixels_stream(float *sum, const float *add, float inv, uint32_t *out, int n) {
-    pixels_fn(sum, add, inv, out, n, true);
-}
-
-void view_srgb_fence(void) {
-#ifdef VIEW_SRGB_X86
-    _mm_sfence();
-#endif
+    pixels_fn(sum, add, inv, out, n);
 }

@@ -100,14 +100,6 @@ const char *view_srgb_select(int isa);
 /* n pixels of 3 floats: sum += add (when add is not NULL), then out = 0xFF000000 | the codes of
  * sum * inv as xRGB8888, exactly view_srgb8 per channel (inv 1: sum itself). */
 void view_srgb_pixels(float *sum, const float *add, float inv, uint32_t *out, int n);
-/* The same, but out's whole cache lines (16 pixels from a 64-byte boundary; AVX2: 4 from 16) are
- * written with streaming stores, which do not read the line first: for the window's surface, cold
- * by the time the next frame writes it (a 16-pixel tile row is one line, so a plain store misses
- * once per row, about 50k times a 1024x768 frame). Not for pixels read again soon. */
-void view_srgb_pixels_stream(float *sum, const float *add, float inv, uint32_t *out, int n);
-/* Orders view_srgb_pixels_stream's writes (streaming stores) before later ones: call it before the
- * pixels are handed to another thread or the display server. */
-void view_srgb_fence(void);
 
 /* The 8-bit sRGB code of a linear value, equal to what rp_image_write stores in a PNG. Branch-free
  * but for the table's check: clamping to [0, 1] maps negatives and NaN to 0 as the formula does. */

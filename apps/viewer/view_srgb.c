@@ -2,7 +2,8 @@
  * the formula's powf per channel would cost the window a sizeable share of a frame. The floats in
  * [2^-13, 1] are cut into buckets by exponent and, per octave, as few top mantissa bits as keep the
  * code rising by at most one within a bucket (found when the table is built: 0 to 7 bits, 384
- * buckets in all), so a bucket stores its first code and the bit pattern where the next begins. Positive floats order as their bit patterns.
+ * buckets in all), so a bucket stores its first code and the bit pattern where the next begins.
+ * Positive floats order as their bit patterns.
  * Checked against the formula on every float in [0, 1] (all 1065353217 of them), on NaN and on
  * negative values: no difference. The encoder itself is inline, in viewer.h. Whole rows go through
  * view_srgb_pixels, which also adds a frame into the accumulated sum: the same lookup on 8 (AVX2)
@@ -128,7 +129,8 @@ __attribute__((target("avx2"))) static inline __m256i codes8(__m256 v, __m256i s
     __m256i first = _mm256_blendv_epi8(_mm256_permutevar8x32_epi32(f0, e), _mm256_permutevar8x32_epi32(f1, e), hi);
     __m256i i = _mm256_add_epi32(first, _mm256_srlv_epi32(m, sh));
     __m256i t = _mm256_i32gather_epi32((const int *)view_srgb_table, i, 4);
-    __m256i low = _mm256_and_si256(m, _mm256_sub_epi32(_mm256_sllv_epi32(_mm256_set1_epi32(1), sh), _mm256_set1_epi32(1)));
+    __m256i ones = _mm256_set1_epi32(1);
+    __m256i low = _mm256_and_si256(m, _mm256_sub_epi32(_mm256_sllv_epi32(ones, sh), ones));
     __m256i below = _mm256_cmpgt_epi32(_mm256_and_si256(t, _mm256_set1_epi32(0xFFFFFF)), low); /* -1: no step */
     __m256i c = _mm256_srli_epi32(t, 24);
     return _mm256_add_epi32(_mm256_add_epi32(c, _mm256_set1_epi32(1)), below);
@@ -175,7 +177,8 @@ __attribute__((target("avx512f,avx2"))) static inline __m512i codes16(__m512 v, 
     __m512i sh = _mm512_permutexvar_epi32(e, shift);
     __m512i i = _mm512_add_epi32(_mm512_permutexvar_epi32(e, first), _mm512_srlv_epi32(m, sh));
     __m512i t = _mm512_i32gather_epi32(i, (const int *)view_srgb_table, 4);
-    __m512i low = _mm512_and_si512(m, _mm512_sub_epi32(_mm512_sllv_epi32(_mm512_set1_epi32(1), sh), _mm512_set1_epi32(1)));
+    __m512i ones = _mm512_set1_epi32(1);
+    __m512i low = _mm512_and_si512(m, _mm512_sub_epi32(_mm512_sllv_epi32(ones, sh), ones));
     __mmask16 step = _mm512_cmpge_epi32_mask(low, _mm512_and_si512(t, _mm512_set1_epi32(0xFFFFFF)));
     __m512i c = _mm512_srli_epi32(t, 24);
     return _mm512_mask_add_epi32(c, step, c, _mm512_set1_epi32(1));

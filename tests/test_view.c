@@ -324,6 +324,40 @@ static void test_resolution(const char *scene) {
     CHECKF(rc == 0 && strstr(output, "frame 3: 64x48 scale 1 samples 1 moved 1"), "exit %d:\n%s", rc, output);
 }
 
+/* The motion controller, twice in one run: flying, then still, then a mouse-look drag, then still.
+ * A budget no frame meets (--fps 1000) puts every moving frame that has an estimate at the floor
+ * (--max-scale 3: 107x80); the first frame after each stop is full size again and the samples
+ * start over from one, so the drop and the return do not depend on how fast the machine is. */
+static void test_controller(const char *scene) {
+    char args[4096];
+    snprintf(args, sizeof args,
+             "view '%s' --width 320 --height 240 --threads 2 --fps 1000 --max-scale 3 --frames 12 --log --no-overlay "
+             "--script '0 down w; 3 up w; 6 press right 100 100; 7 move 110 100; 8 move 120 100; "
+             "9 release right 120 100'",
+             scene);
+    int rc = run(true, args);
+    CHECKF(rc == 0, "exit %d:\n%s", rc, output);
+    static const int moving[12] = {1, 1, 1, 0, 0, 0, 0, 1, 1, 0, 0, 0};
+    static const int samples[12] = {1, 0, 0, 1, 2, 3, 4, 0, 0, 1, 2, 3};
+    for (int f = 0; f < 12; f++) {
+        int w = 0, h = 0, scale = 0, spp = -1, moved = -1;
+        char key[32];
+        snprintf(key, sizeof key, "frame %d: ", f);
+        const char *l = strstr(output, key);
+        bool ok = l && sscanf(l + strlen(key), "%dx%d scale %d samples %d moved %d", &w, &h, &scale, &spp, &moved) == 5;
+        CHECKF(ok, "no line for frame %d:\n%s", f, output);
+        if (!ok) continue;
+        CHECKF(moved == moving[f] && spp == samples[f], "frame %d: moved %d (want %d), samples %d (want %d)", f, moved,
+               moving[f], spp, samples[f]);
+        if (f == 0) continue; /* no estimate of a frame's time yet: full size */
+        if (moving[f])
+            CHECKF(scale == 3 && w == 107 && h == 80, "frame %d (moving): %dx%d scale %d, want the floor 107x80", f, w,
+                   h, scale);
+        else
+            CHECKF(scale == 1 && w == 320 && h == 240, "frame %d (still): %dx%d scale %d", f, w, h, scale);
+    }
+}
+
 static void test_errors(const char *scene) {
     char args[4096];
     snprintf(args, sizeof args, "view '%s' --frames 1 --script '3 jump'", scene);
@@ -514,6 +548,7 @@ int main(void) {
     }
     test_overlay(cornell);
     test_resolution(cornell);
+    test_controller(cornell);
     test_resize(cornell, "2 resize 120 90", 6, 120, 90);
     /* while moving, then smaller, then wider than it was; the reduced frames follow too */
     test_resize(cornell, "0 down w; 2 resize 64 40; 4 up w; 4 resize 130 70", 8, 130, 70);

@@ -922,6 +922,7 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         v->bytes += bytes;
     }
     v->last_frame_ms = frame_ms;
+    double frame_cpu = cpu_ms() - u0; /* the process's CPU time in this frame, --compare's render left out */
     if (v->opt.compare && render && scale == 1 && v->frames_done > 0) {
         /* the same frame (settings, camera, samples) by rp_render alone, right after the viewer's:
          * the machine's load drifts alike for both */
@@ -943,9 +944,9 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
     }
     if (v->opt.log)
         printf("frame %d: %dx%d scale %d samples %d moved %d render %.2f ms (tiles %.2f) show %.2f ms late %.2f ms "
-               "events %.2f ms overlay %.2f ms frame %.2f ms\n",
+               "events %.2f ms overlay %.2f ms frame %.2f ms cpu %.2f ms\n",
                frame, fw, fh, scale, v->samples, moved ? 1 : 0, render_ms, tiles_ms, show_ms, late_ms, events_ms,
-               overlay_ms, frame_ms);
+               overlay_ms, frame_ms, frame_cpu);
     v->frames_done++;
     return true;
 }

@@ -1,19 +1,26 @@
 /* Linear float to 8-bit sRGB, as rp_image_write encodes PNG pixels (src/io/image.c), but by table:
  * the formula's powf per channel would cost the window a sizeable share of a frame. The floats in
- * [2^-13, 1] are cut into buckets by their top 17 bits (exponent and 8 mantissa bits); within a
- * bucket the code rises by at most one (checked when the table is built), so a bucket stores its
- * first code and the bit pattern where the next begins. Positive floats order as their bit patterns.
+ * [2^-13, 1] are cut into buckets by exponent and, per octave, as few top mantissa bits as keep the
+ * code rising by at most one within a bucket (found when the table is built: 0 to 7 bits, 384
+ * buckets in all), so a bucket stores its first code and the bit pattern where the next begins.
+ * Positive floats order as their bit patterns.
  * Checked against the formula on every float in [0, 1] (all 1065353217 of them), on NaN and on
  * negative values: no difference. The encoder itself is inline, in viewer.h. Whole rows go through
  * view_srgb_pixels, which also adds a frame into the accumulated sum: the same lookup on 8 (AVX2)
- * or 16 (AVX-512) lanes with a gather, chosen once by the CPU; 5-7x faster than the scalar loop on
- * a 1024x768 frame (test_view_srgb checks each against the table on every float in [0, 1]). */
+ * or 16 (AVX-512) lanes with a gather (the octave's shift and first bucket come from a register),
+ * chosen once by the CPU (test_view_srgb checks each against the table on every float in [0, 1]).
+ * The gathers were most of the cost: 1.2-1.6 ms of CPU a 1024x768 frame on the EPYC (Zen 4) test
+ * machine, 2-3 ms inside the viewer, where the rendering between tiles evicts the table. AVX-512
+ * therefore computes the code by a polynomial and gathers only for lanes near a code's edge (about
+ * 0.4% of them): 25-30% less CPU on the same frame, and nothing for the rendering to evict. */
 #include "viewer.h"
 
 #include <math.h>
 #include <string.h>
 
-uint32_t view_srgb_table[VIEW_SRGB_BUCKETS];
+uint32_t view_srgb_table[VIEW_SRGB_MAX];
+uint32_t view_srgb_shift[16], view_srgb_first[16];
+static float view_srgb_pow2[16]; /* 2^((e - 13) / 2.4) for octave e */
 static bool ready;
 bool view_srgb_exact;
 
@@ -31,26 +38,53 @@ static float from_bits(uint32_t b) {
     return f;
 }
 
+/* Whether octave e cut into 2^k buckets has the code rise by at most one within each. */
+static bool octave_fits(uint32_t e, uint32_t k) {
+    uint32_t base = (e + (uint32_t)VIEW_SRGB_E0) << 23, w = 1u << (23 - k);
+    for (uint32_t j = 0; j < (1u << k); j++) {
+        uint32_t lo = base + j * w;
+        if (view_srgb8_formula(from_bits(lo + w - 1u)) > view_srgb8_formula(from_bits(lo)) + 1) return false;
+    }
+    return true;
+}
+
 void view_srgb_init(void) {
     if (ready) return;
-    bool ok = view_srgb8_formula(from_bits(VIEW_SRGB_LO - 1u)) == 0; /* below the table all is 0 */
-    for (uint32_t i = 0; i < VIEW_SRGB_BUCKETS; i++) {
-        uint32_t lo = (i + VIEW_SRGB_FIRST) << VIEW_SRGB_SHIFT, hi = lo + (1u << VIEW_SRGB_SHIFT) - 1u;
-        uint8_t a = view_srgb8_formula(from_bits(lo)), z = view_srgb8_formula(from_bits(hi > 0x3F800000u ? 0x3F800000u : hi));
-        view_srgb_table[i] = (uint32_t)a << 16 | 0x8000u; /* no step in this bucket */
-        if (z > a + 1) ok = false;
-        if (z != a + 1) continue;
-        while (lo < hi) { /* the first pattern whose code is z */
-            uint32_t mid = lo + (hi - lo) / 2u;
-            if (view_srgb8_formula(from_bits(mid)) >= z) hi = mid;
-            else lo = mid + 1u;
+    bool ok = view_srgb8_formula(from_bits(VIEW_SRGB_LO)) == 0; /* below the table all is 0 */
+    uint32_t n = 0;
+    for (uint32_t e = 0; e < 16 && ok; e++) {
+        uint32_t k = 0; /* octave 13 is 1.0 alone, 14 and 15 never used */
+        while (e < VIEW_SRGB_OCTAVES - 1 && k < 16 && !octave_fits(e, k)) k++;
+        view_srgb_shift[e] = 23 - k;
+        view_srgb_first[e] = n;
+        if (e >= VIEW_SRGB_OCTAVES) continue;
+        if (n + (1u << k) > VIEW_SRGB_MAX || k == 16) {
+            ok = false;
+            break;
         }
-        view_srgb_table[i] = (uint32_t)a << 16 | (lo & 0x7FFFu);
+        uint32_t base = (e + (uint32_t)VIEW_SRGB_E0) << 23, w = 1u << (23 - k);
+        for (uint32_t j = 0; j < (1u << k); j++, n++) {
+            uint32_t lo = base + j * w, hi = lo + w - 1u;
+            if (e == VIEW_SRGB_OCTAVES - 1) hi = lo; /* 1.0 */
+            uint8_t a = view_srgb8_formula(from_bits(lo)), z = view_srgb8_formula(from_bits(hi));
+            view_srgb_table[n] = (uint32_t)a << 24 | 1u << 23; /* no step in this bucket */
+            if (z != a + 1) continue;
+            while (lo < hi) { /* the first pattern whose code is z */
+                uint32_t mid = lo + (hi - lo) / 2u;
+                if (view_srgb8_formula(from_bits(mid)) >= z) hi = mid;
+                else lo = mid + 1u;
+            }
+            view_srgb_table[n] = (uint32_t)a << 24 | (lo & (w - 1u));
+        }
     }
-    /* a libm whose powf made the code jump by two within a bucket: every value by the formula */
+    for (int e = 0; e < 16; e++) view_srgb_pow2[e] = (float)pow(2.0, (double)(e - 13) / 2.4);
+    /* a libm whose powf made the code jump by two within a float's ulp: every value by the formula */
     view_srgb_exact = ok;
     ready = true;
 }
+
+/* The table's size in words, for reports. */
+int view_srgb_table_words(void) { return (int)view_srgb_first[VIEW_SRGB_OCTAVES]; }
 
 /* ---- whole rows: accumulate, average and encode, per instruction set ---- */
 
@@ -77,20 +111,28 @@ static void pixels_scalar(float *sum, const float *add, float inv, uint32_t *out
 /* 16 bytes of RGB (4 pixels, the last 4 bytes unused) to 4 xRGB8888 words: SSSE3's byte shuffle. */
 __attribute__((target("avx2"))) static inline void rgb4_to_xrgb(const uint8_t *rgb, uint32_t *out) {
     const __m128i order = _mm_setr_epi8(2, 1, 0, -1, 5, 4, 3, -1, 8, 7, 6, -1, 11, 10, 9, -1);
-    __m128i p = _mm_shuffle_epi8(_mm_loadu_si128((const __m128i *)rgb), order);
-    _mm_storeu_si128((__m128i *)out, _mm_or_si128(p, _mm_set1_epi32((int)0xFF000000u)));
+    __m128i p = _mm_or_si128(_mm_shuffle_epi8(_mm_loadu_si128((const __m128i *)rgb), order),
+                             _mm_set1_epi32((int)0xFF000000u));
+    _mm_storeu_si128((__m128i *)out, p);
 }
 
-/* The table lookup of view_srgb8 on 8 lanes: clamp (max first: NaN becomes 0), bucket, gather. */
-__attribute__((target("avx2"))) static inline __m256i codes8(__m256 v) {
-    v = _mm256_min_ps(_mm256_max_ps(v, _mm256_setzero_ps()), _mm256_set1_ps(1.0f));
+/* The table lookup of view_srgb8 on 8 lanes: clamp (max first: NaN becomes 2^-13), the octave's
+ * shift and first bucket from registers (octaves 8-13 from the second half), gather. */
+__attribute__((target("avx2"))) static inline __m256i codes8(__m256 v, __m256i sh0, __m256i sh1, __m256i f0,
+                                                             __m256i f1) {
+    v = _mm256_min_ps(_mm256_max_ps(v, _mm256_set1_ps(0x1p-13f)), _mm256_set1_ps(1.0f));
     __m256i b = _mm256_castps_si256(v);
-    __m256i i = _mm256_max_epi32(_mm256_srli_epi32(b, VIEW_SRGB_SHIFT), _mm256_set1_epi32((int)VIEW_SRGB_FIRST));
-    i = _mm256_sub_epi32(i, _mm256_set1_epi32((int)VIEW_SRGB_FIRST));
+    __m256i e = _mm256_sub_epi32(_mm256_srli_epi32(b, 23), _mm256_set1_epi32(VIEW_SRGB_E0));
+    __m256i m = _mm256_and_si256(b, _mm256_set1_epi32(0x7FFFFF));
+    __m256i hi = _mm256_cmpgt_epi32(e, _mm256_set1_epi32(7));
+    __m256i sh = _mm256_blendv_epi8(_mm256_permutevar8x32_epi32(sh0, e), _mm256_permutevar8x32_epi32(sh1, e), hi);
+    __m256i first = _mm256_blendv_epi8(_mm256_permutevar8x32_epi32(f0, e), _mm256_permutevar8x32_epi32(f1, e), hi);
+    __m256i i = _mm256_add_epi32(first, _mm256_srlv_epi32(m, sh));
     __m256i t = _mm256_i32gather_epi32((const int *)view_srgb_table, i, 4);
-    __m256i below = _mm256_cmpgt_epi32(_mm256_and_si256(t, _mm256_set1_epi32(0xFFFF)),
-                                       _mm256_and_si256(b, _mm256_set1_epi32(0x7FFF))); /* -1: no step */
-    __m256i c = _mm256_and_si256(_mm256_srli_epi32(t, 16), _mm256_set1_epi32(0xFF));
+    __m256i ones = _mm256_set1_epi32(1);
+    __m256i low = _mm256_and_si256(m, _mm256_sub_epi32(_mm256_sllv_epi32(ones, sh), ones));
+    __m256i below = _mm256_cmpgt_epi32(_mm256_and_si256(t, _mm256_set1_epi32(0xFFFFFF)), low); /* -1: no step */
+    __m256i c = _mm256_srli_epi32(t, 24);
     return _mm256_add_epi32(_mm256_add_epi32(c, _mm256_set1_epi32(1)), below);
 }
 
@@ -105,6 +147,10 @@ __attribute__((target("avx2"))) static inline void store_bytes8(__m256i c, uint8
 __attribute__((target("avx2"))) static void pixels_avx2(float *sum, const float *add, float inv, uint32_t *out,
                                                         int n) {
     const __m256 s = _mm256_set1_ps(inv);
+    const __m256i sh0 = _mm256_loadu_si256((const __m256i *)view_srgb_shift),
+                  sh1 = _mm256_loadu_si256((const __m256i *)(view_srgb_shift + 8)),
+                  f0 = _mm256_loadu_si256((const __m256i *)view_srgb_first),
+                  f1 = _mm256_loadu_si256((const __m256i *)(view_srgb_first + 8));
     int i = 0;
     for (; i + 8 <= n; i += 8) { /* 8 pixels: 24 floats, 3 vectors */
         uint8_t rgb[32];
@@ -115,7 +161,7 @@ __attribute__((target("avx2"))) static void pixels_avx2(float *sum, const float 
                 v = _mm256_add_ps(v, _mm256_loadu_ps(add + 3 * i + 8 * k));
                 _mm256_storeu_ps(p, v);
             }
-            store_bytes8(codes8(_mm256_mul_ps(v, s)), rgb + 8 * k);
+            store_bytes8(codes8(_mm256_mul_ps(v, s), sh0, sh1, f0, f1), rgb + 8 * k);
         }
         rgb4_to_xrgb(rgb, out + i);
         rgb4_to_xrgb(rgb + 12, out + i + 4);
@@ -123,24 +169,82 @@ __attribute__((target("avx2"))) static void pixels_avx2(float *sum, const float 
     pixels_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i);
 }
 
-__attribute__((target("avx512f,avx2"))) static inline __m512i codes16(__m512 v) {
-    v = _mm512_min_ps(_mm512_max_ps(v, _mm512_setzero_ps()), _mm512_set1_ps(1.0f));
+__attribute__((target("avx512f,avx2"))) static inline __m512i codes16(__m512 v, __m512i shift, __m512i first) {
+    v = _mm512_min_ps(_mm512_max_ps(v, _mm512_set1_ps(0x1p-13f)), _mm512_set1_ps(1.0f));
     __m512i b = _mm512_castps_si512(v);
-    __m512i i = _mm512_max_epi32(_mm512_srli_epi32(b, VIEW_SRGB_SHIFT), _mm512_set1_epi32((int)VIEW_SRGB_FIRST));
-    i = _mm512_sub_epi32(i, _mm512_set1_epi32((int)VIEW_SRGB_FIRST));
+    __m512i e = _mm512_sub_epi32(_mm512_srli_epi32(b, 23), _mm512_set1_epi32(VIEW_SRGB_E0));
+    __m512i m = _mm512_and_si512(b, _mm512_set1_epi32(0x7FFFFF));
+    __m512i sh = _mm512_permutexvar_epi32(e, shift);
+    __m512i i = _mm512_add_epi32(_mm512_permutexvar_epi32(e, first), _mm512_srlv_epi32(m, sh));
     __m512i t = _mm512_i32gather_epi32(i, (const int *)view_srgb_table, 4);
-    __mmask16 step = _mm512_cmpge_epi32_mask(_mm512_and_si512(b, _mm512_set1_epi32(0x7FFF)),
-                                             _mm512_and_si512(t, _mm512_set1_epi32(0xFFFF)));
-    __m512i c = _mm512_and_si512(_mm512_srli_epi32(t, 16), _mm512_set1_epi32(0xFF));
+    __m512i ones = _mm512_set1_epi32(1);
+    __m512i low = _mm512_and_si512(m, _mm512_sub_epi32(_mm512_sllv_epi32(ones, sh), ones));
+    __mmask16 step = _mm512_cmpge_epi32_mask(low, _mm512_and_si512(t, _mm512_set1_epi32(0xFFFFFF)));
+    __m512i c = _mm512_srli_epi32(t, 24);
     return _mm512_mask_add_epi32(c, step, c, _mm512_set1_epi32(1));
 }
 
-__attribute__((target("avx512f,avx2"))) static void pixels_avx512(float *sum, const float *add, float inv,
+/* The codes of 16 values without the table where that is safe. The formula's linear part is the
+ * formula's own operations. Its power part, 1.055 v^(1/2.4) - 0.055, is v = 2^e x with x in [1, 2):
+ * 2^(e/2.4) from a register and x^(1/2.4) by a degree-7 polynomial (Chebyshev interpolation in
+ * t = 2x - 3, relative error 4e-8, about 1e-5 of a code with float rounding); where the value lands
+ * within 2e-3 of a code's edge, where that error could matter, the lane takes the table's code. */
+__attribute__((target("avx512f,avx2,fma"))) static inline __m512i codes16_poly(__m512 v, __m512 pow2, __m512i shift,
+                                                                                __m512i first) {
+    __m512 c = _mm512_min_ps(_mm512_max_ps(v, _mm512_set1_ps(0x1p-13f)), _mm512_set1_ps(1.0f));
+    __m512i b = _mm512_castps_si512(c);
+    __m512i e = _mm512_sub_epi32(_mm512_srli_epi32(b, 23), _mm512_set1_epi32(VIEW_SRGB_E0));
+    __m512 x = _mm512_castsi512_ps(_mm512_or_si512(_mm512_and_si512(b, _mm512_set1_epi32(0x7FFFFF)),
+                                                   _mm512_set1_epi32(0x3F800000)));
+    __m512 t = _mm512_sub_ps(_mm512_add_ps(x, x), _mm512_set1_ps(3.0f)); /* exact */
+    __m512 g = _mm512_set1_ps(1.149400295e-05f);
+    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(-4.286558067e-05f));
+    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(1.435515284e-04f));
+    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(-6.016229575e-04f));
+    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(2.812993774e-03f));
+    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(-1.598916955e-02f));
+    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(1.644518801e-01f));
+    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(1.184053612e+00f));
+    __m512 p = _mm512_mul_ps(g, _mm512_permutexvar_ps(e, pow2));
+    /* (1.055 p - 0.055) 255 + 0.5 */
+    __m512 y = _mm512_fmadd_ps(p, _mm512_set1_ps(269.025f), _mm512_set1_ps(-13.525f));
+    __m512 f = _mm512_sub_ps(y, _mm512_roundscale_ps(y, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC));
+    __mmask16 edge = _mm512_cmp_ps_mask(f, _mm512_set1_ps(2e-3f), _CMP_LT_OQ) |
+                     _mm512_cmp_ps_mask(f, _mm512_set1_ps(1.0f - 2e-3f), _CMP_GT_OQ);
+    /* the linear part as the formula computes it: (12.92 v) 255 + 0.5, then truncated */
+    __mmask16 lin = _mm512_cmp_ps_mask(c, _mm512_set1_ps(0.0031308f), _CMP_LE_OQ);
+    __m512 yl = _mm512_add_ps(_mm512_mul_ps(_mm512_mul_ps(c, _mm512_set1_ps(12.92f)), _mm512_set1_ps(255.0f)),
+                              _mm512_set1_ps(0.5f));
+    y = _mm512_mask_mov_ps(y, lin, yl);
+    __m512i code = _mm512_min_epi32(_mm512_cvttps_epi32(y), _mm512_set1_epi32(255));
+    edge &= (__mmask16)~lin;
+    if (edge) code = _mm512_mask_mov_epi32(code, edge, codes16(v, shift, first));
+    return code;
+}
+
+/* 16 pixels' codes, channels interleaved as the floats were (c0: R0 G0 B0 R1 .., c2: .. B15), to
+ * 16 xRGB8888 words, in registers: each channel gathered by a two-source permute, the lanes past
+ * the 32nd from c2. (Bytes stored and reloaded 12 apart would stall on store forwarding.) */
+__attribute__((target("avx512f,avx2"))) static inline __m512i xrgb16(__m512i c0, __m512i c1, __m512i c2) {
+    const __m512i r = _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 33, 36, 39, 42, 45);
+    const __m512i one = _mm512_set1_epi32(1), two = _mm512_set1_epi32(2);
+    __m512i g = _mm512_add_epi32(r, one), b = _mm512_add_epi32(r, two);
+    /* lanes whose channel lies in c2 (index 32 and up): R from pixel 11, G from 11, B from 10 */
+    __m512i R = _mm512_mask_permutexvar_epi32(_mm512_permutex2var_epi32(c0, r, c1), 0xF800, r, c2);
+    __m512i G = _mm512_mask_permutexvar_epi32(_mm512_permutex2var_epi32(c0, g, c1), 0xF800, g, c2);
+    __m512i B = _mm512_mask_permutexvar_epi32(_mm512_permutex2var_epi32(c0, b, c1), 0xFC00, b, c2);
+    __m512i x = _mm512_or_si512(_mm512_slli_epi32(R, 16), _mm512_slli_epi32(G, 8));
+    return _mm512_or_si512(_mm512_or_si512(x, B), _mm512_set1_epi32((int)0xFF000000u));
+}
+
+__attribute__((target("avx512f,avx2,fma"))) static void pixels_avx512(float *sum, const float *add, float inv,
                                                                   uint32_t *out, int n) {
     const __m512 s = _mm512_set1_ps(inv);
+    const __m512i shift = _mm512_loadu_si512(view_srgb_shift), first = _mm512_loadu_si512(view_srgb_first);
+    const __m512 pow2 = _mm512_loadu_ps(view_srgb_pow2);
     int i = 0;
     for (; i + 16 <= n; i += 16) { /* 16 pixels: 48 floats, 3 vectors */
-        uint8_t rgb[64];
+        __m512i c[3];
         for (int k = 0; k < 3; k++) {
             float *p = sum + 3 * i + 16 * k;
             __m512 v = _mm512_loadu_ps(p);
@@ -148,9 +252,10 @@ __attribute__((target("avx512f,avx2"))) static void pixels_avx512(float *sum, co
                 v = _mm512_add_ps(v, _mm512_loadu_ps(add + 3 * i + 16 * k));
                 _mm512_storeu_ps(p, v);
             }
-            _mm_storeu_si128((__m128i *)(rgb + 16 * k), _mm512_cvtepi32_epi8(codes16(_mm512_mul_ps(v, s))));
+            c[k] = codes16_poly(_mm512_mul_ps(v, s), pow2, shift, first);
         }
-        for (int q = 0; q < 4; q++) rgb4_to_xrgb(rgb + 12 * q, out + i + 4 * q);
+        __m512i px = xrgb16(c[0], c[1], c[2]);
+        _mm512_storeu_si512(out + i, px);
     }
     pixels_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i);
 }

@@ -69,23 +69,30 @@ int view_font_width(const char *text, int scale);
 
 /* ---- sRGB ---- */
 
-/* The table's buckets: floats in [2^-13, 1] by their top 17 bits (exponent and 8 mantissa bits);
- * every float below 2^-13 encodes to 0 (the code becomes 1 near 1.5e-4). 3329 words, 13 KiB. */
+/* The table's buckets: floats in [2^-13, 1] by their exponent and as many top mantissa bits as that
+ * octave needs for the code to rise by at most one within a bucket (fewer where the codes are
+ * sparse); every float below 2^-13 encodes to 0 (the code becomes 1 near 1.5e-4). 384 words with
+ * glibc's powf (1.5 KiB, 24 cache lines; cut evenly by 8 mantissa bits it took 3329, 13 KiB), so it
+ * stays in the first level cache while tiles are rendered and converted in turn. */
 #define VIEW_SRGB_LO 0x39000000u /* 2^-13 */
 enum {
-    VIEW_SRGB_SHIFT = 15,
-    VIEW_SRGB_FIRST = VIEW_SRGB_LO >> VIEW_SRGB_SHIFT,
-    VIEW_SRGB_BUCKETS = (0x3F800000u >> VIEW_SRGB_SHIFT) - VIEW_SRGB_FIRST + 1
+    VIEW_SRGB_E0 = (int)(VIEW_SRGB_LO >> 23), /* the exponent field of octave 0; octave 13 is 1.0 */
+    VIEW_SRGB_OCTAVES = 14,
+    VIEW_SRGB_MAX = 4096 /* words the table may take */
 };
-/* Per bucket: bits 16-23 the code at its start, bits 0-15 the low 15 bits of the first pattern with
- * the next code (0x8000: none); within a bucket the code rises by at most one (view_srgb_init). */
-extern uint32_t view_srgb_table[VIEW_SRGB_BUCKETS];
+/* Per bucket: bits 24-31 the code at its start, bits 0-23 the mantissa's low bits (below the
+ * bucket's) where the next code begins (1 << 23: none). Per octave: the shift that leaves the
+ * bucket's bits of the mantissa, and its first bucket (view_srgb_init). */
+extern uint32_t view_srgb_table[VIEW_SRGB_MAX];
+extern uint32_t view_srgb_shift[16], view_srgb_first[16];
 extern bool view_srgb_exact; /* false: the table could not be built, use the formula */
 
 /* Builds the table (once; not thread-safe, call before the first view_srgb8). */
 void view_srgb_init(void);
 /* The same by the formula: rp_image_write's encode_srgb8, operation for operation. */
 uint8_t view_srgb8_formula(float v);
+/* The table's size in words. */
+int view_srgb_table_words(void);
 
 /* Chooses how view_srgb_pixels runs: isa is an rp_device_desc.isa code (0 the widest the CPU has,
  * 1 or 4 scalar, 8 AVX2, 16 AVX-512), capped by the CPU. Returns its name. Call after view_srgb_init. */
@@ -98,14 +105,14 @@ void view_srgb_pixels(float *sum, const float *add, float inv, uint32_t *out, in
  * but for the table's check: clamping to [0, 1] maps negatives and NaN to 0 as the formula does. */
 static inline uint32_t view_srgb8(float v) {
     if (!view_srgb_exact) return view_srgb8_formula(v);
-    v = v > 0.0f ? v : 0.0f;
+    const float lo = 0x1p-13f;
+    v = v > lo ? v : lo; /* NaN too; 2^-13 encodes to 0 */
     v = v < 1.0f ? v : 1.0f;
     uint32_t b;
     memcpy(&b, &v, sizeof b);
-    uint32_t i = b >> VIEW_SRGB_SHIFT;
-    i = i < VIEW_SRGB_FIRST ? VIEW_SRGB_FIRST : i;
-    uint32_t t = view_srgb_table[i - VIEW_SRGB_FIRST];
-    return ((t >> 16) & 0xFFu) + ((b & 0x7FFFu) >= (t & 0xFFFFu));
+    uint32_t e = (b >> 23) - (uint32_t)VIEW_SRGB_E0, m = b & 0x7FFFFFu, sh = view_srgb_shift[e];
+    uint32_t t = view_srgb_table[view_srgb_first[e] + (m >> sh)];
+    return (t >> 24) + ((m & ((1u << sh) - 1u)) >= (t & 0xFFFFFFu));
 }
 
 #endif

@@ -36,14 +36,32 @@ typedef struct bih_ctx {
     uint32_t task_count, task_cap;
     _Atomic uint32_t depth;
     _Atomic uint64_t leaves;
+    float abs_pad;             /* the planes' margin (pad_lo, pad_hi); 0: none */
     /* leaf packing */
-    uint32_t *block_of;        /* per position: its block */
+    uint32_t *block_of;        /* per position: its leaf's count at a leaf's first, else 0; then its block */
     tri4 *blocks;
 } bih_ctx;
 
+/* A plane moved outward by the BVH's margin (bvh2_pad_boxes), as each node is written: an
+ * axis-parallel ray lying in a plane, as through a vertex, then stays inside the child that plane
+ * bounds instead of leaving it at t = 0 (the traversal takes a direction component of 0 as 1e-18),
+ * and meets the triangles in that plane as the watertight test does. */
+static inline float pad_lo(const bih_ctx *c, float x) {
+    return c->abs_pad != 0.0f && fabsf(x) < INFINITY ? box_pad_lo(x, c->abs_pad) : x;
+}
+static inline float pad_hi(const bih_ctx *c, float x) {
+    return c->abs_pad != 0.0f && fabsf(x) < INFINITY ? box_pad_hi(x, c->abs_pad) : x;
+}
+
+/* Writes a leaf of positions [begin, end) and marks its first position with its count for
+ * plan_blocks (each position belongs to one leaf, so the threads' writes never meet). */
 static void make_leaf(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, uint32_t depth) {
     bih_node *n = &c->nodes[node];
     uint32_t first = begin, count = end - begin;
+    if (count) {
+        c->block_of[begin] = count;
+        for (uint32_t i = begin + 1; i < end; i++) c->block_of[i] = 0;
+    }
     memcpy(&n->clip[0], &first, 4);
     memcpy(&n->clip[1], &count, 4);
     n->meta = BIH_LEAF;
@@ -218,7 +236,7 @@ static uint32_t clip_empty(bih_ctx *c, uint32_t node, float nb[6], vf4 blo, vf4 
         }
         if (best < 0) break;
         uint32_t child = atomic_fetch_add_explicit(&c->next, 1, memory_order_relaxed);
-        c->nodes[node] = (bih_node){{blo[best], bhi[best]}, child << BIH_TAG_BITS | BIH_CLIP | (uint32_t)best};
+        c->nodes[node] = (bih_node){{pad_lo(c, blo[best]), pad_hi(c, bhi[best])}, child << BIH_TAG_BITS | BIH_CLIP | (uint32_t)best};
         nb[best] = blo[best], nb[3 + best] = bhi[best];
         node = child;
     }
@@ -264,7 +282,7 @@ static void split(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, float
         uint32_t i = spawn && c->pool && end - begin >= BIH_PAR_MIN ? partition_par(c->pool, c->p, begin, end, axis, twice, &sd)
                                                                     : partition(c->p, begin, end, axis, twice, &sd);
         uint32_t child = atomic_fetch_add_explicit(&c->next, 2, memory_order_relaxed);
-        c->nodes[node] = (bih_node){{sd.lhi[axis], sd.rlo[axis]}, child << BIH_TAG_BITS | (uint32_t)axis};
+        c->nodes[node] = (bih_node){{pad_hi(c, sd.lhi[axis]), pad_lo(c, sd.rlo[axis])}, child << BIH_TAG_BITS | (uint32_t)axis};
         float sl[6], sr[6], nl[6];
         memcpy(sl, sb, sizeof sl), memcpy(sr, sb, sizeof sr), memcpy(nl, nb, sizeof nl);
         sl[3 + axis] = plane, sr[axis] = plane;
@@ -294,16 +312,9 @@ static void task_run(void *user, uint32_t index, uint32_t thread) {
 
 
 /* Numbers the blocks: every position gets its block (a leaf's triangles fill blocks of four in
- * order, its first position starting one), as the BVH's tri_pack_plan. */
-static uint32_t plan_blocks(bih_ctx *c, uint32_t node_count, uint32_t n) {
-    memset(c->block_of, 0, (size_t)n * sizeof(uint32_t));
-    for (uint32_t i = 0; i < node_count; i++) {
-        bih_node *nd = &c->nodes[i];
-        if (nd->meta != BIH_LEAF) continue;
-        uint32_t first, count;
-        memcpy(&first, &nd->clip[0], 4), memcpy(&count, &nd->clip[1], 4);
-        if (count) c->block_of[first] = count;
-    }
+ * order, its first position starting one), as the BVH's tri_pack_plan; make_leaf has marked each
+ * leaf's first position with its count. */
+static uint32_t plan_blocks(bih_ctx *c, uint32_t n) {
     uint32_t next = 0, block = 0, k = 0; /* k: position in the current leaf */
     for (uint32_t p = 0; p < n; p++) {
         uint32_t count = c->block_of[p];
@@ -364,23 +375,6 @@ static void stamp_task(void *user, uint32_t index, uint32_t thread) {
     }
 }
 
-/* The root box and every node's clip planes moved outward by the BVH's margin (bvh2_pad_boxes): an
- * axis-parallel ray lying in a plane, as through a vertex, then stays inside the child that plane
- * bounds instead of leaving it at t = 0 (the traversal takes a direction component of 0 as 1e-18),
- * and meets the triangles in that plane as the watertight test does. */
-static void pad_planes(bih_ctx *c, uint32_t node_count, float bounds[6]) {
-    float abs_pad = box_pad_abs(bounds, bounds + 3);
-    if (abs_pad == 0.0f) return;
-    for (int k = 0; k < 3; k++) bounds[k] = box_pad_lo(bounds[k], abs_pad), bounds[3 + k] = box_pad_hi(bounds[3 + k], abs_pad);
-    for (uint32_t i = 0; i < node_count; i++) {
-        bih_node *nd = &c->nodes[i];
-        if (nd->meta == BIH_LEAF) continue;
-        bool clip = (nd->meta & BIH_CLIP) != 0; /* clip[0] a lower plane, clip[1] an upper one */
-        if (fabsf(nd->clip[0]) < INFINITY) nd->clip[0] = clip ? box_pad_lo(nd->clip[0], abs_pad) : box_pad_hi(nd->clip[0], abs_pad);
-        if (fabsf(nd->clip[1]) < INFINITY) nd->clip[1] = clip ? box_pad_hi(nd->clip[1], abs_pad) : box_pad_lo(nd->clip[1], abs_pad);
-    }
-}
-
 static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *in, accel_built *out) {
     memset(out, 0, sizeof *out);
     uint32_t n = in->count;
@@ -405,6 +399,7 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     box3 b = in->bounds;
     float sb[6] = {b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z};
     memcpy(out->bounds, sb, sizeof sb);
+    c.abs_pad = box_pad_abs(sb, sb + 3);
     atomic_store(&c.next, 1);
     cbounds cb = {vf4_splat(INFINITY), vf4_splat(-INFINITY)};
     for (uint32_t i = 0; i < n; i++) {
@@ -420,8 +415,9 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
         sys_pool_parallel_for(pool, c.task_count, task_run, &c);
     }
     uint32_t node_count = atomic_load(&c.next);
-    pad_planes(&c, node_count, out->bounds);
-    uint32_t blocks = plan_blocks(&c, node_count, n);
+    if (c.abs_pad != 0.0f)
+        for (int k = 0; k < 3; k++) out->bounds[k] = box_pad_lo(out->bounds[k], c.abs_pad), out->bounds[3 + k] = box_pad_hi(out->bounds[3 + k], c.abs_pad);
+    uint32_t blocks = plan_blocks(&c, n);
     c.blocks = accel_blocks_alloc(a, blocks);
     bool ok = c.blocks != NULL;
     if (ok) {

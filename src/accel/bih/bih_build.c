@@ -40,6 +40,7 @@ typedef struct bih_ctx {
     /* leaf packing */
     uint32_t *block_of;        /* per position: its leaf's count at a leaf's first, else 0; then its block */
     tri4 *blocks;
+    bih_node *out;             /* the nodes, copied to an allocation of their final count */
 } bih_ctx;
 
 /* A plane moved outward by the BVH's margin (bvh2_pad_boxes), as each node is written: an
@@ -337,8 +338,8 @@ static uint32_t fill_chunk_start(const fill_ctx *f, uint32_t index) {
 }
 
 /* Fills the blocks of a chunk of the positions (the scene's fill, accel_tri_input.fill, reading
- * each position's id from its box, lo's w lane) and points the leaves among a chunk of the nodes
- * at their blocks. */
+ * each position's id from its box, lo's w lane) and copies a chunk of the nodes to their final
+ * allocation, pointing the leaves at their blocks. */
 static void fill_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     const fill_ctx *f = user;
@@ -349,7 +350,8 @@ static void fill_task(void *user, uint32_t index, uint32_t thread) {
     uint64_t nn = f->node_count;
     uint32_t b = (uint32_t)(nn * index / f->chunks), e = (uint32_t)(nn * (index + 1) / f->chunks);
     for (uint32_t i = b; i < e; i++) {
-        bih_node *nd = &c->nodes[i];
+        bih_node *nd = &c->out[i];
+        *nd = c->nodes[i];
         if (nd->meta != BIH_LEAF) continue;
         uint32_t first, count;
         memcpy(&first, &nd->clip[0], 4), memcpy(&count, &nd->clip[1], 4);
@@ -379,6 +381,8 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     memset(out, 0, sizeof *out);
     uint32_t n = in->count;
     bih_ctx c = {.in = in, .p = in->boxes};
+    /* real nodes: 2n - 1; clip nodes: at most one in front of each (clip_empty). They are copied
+     * to an allocation of their count (about n on the shared scenes) when the leaves are filled. */
     size_t node_bytes = ((size_t)4 * n + 1) * sizeof(bih_node);
     c.nodes = sys_alloc(a, node_bytes);
     c.block_of = sys_alloc(a, (size_t)n * sizeof(uint32_t) + 4);
@@ -419,7 +423,9 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
         for (int k = 0; k < 3; k++) out->bounds[k] = box_pad_lo(out->bounds[k], c.abs_pad), out->bounds[3 + k] = box_pad_hi(out->bounds[3 + k], c.abs_pad);
     uint32_t blocks = plan_blocks(&c, n);
     c.blocks = accel_blocks_alloc(a, blocks);
-    bool ok = c.blocks != NULL;
+    size_t out_bytes = (size_t)node_count * sizeof(bih_node);
+    c.out = sys_alloc(a, out_bytes);
+    bool ok = c.blocks != NULL && c.out != NULL;
     if (ok) {
         fill_ctx f = {&c, node_count, n, pool ? threads * 8 : 1};
         if (pool) sys_pool_parallel_for(pool, f.chunks, fill_task, &f);
@@ -427,12 +433,14 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     }
     sys_free(a, c.block_of, (size_t)n * sizeof(uint32_t) + 4);
     sys_free(a, c.tasks, c.task_cap * sizeof(bih_task));
+    sys_free(a, c.nodes, node_bytes);
     if (!ok) {
-        sys_free(a, c.nodes, node_bytes);
+        sys_free(a, c.out, out_bytes);
+        if (c.blocks) sys_free(a, c.blocks, ((size_t)blocks + 1) * sizeof(tri4));
         return false;
     }
-    out->nodes = c.nodes;
-    out->node_bytes = node_bytes;
+    out->nodes = c.out;
+    out->node_bytes = out_bytes;
     out->blocks = c.blocks;
     out->block_count = blocks;
     out->root_depth = atomic_load(&c.depth);

@@ -3,7 +3,8 @@
  * Single rays: at a node the ray's interval is cut by the two clip planes, the near child (by the
  * direction's sign) is walked first and the far one pushed with its interval; pending nodes that
  * start beyond the closest hit are skipped. The children's intervals may overlap, so the stack is
- * not sorted: every entry is checked.
+ * not sorted: every entry is checked. A clip node (bih.h) cuts the interval by its child's slab,
+ * both ends widened, and goes on into its one child.
  *
  * Packets (4/8/16-ray SIMD packets and n x n packets, one code for both): the rays walk the tree
  * together, 4 lanes at a time (vf4), each with its own interval, as Wald et al. 2001 walk the

@@ -20,8 +20,9 @@
 
 typedef struct bih_task {
     uint32_t node, begin, end, depth;
-    float sb[6];
+    float sb[6], nb[6];
     vf4 clo, chi; /* twice the centroids' bounds */
+    vf4 blo, bhi; /* the boxes' bounds */
 } bih_task;
 
 typedef struct bih_ctx {
@@ -35,14 +36,33 @@ typedef struct bih_ctx {
     uint32_t task_count, task_cap;
     _Atomic uint32_t depth;
     _Atomic uint64_t leaves;
+    float abs_pad;             /* the planes' margin (pad_lo, pad_hi); 0: none */
     /* leaf packing */
-    uint32_t *block_of;        /* per position: its block */
+    uint32_t *block_of;        /* per position: its leaf's count at a leaf's first, else 0; then its block */
     tri4 *blocks;
+    bih_node *out;             /* the nodes, copied to an allocation of their final count */
 } bih_ctx;
 
+/* A plane moved outward by the BVH's margin (bvh2_pad_boxes), as each node is written: an
+ * axis-parallel ray lying in a plane, as through a vertex, then stays inside the child that plane
+ * bounds instead of leaving it at t = 0 (the traversal takes a direction component of 0 as 1e-18),
+ * and meets the triangles in that plane as the watertight test does. */
+static inline float pad_lo(const bih_ctx *c, float x) {
+    return c->abs_pad != 0.0f && fabsf(x) < INFINITY ? box_pad_lo(x, c->abs_pad) : x;
+}
+static inline float pad_hi(const bih_ctx *c, float x) {
+    return c->abs_pad != 0.0f && fabsf(x) < INFINITY ? box_pad_hi(x, c->abs_pad) : x;
+}
+
+/* Writes a leaf of positions [begin, end) and marks its first position with its count for
+ * plan_blocks (each position belongs to one leaf, so the threads' writes never meet). */
 static void make_leaf(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, uint32_t depth) {
     bih_node *n = &c->nodes[node];
     uint32_t first = begin, count = end - begin;
+    if (count) {
+        c->block_of[begin] = count;
+        for (uint32_t i = begin + 1; i < end; i++) c->block_of[i] = 0;
+    }
     memcpy(&n->clip[0], &first, 4);
     memcpy(&n->clip[1], &count, 4);
     n->meta = BIH_LEAF;
@@ -60,17 +80,18 @@ typedef struct cbounds {
 /* What a partition found out about its two sides: the left side's upper bound and the right
  * side's lower bound (the clip planes, lane axis) and their centroids' bounds. */
 typedef struct sides {
-    vf4 lhi, rlo;
+    vf4 lhi, rlo, llo, rhi; /* the clip planes are lhi and rlo; llo and rhi complete the boxes */
     cbounds cl, cr;
 } sides;
 
 static inline sides sides_empty(void) {
     vf4 inf = vf4_splat(INFINITY), ninf = vf4_splat(-INFINITY);
-    return (sides){ninf, inf, {inf, ninf}, {inf, ninf}};
+    return (sides){ninf, inf, inf, ninf, {inf, ninf}, {inf, ninf}};
 }
 
 static inline void sides_merge(sides *s, const sides *o) {
     s->lhi = vf4_max(s->lhi, o->lhi), s->rlo = vf4_min(s->rlo, o->rlo);
+    s->llo = vf4_min(s->llo, o->llo), s->rhi = vf4_max(s->rhi, o->rhi);
     s->cl.lo = vf4_min(s->cl.lo, o->cl.lo), s->cl.hi = vf4_max(s->cl.hi, o->cl.hi);
     s->cr.lo = vf4_min(s->cr.lo, o->cr.lo), s->cr.hi = vf4_max(s->cr.hi, o->cr.hi);
 }
@@ -84,27 +105,27 @@ static uint32_t partition(bvh_prim *p, uint32_t i, uint32_t j, int axis, float t
             if (i == j) return i;
             ci = p[i].lo + p[i].hi;
             if (!(ci[axis] < twice)) break;
-            s->lhi = vf4_max(s->lhi, p[i].hi);
+            s->lhi = vf4_max(s->lhi, p[i].hi), s->llo = vf4_min(s->llo, p[i].lo);
             s->cl.lo = vf4_min(s->cl.lo, ci), s->cl.hi = vf4_max(s->cl.hi, ci);
         }
         /* p[i] is on the right */
         vf4 cj;
         for (;;) {
             if (--j == i) {
-                s->rlo = vf4_min(s->rlo, p[i].lo);
+                s->rlo = vf4_min(s->rlo, p[i].lo), s->rhi = vf4_max(s->rhi, p[i].hi);
                 s->cr.lo = vf4_min(s->cr.lo, ci), s->cr.hi = vf4_max(s->cr.hi, ci);
                 return i;
             }
             cj = p[j].lo + p[j].hi;
             if (cj[axis] < twice) break;
-            s->rlo = vf4_min(s->rlo, p[j].lo);
+            s->rlo = vf4_min(s->rlo, p[j].lo), s->rhi = vf4_max(s->rhi, p[j].hi);
             s->cr.lo = vf4_min(s->cr.lo, cj), s->cr.hi = vf4_max(s->cr.hi, cj);
         }
         bvh_prim t = p[i];
         p[i] = p[j], p[j] = t;
-        s->lhi = vf4_max(s->lhi, p[i].hi);
+        s->lhi = vf4_max(s->lhi, p[i].hi), s->llo = vf4_min(s->llo, p[i].lo);
         s->cl.lo = vf4_min(s->cl.lo, cj), s->cl.hi = vf4_max(s->cl.hi, cj);
-        s->rlo = vf4_min(s->rlo, p[j].lo);
+        s->rlo = vf4_min(s->rlo, p[j].lo), s->rhi = vf4_max(s->rhi, p[j].hi);
         s->cr.lo = vf4_min(s->cr.lo, ci), s->cr.hi = vf4_max(s->cr.hi, ci);
         i++;
     }
@@ -190,9 +211,43 @@ static uint32_t partition_par(sys_pool *pool, bvh_prim *p, uint32_t begin, uint3
     return mid;
 }
 
-static void split(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, float sb[6], cbounds cb, uint32_t depth,
-                  bool spawn) {
+/* Cuts the empty space around a node's boxes off: where the node's box (the root box cut by its
+ * ancestors' planes, nb) is more than BIH_CLIP_RATIO times as wide on an axis as the boxes'
+ * bounds, a clip node with both planes on that axis (Sunflow's BVH2 node) goes in front of it.
+ * The global heuristic never makes a node where a halving of the split box leaves one side empty,
+ * so without them a node's box only shrinks on the axes its ancestors split: on spd_tree_s12 the
+ * nodes' boxes had 100 times the surface area of their triangles' bounds and a ray visited
+ * hundreds of leaves. At most BIH_CLIP_AXES per node, the widest gaps first; returns the node
+ * the subtree goes on in. Clip nodes push nothing on a traversal's stack: they do not count
+ * towards BIH_MAX_DEPTH. */
+#ifndef BIH_CLIP_RATIO
+#define BIH_CLIP_RATIO 1.3f
+#endif
+#ifndef BIH_CLIP_AXES
+#define BIH_CLIP_AXES 1
+#endif
+static uint32_t clip_empty(bih_ctx *c, uint32_t node, float nb[6], vf4 blo, vf4 bhi) {
+    for (int n = 0; n < BIH_CLIP_AXES; n++) {
+        int best = -1;
+        float best_ratio = BIH_CLIP_RATIO;
+        for (int k = 0; k < 3; k++) {
+            float w = nb[3 + k] - nb[k], bw = bhi[k] - blo[k];
+            if (!(blo[k] > nb[k] || bhi[k] < nb[3 + k])) continue;
+            if (w > best_ratio * bw) best = k, best_ratio = bw > 0.0f ? w / bw : INFINITY;
+        }
+        if (best < 0) break;
+        uint32_t child = atomic_fetch_add_explicit(&c->next, 1, memory_order_relaxed);
+        c->nodes[node] = (bih_node){{pad_lo(c, blo[best]), pad_hi(c, bhi[best])}, child << BIH_TAG_BITS | BIH_CLIP | (uint32_t)best};
+        nb[best] = blo[best], nb[3 + best] = bhi[best];
+        node = child;
+    }
+    return node;
+}
+
+static void split(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, float sb[6], cbounds cb, float nb[6],
+                  vf4 blo, vf4 bhi, uint32_t depth, bool spawn) {
     for (;;) {
+        node = clip_empty(c, node, nb, blo, bhi);
         if (end - begin <= BIH_LEAF_SIZE || depth >= BIH_MAX_DEPTH) {
             make_leaf(c, node, begin, end, depth);
             return;
@@ -200,8 +255,8 @@ static void split(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, float
         /* a subtree small enough is a task (or, the task list full, built here) */
         if (spawn && end - begin <= c->task_max && c->task_count < c->task_cap) {
             bih_task *t = &c->tasks[c->task_count++];
-            *t = (bih_task){node, begin, end, depth, {0}, cb.lo, cb.hi};
-            memcpy(t->sb, sb, sizeof t->sb);
+            *t = (bih_task){node, begin, end, depth, {0}, {0}, cb.lo, cb.hi, blo, bhi};
+            memcpy(t->sb, sb, sizeof t->sb), memcpy(t->nb, nb, sizeof t->nb);
             return;
         }
         /* Halve the split box until its plane parts the centroids. When every centroid lies on one
@@ -228,13 +283,15 @@ static void split(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, float
         uint32_t i = spawn && c->pool && end - begin >= BIH_PAR_MIN ? partition_par(c->pool, c->p, begin, end, axis, twice, &sd)
                                                                     : partition(c->p, begin, end, axis, twice, &sd);
         uint32_t child = atomic_fetch_add_explicit(&c->next, 2, memory_order_relaxed);
-        c->nodes[node] = (bih_node){{sd.lhi[axis], sd.rlo[axis]}, child << 2 | (uint32_t)axis};
-        float sl[6], sr[6];
-        memcpy(sl, sb, sizeof sl), memcpy(sr, sb, sizeof sr);
+        c->nodes[node] = (bih_node){{pad_hi(c, sd.lhi[axis]), pad_lo(c, sd.rlo[axis])}, child << BIH_TAG_BITS | (uint32_t)axis};
+        float sl[6], sr[6], nl[6];
+        memcpy(sl, sb, sizeof sl), memcpy(sr, sb, sizeof sr), memcpy(nl, nb, sizeof nl);
         sl[3 + axis] = plane, sr[axis] = plane;
-        split(c, child, begin, i, sl, sd.cl, depth + 1, spawn);
+        if (sd.lhi[axis] < nl[3 + axis]) nl[3 + axis] = sd.lhi[axis];
+        if (sd.rlo[axis] > nb[axis]) nb[axis] = sd.rlo[axis];
+        split(c, child, begin, i, sl, sd.cl, nl, sd.llo, sd.lhi, depth + 1, spawn);
         /* the right side in this frame (a loop, not a call: the recursion's depth is the left path) */
-        node = child + 1, begin = i, depth = depth + 1, cb = sd.cr;
+        node = child + 1, begin = i, depth = depth + 1, cb = sd.cr, blo = sd.rlo, bhi = sd.rhi;
         memcpy(sb, sr, sizeof sr);
     }
 }
@@ -250,20 +307,15 @@ static void task_run(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     bih_ctx *c = user;
     bih_task t = c->tasks[index];
-    split(c, t.node, t.begin, t.end, t.sb, (cbounds){t.clo, t.chi}, t.depth, false);
+    split(c, t.node, t.begin, t.end, t.sb, (cbounds){t.clo, t.chi}, t.nb, t.blo, t.bhi, t.depth, false);
 }
 
+
+
 /* Numbers the blocks: every position gets its block (a leaf's triangles fill blocks of four in
- * order, its first position starting one), as the BVH's tri_pack_plan. */
-static uint32_t plan_blocks(bih_ctx *c, uint32_t node_count, uint32_t n) {
-    memset(c->block_of, 0, (size_t)n * sizeof(uint32_t));
-    for (uint32_t i = 0; i < node_count; i++) {
-        bih_node *nd = &c->nodes[i];
-        if (nd->meta != BIH_LEAF) continue;
-        uint32_t first, count;
-        memcpy(&first, &nd->clip[0], 4), memcpy(&count, &nd->clip[1], 4);
-        if (count) c->block_of[first] = count;
-    }
+ * order, its first position starting one), as the BVH's tri_pack_plan; make_leaf has marked each
+ * leaf's first position with its count. */
+static uint32_t plan_blocks(bih_ctx *c, uint32_t n) {
     uint32_t next = 0, block = 0, k = 0; /* k: position in the current leaf */
     for (uint32_t p = 0; p < n; p++) {
         uint32_t count = c->block_of[p];
@@ -286,8 +338,8 @@ static uint32_t fill_chunk_start(const fill_ctx *f, uint32_t index) {
 }
 
 /* Fills the blocks of a chunk of the positions (the scene's fill, accel_tri_input.fill, reading
- * each position's id from its box, lo's w lane) and points the leaves among a chunk of the nodes
- * at their blocks. */
+ * each position's id from its box, lo's w lane) and copies a chunk of the nodes to their final
+ * allocation, pointing the leaves at their blocks. */
 static void fill_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     const fill_ctx *f = user;
@@ -298,7 +350,8 @@ static void fill_task(void *user, uint32_t index, uint32_t thread) {
     uint64_t nn = f->node_count;
     uint32_t b = (uint32_t)(nn * index / f->chunks), e = (uint32_t)(nn * (index + 1) / f->chunks);
     for (uint32_t i = b; i < e; i++) {
-        bih_node *nd = &c->nodes[i];
+        bih_node *nd = &c->out[i];
+        *nd = c->nodes[i];
         if (nd->meta != BIH_LEAF) continue;
         uint32_t first, count;
         memcpy(&first, &nd->clip[0], 4), memcpy(&count, &nd->clip[1], 4);
@@ -324,27 +377,13 @@ static void stamp_task(void *user, uint32_t index, uint32_t thread) {
     }
 }
 
-/* The root box and every node's clip planes moved outward by the BVH's margin (bvh2_pad_boxes): an
- * axis-parallel ray lying in a plane, as through a vertex, then stays inside the child that plane
- * bounds instead of leaving it at t = 0 (the traversal takes a direction component of 0 as 1e-18),
- * and meets the triangles in that plane as the watertight test does. */
-static void pad_planes(bih_ctx *c, uint32_t node_count, float bounds[6]) {
-    float abs_pad = box_pad_abs(bounds, bounds + 3);
-    if (abs_pad == 0.0f) return;
-    for (int k = 0; k < 3; k++) bounds[k] = box_pad_lo(bounds[k], abs_pad), bounds[3 + k] = box_pad_hi(bounds[3 + k], abs_pad);
-    for (uint32_t i = 0; i < node_count; i++) {
-        bih_node *nd = &c->nodes[i];
-        if (nd->meta == BIH_LEAF) continue;
-        if (fabsf(nd->clip[0]) < INFINITY) nd->clip[0] = box_pad_hi(nd->clip[0], abs_pad);
-        if (fabsf(nd->clip[1]) < INFINITY) nd->clip[1] = box_pad_lo(nd->clip[1], abs_pad);
-    }
-}
-
 static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *in, accel_built *out) {
     memset(out, 0, sizeof *out);
     uint32_t n = in->count;
     bih_ctx c = {.in = in, .p = in->boxes};
-    size_t node_bytes = ((size_t)2 * n + 1) * sizeof(bih_node);
+    /* real nodes: 2n - 1; clip nodes: at most one in front of each (clip_empty). They are copied
+     * to an allocation of their count (about n on the shared scenes) when the leaves are filled. */
+    size_t node_bytes = ((size_t)4 * n + 1) * sizeof(bih_node);
     c.nodes = sys_alloc(a, node_bytes);
     c.block_of = sys_alloc(a, (size_t)n * sizeof(uint32_t) + 4);
     uint32_t threads = pool && n >= 4096 ? (uint32_t)sys_pool_threads(pool) : 1;
@@ -364,22 +403,29 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     box3 b = in->bounds;
     float sb[6] = {b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z};
     memcpy(out->bounds, sb, sizeof sb);
+    c.abs_pad = box_pad_abs(sb, sb + 3);
     atomic_store(&c.next, 1);
     cbounds cb = {vf4_splat(INFINITY), vf4_splat(-INFINITY)};
     for (uint32_t i = 0; i < n; i++) {
         vf4 c2 = in->boxes[i].lo + in->boxes[i].hi;
         cb.lo = vf4_min(cb.lo, c2), cb.hi = vf4_max(cb.hi, c2);
     }
-    split(&c, 0, 0, n, sb, cb, 1, pool != NULL);
+    float nb[6];
+    memcpy(nb, sb, sizeof nb);
+    vf4 blo = {b.lo.x, b.lo.y, b.lo.z, 0.0f}, bhi = {b.hi.x, b.hi.y, b.hi.z, 0.0f};
+    split(&c, 0, 0, n, sb, cb, nb, blo, bhi, 1, pool != NULL);
     if (pool && c.task_count) {
         qsort(c.tasks, c.task_count, sizeof *c.tasks, task_larger);
         sys_pool_parallel_for(pool, c.task_count, task_run, &c);
     }
     uint32_t node_count = atomic_load(&c.next);
-    pad_planes(&c, node_count, out->bounds);
-    uint32_t blocks = plan_blocks(&c, node_count, n);
+    if (c.abs_pad != 0.0f)
+        for (int k = 0; k < 3; k++) out->bounds[k] = box_pad_lo(out->bounds[k], c.abs_pad), out->bounds[3 + k] = box_pad_hi(out->bounds[3 + k], c.abs_pad);
+    uint32_t blocks = plan_blocks(&c, n);
     c.blocks = accel_blocks_alloc(a, blocks);
-    bool ok = c.blocks != NULL;
+    size_t out_bytes = (size_t)node_count * sizeof(bih_node);
+    c.out = sys_alloc(a, out_bytes);
+    bool ok = c.blocks != NULL && c.out != NULL;
     if (ok) {
         fill_ctx f = {&c, node_count, n, pool ? threads * 8 : 1};
         if (pool) sys_pool_parallel_for(pool, f.chunks, fill_task, &f);
@@ -387,12 +433,14 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     }
     sys_free(a, c.block_of, (size_t)n * sizeof(uint32_t) + 4);
     sys_free(a, c.tasks, c.task_cap * sizeof(bih_task));
+    sys_free(a, c.nodes, node_bytes);
     if (!ok) {
-        sys_free(a, c.nodes, node_bytes);
+        sys_free(a, c.out, out_bytes);
+        if (c.blocks) sys_free(a, c.blocks, ((size_t)blocks + 1) * sizeof(tri4));
         return false;
     }
-    out->nodes = c.nodes;
-    out->node_bytes = node_bytes;
+    out->nodes = c.out;
+    out->node_bytes = out_bytes;
     out->blocks = c.blocks;
     out->block_count = blocks;
     out->root_depth = atomic_load(&c.depth);

@@ -3,7 +3,8 @@
  * Single rays: at a node the ray's interval is cut by the two clip planes, the near child (by the
  * direction's sign) is walked first and the far one pushed with its interval; pending nodes that
  * start beyond the closest hit are skipped. The children's intervals may overlap, so the stack is
- * not sorted: every entry is checked.
+ * not sorted: every entry is checked. A clip node (bih.h) cuts the interval by its child's slab,
+ * both ends widened, and goes on into its one child.
  *
  * Packets (4/8/16-ray SIMD packets and n x n packets, one code for both): the rays walk the tree
  * together, 4 lanes at a time (vf4), each with its own interval, as Wald et al. 2001 walk the
@@ -36,8 +37,16 @@ static bool bih_walk(const accel_built *s, const alt_ray *r, alt_hit *h, bool an
     for (;;) {
         const bih_node *nd = &nodes[node];
         while (nd->meta != BIH_LEAF) {
-            uint32_t axis = nd->meta & 3u, child = nd->meta >> 2;
+            uint32_t axis = nd->meta & 3u, child = nd->meta >> BIH_TAG_BITS;
             float o = r->org[axis], rd = r->rdir[axis];
+            if (nd->meta & BIH_CLIP) { /* the child's slab, both ends widened */
+                float ta = (nd->clip[0] - o) * rd, tb = (nd->clip[1] - o) * rd;
+                float tn = alt_dn(ta < tb ? ta : tb), tf = alt_up(ta < tb ? tb : ta);
+                t0 = tn > t0 ? tn : t0, t1 = tf < t1 ? tf : t1;
+                if (!(t0 <= t1)) goto pop;
+                nd = &nodes[child];
+                continue;
+            }
             float tl = (nd->clip[0] - o) * rd, tr = (nd->clip[1] - o) * rd;
             /* positive direction: in the left child while t <= tl, in the right from tr on */
             bool pos = rd > 0.0f;
@@ -190,8 +199,27 @@ static void pk_walk(bih_pk *p, const accel_built *s) {
             goto pop;
         }
         const bih_node *nd = &nodes[node];
+        if (nd->meta != BIH_LEAF && (nd->meta & BIH_CLIP)) { /* the child's slab, as the single-ray walk */
+            uint32_t axis = nd->meta & 3u;
+            vf4 ca = vf4_splat(nd->clip[0]), cb = vf4_splat(nd->clip[1]);
+            uint32_t f = UINT32_MAX, l = 0, na = 0;
+            for (uint32_t c = c0; c < c1; c++) {
+                vf4 o = p->o[axis][c], rd = p->rd[axis][c];
+                vf4 ta = (ca - o) * rd, tb = (cb - o) * rd;
+                vf4 x0 = vf4_max(t0[c], dn4(vf4_min(ta, tb))), x1 = vf4_min(t1[c], up4(vf4_max(tb, ta)));
+                vi4 in = x0 <= x1;
+                t0[c] = vf4_select(in, x0, vf4_splat(INFINITY)), t1[c] = vf4_select(in, x1, vf4_splat(-INFINITY));
+                uint32_t bits = vi4_movemask(in);
+                if (bits) f = f == UINT32_MAX ? c : f, l = c, na += pop4(bits);
+            }
+            if (!na) goto pop;
+            c0 = f, c1 = l + 1, active = na, node = nd->meta >> BIH_TAG_BITS;
+            if (nd->clip[0] > box[axis]) box[axis] = nd->clip[0];
+            if (nd->clip[1] < box[3 + axis]) box[3 + axis] = nd->clip[1];
+            continue;
+        }
         if (nd->meta != BIH_LEAF) {
-            uint32_t axis = nd->meta & 3u, child = nd->meta >> 2;
+            uint32_t axis = nd->meta & 3u, child = nd->meta >> BIH_TAG_BITS;
             bool ppos = p->pos[axis] != 0;
             /* the packet's first child: near for the majority, the left one for positive rays */
             uint32_t first = ppos ? child : child + 1, second = ppos ? child + 1 : child;

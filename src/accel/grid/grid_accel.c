@@ -160,8 +160,10 @@ static inline float plane_t(const grid_layout *g, const alt_ray *r, int k, int32
 
 /* The voxel of axis k that holds the ray's point at t, clamped to [lo, hi]. */
 static inline int32_t cell_at(const grid_layout *g, const alt_ray *r, int k, float t, int32_t lo, int32_t hi) {
-    float c = floorf((r->org[k] + r->dir[k] * t - g->lo[k]) * g->inv_cell[k]);
-    return !(c >= (float)lo) ? lo : (c > (float)hi ? hi : (int32_t)c);
+    /* floor(c) >= lo iff c >= lo, and floor(c) > hi iff c >= hi + 1; between them truncation
+     * is floor (c >= 0) */
+    float c = (r->org[k] + r->dir[k] * t - g->lo[k]) * g->inv_cell[k];
+    return !(c >= (float)lo) ? lo : (c >= (float)(hi + 1) ? hi : (int32_t)c);
 }
 
 /* 3D-DDA (Amanatides, Woo 1987) over the voxels. From an empty voxel whose clear cube reaches

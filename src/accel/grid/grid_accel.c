@@ -17,9 +17,9 @@
 /* At the head of accel_built.nodes, followed by
  *   uint32_t first[voxel_count + 1]: voxel v's blocks are [first[v], first[v + 1]),
  *   uint32_t ids[4 * block_count]: the triangle of each lane (the mailbox's key),
- *   uint8_t clear[voxel_count]: 0 when voxel v holds triangles, else its chessboard distance
- *   (in voxels, at most 255) to the nearest voxel that does: the cube of clear[v] - 1 voxels
- *   around v on every side holds none. */
+ *   uint8_t clear[8][voxel_count]: per octant of ray directions, 0 when voxel v holds triangles,
+ *   else the side (in voxels, at most 255) of the largest cube with v at its corner, growing
+ *   into that octant, that holds none. */
 typedef struct grid_layout {
     float lo[3], cell[3], inv_cell[3];
     int32_t res[3];
@@ -33,38 +33,38 @@ static inline const uint32_t *layout_first(const grid_layout *g) {
     return (const uint32_t *)((const char *)g + LAYOUT_HEAD);
 }
 static inline const uint32_t *layout_ids(const grid_layout *g) { return layout_first(g) + g->voxel_count + 1; }
-/* One byte per voxel, small enough to stay in cache: empty space costs no load of first[]. */
-static inline const uint8_t *layout_clear(const grid_layout *g) {
-    return (const uint8_t *)(layout_ids(g) + 4 * g->block_count);
+/* One byte per voxel for a ray's octant (bit k: the ray goes towards +axis k), small enough to
+ * stay in cache: empty space costs no load of first[]. */
+static inline const uint8_t *layout_clear(const grid_layout *g, int octant) {
+    return (const uint8_t *)(layout_ids(g) + 4 * g->block_count) + (size_t)octant * g->voxel_count;
 }
 
-/* Chessboard distance transform of the occupancy in d (0: occupied, 255: empty) by the two
- * passes of Rosenfeld and Pfaltz (1966) over the 3x3x3 neighbourhood, which are exact for this
- * metric; distances saturate at 255. */
-static void clear_distances(uint8_t *d, const int32_t res[3]) {
+/* The clear cubes of octant o (bit k set: the cube grows towards +axis k) from the occupancy in d
+ * (0: occupied, else empty): d[v] becomes the side of the largest empty cube with v at its corner
+ * that lies in octant o, at most 255 (voxels outside the grid count as empty). A cube of side n at
+ * v is v and the cubes of side n - 1 at its 7 neighbours in the octant, so one pass that visits
+ * those neighbours first gives it (the largest empty square's recurrence, in 3D). */
+static void clear_cubes(uint8_t *d, const int32_t res[3], int o) {
     const int32_t nx = res[0], ny = res[1], nz = res[2];
-    for (int pass = 0; pass < 2; pass++) {
-        const int32_t s = pass ? -1 : 1;
-        for (int32_t zi = 0; zi < nz; zi++)
-            for (int32_t yi = 0; yi < ny; yi++)
-                for (int32_t xi = 0; xi < nx; xi++) {
-                    int32_t z = pass ? nz - 1 - zi : zi, y = pass ? ny - 1 - yi : yi, x = pass ? nx - 1 - xi : xi;
-                    size_t v = ((size_t)z * (size_t)ny + (size_t)y) * (size_t)nx + (size_t)x;
-                    unsigned best = d[v];
-                    if (!best) continue;
-                    /* the 13 neighbours this pass has already visited: the plane behind, the row
-                     * behind in this plane, the voxel behind in this row */
-                    for (int32_t dz = -1; dz <= 0; dz++)
-                        for (int32_t dy = -1; dy <= 1; dy++)
-                            for (int32_t dx = -1; dx <= 1; dx++) {
-                                if (dz == 0 && (dy > 0 || (dy == 0 && dx >= 0))) continue;
-                                int32_t qx = x + s * dx, qy = y + s * dy, qz = z + s * dz;
-                                if (qx < 0 || qx >= nx || qy < 0 || qy >= ny || qz < 0 || qz >= nz) continue;
-                                unsigned q = d[((size_t)qz * (size_t)ny + (size_t)qy) * (size_t)nx + (size_t)qx] + 1u;
-                                if (q < best) best = q;
-                            }
-                    d[v] = (uint8_t)best;
+    const int32_t sx = o & 1 ? 1 : -1, sy = o & 2 ? 1 : -1, sz = o & 4 ? 1 : -1;
+    for (int32_t zi = 0; zi < nz; zi++) {
+        int32_t z = sz > 0 ? nz - 1 - zi : zi;
+        for (int32_t yi = 0; yi < ny; yi++) {
+            int32_t y = sy > 0 ? ny - 1 - yi : yi;
+            for (int32_t xi = 0; xi < nx; xi++) {
+                int32_t x = sx > 0 ? nx - 1 - xi : xi;
+                size_t v = ((size_t)z * (size_t)ny + (size_t)y) * (size_t)nx + (size_t)x;
+                if (!d[v]) continue;
+                unsigned best = 254;
+                for (int n = 1; n < 8; n++) {
+                    int32_t qx = x + (n & 1 ? sx : 0), qy = y + (n & 2 ? sy : 0), qz = z + (n & 4 ? sz : 0);
+                    if (qx < 0 || qx >= nx || qy < 0 || qy >= ny || qz < 0 || qz >= nz) continue;
+                    unsigned q = d[((size_t)qz * (size_t)ny + (size_t)qy) * (size_t)nx + (size_t)qx];
+                    if (q < best) best = q;
                 }
+                d[v] = (uint8_t)(best + 1);
+            }
+        }
     }
 }
 
@@ -93,7 +93,7 @@ static bool grid_accel_build(const sys_allocator *a, sys_pool *pool, accel_tri_i
         return false;
     }
     size_t bytes = LAYOUT_HEAD + ((size_t)g->voxel_count + 1) * sizeof(uint32_t) + (size_t)blocks * 4 * sizeof(uint32_t) +
-                   (size_t)g->voxel_count;
+                   8 * (size_t)g->voxel_count;
     grid_layout *lay = sys_alloc(a, bytes);
     tri4 *tb = lay ? accel_blocks_alloc(a, (uint32_t)blocks) : NULL;
     if (!tb) {
@@ -107,9 +107,11 @@ static bool grid_accel_build(const sys_allocator *a, sys_pool *pool, accel_tri_i
     lay->voxel_count = g->voxel_count;
     lay->block_count = blocks;
     uint32_t *first = (uint32_t *)((char *)lay + LAYOUT_HEAD), *ids = first + g->voxel_count + 1;
-    uint8_t *clear = (uint8_t *)(ids + 4 * blocks);
-    for (uint32_t v = 0; v < g->voxel_count; v++) clear[v] = g->offsets[v] == g->offsets[v + 1] ? 255 : 0;
-    clear_distances(clear, lay->res);
+    for (int o = 0; o < 8; o++) {
+        uint8_t *clear = (uint8_t *)layout_clear(lay, o);
+        for (uint32_t v = 0; v < g->voxel_count; v++) clear[v] = g->offsets[v] != g->offsets[v + 1] ? 0 : 1;
+        clear_cubes(clear, lay->res, o);
+    }
     uint32_t b = 0;
     for (uint32_t v = 0; v < g->voxel_count; v++) {
         first[v] = b;
@@ -166,8 +168,8 @@ static inline int32_t cell_at(const grid_layout *g, const alt_ray *r, int k, flo
     return !(c >= (float)lo) ? lo : (c >= (float)(hi + 1) ? hi : (int32_t)c);
 }
 
-/* 3D-DDA (Amanatides, Woo 1987) over the voxels. From an empty voxel whose clear cube reaches
- * r > 0 voxels further on every side, the walk jumps to that cube's exit: on to the voxel beyond
+/* 3D-DDA (Amanatides, Woo 1987) over the voxels. From an empty voxel whose clear cube in the
+ * ray's octant reaches r > 0 voxels further, the walk jumps to that cube's exit: on to the voxel beyond
  * the face the ray leaves by, at the exit point (clamped to the cube's side on the other axes).
  * Each axis's next crossing is computed afresh from its plane (not accumulated), so rounding does
  * not grow along the ray; where a voxel found from a point is one off, the ray is within rounding
@@ -180,7 +182,7 @@ static bool grid_trav(const rp_accel *acc, const accel_built *s, const alt_ray *
     if (!alt_ray_box(r, s->bounds, h->t, &t0, &t1)) return false;
     const grid_layout *g = s->nodes;
     const uint32_t *first = layout_first(g), *ids = layout_ids(g);
-    const uint8_t *clear = layout_clear(g);
+    const uint8_t *clear = layout_clear(g, (r->rdir[0] >= 0.0f) | (r->rdir[1] >= 0.0f) << 1 | (r->rdir[2] >= 0.0f) << 2);
     const int32_t stride[3] = {1, g->res[0], g->res[0] * g->res[1]};
     int32_t cell[3], step[3], stop[3];
     bool pos[3];
@@ -199,12 +201,13 @@ static bool grid_trav(const rp_accel *acc, const accel_built *s, const alt_ray *
     for (;;) {
         const int32_t reach = (int32_t)clear[voxel] - 1;
         if (reach > 0) {
-            /* an empty cube of cell +- reach (within the grid): on to the voxel past its exit */
+            /* an empty cube from cell to cell + reach * step (within the grid): on to the voxel
+             * past its exit */
             int32_t lo[3], hi[3];
             float mt[3];
             for (int k = 0; k < 3; k++) {
-                lo[k] = cell[k] - reach > 0 ? cell[k] - reach : 0;
-                hi[k] = cell[k] + reach < g->res[k] - 1 ? cell[k] + reach : g->res[k] - 1;
+                lo[k] = pos[k] ? cell[k] : (cell[k] - reach > 0 ? cell[k] - reach : 0);
+                hi[k] = !pos[k] ? cell[k] : (cell[k] + reach < g->res[k] - 1 ? cell[k] + reach : g->res[k] - 1);
                 mt[k] = plane_t(g, r, k, pos[k] ? hi[k] + 1 : lo[k]);
             }
             int k = mt[0] < mt[1] ? (mt[0] < mt[2] ? 0 : 2) : (mt[1] < mt[2] ? 1 : 2);

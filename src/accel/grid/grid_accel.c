@@ -157,7 +157,8 @@ static inline bool mailbox_all_seen(uint32_t *mb, const uint32_t *id) {
 
 /* Crossing of the plane `index` (in voxels) of axis k by the ray; +inf when parallel to it. */
 static inline float plane_t(const grid_layout *g, const alt_ray *r, int k, int32_t index) {
-    return r->dir[k] == 0.0f ? INFINITY : (g->lo[k] + (float)index * g->cell[k] - r->org[k]) * r->rdir[k];
+    float t = (g->lo[k] + (float)index * g->cell[k] - r->org[k]) * r->rdir[k];
+    return r->dir[k] == 0.0f ? INFINITY : t;
 }
 
 /* The voxel of axis k that holds the ray's point at t, clamped to [lo, hi]. */
@@ -166,6 +167,14 @@ static inline int32_t cell_at(const grid_layout *g, const alt_ray *r, int k, flo
      * is floor (c >= 0) */
     float c = (r->org[k] + r->dir[k] * t - g->lo[k]) * g->inv_cell[k];
     return !(c >= (float)lo) ? lo : (c >= (float)(hi + 1) ? hi : (int32_t)c);
+}
+
+/* Where the walk ends: the segment's exit t1, or the closest hit ht widened by the kernels' cull
+ * slack (a cell starting beyond it holds no nearer hit). NaN never ends it (as before: the
+ * comparisons with a NaN are false). */
+static inline float walk_end(float t1, float ht) {
+    float lim = ht > 0.0f ? ht * ALT_CULL_SLACK : ht * (1.0f / ALT_CULL_SLACK);
+    return lim < t1 ? lim : t1;
 }
 
 /* 3D-DDA (Amanatides, Woo 1987) over the voxels. From an empty voxel whose clear cube in the
@@ -198,6 +207,7 @@ static bool grid_trav(const rp_accel *acc, const accel_built *s, const alt_ray *
     }
     uint32_t mb[GRID_MAILBOX];
     for (int i = 0; i < GRID_MAILBOX; i++) mb[i] = UINT32_MAX;
+    float end = walk_end(t1, h->t);
     for (;;) {
         const int32_t reach = (int32_t)clear[voxel] - 1;
         if (reach > 0) {
@@ -212,8 +222,7 @@ static bool grid_trav(const rp_accel *acc, const accel_built *s, const alt_ray *
             }
             int k = mt[0] < mt[1] ? (mt[0] < mt[2] ? 0 : 2) : (mt[1] < mt[2] ? 1 : 2);
             float te = mt[k];
-            float ht = h->t, lim = ht > 0.0f ? ht * ALT_CULL_SLACK : ht * (1.0f / ALT_CULL_SLACK);
-            if (te > t1 || te > lim) return false;
+            if (te > end) return false;
             int32_t c = pos[k] ? hi[k] + 1 : lo[k] - 1;
             if (c < 0 || c >= g->res[k]) return false; /* it leaves the grid */
             voxel = 0;
@@ -229,11 +238,10 @@ static bool grid_trav(const rp_accel *acc, const accel_built *s, const alt_ray *
                 if (mailbox_all_seen(mb, &ids[4 * b])) continue;
                 if (alt_leaf(s->blocks, r, b, 1, h, any)) return true;
             }
+            end = walk_end(t1, h->t);
         }
         int k = next[0] < next[1] ? (next[0] < next[2] ? 0 : 2) : (next[1] < next[2] ? 1 : 2);
-        float te = next[k];
-        float ht = h->t, lim = ht > 0.0f ? ht * ALT_CULL_SLACK : ht * (1.0f / ALT_CULL_SLACK);
-        if (te > t1 || te > lim) return false;
+        if (next[k] > end) return false;
         cell[k] += step[k];
         if (cell[k] == stop[k]) return false;
         voxel += (uint32_t)(step[k] * stride[k]);

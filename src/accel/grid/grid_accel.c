@@ -47,22 +47,33 @@ static inline const uint8_t *layout_clear(const grid_layout *g, int octant) {
 static void clear_cubes(uint8_t *d, const int32_t res[3], int o) {
     const int32_t nx = res[0], ny = res[1], nz = res[2];
     const int32_t sx = o & 1 ? 1 : -1, sy = o & 2 ? 1 : -1, sz = o & 4 ? 1 : -1;
+    uint8_t m[4096]; /* per x: the least of the neighbours in the rows already done (res <= 4096) */
     for (int32_t zi = 0; zi < nz; zi++) {
         int32_t z = sz > 0 ? nz - 1 - zi : zi;
         for (int32_t yi = 0; yi < ny; yi++) {
             int32_t y = sy > 0 ? ny - 1 - yi : yi;
+            uint8_t *row = d + ((size_t)z * (size_t)ny + (size_t)y) * (size_t)nx;
+            bool in_y = y + sy >= 0 && y + sy < ny, in_z = z + sz >= 0 && z + sz < nz;
+            const uint8_t *ry = in_y ? d + ((size_t)z * (size_t)ny + (size_t)(y + sy)) * (size_t)nx : NULL;
+            const uint8_t *rz = in_z ? d + ((size_t)(z + sz) * (size_t)ny + (size_t)y) * (size_t)nx : NULL;
+            const uint8_t *ryz = in_y && in_z ? d + ((size_t)(z + sz) * (size_t)ny + (size_t)(y + sy)) * (size_t)nx : NULL;
+            for (int32_t x = 0; x < nx; x++) {
+                uint8_t v = 254; /* outside the grid: empty */
+                if (ry && ry[x] < v) v = ry[x];
+                if (rz && rz[x] < v) v = rz[x];
+                if (ryz && ryz[x] < v) v = ryz[x];
+                m[x] = v;
+            }
+            /* along the row, in the octant's order: x + sx is done before x */
             for (int32_t xi = 0; xi < nx; xi++) {
                 int32_t x = sx > 0 ? nx - 1 - xi : xi;
-                size_t v = ((size_t)z * (size_t)ny + (size_t)y) * (size_t)nx + (size_t)x;
-                if (!d[v]) continue;
-                unsigned best = 254;
-                for (int n = 1; n < 8; n++) {
-                    int32_t qx = x + (n & 1 ? sx : 0), qy = y + (n & 2 ? sy : 0), qz = z + (n & 4 ? sz : 0);
-                    if (qx < 0 || qx >= nx || qy < 0 || qy >= ny || qz < 0 || qz >= nz) continue;
-                    unsigned q = d[((size_t)qz * (size_t)ny + (size_t)qy) * (size_t)nx + (size_t)qx];
-                    if (q < best) best = q;
+                if (!row[x]) continue;
+                uint8_t v = m[x];
+                if (x + sx >= 0 && x + sx < nx) {
+                    if (m[x + sx] < v) v = m[x + sx];
+                    if (row[x + sx] < v) v = row[x + sx];
                 }
-                d[v] = (uint8_t)(best + 1);
+                row[x] = (uint8_t)(v + 1);
             }
         }
     }
@@ -208,6 +219,7 @@ static bool grid_trav(const rp_accel *acc, const accel_built *s, const alt_ray *
     uint32_t mb[GRID_MAILBOX];
     for (int i = 0; i < GRID_MAILBOX; i++) mb[i] = UINT32_MAX;
     float end = walk_end(t1, h->t);
+    bool fresh = true; /* next[] holds the current voxel's crossings */
     for (;;) {
         const int32_t reach = (int32_t)clear[voxel] - 1;
         if (reach > 0) {
@@ -228,9 +240,9 @@ static bool grid_trav(const rp_accel *acc, const accel_built *s, const alt_ray *
             voxel = 0;
             for (int j = 0; j < 3; j++) {
                 cell[j] = j == k ? c : cell_at(g, r, j, te, lo[j], hi[j]);
-                next[j] = plane_t(g, r, j, cell[j] + pos[j]);
                 voxel += (uint32_t)(cell[j] * stride[j]);
             }
+            fresh = false;
             continue;
         }
         if (reach < 0) {
@@ -239,6 +251,10 @@ static bool grid_trav(const rp_accel *acc, const accel_built *s, const alt_ray *
                 if (alt_leaf(s->blocks, r, b, 1, h, any)) return true;
             }
             end = walk_end(t1, h->t);
+        }
+        if (!fresh) { /* after a jump (which needs none): the crossings of this voxel's sides */
+            for (int j = 0; j < 3; j++) next[j] = plane_t(g, r, j, cell[j] + pos[j]);
+            fresh = true;
         }
         int k = next[0] < next[1] ? (next[0] < next[2] ? 0 : 2) : (next[1] < next[2] ? 1 : 2);
         if (next[k] > end) return false;

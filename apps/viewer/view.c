@@ -269,6 +269,13 @@ typedef struct viewer {
     int frames_done;
     bool playing;               /* space: an animated scene's time runs (frame 0 until then) */
     double anim_t;
+    /* rp_render runs on a thread of its own, made once: a thread a frame would fault its stack's
+     * pages in again every frame, after glibc's madvise of the last one's (a TLB shootdown) */
+    bool render_started, render_quit;
+    pthread_t render_th;
+    pthread_mutex_t render_lock;
+    pthread_cond_t render_cv;  /* a call was posted, or the posted one is done */
+    struct render_call *render_job; /* the posted call; NULL once done */
 } viewer;
 
 enum { HELD_W, HELD_A, HELD_S, HELD_D, HELD_Q, HELD_E, HELD_SHIFT };
@@ -673,6 +680,68 @@ static void *render_main(void *p) {
     return NULL;
 }
 
+/* The render thread: runs each posted call, until told to quit. */
+static void *render_loop(void *p) {
+    viewer *v = p;
+    pthread_mutex_lock(&v->render_lock);
+    for (;;) {
+        while (!v->render_job && !v->render_quit) pthread_cond_wait(&v->render_cv, &v->render_lock);
+        if (!v->render_job) break; /* quit, nothing posted */
+        render_call *c = v->render_job;
+        pthread_mutex_unlock(&v->render_lock);
+        render_main(c);
+        pthread_mutex_lock(&v->render_lock);
+        v->render_job = NULL;
+        pthread_cond_broadcast(&v->render_cv);
+    }
+    pthread_mutex_unlock(&v->render_lock);
+    return NULL;
+}
+
+/* Posts a call to the render thread (started on first use). False when there is no such thread:
+ * the caller runs the call itself. */
+static bool render_post(viewer *v, render_call *c) {
+    if (!v->render_started) {
+        if (pthread_mutex_init(&v->render_lock, NULL) != 0) return false;
+        if (pthread_cond_init(&v->render_cv, NULL) != 0) {
+            pthread_mutex_destroy(&v->render_lock);
+            return false;
+        }
+        v->render_job = NULL;
+        v->render_quit = false;
+        if (pthread_create(&v->render_th, NULL, render_loop, v) != 0) {
+            pthread_cond_destroy(&v->render_cv);
+            pthread_mutex_destroy(&v->render_lock);
+            return false;
+        }
+        v->render_started = true;
+    }
+    pthread_mutex_lock(&v->render_lock);
+    v->render_job = c;
+    pthread_cond_broadcast(&v->render_cv);
+    pthread_mutex_unlock(&v->render_lock);
+    return true;
+}
+
+/* Waits for the posted call. */
+static void render_wait(viewer *v) {
+    pthread_mutex_lock(&v->render_lock);
+    while (v->render_job) pthread_cond_wait(&v->render_cv, &v->render_lock);
+    pthread_mutex_unlock(&v->render_lock);
+}
+
+static void render_stop(viewer *v) {
+    if (!v->render_started) return;
+    pthread_mutex_lock(&v->render_lock);
+    v->render_quit = true;
+    pthread_cond_broadcast(&v->render_cv);
+    pthread_mutex_unlock(&v->render_lock);
+    pthread_join(v->render_th, NULL);
+    pthread_cond_destroy(&v->render_cv);
+    pthread_mutex_destroy(&v->render_lock);
+    v->render_started = false;
+}
+
 static bool show(viewer *v);
 
 /* Shows the frame waiting in the window's surface, if any. */
@@ -848,15 +917,14 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         rc.desc.tile_user = &job;
         /* the window shows the last frame while this one renders: its round trip to the display
          * server overlaps the rendering instead of adding to it */
-        pthread_t th;
-        bool threaded = pthread_create(&th, NULL, render_main, &rc) == 0;
+        bool threaded = render_post(v, &rc);
         double s0 = cli_now_ms();
         bool shown = flush(v);
         show_ms = cli_now_ms() - s0;
         double c0 = cli_now_ms();
         present_release(&job);
         late_ms = cli_now_ms() - c0;
-        if (threaded) pthread_join(th, NULL);
+        if (threaded) render_wait(v);
         else render_main(&rc);
         u2 = cpu_ms();
         double c1 = cli_now_ms();
@@ -952,6 +1020,7 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
 }
 
 static void viewer_free(viewer *v) {
+    render_stop(v);
     free(v->frame);
     free(v->sum);
     free(v->disp);

@@ -135,6 +135,39 @@ static void test_load(void) {
         write_bytes(bad, head, cut);
         check_bad(bad, NULL, "truncated");
     }
+    /* whole files whose declared lengths are absurd: refused from the lengths, before OpenVDB makes a
+     * string of 4 GiB (it took minutes and gigabytes to find such a file too short) */
+    static char whole[1 << 21];
+    f = fopen(path, "rb");
+    size_t size = f ? fread(whole, 1, sizeof whole, f) : 0;
+    if (f) fclose(f);
+    CHECK(size > 4096 && size < sizeof whole);
+    uint32_t len;
+    size_t at = 8 + 4 + 8 + 1 + 36 + 4; /* header, UUID, the file metadata's count: its first name */
+    for (int k = 0; k < 2 && size > 4096; k++) {
+        memcpy(&len, whole + at, 4);
+        at += 4 + len; /* past the name, then the type */
+    }
+    if (size > 4096 && at + 4 < size) {
+        uint32_t huge = 0xFFFFFFF0u, keep;
+        memcpy(&keep, whole + at, 4);
+        memcpy(whole + at, &huge, 4);
+        snprintf(bad, sizeof bad, "%s/filemeta.vdb", tmp);
+        write_bytes(bad, whole, size);
+        check_bad(bad, NULL, "the file's metadata, entry 1 (its value) declares 4294967280 bytes");
+        memcpy(whole + at, &keep, 4);
+    }
+    bool found = false;
+    for (size_t i = 100; i + 9 < size && i < 4096 && !found; i++) /* the grid's first metadata name, "class" */
+        if (memcmp(whole + i, "\x05\0\0\0class", 9) == 0) {
+            found = true;
+            uint32_t huge = 0x7FFFFFFFu;
+            memcpy(whole + i, &huge, 4);
+            snprintf(bad, sizeof bad, "%s/gridmeta.vdb", tmp);
+            write_bytes(bad, whole, size);
+            check_bad(bad, NULL, "grid 1's metadata, entry 1 (its name) declares 2147483647 bytes");
+        }
+    CHECK(found);
     check_bad(path, "temperature", "no float grid named 'temperature'");
     rp_scene_data_free(&d);
 }

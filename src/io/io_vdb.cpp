@@ -4,6 +4,7 @@
 // becomes a message naming the reason. The grid's transform must be linear (an affine map from
 // index to world); frustum transforms are refused.
 #include <cerrno>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <exception>
@@ -53,6 +54,106 @@ openvdb::FloatGrid::Ptr pick_grid(const openvdb::GridPtrVec &grids, const char *
     return first;
 }
 
+// Walks the parts of a .vdb file that declare lengths OpenVDB allocates before it reads them: the
+// header, the file's metadata, each grid's descriptor and each grid's metadata. OpenVDB 10 makes a
+// string (zero-filled) of whatever length a file declares, up to 4 GiB, before it finds the file too
+// short: a corrupt 10 kB file took 25 s and 3 GB to be refused. Here every length and position must
+// lie inside the file. The grids' trees are left to OpenVDB (their sizes follow from node masks).
+class vdb_walk {
+  public:
+    vdb_walk(std::istream &is, uint64_t size) : is_(is), size_(size) {}
+
+    bool check(std::string *fail) {
+        is_.seekg(8); // past the magic number, which the caller checked
+        uint32_t version = 0, major = 0, minor = 0;
+        if (!u32(&version, "the file format version")) return stop(fail);
+        if (version < 222) return true; // older layouts: left to OpenVDB (no grid compression flags)
+        if (!u32(&major, "the library version") || !u32(&minor, "the library version")) return stop(fail);
+        char offsets = 0;
+        if (!bytes(&offsets, 1, "the grid offsets flag") || !skip(36, "the file's UUID")) return stop(fail);
+        if (!meta("the file's metadata")) return stop(fail);
+        uint32_t grids = 0;
+        if (!u32(&grids, "the grid count")) return stop(fail);
+        for (uint32_t g = 0; g < grids; g++) {
+            std::string what = "grid " + std::to_string(g + 1) + "'s descriptor";
+            int64_t pos[3];
+            if (!string(what + " (its name)") || !string(what + " (its type)") ||
+                (version >= 223 && !string(what + " (its instance parent)")))
+                return stop(fail);
+            for (int k = 0; k < 3; k++)
+                if (!bytes(&pos[k], 8, what)) return stop(fail);
+            if (offsets && !(pos[0] >= 0 && pos[0] <= pos[1] && pos[1] <= pos[2] && (uint64_t)pos[2] <= size_)) {
+                why_ = what + " places the grid at bytes " + std::to_string(pos[0]) + " to " + std::to_string(pos[2]) +
+                       ", outside the file (" + std::to_string(size_) + " bytes)";
+                return stop(fail);
+            }
+            if (offsets) is_.seekg(pos[0]);
+            uint32_t compression = 0;
+            if (!u32(&compression, "grid " + std::to_string(g + 1) + "'s compression flags") ||
+                !meta("grid " + std::to_string(g + 1) + "'s metadata"))
+                return stop(fail);
+            if (!offsets) return true; // the next descriptor lies past this grid's tree
+            is_.seekg(pos[2]);
+        }
+        return true;
+    }
+
+  private:
+    std::istream &is_;
+    uint64_t size_;
+    std::string why_;
+
+    bool stop(std::string *fail) {
+        *fail = "truncated or corrupt OpenVDB file: " + why_;
+        return false;
+    }
+    uint64_t left() {
+        std::streamoff at = is_.tellg();
+        return at < 0 || (uint64_t)at > size_ ? 0 : size_ - (uint64_t)at;
+    }
+    bool bytes(void *dst, uint64_t n, const std::string &what) {
+        if (n > left()) {
+            why_ = what + " runs past the file's end";
+            return false;
+        }
+        is_.read(static_cast<char *>(dst), (std::streamsize)n);
+        return true;
+    }
+    bool u32(uint32_t *dst, const std::string &what) { return bytes(dst, 4, what); }
+    bool skip(uint64_t n, const std::string &what) {
+        if (n > left()) {
+            why_ = what + " runs past the file's end";
+            return false;
+        }
+        is_.seekg((std::streamoff)n, std::ios::cur);
+        return true;
+    }
+    // A length-prefixed run of bytes (a string, a metadata value).
+    bool sized(const std::string &what) {
+        std::streamoff at = is_.tellg();
+        uint32_t n = 0;
+        if (!u32(&n, what)) return false;
+        if (n > left()) {
+            why_ = what + " declares " + std::to_string(n) + " bytes at byte " + std::to_string(at) + ", past the file's end (" +
+                   std::to_string(size_) + " bytes)";
+            return false;
+        }
+        is_.seekg((std::streamoff)n, std::ios::cur);
+        return true;
+    }
+    bool string(const std::string &what) { return sized(what); }
+    bool meta(const std::string &what) {
+        uint32_t count = 0;
+        if (!u32(&count, what + " (its entry count)")) return false;
+        for (uint32_t i = 0; i < count; i++) {
+            std::string entry = what + ", entry " + std::to_string(i + 1);
+            if (!string(entry + " (its name)") || !string(entry + " (its type)") || !sized(entry + " (its value)"))
+                return false;
+        }
+        return true;
+    }
+};
+
 bool read_grid(const char *path, const char *wanted, rp_volume_data *v, std::string *fail) {
     openvdb::initialize(); // idempotent and thread-safe: registers the grid types
     std::ifstream is(path, std::ios::binary);
@@ -68,6 +169,14 @@ bool read_grid(const char *path, const char *wanted, rp_volume_data *v, std::str
         *fail = "not an OpenVDB file (no VDB magic number at its start)";
         return false;
     }
+    is.seekg(0, std::ios::end);
+    std::streamoff size = is.tellg();
+    if (size < 0) {
+        *fail = "cannot find the file's size";
+        return false;
+    }
+    if (!vdb_walk(is, (uint64_t)size).check(fail)) return false;
+    is.clear();
     is.seekg(0);
     // A short read throws (std::ios_base::failure) instead of leaving OpenVDB with a half-read
     // grid: io::File reads a truncated file without complaint.

@@ -231,6 +231,21 @@ int main(void) {
             img[i] = rp_image_read_pfm(path, &vw, &vh, &vc, err, sizeof err);
             CHECKF(img[i] && vw == 48 && vh == 48 && vc == 3, "%s", err);
         }
+        if (vdb && img[1]) { /* the stream engine reads the same flags and composites the cloud alike */
+            snprintf(args, sizeof args, "render '%s' --engine stream --volume '%s' %s %s -o '%s/vol_stream.pfm'", cornell,
+                     cloud, fits[1], common, tmp);
+            int src = run(args);
+            CHECKF(src == 0, "%s: exit %d\n%s", args, src, output);
+            snprintf(path, sizeof path, "%s/vol_stream.pfm", tmp);
+            int vw = 0, vh = 0, vc = 0;
+            float *st = rp_image_read_pfm(path, &vw, &vh, &vc, err, sizeof err);
+            CHECKF(st && vw == 48 && vh == 48 && vc == 3 && memcmp(st, img[1], 48 * 48 * 3 * sizeof(float)) == 0,
+                   "--engine stream --volume: not the packet renderer's image (%s)", err);
+            free(st);
+            snprintf(args, sizeof args, "render '%s' --engine stream --shading shadow --volume '%s' -o '%s/x.png'",
+                     cornell, cloud, tmp);
+            EXPECT(args, 1, "does not show a participating medium");
+        }
         if (img[0] && img[1] && img[2]) {
             /* the cloud is a dark (albedo 0.2) patch over a third of the view's width, wispy: about
              * 66 pixels; behind the camera only the headlight, which follows the scene's box (the

@@ -145,8 +145,9 @@ static void check_file(rp_device *dev, const char *file, int w, int h) {
 /* The renderer's integrator on the stream against rp_render (the packet renderer) with the same
  * desc: every value bit for bit, for both schedulers; the statistics per ray kind add up to the
  * totals and are the same twice. */
-static void check_integrator(rp_device *dev, const char *file, rp_integrator_type integrator, int w, int h, int spp,
-                             int want_kind) {
+/* box: a homogeneous medium in it (lo xyz, hi xyz), or NULL */
+static void check_integrator_in(rp_device *dev, const char *file, const float *box, rp_integrator_type integrator, int w,
+                                int h, int spp, int want_kind) {
     char buf[512], err[512] = "";
     const char *path = rp_test_scene(file, buf, sizeof buf);
     CHECKF(path != NULL, "%s", file);
@@ -155,6 +156,7 @@ static void check_integrator(rp_device *dev, const char *file, rp_integrator_typ
     bool ok = rp_scene_data_load(path, &d, err, sizeof err);
     CHECKF(ok, "%s", err);
     if (!ok) return;
+    CHECK(!box || rp_scene_data_add_medium_box(&d, box, box + 3));
     /* flat, as the stream engine builds animated scenes */
     rp_render_scene *rs = rp_render_scene_new(dev, &d, &(rp_render_scene_desc){.flatten_animation = true}, err, sizeof err);
     CHECKF(rs != NULL, "%s: %s", file, err);
@@ -218,6 +220,11 @@ static void check_integrator(rp_device *dev, const char *file, rp_integrator_typ
     rp_scene_data_free(&d);
 }
 
+static void check_integrator(rp_device *dev, const char *file, rp_integrator_type integrator, int w, int h, int spp,
+                             int want_kind) {
+    check_integrator_in(dev, file, NULL, integrator, w, h, spp, want_kind);
+}
+
 int main(void) {
     rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
     CHECK(dev != NULL);
@@ -246,6 +253,12 @@ int main(void) {
                      small ? 64 : 96, 1, RP_RAY_BOUNCE);
     check_integrator(dev, "bart_kitchen.tar.gz", RP_INTEGRATOR_WHITTED, small ? 80 : 128, small ? 64 : 72, 1,
                      RP_RAY_REFRACTION);
+    /* in a participating medium: Whitted composites it over the eye ray (the stream keeps each
+     * pixel's opacity from the eye stream), path tracing tracks it; more than one chunk */
+    const float box[6] = {150, 100, 150, 400, 350, 400};
+    check_integrator_in(dev, "cornell_box/cornell_box.obj", box, RP_INTEGRATOR_WHITTED, small ? 72 : 80, 64, 1,
+                        RP_RAY_SHADOW);
+    check_integrator_in(dev, "cornell_box/cornell_box.obj", box, RP_INTEGRATOR_PATH, 24, 24, 1, RP_RAY_BOUNCE);
     rp_device_release(dev);
     return RP_TEST_END();
 }

@@ -33,6 +33,7 @@ typedef struct stream_opts {
     rp_render_desc rd;
     stream_desc sd;
     grid_desc gd;
+    cli_medium_opts vol;       /* --volume, --medium-box, --albedo, ...: as `render` reads them */
 } stream_opts;
 
 static void usage(FILE *out, bool bench) {
@@ -166,6 +167,9 @@ static int parse(const char *cmd, int argc, char **argv, stream_opts *o, bool be
         } else if (strcmp(a, "--min-dim") == 0) {
             VALUE();
             if (!cli_parse_int(cmd, a, v, 1, 4096, &o->gd.min_dim)) return CLI_EXIT_USAGE;
+        } else if (cli_is_medium_flag(a)) {
+            VALUE();
+            if (!cli_parse_medium_flag(cmd, a, v, &o->vol)) return CLI_EXIT_USAGE;
         } else if (strcmp(a, "--oracle") == 0) {
             VALUE();
             if (!cli_parse_float(cmd, a, v, 0.0, 1.0, false, &o->sd.oracle)) return CLI_EXIT_USAGE;
@@ -239,13 +243,25 @@ static void unload(loaded *l) {
 static bool load(const char *cmd, const stream_opts *o, int default_w, int default_h, loaded *l) {
     memset(l, 0, sizeof *l);
     char err[512] = "";
-    if (!rp_scene_data_load(o->scene, &l->data, err, sizeof err)) {
+    rp_scene_load_desc ld;
+    rp_scene_load_desc_defaults(&ld);
+    ld.volume_grid = o->vol.vdb_grid;
+    if (!rp_scene_data_load_ex(o->scene, &ld, &l->data, err, sizeof err)) {
         fprintf(stderr, "%s\n", err[0] ? err : "cannot load the scene");
+        return false;
+    }
+    if (!cli_apply_medium(&o->vol, &l->data, err, sizeof err)) {
+        fprintf(stderr, "raypack %s: %s\n", cmd, err);
+        return false;
+    }
+    if (l->data.volume && o->sd.shading == STREAM_SHADE_SHADOW && !o->sd.render) {
+        fprintf(stderr, "raypack %s: the stream engine's shadow shading does not show a participating medium "
+                        "(use --integrator eyelight, whitted, path, direct or ao)\n", cmd);
         return false;
     }
     if (!(l->device = cli_device_new(cmd, o->threads, o->isa))) return false;
     /* flat: the grid holds one level of primitives, no instances */
-    rp_render_scene_desc sdesc = {.flatten_animation = true};
+    rp_render_scene_desc sdesc = {.flatten_animation = true, .medium = o->vol.medium};
     if (!(l->rs = rp_render_scene_new(l->device, &l->data, &sdesc, err, sizeof err))) {
         fprintf(stderr, "raypack %s: %s\n", cmd, err);
         return false;

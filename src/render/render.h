@@ -490,5 +490,8 @@ v3 aov_shade(const render_frame *f, const rp_ray *ray, const rp_hit *hit);
 /* Eye light and Whitted with a participating medium: its opacity along the primary ray (up to its
  * hit) over the colour seen behind it (integrator/volume.c). */
 v3 volume_composite(const render_frame *f, const rp_ray *ray, v3 behind);
+/* The same with the primary ray's opacity (volume_primary_opacity) already known: the stream
+ * tracer's Whitted knows it from the eye stream, before the pixel's colour is complete. */
+v3 volume_composite_opacity(const render_frame *f, float a, v3 behind);
 
 #endif

@@ -393,6 +393,7 @@ typedef struct stream_ctx {
     ray_stream rays, shadow;
     uint32_t *owner;          /* shadow ray -> the slot it lights */
     whitted_light_term *term; /* shadow ray -> what its light brings */
+    float *veil;              /* Whitted in a medium: per pixel, the medium's opacity along the eye ray */
     char *err;                /* the tracer's message when it failed */
     size_t err_size;
     bool failed;
@@ -474,6 +475,7 @@ static void whitted_chunk(void *user, uint32_t k, uint32_t thread) {
         hit_of(j->c->g, &j->c->rays, i, &rh);
         hits += rh.hit.geom_id != RP_INVALID_ID;
         whitted_surface(j->c->f, &rh.ray, &rh.hit, j->depth, j->lv->weight[i], &j->lv->slot[i]);
+        if (j->depth == 0 && j->c->veil) j->c->veil[i] = volume_primary_opacity(j->c->f, &rh.ray);
         lit += j->lv->slot[i].lit;
     }
     j->hits[k] = hits, j->lit[k] = lit;
@@ -632,6 +634,7 @@ static bool whitted_sample(stream_ctx *c, int sample, whitted_stream_level *leve
     }
     for (size_t i = 0; i < n; i++) {
         v3 col = levels[0].slot[i].color;
+        if (c->veil) col = volume_composite_opacity(c->f, c->veil[i], col); /* as the tile renderer's */
         c->th.accum[3 * i + 0] += col.x, c->th.accum[3 * i + 1] += col.y, c->th.accum[3 * i + 2] += col.z;
     }
     for (int l = 0; l < used; l++) whitted_level_free(&levels[l]);
@@ -774,6 +777,7 @@ static bool render_integrator(rp_render_scene *rs, const grid *g, const stream_d
     if (whitted) {
         levels = calloc((size_t)f->desc.max_depth + 1, sizeof *levels);
         if (!levels) goto oom;
+        if (rs->medium && !(c.veil = malloc(n * sizeof *c.veil))) goto oom;
         for (int s = 0; s < f->desc.spp; s++)
             if (!whitted_sample(&c, f->desc.sample_start + s, levels)) goto oom;
     } else {
@@ -796,7 +800,7 @@ oom:
         for (int l = 0; l <= f->desc.max_depth; l++) whitted_level_free(&levels[l]);
     free(levels), free(paths);
     if (c.th.pbr) free(c.th.pbr->shadow_L), free(c.th.pbr->shadow_pixel);
-    free(c.th.pbr), free(c.th.accum), free(c.owner), free(c.term);
+    free(c.th.pbr), free(c.th.accum), free(c.owner), free(c.term), free(c.veil);
     stream_free(&c.rays), stream_free(&c.shadow);
     free(f);
     return ok;
@@ -861,7 +865,13 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
         eye.state[i] = RAY_DONE;
         if (!shadows) {
             float c = eyelight(&rh);
-            pixels[3 * i + 0] = c, pixels[3 * i + 1] = c, pixels[3 * i + 2] = c;
+            v3 col = v3_make(c, c, c);
+            if (rs->medium) { /* composited as the tile renderer's eye light does */
+                render_frame ef = {.s = rs};
+                ef.desc.integrator = RP_INTEGRATOR_EYELIGHT;
+                col = volume_composite_opacity(&ef, volume_primary_opacity(&ef, &rh.ray), col);
+            }
+            pixels[3 * i + 0] = col.x, pixels[3 * i + 1] = col.y, pixels[3 * i + 2] = col.z;
             continue;
         }
         rp_ray *sr = &shadow.ray[i];

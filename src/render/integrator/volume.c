@@ -84,7 +84,10 @@ float volume_primary_opacity(const render_frame *f, const rp_ray *ray) {
 }
 
 v3 volume_composite(const render_frame *f, const rp_ray *ray, v3 behind) {
-    float a = volume_primary_opacity(f, ray);
+    return volume_composite_opacity(f, volume_primary_opacity(f, ray), behind);
+}
+
+v3 volume_composite_opacity(const render_frame *f, float a, v3 behind) {
     v3 mc = f->desc.integrator == RP_INTEGRATOR_WHITTED ? f->s->medium->albedo : v3_make(1, 1, 1);
     return v3_add(v3_scale(behind, 1.0f - a), v3_scale(mc, a));
 }

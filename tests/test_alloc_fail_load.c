@@ -236,6 +236,34 @@ static const char gltf[] =
     "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\",\"min\":[0,0,0],\"max\":[1,1,0]},"
     "{\"bufferView\":1,\"componentType\":5126,\"count\":3,\"type\":\"VEC2\"}]}\n";
 
+/* Blocks from 1 MiB start on a 2 MiB boundary (so all of a block can be huge pages), are usable to
+ * their size, grow with their contents kept, and go back with free(); small ones are malloc's. */
+static void test_large_blocks(void) {
+    const uintptr_t huge = (uintptr_t)2 << 20;
+    const size_t sizes[] = {(size_t)1 << 20, ((size_t)3 << 20) + 5, 7607064};
+    for (size_t i = 0; i < sizeof sizes / sizeof sizes[0]; i++) {
+        size_t n = sizes[i];
+        unsigned char *a = io_malloc(n), *b = io_realloc(NULL, n);
+        CHECKF(a && b && ((uintptr_t)a & (huge - 1)) == 0 && ((uintptr_t)b & (huge - 1)) == 0,
+               "%zu bytes: %p %p", n, (void *)a, (void *)b);
+        if (!a || !b) continue;
+        memset(a, 0xA5, n);
+        memset(b, 0x5A, n);
+        unsigned char *c = io_realloc(b, 2 * n);
+        CHECK(c != NULL);
+        if (c) {
+            b = c;
+            CHECK(b[0] == 0x5A && b[n - 1] == 0x5A && a[n - 1] == 0xA5);
+            memset(b + n, 1, n);
+        }
+        free(a);
+        free(b);
+    }
+    char *small = io_malloc(100);
+    CHECK(small != NULL);
+    free(small);
+}
+
 int main(int argc, char **argv) {
     (void)argc;
     (void)argv;
@@ -254,6 +282,7 @@ int main(int argc, char **argv) {
     const char *t = getenv("RP_TEST_TMP");
     snprintf(tmp, sizeof tmp, "%s", t ? t : "tmp_test_alloc_fail_load");
     mkdir(tmp, 0755);
+    test_large_blocks();
     io_set_alloc_hook(hook, NULL);
 
     static const char *const obj_names[] = {"s.obj", "m.mtl", "t.ppm"};

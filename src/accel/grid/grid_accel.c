@@ -17,18 +17,15 @@
 /* At the head of accel_built.nodes, followed by
  *   uint32_t first[voxel_count + 1]: voxel v's blocks are [first[v], first[v + 1]),
  *   uint32_t ids[4 * block_count]: the triangle of each lane (the mailbox's key),
- *   uint8_t clear[8][brick_count * 64]: per octant of ray directions, 0 when voxel v holds
- *   triangles, else the side (in voxels, at most 255) of the largest cube with v at its corner,
- *   growing into that octant, that holds none; stored in bricks of 4 x 4 x 4 voxels (a cache
- *   line each, clear_index), so a walk's neighbouring voxels share lines whichever axis it
- *   crosses: in row order, a step along z had been a cache miss. */
+ *   uint8_t clear[8][voxel_count]: per octant of ray directions, 0 when voxel v holds triangles,
+ *   else the side (in voxels, at most 255) of the largest cube with v at its corner, growing
+ *   into that octant, that holds none. (Stored in bricks of 4 x 4 x 4 voxels, a cache line each,
+ *   the single rays had been slower against the BVH on all five scenes measured: docs/accel.md.) */
 typedef struct grid_layout {
     float lo[3], cell[3], inv_cell[3];
     int32_t res[3];
     uint32_t voxel_count;
     uint64_t block_count;
-    uint32_t bricks[3];    /* bricks per axis: ceil(res / 4) */
-    uint64_t brick_count;
 } grid_layout;
 
 #define LAYOUT_HEAD ((sizeof(grid_layout) + 63) / 64 * 64)
@@ -40,12 +37,7 @@ static inline const uint32_t *layout_ids(const grid_layout *g) { return layout_f
 /* One byte per voxel for a ray's octant (bit k: the ray goes towards +axis k), small enough to
  * stay in cache: empty space costs no load of first[]. */
 static inline const uint8_t *layout_clear(const grid_layout *g, int octant) {
-    return (const uint8_t *)(layout_ids(g) + 4 * g->block_count) + (size_t)octant * 64 * g->brick_count;
-}
-/* Index of voxel (x, y, z) in a clear array: its brick, then its place in the brick. */
-static inline size_t clear_index(const grid_layout *g, int32_t x, int32_t y, int32_t z) {
-    size_t b = ((size_t)(uint32_t)(z >> 2) * g->bricks[1] + (uint32_t)(y >> 2)) * g->bricks[0] + (uint32_t)(x >> 2);
-    return b << 6 | (size_t)((z & 3) << 4 | (y & 3) << 2 | (x & 3));
+    return (const uint8_t *)(layout_ids(g) + 4 * g->block_count) + (size_t)octant * g->voxel_count;
 }
 
 /* The clear cubes of octant o (bit k set: the cube grows towards +axis k) from the occupancy in d
@@ -112,17 +104,12 @@ static bool grid_accel_build(const sys_allocator *a, sys_pool *pool, accel_tri_i
         grid_free(g);
         return false;
     }
-    uint32_t bricks[3];
-    for (int k = 0; k < 3; k++) bricks[k] = (uint32_t)(g->res[k] + 3) / 4;
-    uint64_t brick_count = (uint64_t)bricks[0] * bricks[1] * bricks[2];
-    uint8_t *occ = sys_alloc(a, g->voxel_count);
     size_t bytes = LAYOUT_HEAD + ((size_t)g->voxel_count + 1) * sizeof(uint32_t) + (size_t)blocks * 4 * sizeof(uint32_t) +
-                   8 * 64 * (size_t)brick_count;
-    grid_layout *lay = occ ? sys_alloc(a, bytes) : NULL;
+                   8 * (size_t)g->voxel_count;
+    grid_layout *lay = sys_alloc(a, bytes);
     tri4 *tb = lay ? accel_blocks_alloc(a, (uint32_t)blocks) : NULL;
     if (!tb) {
         sys_free(a, lay, bytes);
-        sys_free(a, occ, g->voxel_count);
         grid_free(g);
         return false;
     }
@@ -131,20 +118,12 @@ static bool grid_accel_build(const sys_allocator *a, sys_pool *pool, accel_tri_i
     for (int k = 0; k < 3; k++) lay->inv_cell[k] = 1.0f / g->cell[k];
     lay->voxel_count = g->voxel_count;
     lay->block_count = blocks;
-    for (int k = 0; k < 3; k++) lay->bricks[k] = bricks[k];
-    lay->brick_count = brick_count;
     uint32_t *first = (uint32_t *)((char *)lay + LAYOUT_HEAD), *ids = first + g->voxel_count + 1;
     for (int o = 0; o < 8; o++) {
         uint8_t *clear = (uint8_t *)layout_clear(lay, o);
-        for (uint32_t v = 0; v < g->voxel_count; v++) occ[v] = g->offsets[v] != g->offsets[v + 1] ? 0 : 1;
-        clear_cubes(occ, lay->res, o);
-        memset(clear, 0, 64 * (size_t)brick_count); /* the bricks' voxels beyond the grid */
-        uint32_t v = 0;
-        for (int32_t z = 0; z < lay->res[2]; z++)
-            for (int32_t y = 0; y < lay->res[1]; y++)
-                for (int32_t x = 0; x < lay->res[0]; x++) clear[clear_index(lay, x, y, z)] = occ[v++];
+        for (uint32_t v = 0; v < g->voxel_count; v++) clear[v] = g->offsets[v] != g->offsets[v + 1] ? 0 : 1;
+        clear_cubes(clear, lay->res, o);
     }
-    sys_free(a, occ, g->voxel_count);
     uint32_t b = 0;
     for (uint32_t v = 0; v < g->voxel_count; v++) {
         first[v] = b;
@@ -243,7 +222,7 @@ static bool grid_trav(const rp_accel *acc, const accel_built *s, const alt_ray *
     float end = walk_end(t1, h->t);
     bool fresh = true; /* next[] holds the current voxel's crossings */
     for (;;) {
-        const int32_t reach = (int32_t)clear[clear_index(g, cell[0], cell[1], cell[2])] - 1;
+        const int32_t reach = (int32_t)clear[voxel] - 1;
         if (reach > 0) {
             /* an empty cube from cell to cell + reach * step (within the grid): on to the voxel
              * past its exit */
@@ -499,9 +478,7 @@ static bool grid_packet(const accel_built *s, const alt_ray *r, alt_hit *h, uint
             /* a clear cube at the union's corner that holds the whole union: every ray stays in
              * it, so in empty space, up to the slice where the first may leave it */
             int32_t cu = cu_pos ? bu0 : bu1, cv = cv_pos ? bv0 : bv1;
-            int32_t cc[3];
-            cc[K] = kc, cc[U] = cu, cc[V] = cv;
-            int32_t side = clear[clear_index(g, cc[0], cc[1], cc[2])];
+            int32_t side = clear[kc * stride[K] + cu * stride[U] + cv * stride[V]];
             if (side > bu1 - bu0 && side > bv1 - bv0) {
                 float lim = (float)(j + side);
                 float ulo = (float)(cu_pos ? cu : cu + 1 - side), uhi = (float)(cu_pos ? cu + side : cu + 1);
@@ -524,10 +501,8 @@ static bool grid_packet(const accel_built *s, const alt_ray *r, alt_hit *h, uint
                     uint32_t i = simd_ctz(m);
                     for (int32_t cvv = p.v0[i]; cvv <= p.v1[i]; cvv++)
                         for (int32_t cuu = p.u0[i]; cuu <= p.u1[i]; cuu++) {
-                            int32_t c3[3];
-                            c3[K] = kc, c3[U] = cuu, c3[V] = cvv;
-                            if (clear[clear_index(g, c3[0], c3[1], c3[2])]) continue;
                             uint32_t voxel = (uint32_t)(kc * stride[K] + cuu * stride[U] + cvv * stride[V]);
+                            if (clear[voxel]) continue;
                             if (test_voxel(s, r, h, ids, first, voxel, 1u << i, mb, any, &fr)) {
                                 occ |= 1u << i, act &= ~(1u << i);
                                 goto next_ray;
@@ -538,10 +513,8 @@ static bool grid_packet(const accel_built *s, const alt_ray *r, alt_hit *h, uint
             } else {
                 for (int32_t cvv = bv0; cvv <= bv1; cvv++)
                     for (int32_t cuu = bu0; cuu <= bu1; cuu++) {
-                        int32_t c3[3];
-                        c3[K] = kc, c3[U] = cuu, c3[V] = cvv;
-                        if (clear[clear_index(g, c3[0], c3[1], c3[2])]) continue;
                         uint32_t voxel = (uint32_t)(kc * stride[K] + cuu * stride[U] + cvv * stride[V]);
+                        if (clear[voxel]) continue;
                         uint32_t rays = 0;
                         for (uint32_t m = in; m; m &= m - 1) {
                             uint32_t i = simd_ctz(m);

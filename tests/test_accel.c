@@ -353,6 +353,104 @@ static void check_grid(const char *name, const test_mesh *m, uint32_t n, uint32_
     free(rays), free(ref), free(g), free(one), free(brute);
 }
 
+/* The grid's coherent packets (slice-wise walk, grid_packet) on camera rays: random cameras inside
+ * and outside the scene, 64x64 pixels in rp_packet_n_index's order (each 16 rays a 4x4 tile), the
+ * lanes of every other camera's packets shuffled and some of its rays cut short (tfar), and
+ * shadow rays from a point light to the BVH's hits (one origin, ends spread over the image):
+ * single rays, 16-ray packets and 16x16 packets of the grid against the BVH's single rays, bit
+ * for bit, closest and any hit. */
+static void check_grid_cameras(const char *name, const test_mesh *m, int cameras, uint64_t seed) {
+    const uint32_t side = 64, n = side * side;
+    rp_ray *rays = malloc(sizeof(rp_ray) * 2 * n);
+    got *ref = malloc(sizeof(got) * 2 * n), *g = malloc(sizeof(got) * 2 * n);
+    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t i = 0; i < m->nv; i++)
+        for (int a = 0; a < 3; a++) lo[a] = fminf(lo[a], m->v[3 * i + a]), hi[a] = fmaxf(hi[a], m->v[3 * i + a]);
+    float diag = sqrtf((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) + (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
+    rp_scene *bvh = make_scene(dev, RP_ACCEL_BVH, m, NULL, 0);
+    rp_scene *grid = make_scene(dev, RP_ACCEL_GRID, m, NULL, 0);
+    test_rng rng = {seed};
+    uint32_t bad[3] = {0}, hits = 0, total = 0;
+    for (int c = 0; c < cameras; c++) {
+        float eye[3], look[3], fwd[3], up[3] = {0.0f, 1.0f, 0.0f}, right[3], u[3];
+        bool inside = c % 2 == 0;
+        for (int a = 0; a < 3; a++) {
+            float mid = 0.5f * (lo[a] + hi[a]), ext = hi[a] - lo[a];
+            look[a] = lo[a] + ext * (0.1f + 0.8f * test_rng_float(&rng));
+            eye[a] = inside ? lo[a] + ext * (0.1f + 0.8f * test_rng_float(&rng))
+                            : mid + diag * (test_rng_float(&rng) - 0.5f) * 2.0f;
+        }
+        if (!inside) /* outside the box: pushed out along the view */
+            for (int a = 0; a < 3; a++) eye[a] += (eye[a] - look[a]) * 0.5f;
+        float len = 0.0f;
+        for (int a = 0; a < 3; a++) fwd[a] = look[a] - eye[a], len += fwd[a] * fwd[a];
+        len = sqrtf(len);
+        for (int a = 0; a < 3; a++) fwd[a] /= len;
+        right[0] = fwd[1] * up[2] - fwd[2] * up[1], right[1] = fwd[2] * up[0] - fwd[0] * up[2],
+        right[2] = fwd[0] * up[1] - fwd[1] * up[0];
+        u[0] = right[1] * fwd[2] - right[2] * fwd[1], u[1] = right[2] * fwd[0] - right[0] * fwd[2],
+        u[2] = right[0] * fwd[1] - right[1] * fwd[0];
+        float scale = tanf((0.3f + 0.6f * test_rng_float(&rng)) * 0.5f * 3.14159265f * 0.5f);
+        bool shuffle = c % 4 >= 2;
+        for (uint32_t y = 0; y < side; y++)
+            for (uint32_t x = 0; x < side; x++) {
+                uint32_t q = ((y / 16) * (side / 16) + x / 16) * 256 + rp_packet_n_index(16, x % 16, y % 16);
+                float px = ((float)x + 0.5f) / (float)side * 2.0f - 1.0f, py = ((float)y + 0.5f) / (float)side * 2.0f - 1.0f;
+                float d[3];
+                for (int a = 0; a < 3; a++) d[a] = fwd[a] + scale * (px * right[a] + py * u[a]);
+                float tfar = shuffle && test_rng_u32(&rng) % 4 == 0 ? diag * test_rng_float(&rng) : INFINITY;
+                rays[q] = (rp_ray){.org_x = eye[0], .org_y = eye[1], .org_z = eye[2], .dir_x = d[0], .dir_y = d[1],
+                                   .dir_z = d[2], .tfar = tfar, .mask = 0xFFFFFFFFu};
+            }
+        if (shuffle) /* the lanes of each 16-ray packet in a random order */
+            for (uint32_t b = 0; b < n; b += 16)
+                for (uint32_t i = 15; i > 0; i--) {
+                    uint32_t j = test_rng_u32(&rng) % (i + 1);
+                    rp_ray t = rays[b + i];
+                    rays[b + i] = rays[b + j], rays[b + j] = t;
+                }
+        for (uint32_t i = 0; i < n; i++) trace1(bvh, &rays[i], &ref[i]);
+        /* shadow rays: from a light near the eye to each primary hit (misses: along the ray) */
+        float light[3];
+        for (int a = 0; a < 3; a++) light[a] = eye[a] + 0.02f * diag * (u[a] - right[a]);
+        for (uint32_t i = 0; i < n; i++) {
+            const rp_ray *r = &rays[i];
+            float t = ref[i].geom != RP_INVALID_ID ? ref[i].t : diag;
+            float p[3] = {r->org_x + r->dir_x * t, r->org_y + r->dir_y * t, r->org_z + r->dir_z * t};
+            rays[n + i] = (rp_ray){.org_x = light[0], .org_y = light[1], .org_z = light[2], .dir_x = p[0] - light[0],
+                                   .dir_y = p[1] - light[1], .dir_z = p[2] - light[2], .tfar = 0.999f, .mask = 0xFFFFFFFFu};
+            trace1(bvh, &rays[n + i], &ref[n + i]);
+        }
+        for (uint32_t i = 0; i < 2 * n; i++) {
+            trace1(grid, &rays[i], &g[i]);
+            bad[0] += !same_got(&g[i], &ref[i]) || g[i].occluded != ref[i].occluded;
+            hits += ref[i].geom != RP_INVALID_ID;
+        }
+        trace_16(grid, rays, 2 * n, g);
+        for (uint32_t i = 0; i < 2 * n; i++) {
+            bool b = g[i].geom != 0xDEADu && (g[i].geom == 0xBADu || !same_got(&g[i], &ref[i]) || g[i].occluded != ref[i].occluded);
+            if (b && getenv("RP_TEST_VERBOSE"))
+                fprintf(stderr, "%s camera %d packet16 ray %u: bvh %u/%u t %.9g occl %d, grid %u/%u t %.9g occl %d\n", name, c,
+                        i, ref[i].geom, ref[i].prim, (double)ref[i].t, ref[i].occluded, g[i].geom, g[i].prim, (double)g[i].t,
+                        g[i].occluded);
+            bad[1] += b;
+        }
+        trace_n(dev, grid, 16, RP_TRAVERSAL_AUTO, rays, 2 * n, g);
+        for (uint32_t i = 0; i < 2 * n; i++) bad[2] += !same_got(&g[i], &ref[i]) || g[i].occluded != ref[i].occluded;
+        total += 2 * n;
+    }
+    CHECKF(hits > total / 8, "%s cameras: only %u of %u rays hit", name, hits, total);
+    CHECKF(bad[0] + bad[1] + bad[2] == 0, "%s cameras: the grid differs from the BVH: single %u, packet16 %u, 16x16 %u of %u",
+           name, bad[0], bad[1], bad[2], total);
+    printf("%s: %d cameras, %u camera and shadow rays, %u hit; the grid's single rays and packets give the BVH's hits\n", name,
+           cameras, total, hits);
+    rp_scene_release(bvh);
+    rp_scene_release(grid);
+    rp_device_release(dev);
+    free(rays), free(ref), free(g);
+}
+
 /* A flat scene: a 40 x 40 quad mesh in the plane z = 0.25 (the grid's box is a thin slab). */
 static test_mesh flat_mesh(void) {
     const uint32_t q = 40;
@@ -416,6 +514,7 @@ int main(void) {
         bool ok = load_mesh(grid_files[f], &m);
         CHECKF(ok && m.nt > 0, "%s loads", grid_files[f]);
         if (ok) check_grid(grid_files[f], &m, small ? 512 : 8192, small ? 16 : 256);
+        if (ok) check_grid_cameras(grid_files[f], &m, small ? 2 : 8, 99 + (uint64_t)f);
         test_mesh_free(&m);
     }
     /* a scene without triangles, and a bad accel value */

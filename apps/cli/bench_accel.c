@@ -7,6 +7,7 @@
 #include <errno.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "bench.h"
 #include "cli.h"
@@ -24,6 +25,14 @@ typedef struct accel_run {
     bench_n_engine engines[BENCH_KIND_COUNT][BENCH_N_MODES];
     bench_stat stat[BENCH_KIND_COUNT][ACCEL_MODES];
 } accel_run;
+
+/* CPU seconds of the calling thread: on one thread (--threads 1) the modes are timed by it, so other
+ * programs on a shared machine do not skew the ratios */
+static double thread_cpu_seconds(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
 
 static int cmp_double(const void *a, const void *b) {
     double x = *(const double *)a, y = *(const double *)b;
@@ -111,7 +120,9 @@ int bench_accel_grid(bench_ctx *ctx) {
         for (int r = 0; r < reps; r++)
             for (int a = 0; a < RP_ACCEL_COUNT; a++)
                 for (int m = 0; m < ACCEL_MODES; m++) {
+                    double c0 = thread_cpu_seconds();
                     double s = bench_trace_set(ctx, ctx->opts.threads, &runs[a].modes[k][m], set, &hits);
+                    if (ctx->opts.threads <= 1) s = thread_cpu_seconds() - c0;
                     samples[((size_t)a * ACCEL_MODES + (size_t)m) * (size_t)reps + (size_t)r] =
                         s > 0.0 ? (double)set->count / s * 1e-6 : 0.0;
                 }
@@ -121,7 +132,8 @@ int bench_accel_grid(bench_ctx *ctx) {
     }
     free(samples);
     bench_hits_free(&hits);
-    printf("Mrays/s, median of %d on %d threads (min-max)\n", reps, ctx->opts.threads);
+    printf("Mrays/s, median of %d on %d threads (min-max)%s\n", reps, ctx->opts.threads,
+           ctx->opts.threads <= 1 ? ", per CPU second of the tracing thread" : "");
     printf("%-11s %-8s", "rays", "mode");
     for (int a = 0; a < RP_ACCEL_COUNT; a++) printf("  %-24s", rp_accel_name((rp_accel_type)a));
     printf("\n");

@@ -99,6 +99,46 @@ static void test_isa(int isa, uint32_t stride) {
             wrong += !(isnan(sum[i]) && isnan(sum_ref[i])) && memcmp(&sum[i], &sum_ref[i], sizeof(float)) != 0;
     }
     CHECKF(wrong == 0, "%s: %zu differences when accumulating", name, wrong);
+
+    /* rectangles (view_srgb_rect: a tile's rows in one call) inside wider rows: each row as alone,
+     * the floats and words between rows untouched */
+    wrong = 0;
+    for (int rows = 1; rows <= 5; rows++)
+        for (int n = 1; n <= 40; n += 3) {
+            enum { SW = 3 * 48, OW = 45 };
+            static float rsum[5 * SW], rref[5 * SW], radd[5 * SW];
+            static uint32_t rout[5 * OW];
+            for (int i = 0; i < rows * SW; i++) {
+                seed = seed * 1664525u + 1013904223u;
+                rsum[i] = (float)(seed >> 8) * 0x1p-24f;
+                seed = seed * 1664525u + 1013904223u;
+                radd[i] = (seed >> 8) % 5u == 0 ? special[(seed >> 12) % ns] : (float)(seed >> 8) * 0x1p-25f;
+            }
+            memcpy(rref, rsum, sizeof rsum);
+            for (int i = 0; i < 5 * OW; i++) rout[i] = 0x12345678u;
+            float inv = 1.0f / (float)(rows + 1);
+            bool with_add = (n + rows) % 2 == 0;
+            view_srgb_rect(rsum, with_add ? radd : NULL, SW, inv, rout, OW, n, rows);
+            for (int y = 0; y < rows; y++) {
+                for (int i = 0; i < OW; i++) {
+                    uint32_t want = 0x12345678u;
+                    if (i < n) {
+                        want = 0xFF000000u;
+                        for (int k = 0; k < 3; k++) {
+                            float *r = &rref[y * SW + 3 * i + k];
+                            if (with_add) *r += radd[y * SW + 3 * i + k];
+                            want |= view_srgb8(*r * inv) << (16 - 8 * k);
+                        }
+                    }
+                    wrong += rout[y * OW + i] != want;
+                }
+                for (int i = 0; i < SW; i++) {
+                    float a = rsum[y * SW + i], r = rref[y * SW + i];
+                    wrong += !(isnan(a) && isnan(r)) && memcmp(&a, &r, sizeof a) != 0;
+                }
+            }
+        }
+    CHECKF(wrong == 0, "%s: %zu differences in rectangles", name, wrong);
     printf("%s: %zu floats checked\n", name, checked);
 }
 

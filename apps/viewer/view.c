@@ -55,7 +55,8 @@ static void view_usage(FILE *out) {
             "  --log                print a line per frame (size, samples, motion, each phase's time)\n"
             "  --max-scale S        lowest resolution during motion is 1/S of the window's, 1..32 [16]\n"
             "  --compare            after each full-size frame, render it again with rp_render alone (not\n"
-            "                       shown) and report the window's cost against that in CPU time\n"
+            "                       shown, into a sum of its own as render --time does) and report the\n"
+            "                       window's cost against that in CPU time\n"
             "\n"
             "keys: W/S A/D Q/E fly (Shift: 4x faster), right mouse button: look, left button: orbit\n"
             "  about the point under the cursor, wheel: fly speed, - and =: field of view, P: print the\n"
@@ -266,6 +267,7 @@ typedef struct viewer {
     float *scratch;               /* --compare: where rp_render alone renders */
     double cmp_view_cpu, cmp_ref_cpu; /* --compare: process CPU of the viewer's frames, of rp_render alone */
     int cmp_frames;
+    int cmp_samples;              /* --compare: the samples scratch holds summed (as sum holds them) */
     int frames_done;
     bool playing;               /* space: an animated scene's time runs (frame 0 until then) */
     double anim_t;
@@ -549,20 +551,19 @@ static void present_rect(const present_job *j, int x0, int y0, int x1, int y1, b
     if (j->accumulate) {
         /* as the tile renderer sums samples, then scales by 1/spp (by 1: the sum itself) */
         float inv = j->samples == 1 ? 1.0f : 1.0f / (float)j->samples;
-        for (int y = y0; y < y1; y++) {
-            size_t at = (size_t)y * (size_t)v->w + (size_t)x0;
-            view_srgb_pixels(v->sum + at * 3, add && j->add ? v->frame + at * 3 : NULL, inv,
-                             v->out + (size_t)y * (size_t)v->out_pitch + (size_t)x0, n);
-        }
+        size_t at = (size_t)y0 * (size_t)v->w + (size_t)x0;
+        view_srgb_rect(v->sum + at * 3, add && j->add ? v->frame + at * 3 : NULL, (size_t)v->w * 3, inv,
+                       v->out + (size_t)y0 * (size_t)v->out_pitch + (size_t)x0, (size_t)v->out_pitch, n, y1 - y0);
         return;
     }
     int s = j->scale;
+    if (s == 1) {
+        view_srgb_rect(v->frame + ((size_t)y0 * (size_t)j->fw + (size_t)x0) * 3, NULL, (size_t)j->fw * 3, 1.0f,
+                       v->out + (size_t)y0 * (size_t)v->out_pitch + (size_t)x0, (size_t)v->out_pitch, n, y1 - y0);
+        return;
+    }
     for (int y = y0; y < y1; y++) {
         float *row = v->frame + ((size_t)y * (size_t)j->fw + (size_t)x0) * 3;
-        if (s == 1) {
-            view_srgb_pixels(row, NULL, 1.0f, v->out + (size_t)y * (size_t)v->out_pitch + (size_t)x0, n);
-            continue;
-        }
         view_srgb_pixels(row, NULL, 1.0f, line, n);
         int ox0 = x0 * s, ox1 = x1 * s < v->w ? x1 * s : v->w, oy0 = y * s, oy1 = (y + 1) * s < v->h ? (y + 1) * s : v->h;
         uint32_t *out = v->out + (size_t)oy0 * (size_t)v->out_pitch;
@@ -603,11 +604,10 @@ static void present_tile(void *user, int x0, int y0, int x1, int y1, uint32_t th
     if (now) {
         present_rect(j, x0, y0, x1, y1, true, line);
     } else if (j->accumulate && j->add) {
-        /* add the frame now, while it is in cache; the pixels come later, from the sum */
-        for (int y = y0; y < y1; y++) {
-            size_t at = (size_t)y * (size_t)j->v->w + (size_t)x0;
-            view_srgb_pixels(j->v->sum + at * 3, j->v->frame + at * 3, 1.0f, line, x1 - x0);
-        }
+        /* add the frame now, while it is in cache; the pixels come later, from the sum (each row's
+         * codes go to the same scratch line: pitch 0) */
+        size_t at = (size_t)y0 * (size_t)j->v->w + (size_t)x0;
+        view_srgb_rect(j->v->sum + at * 3, j->v->frame + at * 3, (size_t)j->v->w * 3, 1.0f, line, 0, x1 - x0, y1 - y0);
     }
     j->busy_ms[8 * thread] += cli_now_ms() - t0;
 }
@@ -836,6 +836,7 @@ static bool follow_window_size(viewer *v) {
     }
     free(v->scratch); /* --compare's, made again at the new size */
     v->scratch = NULL;
+    v->cmp_samples = -1;
     v->full_ms *= (double)n / ((double)v->w * (double)v->h);
     v->w = w;
     v->h = h;
@@ -993,9 +994,15 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
     double frame_cpu = cpu_ms() - u0; /* the process's CPU time in this frame, --compare's render left out */
     if (v->opt.compare && render && scale == 1 && v->frames_done > 0) {
         /* the same frame (settings, camera, samples) by rp_render alone, right after the viewer's:
-         * the machine's load drifts alike for both */
-        double c0 = cpu_ms();
+         * the machine's load drifts alike for both. As `raypack render --time` renders its frames,
+         * it continues a sum of its own (scratch) from the second sample on, so the reference pays
+         * the accumulation too; instant radiosity's samples are rendered apart (the viewer adds them
+         * itself, as the command does). */
         float *px = v->scratch ? v->scratch : (v->scratch = malloc((size_t)v->w * (size_t)v->h * 3 * sizeof(float)));
+        bool cont = v->desc.integrator != RP_INTEGRATOR_IR && v->samples > 1;
+        if (px && cont && v->cmp_samples != v->samples - 1) /* the first compared frame: start from the sum (untimed) */
+            memcpy(px, v->sum, (size_t)v->w * (size_t)v->h * 3 * sizeof(float));
+        double c0 = cpu_ms();
         rp_render_desc d = v->desc;
         rp_camera cam = view_camera_get(&v->cam);
         d.width = v->w;
@@ -1004,7 +1011,10 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         d.max_depth = v->depth == 0 ? -1 : v->depth;
         d.spp = 1;
         d.sample_start = v->samples - 1;
+        d.accumulate = cont;
+        v->cmp_samples = -1;
         if (px && rp_render(v->scene, &d, px, NULL)) {
+            v->cmp_samples = v->samples;
             v->cmp_ref_cpu += cpu_ms() - c0;
             v->cmp_view_cpu += c0 - u0;
             v->cmp_frames++;

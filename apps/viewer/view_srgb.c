@@ -6,9 +6,9 @@
  * Positive floats order as their bit patterns.
  * Checked against the formula on every float in [0, 1] (all 1065353217 of them), on NaN and on
  * negative values: no difference. The encoder itself is inline, in viewer.h. Whole rows go through
- * view_srgb_pixels, which also adds a frame into the accumulated sum: the same lookup on 8 (AVX2)
- * or 16 (AVX-512) lanes with a gather (the octave's shift and first bucket come from a register),
- * chosen once by the CPU (test_view_srgb checks each against the table on every float in [0, 1]).
+ * view_srgb_pixels (a tile's rows through view_srgb_rect, the constants set up once a tile), which
+ * also adds a frame into the accumulated sum: the same lookup on 8 (AVX2) or 16 (AVX-512) lanes
+ * with a gather (the octave's shift and first bucket come from a register), chosen once by the CPU (test_view_srgb checks each against the table on every float in [0, 1]).
  * The gathers were most of the cost: 1.2-1.6 ms of CPU a 1024x768 frame on the EPYC (Zen 4) test
  * machine, 2-3 ms inside the viewer, where the rendering between tiles evicts the table. AVX-512
  * therefore computes the code by a polynomial and gathers only for lanes near a code's edge (about
@@ -93,7 +93,7 @@ static uint32_t pixel_scalar(const float *c) {
 }
 
 /* The reference for the others: per channel sum += add, then the code of sum * inv. */
-static void pixels_scalar(float *sum, const float *add, float inv, uint32_t *out, int n) {
+static void row_scalar(float *sum, const float *add, float inv, uint32_t *out, int n) {
     for (int i = 0; i < n; i++) {
         float c[3];
         for (int k = 0; k < 3; k++) {
@@ -102,6 +102,13 @@ static void pixels_scalar(float *sum, const float *add, float inv, uint32_t *out
         }
         out[i] = pixel_scalar(c);
     }
+}
+
+/* A rectangle's rows: sum and add advance by stride floats a row, out by pitch words. */
+static void pixels_scalar(float *sum, const float *add, size_t stride, float inv, uint32_t *out, size_t pitch, int n,
+                          int rows) {
+    for (int y = 0; y < rows; y++, sum += stride, add = add ? add + stride : NULL, out += pitch)
+        row_scalar(sum, add, inv, out, n);
 }
 
 #if (defined(__x86_64__) || defined(__i386__)) && (defined(__GNUC__) || defined(__clang__))
@@ -144,29 +151,31 @@ __attribute__((target("avx2"))) static inline void store_bytes8(__m256i c, uint8
     _mm_storel_epi64((__m128i *)dst, _mm256_castsi256_si128(c));
 }
 
-__attribute__((target("avx2"))) static void pixels_avx2(float *sum, const float *add, float inv, uint32_t *out,
-                                                        int n) {
+__attribute__((target("avx2"))) static void pixels_avx2(float *sum, const float *add, size_t stride, float inv,
+                                                        uint32_t *out, size_t pitch, int n, int rows) {
     const __m256 s = _mm256_set1_ps(inv);
     const __m256i sh0 = _mm256_loadu_si256((const __m256i *)view_srgb_shift),
                   sh1 = _mm256_loadu_si256((const __m256i *)(view_srgb_shift + 8)),
                   f0 = _mm256_loadu_si256((const __m256i *)view_srgb_first),
                   f1 = _mm256_loadu_si256((const __m256i *)(view_srgb_first + 8));
-    int i = 0;
-    for (; i + 8 <= n; i += 8) { /* 8 pixels: 24 floats, 3 vectors */
-        uint8_t rgb[32];
-        for (int k = 0; k < 3; k++) {
-            float *p = sum + 3 * i + 8 * k;
-            __m256 v = _mm256_loadu_ps(p);
-            if (add) {
-                v = _mm256_add_ps(v, _mm256_loadu_ps(add + 3 * i + 8 * k));
-                _mm256_storeu_ps(p, v);
+    for (int y = 0; y < rows; y++, sum += stride, add = add ? add + stride : NULL, out += pitch) {
+        int i = 0;
+        for (; i + 8 <= n; i += 8) { /* 8 pixels: 24 floats, 3 vectors */
+            uint8_t rgb[32];
+            for (int k = 0; k < 3; k++) {
+                float *p = sum + 3 * i + 8 * k;
+                __m256 v = _mm256_loadu_ps(p);
+                if (add) {
+                    v = _mm256_add_ps(v, _mm256_loadu_ps(add + 3 * i + 8 * k));
+                    _mm256_storeu_ps(p, v);
+                }
+                store_bytes8(codes8(_mm256_mul_ps(v, s), sh0, sh1, f0, f1), rgb + 8 * k);
             }
-            store_bytes8(codes8(_mm256_mul_ps(v, s), sh0, sh1, f0, f1), rgb + 8 * k);
+            rgb4_to_xrgb(rgb, out + i);
+            rgb4_to_xrgb(rgb + 12, out + i + 4);
         }
-        rgb4_to_xrgb(rgb, out + i);
-        rgb4_to_xrgb(rgb + 12, out + i + 4);
+        row_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i);
     }
-    pixels_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i);
 }
 
 __attribute__((target("avx512f,avx2"))) static inline __m512i codes16(__m512 v, __m512i shift, __m512i first) {
@@ -237,31 +246,34 @@ __attribute__((target("avx512f,avx2"))) static inline __m512i xrgb16(__m512i c0,
     return _mm512_or_si512(_mm512_or_si512(x, B), _mm512_set1_epi32((int)0xFF000000u));
 }
 
-__attribute__((target("avx512f,avx2,fma"))) static void pixels_avx512(float *sum, const float *add, float inv,
-                                                                  uint32_t *out, int n) {
+__attribute__((target("avx512f,avx2,fma"))) static void pixels_avx512(float *sum, const float *add, size_t stride,
+                                                                  float inv, uint32_t *out, size_t pitch, int n,
+                                                                  int rows) {
     const __m512 s = _mm512_set1_ps(inv);
     const __m512i shift = _mm512_loadu_si512(view_srgb_shift), first = _mm512_loadu_si512(view_srgb_first);
     const __m512 pow2 = _mm512_loadu_ps(view_srgb_pow2);
-    int i = 0;
-    for (; i + 16 <= n; i += 16) { /* 16 pixels: 48 floats, 3 vectors */
-        __m512i c[3];
-        for (int k = 0; k < 3; k++) {
-            float *p = sum + 3 * i + 16 * k;
-            __m512 v = _mm512_loadu_ps(p);
-            if (add) {
-                v = _mm512_add_ps(v, _mm512_loadu_ps(add + 3 * i + 16 * k));
-                _mm512_storeu_ps(p, v);
+    for (int y = 0; y < rows; y++, sum += stride, add = add ? add + stride : NULL, out += pitch) {
+        int i = 0;
+        for (; i + 16 <= n; i += 16) { /* 16 pixels: 48 floats, 3 vectors */
+            __m512i c[3];
+            for (int k = 0; k < 3; k++) {
+                float *p = sum + 3 * i + 16 * k;
+                __m512 v = _mm512_loadu_ps(p);
+                if (add) {
+                    v = _mm512_add_ps(v, _mm512_loadu_ps(add + 3 * i + 16 * k));
+                    _mm512_storeu_ps(p, v);
+                }
+                c[k] = codes16_poly(_mm512_mul_ps(v, s), pow2, shift, first);
             }
-            c[k] = codes16_poly(_mm512_mul_ps(v, s), pow2, shift, first);
+            __m512i px = xrgb16(c[0], c[1], c[2]);
+            _mm512_storeu_si512(out + i, px);
         }
-        __m512i px = xrgb16(c[0], c[1], c[2]);
-        _mm512_storeu_si512(out + i, px);
+        row_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i);
     }
-    pixels_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i);
 }
 #endif
 
-static void (*pixels_fn)(float *, const float *, float, uint32_t *, int) = pixels_scalar;
+static void (*pixels_fn)(float *, const float *, size_t, float, uint32_t *, size_t, int, int) = pixels_scalar;
 
 const char *view_srgb_select(int isa) {
     pixels_fn = pixels_scalar;
@@ -284,5 +296,10 @@ const char *view_srgb_select(int isa) {
 }
 
 void view_srgb_pixels(float *sum, const float *add, float inv, uint32_t *out, int n) {
-    pixels_fn(sum, add, inv, out, n);
+    pixels_fn(sum, add, 0, inv, out, 0, n, 1);
+}
+
+void view_srgb_rect(float *sum, const float *add, size_t stride, float inv, uint32_t *out, size_t pitch, int n,
+                    int rows) {
+    pixels_fn(sum, add, stride, inv, out, pitch, n, rows);
 }

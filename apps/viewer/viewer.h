@@ -100,6 +100,10 @@ const char *view_srgb_select(int isa);
 /* n pixels of 3 floats: sum += add (when add is not NULL), then out = 0xFF000000 | the codes of
  * sum * inv as xRGB8888, exactly view_srgb8 per channel (inv 1: sum itself). */
 void view_srgb_pixels(float *sum, const float *add, float inv, uint32_t *out, int n);
+/* The same over `rows` rows of n pixels: sum and add advance by stride floats a row, out by pitch
+ * words (one call a tile: the constants are set up once). */
+void view_srgb_rect(float *sum, const float *add, size_t stride, float inv, uint32_t *out, size_t pitch, int n,
+                    int rows);
 
 /* The 8-bit sRGB code of a linear value, equal to what rp_image_write stores in a PNG. Branch-free
  * but for the table's check: clamping to [0, 1] maps negatives and NaN to 0 as the formula does. */

@@ -9,8 +9,9 @@
  * view_srgb_pixels (a tile's rows through view_srgb_rect, the constants set up once a tile), which
  * also adds a frame into the accumulated sum: the same lookup on 8 (AVX2) or 16 (AVX-512) lanes
  * with a gather (the octave's shift and first bucket come from a register), chosen once by the CPU
- * (test_view_srgb checks each against the table on every float in [0, 1]). The gathers were most of the cost: 1.2-1.6 ms of CPU a 1024x768 frame on the EPYC (Zen 4) test
- * machine, 2-3 ms inside the viewer, where the rendering between tiles evicts the table. AVX-512
+ * (test_view_srgb checks each against the table on every float in [0, 1]). The gathers were most of
+ * the cost: 1.2-1.6 ms of CPU a 1024x768 frame on the EPYC (Zen 4) test machine, 2-3 ms inside the
+ * viewer, where the rendering between tiles evicts the table. AVX-512
  * therefore computes the code by a polynomial and gathers only for lanes near a code's edge (about
  * 0.4% of them): 25-30% less CPU on the same frame, and nothing for the rendering to evict. */
 #include "viewer.h"

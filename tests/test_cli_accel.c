@@ -89,6 +89,19 @@ int main(void) {
     snprintf(args, sizeof args, "bench '%s' --accel grid --density 2 --width 32 --height 32 --repeats 1 --warmup 0",
              teapot);
     EXPECT(args, 0, "");
+    /* build times alone: every structure, in turns, with the BVH's ratio */
+    EXPECT("bench --builds --accel-grid", 2, "--builds is a run of its own");
+    snprintf(args, sizeof args, "bench '%s' --builds --repeats 2", teapot);
+    EXPECT(args, 0, "2 builds each in turns");
+    for (int a = 0; a < RP_ACCEL_COUNT; a++) {
+        char key[64];
+        snprintf(key, sizeof key, "build     %-7s median ", names[a]);
+        const char *l = strstr(output, key);
+        double med = -1.0, lo = -1.0, ratio = -1.0;
+        CHECKF(l && sscanf(l + strlen(key), "%lf ms, min %lf ms, %*f MiB, BVH / this %lfx", &med, &lo, &ratio) == 3 &&
+                   med > 0.0 && lo > 0.0 && lo <= med && ratio > 0.0 && (a != 0 || ratio == 1.0),
+               "--builds prints %s's build (%g, %g, %g)", names[a], med, lo, ratio);
+    }
     size_t n;
     char *j = slurp(json, &n);
     CHECK(j != NULL);

@@ -1042,6 +1042,9 @@ static void usage(FILE *f) {
             "                     memory and Mrays/s of single rays, SIMD rays and 16x16 packets\n"
             "                     per ray kind, on the same rays (repeats 3); with --threads 1\n"
             "                     timed by the thread's CPU time\n"
+            "  --builds           build times alone: the BVH, the BIH and the grid built --repeats\n"
+            "                     times (default 7) in turns in one process, the kd-tree once; median,\n"
+            "                     min and the BVH's median over each\n"
             "  --engine cuda      the CUDA BVH kernels (gpu/cuda) on the same sets, checked against\n"
             "                     raypack's single rays, kernel time by CUDA events (docs/gpu.md)\n"
             "  --accel KIND       the structure of plain bench and --grid: bvh, kdtree, bih or grid\n"
@@ -1087,6 +1090,10 @@ static int parse_args(int argc, char **argv, bench_opts *o) {
         }
         if (strcmp(a, "--accel-grid") == 0) {
             o->accel_grid = true;
+            continue;
+        }
+        if (strcmp(a, "--builds") == 0) {
+            o->builds = true;
             continue;
         }
         const char *val = cli_flag_value(cmd, argc, argv, &i);
@@ -1646,6 +1653,11 @@ int cli_bench(int argc, char **argv) {
         fprintf(stderr, "raypack bench: --grid and --vs embree are separate runs\n");
         return CLI_EXIT_USAGE;
     }
+    if (ctx.opts.builds && (ctx.opts.grid || ctx.opts.vs_embree || ctx.opts.accel_grid || ctx.opts.cuda)) {
+        fprintf(stderr, "raypack bench: --builds is a run of its own\n");
+        return CLI_EXIT_USAGE;
+    }
+    if (ctx.opts.builds && !ctx.opts.repeats_set) ctx.opts.repeats = 7;
     if (ctx.opts.accel_grid && (ctx.opts.grid || ctx.opts.vs_embree)) {
         fprintf(stderr, "raypack bench: --accel-grid is a run of its own\n");
         return CLI_EXIT_USAGE;
@@ -1687,7 +1699,10 @@ int cli_bench(int argc, char **argv) {
         return rc;
     }
 #endif
-    rc = ctx.opts.accel_grid ? bench_accel_grid(&ctx) : ctx.opts.grid ? bench_grid(&ctx) : bench_core(&ctx);
+    rc = ctx.opts.builds       ? bench_builds(&ctx)
+         : ctx.opts.accel_grid ? bench_accel_grid(&ctx)
+         : ctx.opts.grid       ? bench_grid(&ctx)
+                               : bench_core(&ctx);
     teardown(&ctx);
     return rc;
 }

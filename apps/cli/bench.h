@@ -34,6 +34,7 @@ typedef struct bench_opts {
     bool cuda;               /* --engine cuda: the GPU kernels on the same sets (bench_cuda.c) */
     bool grid;               /* --grid: the experiment grid of Overbeck et al. 2008, sec. 5 */
     bool accel_grid;         /* --accel-grid: every acceleration structure on the same rays */
+    bool builds;             /* --builds: build times alone, every structure in turns */
     rp_accel_type accel;     /* --accel: the structure raypack's scene is built with */
     float grid_density;      /* --density: the grid's voxels per triangle (0: the default) */
     bool repeats_set;        /* --repeats was given (the grid's default differs) */
@@ -266,6 +267,7 @@ void bench_print_header(const bench_ctx *ctx);
 
 /* `raypack bench --accel-grid`: every structure on the same rays (bench_accel.c); returns the exit code. */
 int bench_accel_grid(bench_ctx *ctx);
+int bench_builds(bench_ctx *ctx);
 /* `raypack bench --grid`: the paper's experiment grid (bench_grid.c); returns the exit code. */
 int bench_grid(bench_ctx *ctx);
 

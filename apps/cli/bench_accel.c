@@ -182,3 +182,48 @@ int bench_accel_grid(bench_ctx *ctx) {
     free(runs);
     return rc;
 }
+
+/* `raypack bench --builds`: build times alone. The BVH, the BIH and the grid are built --repeats
+ * times in turns (BVH, BIH, grid, BVH, ...) in one process, each scene released before the next
+ * build, so the structures share the machine's drift and every build after the first reuses memory
+ * the process has touched before (a renderer that rebuilds each frame works that way); the
+ * kd-tree's serial build, slow on large scenes, runs once at the end. */
+int bench_builds(bench_ctx *ctx) {
+    static const rp_accel_type turns[] = {RP_ACCEL_BVH, RP_ACCEL_BIH, RP_ACCEL_GRID};
+    enum { TURNS = sizeof turns / sizeof turns[0] };
+    int reps = ctx->opts.repeats;
+    double *ms = calloc((size_t)reps * RP_ACCEL_COUNT, sizeof(double));
+    rp_scene_stats st[RP_ACCEL_COUNT];
+    memset(st, 0, sizeof st);
+    bool failed = ms == NULL;
+    rp_accel_type keep = ctx->opts.accel;
+    for (int r = 0; r < reps && !failed; r++)
+        for (int t = 0; t < TURNS + (r == reps - 1) && !failed; t++) {
+            rp_accel_type a = t < TURNS ? turns[t] : RP_ACCEL_KDTREE;
+            ctx->opts.accel = a;
+            rp_scene *s = bench_build_raypack(ctx, &ms[(size_t)a * (size_t)reps + (size_t)r], &st[a]);
+            if (!s) failed = true;
+            else rp_scene_release(s);
+        }
+    ctx->opts.accel = keep;
+    if (failed) {
+        fprintf(stderr, "raypack bench: a build failed\n");
+        free(ms);
+        return 1;
+    }
+    printf("scene     %s: %zu triangles, %d threads, %d builds each in turns (the kd-tree: 1)\n", ctx->scene_name,
+           ctx->mesh.triangle_count, ctx->opts.threads, reps);
+    double bvh = 0.0;
+    for (int a = 0; a < RP_ACCEL_COUNT; a++) {
+        int n = a == RP_ACCEL_KDTREE ? 1 : reps;
+        double *v = ms + (size_t)a * (size_t)reps + (a == RP_ACCEL_KDTREE ? (size_t)reps - 1 : 0);
+        qsort(v, (size_t)n, sizeof *v, cmp_double);
+        double med = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+        if (a == RP_ACCEL_BVH) bvh = med;
+        printf("build     %-7s median %9.2f ms, min %9.2f ms, %8.2f MiB, BVH / this %.2fx\n",
+               rp_accel_name((rp_accel_type)a), med, v[0], (double)st[a].bytes / 1048576.0,
+               med > 0.0 ? bvh / med : 0.0);
+    }
+    free(ms);
+    return 0;
+}

@@ -359,7 +359,7 @@ static void check_grid(const char *name, const test_mesh *m, uint32_t n, uint32_
  * shadow rays from a point light to the BVH's hits (one origin, ends spread over the image):
  * single rays, 16-ray packets and 16x16 packets of the grid against the BVH's single rays, bit
  * for bit, closest and any hit. */
-static void check_grid_cameras(const char *name, const test_mesh *m, int cameras, uint64_t seed) {
+static void check_grid_cameras(const char *name, const test_mesh *m, int cameras, uint64_t seed, int isa) {
     const uint32_t side = 64, n = side * side;
     rp_ray *rays = malloc(sizeof(rp_ray) * 2 * n);
     got *ref = malloc(sizeof(got) * 2 * n), *g = malloc(sizeof(got) * 2 * n);
@@ -367,7 +367,13 @@ static void check_grid_cameras(const char *name, const test_mesh *m, int cameras
     for (uint32_t i = 0; i < m->nv; i++)
         for (int a = 0; a < 3; a++) lo[a] = fminf(lo[a], m->v[3 * i + a]), hi[a] = fmaxf(hi[a], m->v[3 * i + a]);
     float diag = sqrtf((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) + (hi[2] - lo[2]) * (hi[2] - lo[2]));
-    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
+    /* isa 0: the widest the CPU has; else that ISA's kernels (the grid's traversal is compiled per
+     * ISA, src/accel/grid/grid_trav.inc), when the CPU has it */
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2, .isa = isa});
+    if (!dev) {
+        free(rays), free(ref), free(g);
+        return;
+    }
     rp_scene *bvh = make_scene(dev, RP_ACCEL_BVH, m, NULL, 0);
     rp_scene *grid = make_scene(dev, RP_ACCEL_GRID, m, NULL, 0);
     test_rng rng = {seed};
@@ -441,10 +447,11 @@ static void check_grid_cameras(const char *name, const test_mesh *m, int cameras
         total += 2 * n;
     }
     CHECKF(hits > total / 8, "%s cameras: only %u of %u rays hit", name, hits, total);
-    CHECKF(bad[0] + bad[1] + bad[2] == 0, "%s cameras: the grid differs from the BVH: single %u, packet16 %u, 16x16 %u of %u",
-           name, bad[0], bad[1], bad[2], total);
-    printf("%s: %d cameras, %u camera and shadow rays, %u hit; the grid's single rays and packets give the BVH's hits\n", name,
-           cameras, total, hits);
+    CHECKF(bad[0] + bad[1] + bad[2] == 0,
+           "%s cameras, isa %d: the grid differs from the BVH: single %u, packet16 %u, 16x16 %u of %u", name,
+           rp_device_isa(dev), bad[0], bad[1], bad[2], total);
+    printf("%s: %d cameras, isa %d, %u camera and shadow rays, %u hit; the grid's single rays and packets give the BVH's "
+           "hits\n", name, cameras, rp_device_isa(dev), total, hits);
     rp_scene_release(bvh);
     rp_scene_release(grid);
     rp_device_release(dev);
@@ -514,7 +521,10 @@ int main(void) {
         bool ok = load_mesh(grid_files[f], &m);
         CHECKF(ok && m.nt > 0, "%s loads", grid_files[f]);
         if (ok) check_grid(grid_files[f], &m, small ? 512 : 8192, small ? 16 : 256);
-        if (ok) check_grid_cameras(grid_files[f], &m, small ? 2 : 8, 99 + (uint64_t)f);
+        if (ok) check_grid_cameras(grid_files[f], &m, small ? 2 : 8, 99 + (uint64_t)f, 0);
+        /* the grid's other ISAs' kernels (AVX2, SSE4.2, scalar) on the bunny and sponza */
+        for (int isa = 8; ok && f < 2 && isa >= 1; isa = isa == 4 ? 1 : isa / 2)
+            check_grid_cameras(grid_files[f], &m, 2, 7 + (uint64_t)(f * 16 + isa), isa);
         test_mesh_free(&m);
     }
     /* a scene without triangles, and a bad accel value */

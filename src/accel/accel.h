@@ -50,6 +50,8 @@ typedef struct accel_ops {
     const char *name;
     bool (*build)(const sys_allocator *a, sys_pool *pool, accel_tri_input *in, accel_built *out);
     const rp_kernels *kernels;
+    /* the queries compiled for the device's ISA (rp_kernels.isa: 1, 4, 8, 16), or NULL: kernels */
+    const rp_kernels *(*kernels_for_isa)(int isa);
 } accel_ops;
 
 extern const accel_ops accel_kdtree, accel_bih, accel_grid;

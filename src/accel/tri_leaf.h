@@ -115,7 +115,11 @@ static inline bool alt_leaf(const tri4 *blocks, const alt_ray *r, uint32_t first
  * n x n packets' traversal (rp_kernels.trace_n) or NULL. Spheres and
  * user primitives go to the device's BVH kernels (acc->nodes is NULL), after the triangles, as
  * the BVH's kernels order them. */
-#define ALT_KERNELS(NAME, TRAV, PTRAV, TRACE_N)                                                   \
+#define ALT_KERNELS(NAME, TRAV, PTRAV, TRACE_N) ALT_KERNELS_ISA(NAME, TRAV, PTRAV, TRACE_N, 1)
+/* The same, for kernels compiled per instruction set (the grid's, src/accel/grid/grid_trav.inc):
+ * ISA is the SIMD width rp_kernels.isa reports, which sizes the SIMD packets that the n x n
+ * packets are cut into when TRACE_N is NULL (api_n.c). */
+#define ALT_KERNELS_ISA(NAME, TRAV, PTRAV, TRACE_N, ISA)                                          \
     static void NAME##_intersect1(const rp_accel *acc, rp_rayhit *rh) {                           \
         if (!(rh->ray.tnear <= rh->ray.tfar)) return;                                             \
         const accel_built *s = acc->alt;                                                          \
@@ -146,7 +150,7 @@ static inline bool alt_leaf(const tri4 *blocks, const alt_ray *r, uint32_t first
     ALT_PACKET(NAME, TRAV, PTRAV, 8)                                                              \
     ALT_PACKET(NAME, TRAV, PTRAV, 16)                                                             \
     RP_HIDDEN const rp_kernels NAME##_kernels = {                                                 \
-        .name = #NAME, .isa = 1,                                                                  \
+        .name = #NAME, .isa = ISA,                                                                \
         .intersect1 = NAME##_intersect1, .occluded1 = NAME##_occluded1,                           \
         .intersect4 = NAME##_intersect_4, .intersect8 = NAME##_intersect_8,                       \
         .intersect16 = NAME##_intersect_16, .occluded4 = NAME##_occluded_4,                       \

@@ -840,7 +840,8 @@ rp_error scene_build(rp_scene *s) {
         .alt = ops ? &s->alt : NULL,
         .base = s->device->kernels,
     };
-    s->kernels = ops ? ops->kernels : s->device->kernels;
+    s->kernels = !ops ? s->device->kernels
+                 : ops->kernels_for_isa ? ops->kernels_for_isa(s->device->kernels->isa) : ops->kernels;
     return RP_ERROR_NONE;
 }
 

@@ -452,4 +452,4 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     return true;
 }
 
-RP_HIDDEN const accel_ops accel_bih = {"bih", bih_build, &bih_kernels};
+RP_HIDDEN const accel_ops accel_bih = {"bih", bih_build, &bih_kernels, NULL};

@@ -416,4 +416,4 @@ static bool kd_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *in
     return true;
 }
 
-RP_HIDDEN const accel_ops accel_kdtree = {"kdtree", kd_build, &kdtree_kernels};
+RP_HIDDEN const accel_ops accel_kdtree = {"kdtree", kd_build, &kdtree_kernels, NULL};

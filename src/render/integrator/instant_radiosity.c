@@ -499,15 +499,21 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                 rp_rayhit_n *rp = &pt->rr_packet;
                 uint32_t m = 0, traced = 0;
                 for (int k = 0; k < nv; k++) {
+                    /* the live lanes' indices, branch-free (each lane written at m, which only the
+                     * live ones advance: at most 64 k + 63 < IR_CHUNK * 64), then their rays */
+                    uint32_t m0 = m;
                     for (uint32_t q = 0; q < Q; q++) {
-                        if (!c->live[k][q]) continue;
-                        rp->org_x[m] = L->ox[q], rp->org_y[m] = L->oy[q], rp->org_z[m] = L->oz[q];
-                        rp->dir_x[m] = c->dx[k][q], rp->dir_y[m] = c->dy[k][q], rp->dir_z[m] = c->dz[k][q];
-                        rp->tnear[m] = 0.0f, rp->tfar[m] = c->tf[k][q];
-                        pt->rr_valid[m] = -1;
-                        pt->rr_from[m++] = (uint16_t)((uint32_t)k * 64u + q);
-                        traced++;
+                        pt->rr_from[m] = (uint16_t)((uint32_t)k * 64u + q);
+                        m += c->live[k][q] != 0;
                     }
+                    for (uint32_t i = m0; i < m; i++) {
+                        uint32_t q = pt->rr_from[i] % 64u;
+                        rp->org_x[i] = L->ox[q], rp->org_y[i] = L->oy[q], rp->org_z[i] = L->oz[q];
+                        rp->dir_x[i] = c->dx[k][q], rp->dir_y[i] = c->dy[k][q], rp->dir_z[i] = c->dz[k][q];
+                        rp->tnear[i] = 0.0f, rp->tfar[i] = c->tf[k][q];
+                        pt->rr_valid[i] = -1;
+                    }
+                    traced += m - m0;
                     for (; m % 16u; m++) pt->rr_valid[m] = 0, pt->rr_from[m] = 0;
                 }
                 if (!traced) continue;
@@ -548,13 +554,21 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                         if (vp->tfar[q] < 0.0f) c->live[k][q] = 0;
                 }
             }
-            /* the unoccluded contributions, VPL by VPL (each pixel's sum in the VPLs' order) */
+            /* the unoccluded contributions, VPL by VPL (each pixel's sum in the VPLs' order),
+             * branch-free in the lanes' order, then into the pixels */
+            RP_ALIGN(64) float sr[64], sg[64], sb[64];
+            for (uint32_t q = 0; q < Q; q++) sr[q] = sg[q] = sb[q] = 0.0f;
             for (int k = 0; k < nv; k++)
                 for (uint32_t q = 0; q < Q; q++) {
-                    if (!c->live[k][q]) continue;
-                    v3 *sum = &pt->ir_sum[L->li[q]];
-                    *sum = v3_add(*sum, v3_make(c->cr[k][q], c->cg[k][q], c->cb[k][q]));
+                    bool on = c->live[k][q] != 0;
+                    sr[q] += on ? c->cr[k][q] : 0.0f;
+                    sg[q] += on ? c->cg[k][q] : 0.0f;
+                    sb[q] += on ? c->cb[k][q] : 0.0f;
                 }
+            for (uint32_t q = 0; q < Q; q++) {
+                v3 *sum = &pt->ir_sum[L->li[q]];
+                *sum = v3_add(*sum, v3_make(sr[q], sg[q], sb[q]));
+            }
         }
     }
     /* The pass's buffers: the VPL sum over the albedo (or as is, where there is none). */

@@ -34,6 +34,12 @@
 #define IR_RR_DEFAULT 1.0f
 /* Scenes of at least this many triangles trace the shadow packets as SIMD rays (ir_frame_init). */
 #define IR_SIMD_MIN_TRIANGLES 4096
+/* A VPL's shadow rays beyond its last full SIMD ray get one of their own from this many on, else
+ * they join the other VPLs' rests (ir_tile). */
+#ifndef IR_SIMD_REST
+#define IR_SIMD_REST 8u
+#endif
+#define IR_NO_RAY 0xFFFFu
 
 static float max3(v3 c) { return fmaxf(c.x, fmaxf(c.y, c.z)); }
 
@@ -430,7 +436,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
      * chunk's live rays packed densely (VPL by VPL, lanes in packet order) into one packet. */
     ir_lanes lanes;
     ir_chunk *c = pt->chunk;
-    const bool pack = pf->shadow_traversal == RP_TRAVERSAL_SIMD && !getenv("IR_NOPACK");
+    const bool pack = pf->shadow_traversal == RP_TRAVERSAL_SIMD;
     const uint32_t Q = (uint32_t)(P * P);
     for (int set = 0; set < NN; set++) {
         const ir_vpl *vs = pf->vpls + ((size_t)f->pass * (size_t)pf->sets + (size_t)set) * (size_t)pf->per_set;
@@ -493,28 +499,35 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
             if (!live) continue;
             if (pf->rr > 0.0f) ir_roulette(c, L, Q, nv, v0, pf->rr);
             if (pack) {
-                /* Each VPL's live rays packed into whole SIMD rays of 16 (so that each SIMD ray
-                 * still ends at one point, which keeps it coherent for the kernels), the VPLs
-                 * one after the other, in a packet just large enough. */
+                /* Each VPL's live rays packed into whole SIMD rays of 16, so that each of those
+                 * ends at one point, which keeps it coherent for the kernels (per-ray masks);
+                 * the VPLs one after the other. A VPL's last few rays (fewer than IR_SIMD_REST)
+                 * would leave most of their SIMD ray's lanes idle: all VPLs' such rests go
+                 * together at the end, densely, where the kernels trace them one by one. */
                 rp_rayhit_n *rp = &pt->rr_packet;
-                uint32_t m = 0, traced = 0;
+                uint32_t m = 0, traced = 0, nrest = 0;
+                uint16_t rest[IR_CHUNK * 16];
                 for (int k = 0; k < nv; k++) {
                     /* the live lanes' indices, branch-free (each lane written at m, which only the
-                     * live ones advance: at most 64 k + 63 < IR_CHUNK * 64), then their rays */
+                     * live ones advance: at most 64 k + 63 < IR_CHUNK * 64) */
                     uint32_t m0 = m;
                     for (uint32_t q = 0; q < Q; q++) {
                         pt->rr_from[m] = (uint16_t)((uint32_t)k * 64u + q);
                         m += c->live[k][q] != 0;
                     }
-                    for (uint32_t i = m0; i < m; i++) {
-                        uint32_t q = pt->rr_from[i] % 64u;
-                        rp->org_x[i] = L->ox[q], rp->org_y[i] = L->oy[q], rp->org_z[i] = L->oz[q];
-                        rp->dir_x[i] = c->dx[k][q], rp->dir_y[i] = c->dy[k][q], rp->dir_z[i] = c->dz[k][q];
-                        rp->tnear[i] = 0.0f, rp->tfar[i] = c->tf[k][q];
-                        pt->rr_valid[i] = -1;
-                    }
                     traced += m - m0;
-                    for (; m % 16u; m++) pt->rr_valid[m] = 0, pt->rr_from[m] = 0;
+                    if ((m - m0) % 16u < IR_SIMD_REST)
+                        for (; m % 16u; m--) rest[nrest++] = pt->rr_from[m - 1];
+                    for (; m % 16u; m++) pt->rr_from[m] = IR_NO_RAY;
+                }
+                for (uint32_t i = 0; i < nrest; i++) pt->rr_from[m++] = rest[i];
+                for (uint32_t i = 0; i < m; i++) {
+                    uint32_t fr = pt->rr_from[i], k = fr / 64u, q = fr % 64u;
+                    pt->rr_valid[i] = fr == IR_NO_RAY ? 0 : -1;
+                    if (fr == IR_NO_RAY) continue;
+                    rp->org_x[i] = L->ox[q], rp->org_y[i] = L->oy[q], rp->org_z[i] = L->oz[q];
+                    rp->dir_x[i] = c->dx[k][q], rp->dir_y[i] = c->dy[k][q], rp->dir_z[i] = c->dz[k][q];
+                    rp->tnear[i] = 0.0f, rp->tfar[i] = c->tf[k][q];
                 }
                 if (!traced) continue;
                 th->rays[RP_RAY_SHADOW] += traced;

@@ -237,7 +237,7 @@ typedef struct rp_ir_desc {
     float rr;         /* Russian roulette on the shadow rays of small contributions: a contribution
                        * of luminance l under rr times its pixel's mean unoccluded contribution
                        * over the VPLs (t) traces its shadow ray with probability l / t and is then
-                       * weighted t / l (unbiased, noisier, fewer rays); 0: 1; negative: off */
+                       * weighted t / l (unbiased, noisier, fewer rays); 0: 2; negative: off */
 } rp_ir_desc;
 
 typedef enum rp_aov {

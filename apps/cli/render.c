@@ -84,7 +84,7 @@ static void render_usage(FILE *out) {
             "  --ir-clamp C           ir: geometry term distance at least C x the scene's bounding\n"
             "                         radius; 0 or negative: no clamping (unbiased) [0.02]\n"
             "  --ir-rr X              ir: Russian roulette on the shadow rays of contributions under X\n"
-            "                         x the pixel's mean (unbiased, noisier, fewer rays); 0: off [1]\n"
+            "                         x the pixel's mean (unbiased, noisier, fewer rays); 0: off [2]\n"
             "  --ao-distance D        ao: occlusion ray length [0.1 x the bounding radius]\n"
             "  --aovs                 also write the albedo and normal AOVs (for denoisers) beside\n"
             "                         the image: NAME.albedo.EXT and NAME.normal.EXT\n"

@@ -31,7 +31,7 @@
 #define PI_F 3.14159265358979323846f
 /* Russian roulette's threshold when rp_ir_desc.rr is 0: a lane's mean unoccluded contribution
  * over the chunk's VPLs times this (ir_roulette; docs/rendering.md has the measurements). */
-#define IR_RR_DEFAULT 1.0f
+#define IR_RR_DEFAULT 2.0f
 /* Scenes of at least this many triangles trace the shadow packets as SIMD rays (ir_frame_init). */
 #define IR_SIMD_MIN_TRIANGLES 4096
 /* A VPL's shadow rays beyond its last full SIMD ray get one of their own from this many on, else

@@ -234,6 +234,10 @@ typedef struct rp_ir_desc {
                        * radius (cos cos / max(d, c)^2, which bounds the spikes near a VPL); 0:
                        * 0.02; negative: no clamping (unbiased) */
     int depth;        /* bounces of the light paths; 0: max_depth - 1 (reflections as path counts them) */
+    float rr;         /* Russian roulette on the shadow rays of small contributions: a contribution
+                       * of luminance l under rr times its pixel's mean unoccluded contribution
+                       * over the VPLs (t) traces its shadow ray with probability l / t and is then
+                       * weighted t / l (unbiased, noisier, fewer rays); 0: 2; negative: off */
 } rp_ir_desc;
 
 typedef enum rp_aov {

@@ -30,7 +30,7 @@ static void usage(FILE *out) {
             "  --spp N                samples per pixel a frame [1]\n"
             "  --frames N             timed frames per integrator, after one warm-up frame [5]\n"
             "  --threads N            worker threads; 0 for all hardware threads [0]\n"
-            "  --ir-interleave N --ir-vpls N --ir-filter N\n"
+            "  --ir-interleave N --ir-vpls N --ir-filter N --ir-rr X (0: off)\n"
             "                         instant radiosity's settings [5, 16, 3: the issue's goal]\n"
             "  --eye X,Y,Z --look X,Y,Z --fov DEG\n"
             "                         camera (each replaces that part of the scene's)\n"
@@ -114,6 +114,7 @@ static int cmp_double(const void *a, const void *b) {
 
 int cli_bench_render(int argc, char **argv) {
     int w = 640, h = 480, spp = 1, frames = 5, threads = 0, inter = 0, vpls = 0, filter = 0;
+    float rr = 0.0f;
     bool kernels = false, anim_flat = false, has_eye = false, has_look = false, has_fov = false;
     float eye[3], look[3], fov = 0.0f;
     bool use[N_INTEGRATORS];
@@ -167,6 +168,10 @@ int cli_bench_render(int argc, char **argv) {
         } else if (strcmp(a, "--ir-filter") == 0) {
             VALUE();
             if (!cli_parse_int(CMD, a, v, 1, 31, &filter)) return CLI_EXIT_USAGE;
+        } else if (strcmp(a, "--ir-rr") == 0) {
+            VALUE();
+            if (!cli_parse_float(CMD, a, v, 0.0, 16.0, false, &rr)) return CLI_EXIT_USAGE;
+            if (rr == 0.0f) rr = -1.0f;
         } else if (strcmp(a, "--kernels") == 0) {
             kernels = true;
         } else if (strcmp(a, "--anim-flat") == 0) {
@@ -234,7 +239,7 @@ int cli_bench_render(int argc, char **argv) {
         for (int k = 0; k < N_INTEGRATORS; k++) {
             if (!use[k]) continue;
             rp_render_desc d = {.width = w, .height = h, .spp = spp, .integrator = INTEGRATORS[k].type,
-                                .ir = {.interleave = inter, .vpls = vpls, .filter = filter}, .camera = &cam};
+                                .ir = {.interleave = inter, .vpls = vpls, .filter = filter, .rr = rr}, .camera = &cam};
             rp_render_stats st;
             double ms = 0.0, cpu = 0.0, cpu_frame[64], cpu_kernel[64];
             uint64_t rays[RP_RAY_KIND_COUNT] = {0};

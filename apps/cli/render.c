@@ -83,6 +83,8 @@ static void render_usage(FILE *out) {
             "  --ir-filter N          ir: discontinuity buffer side (odd; 1: off) [3]\n"
             "  --ir-clamp C           ir: geometry term distance at least C x the scene's bounding\n"
             "                         radius; 0 or negative: no clamping (unbiased) [0.02]\n"
+            "  --ir-rr X              ir: Russian roulette on the shadow rays of contributions under X\n"
+            "                         x the pixel's mean (unbiased, noisier, fewer rays); 0: off [2]\n"
             "  --ao-distance D        ao: occlusion ray length [0.1 x the bounding radius]\n"
             "  --aovs                 also write the albedo and normal AOVs (for denoisers) beside\n"
             "                         the image: NAME.albedo.EXT and NAME.normal.EXT\n"
@@ -132,7 +134,7 @@ typedef struct render_options {
     bool has_eye, has_look, has_up, has_fov;
     float eye[3], look[3], up[3], fov;
     bool stats, quiet;
-    float time_s, exposure, ir_clamp, ao_distance;
+    float time_s, exposure, ir_clamp, ir_rr, ao_distance;
     rp_tonemap tonemap;
     rp_sampler_type sampler;
     const char *env;
@@ -266,6 +268,10 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
             VALUE();
             if (!cli_parse_float(CMD, a, v, -1.0, 1.0, false, &o->ir_clamp)) return CLI_EXIT_USAGE;
             if (o->ir_clamp == 0.0f) o->ir_clamp = -1.0f;
+        } else if (strcmp(a, "--ir-rr") == 0) {
+            VALUE();
+            if (!cli_parse_float(CMD, a, v, 0.0, 16.0, false, &o->ir_rr)) return CLI_EXIT_USAGE;
+            if (o->ir_rr == 0.0f) o->ir_rr = -1.0f;
         } else if (strcmp(a, "--ao-distance") == 0) {
             VALUE();
             if (!cli_parse_float(CMD, a, v, 0.0, 1e30, true, &o->ao_distance)) return CLI_EXIT_USAGE;
@@ -750,7 +756,7 @@ int cli_render(int argc, char **argv) {
         .packet = o.packet, .traversal = o.traversal, .no_frustum = o.no_frustum,
         /* counting costs a little, so only when it is reported */
         .count_work = o.stats || o.stats_json,
-        .ir = {.interleave = o.ir_interleave, .vpls = o.ir_vpls, .filter = o.ir_filter, .clamp = o.ir_clamp},
+        .ir = {.interleave = o.ir_interleave, .vpls = o.ir_vpls, .filter = o.ir_filter, .clamp = o.ir_clamp, .rr = o.ir_rr},
         .sampler = o.sampler,
         .ao_distance = o.ao_distance,
     };
@@ -936,7 +942,7 @@ int cli_render_parse(int argc, char **argv, cli_render_setup *out, bool *help) {
         .reflect_depth = o.reflect_depth < 0 ? 0 : (o.reflect_depth == 0 ? -1 : o.reflect_depth),
         .refract_depth = o.refract_depth < 0 ? 0 : (o.refract_depth == 0 ? -1 : o.refract_depth),
         .packet = o.packet, .traversal = o.traversal, .no_frustum = o.no_frustum,
-        .ir = {.interleave = o.ir_interleave, .vpls = o.ir_vpls, .filter = o.ir_filter, .clamp = o.ir_clamp},
+        .ir = {.interleave = o.ir_interleave, .vpls = o.ir_vpls, .filter = o.ir_filter, .clamp = o.ir_clamp, .rr = o.ir_rr},
         .sampler = o.sampler,
         .ao_distance = o.ao_distance,
     };

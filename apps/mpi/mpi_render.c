@@ -52,8 +52,9 @@ static void mpi_usage(FILE *out) {
             "\n"
             "options (as in `raypack render`): -o FILE (.png .ppm .pfm), --width W, --height H, --spp N,\n"
             "  --integrator whitted|eyelight|direct|path|ir|ao, --max-depth N, --packet N, --threads N,\n"
-            "  --isa NAME, --ir-interleave N, --ir-vpls N, --ir-filter N, --ir-clamp C, --ao-distance D,\n"
-            "  --env FILE.hdr (read by every rank), --env-scale R,G,B, --exposure EV, --tonemap srgb|aces,\n"
+            "  --isa NAME, --ir-interleave N, --ir-vpls N, --ir-filter N, --ir-clamp C, --ir-rr X,\n"
+            "  --ao-distance D, --env FILE.hdr (read by every rank), --env-scale R,G,B, --exposure EV,\n"
+            "  --tonemap srgb|aces,\n"
             "  --eye X,Y,Z --look X,Y,Z --up X,Y,Z --fov DEG, --density-scale S, --albedo A|R,G,B,\n"
             "  --hg-g G, --vdb-grid NAME, --medium-box X0,Y0,Z0,X1,Y1,Z1 (volumes travel with --mpi-bcast),\n"
             "  --quiet\n"
@@ -152,6 +153,10 @@ static int parse_mpi_options(int argc, char **argv, mpir_options *o, bool *help)
             VALUE();
             if (!cli_parse_float(MPIR_CMD, a, v, -1.0, 1.0, false, &o->ir_clamp)) return CLI_EXIT_USAGE;
             if (o->ir_clamp == 0.0f) o->ir_clamp = -1.0f;
+        } else if (strcmp(a, "--ir-rr") == 0) {
+            VALUE();
+            if (!cli_parse_float(MPIR_CMD, a, v, 0.0, 16.0, false, &o->ir_rr)) return CLI_EXIT_USAGE;
+            if (o->ir_rr == 0.0f) o->ir_rr = -1.0f;
         } else if (strcmp(a, "--ao-distance") == 0) {
             VALUE();
             if (!cli_parse_float(MPIR_CMD, a, v, 0.0, 1e30, true, &o->ao_distance)) return CLI_EXIT_USAGE;

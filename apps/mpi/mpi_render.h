@@ -103,7 +103,7 @@ typedef struct mpir_options {
     int raw_planes;
     /* as in `raypack render` */
     int ir_interleave, ir_vpls, ir_filter;
-    float ir_clamp, ao_distance, exposure;
+    float ir_clamp, ir_rr, ao_distance, exposure;
     rp_tonemap tonemap;
     cli_medium_opts vol;   /* --density-scale, --albedo, --hg-g, --medium-box, --vdb-grid */
     const char *env;       /* every rank reads it, with --mpi-bcast too */

@@ -660,7 +660,7 @@ int mpir_server_run(const mpir_options *o, int size) {
                                 .integrator = (int32_t)o->integrator, .packet = o->packet, .camera = fc,
                                 .raw_planes = o->raw_planes, .ao_distance = o->ao_distance,
                                 .ir = {.interleave = o->ir_interleave, .vpls = o->ir_vpls, .filter = o->ir_filter,
-                                       .clamp = o->ir_clamp},
+                                       .clamp = o->ir_clamp, .rr = o->ir_rr},
                                 /* rp_render_desc: 0 is the default depth (5), negative is none */
                                 .max_depth = o->max_depth < 0 ? 0 : (o->max_depth == 0 ? -1 : o->max_depth)};
         double f0 = cli_now_ms(), c0 = mpir_cpu_ms();

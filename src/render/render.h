@@ -244,6 +244,18 @@ typedef struct render_sampler {
     bool sobol;      /* scrambled Sobol (sampler.c) instead of hashed PCG */
 } render_sampler;
 render_sampler sampler_start(uint32_t x, uint32_t y, uint32_t sample);
+/* The PCG hash of the hashed sampler (Jarzynski and Olano 2020). */
+static inline uint32_t render_pcg_hash(uint32_t v) {
+    uint32_t state = v * 747796405u + 2891336453u;
+    uint32_t word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+/* A PCG sampler's dimension d of key (sampler_at without Sobol) as two halves, so that loops over
+ * many keys and one dimension hash the dimension once: sampler_pcg_number(key, sampler_pcg_dim(d)). */
+static inline uint32_t sampler_pcg_dim(uint32_t d) { return render_pcg_hash(d * 0x9e3779b9u + 0x1b873593u); }
+static inline float sampler_pcg_number(uint32_t key, uint32_t dim_hash) {
+    return (float)(render_pcg_hash(key ^ dim_hash) >> 8) * (1.0f / 16777216.0f);
+}
 /* A pixel's sampler of the kind desc.sampler names (PCG: sampler_start). */
 render_sampler sampler_start_pixel(rp_sampler_type type, uint32_t x, uint32_t y, uint32_t sample);
 /* The next dimension's number in [0, 1). */

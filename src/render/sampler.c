@@ -9,11 +9,7 @@
  * (nested uniform scrambling by the Laine-Karras hash), seeded by the pixel. */
 #include "render.h"
 
-static inline uint32_t pcg_hash(uint32_t v) {
-    uint32_t state = v * 747796405u + 2891336453u;
-    uint32_t word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
-    return (word >> 22u) ^ word;
-}
+static inline uint32_t pcg_hash(uint32_t v) { return render_pcg_hash(v); }
 
 render_sampler sampler_start(uint32_t x, uint32_t y, uint32_t sample) {
     render_sampler s = {.key = pcg_hash(x + pcg_hash(y + pcg_hash(sample + 0x68e31da4u))), .dim = 0};
@@ -78,8 +74,7 @@ static float sobol_owen(uint32_t index, uint32_t dim, uint32_t seed) {
 
 float sampler_at(const render_sampler *s, uint32_t d) {
     if (s->sobol) return sobol_owen(s->index, d, s->key);
-    uint32_t h = pcg_hash(s->key ^ pcg_hash(d * 0x9e3779b9u + 0x1b873593u));
-    return (float)(h >> 8) * (1.0f / 16777216.0f);
+    return sampler_pcg_number(s->key, sampler_pcg_dim(d));
 }
 
 float sampler_1d(render_sampler *s) { return sampler_at(s, s->dim++); }

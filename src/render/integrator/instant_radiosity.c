@@ -29,8 +29,17 @@
 #include <string.h>
 
 #define PI_F 3.14159265358979323846f
+/* Russian roulette's threshold when rp_ir_desc.rr is 0: a lane's mean unoccluded contribution
+ * over the chunk's VPLs times this (ir_roulette; docs/rendering.md has the measurements). */
+#define IR_RR_DEFAULT 2.0f
 /* Scenes of at least this many triangles trace the shadow packets as SIMD rays (ir_frame_init). */
 #define IR_SIMD_MIN_TRIANGLES 4096
+/* A VPL's shadow rays beyond its last full SIMD ray get one of their own from this many on, else
+ * they join the other VPLs' rests (ir_tile). */
+#ifndef IR_SIMD_REST
+#define IR_SIMD_REST 8u
+#endif
+#define IR_NO_RAY 0xFFFFu
 
 static float max3(v3 c) { return fmaxf(c.x, fmaxf(c.y, c.z)); }
 
@@ -156,6 +165,7 @@ bool ir_frame_init(render_frame *f) {
         pf->shadow_traversal = RP_TRAVERSAL_SIMD;
     float c = ir->clamp == 0.0f ? 0.02f : ir->clamp;
     pf->clamp_d2 = c > 0.0f ? (c * f->s->radius) * (c * f->s->radius) : 0.0f;
+    pf->rr = ir->rr == 0.0f ? IR_RR_DEFAULT : (ir->rr > 0.0f ? ir->rr : 0.0f);
     size_t np = (size_t)f->desc.width * (size_t)f->desc.height;
     size_t nv = (size_t)f->desc.spp * (size_t)pf->sets * (size_t)pf->per_set;
     pf->vpls = malloc(nv * sizeof *pf->vpls);
@@ -214,6 +224,8 @@ typedef struct ir_lanes {
     float ox[64], oy[64], oz[64], nsx[64], nsy[64], nsz[64], ngx[64], ngy[64], ngz[64];
     float lr[64], lg[64], lb[64];
     int32_t lambert[64]; /* -1: a valid Lambert point, whose contribution the loop takes */
+    uint32_t key[64];        /* the lane's pixel sample's hashed PCG key (Russian roulette's numbers) */
+    uint16_t li[64];         /* the lane's pixel in the tile (ly T + lx) */
 } ir_lanes;
 
 static inline void lanes_to_vpl_(uint32_t n, const ir_lanes *restrict L, const ir_vpl *v, float clamp_d2,
@@ -243,11 +255,48 @@ static inline void lanes_to_vpl_(uint32_t n, const ir_lanes *restrict L, const i
 
 /* vpl_contrib for n lanes of Lambert points and a finite VPL at once, the same arithmetic in the
  * same order (so the same bits), in the compiler's vectors: each lane's shadow ray (direction,
- * tfar) goes into the packet, its contribution into c, and live says whether it has one. */
-static void lanes_to_vpl(uint32_t n, const ir_lanes *L, const ir_vpl *v, float clamp_d2, rp_rayhit_n *p, float *cr,
-                         float *cg, float *cb, int32_t *live) {
-    if (v3_is_zero(v->n)) lanes_to_vpl_(n, L, v, clamp_d2, true, p->dir_x, p->dir_y, p->dir_z, p->tfar, cr, cg, cb, live);
-    else lanes_to_vpl_(n, L, v, clamp_d2, false, p->dir_x, p->dir_y, p->dir_z, p->tfar, cr, cg, cb, live);
+ * tfar) and contribution go into row k of the chunk, and live says whether it has one. */
+static void lanes_to_vpl(uint32_t n, const ir_lanes *L, const ir_vpl *v, float clamp_d2, ir_chunk *c, int k) {
+    if (v3_is_zero(v->n))
+        lanes_to_vpl_(n, L, v, clamp_d2, true, c->dx[k], c->dy[k], c->dz[k], c->tf[k], c->cr[k], c->cg[k], c->cb[k],
+                      c->live[k]);
+    else
+        lanes_to_vpl_(n, L, v, clamp_d2, false, c->dx[k], c->dy[k], c->dz[k], c->tf[k], c->cr[k], c->cg[k], c->cb[k],
+                      c->live[k]);
+}
+
+/* What Russian roulette compares: the luminance (Rec. 709 weights) of a contribution. */
+static inline float ir_lum(float r, float g, float b) { return 0.2126f * r + 0.7152f * g + 0.0722f * b; }
+
+/* Russian roulette on the chunk's shadow rays (rp_ir_desc.rr): a lane's threshold is rr times the
+ * mean luminance of its unoccluded contributions over the chunk's nv VPLs; a contribution of
+ * luminance l below the threshold t keeps its shadow ray with probability l / t (a number hashed
+ * from the pixel sample's PCG key and the VPL's index in its set) and is then weighted t / l, else
+ * it is dropped. The
+ * threshold depends on the point and the VPLs only, never on visibility, so the expectation of each
+ * contribution is what it was: the estimate stays unbiased and gains noise. */
+static void ir_roulette(ir_chunk *c, const ir_lanes *L, uint32_t Q, int nv, int v0, float rr) {
+    float thr[64];
+    for (uint32_t q = 0; q < Q; q++) thr[q] = 0.0f;
+    for (int k = 0; k < nv; k++)
+        for (uint32_t q = 0; q < Q; q++)
+            thr[q] += c->live[k][q] ? ir_lum(c->cr[k][q], c->cg[k][q], c->cb[k][q]) : 0.0f;
+    float scale = rr / (float)nv;
+    for (uint32_t q = 0; q < Q; q++) thr[q] *= scale;
+    for (int k = 0; k < nv; k++) {
+        /* the pixel sample's hashed PCG key and the dimension IR_RR_DIM + (the VPL's index in its
+         * set), hashed together; branch-free, so that the loop runs in vectors */
+        uint32_t hd = sampler_pcg_dim(IR_RR_DIM + (uint32_t)(v0 + k));
+        for (uint32_t q = 0; q < Q; q++) {
+            float l = ir_lum(c->cr[k][q], c->cg[k][q], c->cb[k][q]), t = thr[q];
+            float u = (float)(int32_t)(render_hash(L->key[q] ^ hd) >> 8) * (1.0f / 16777216.0f);
+            /* NaN and inf are traced as they are */
+            int32_t cand = (c->live[k][q] != 0) & (l > 0.0f) & (l < t), kill = cand & !(u * t < l);
+            float w = cand ? t / l : 1.0f;
+            c->live[k][q] = kill ? 0 : c->live[k][q];
+            c->cr[k][q] *= w, c->cg[k][q] *= w, c->cb[k][q] *= w;
+        }
+    }
 }
 
 bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1) {
@@ -381,13 +430,17 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                 at[k] = at[j], at[j] = t;
             }
         }
-    /* Each set's pixels of the tile against each of its VPLs: one P x P shadow packet per VPL. */
+    /* Each set's pixels of the tile against each of its VPLs, IR_CHUNK VPLs at a time: their
+     * contributions first (chunk c), then Russian roulette, then the shadow rays that are left:
+     * one P x P packet per VPL with its point frustum, or, as SIMD rays (large scenes), the
+     * chunk's live rays packed densely (VPL by VPL, lanes in packet order) into one packet. */
     ir_lanes lanes;
-    RP_ALIGN(64) float cr[64], cg[64], cb[64];
+    ir_chunk *c = pt->chunk;
+    const bool pack = pf->shadow_traversal == RP_TRAVERSAL_SIMD;
+    const uint32_t Q = (uint32_t)(P * P);
     for (int set = 0; set < NN; set++) {
         const ir_vpl *vs = pf->vpls + ((size_t)f->pass * (size_t)pf->sets + (size_t)set) * (size_t)pf->per_set;
         /* The set's points in lane order: origins into the packet once, the rest for lanes_to_vpl. */
-        uint32_t Q = (uint32_t)(P * P);
         ir_lanes *L = &lanes;
         rp_rayhit_n *vp = &pt->vpl_packet;
         for (int b = 0; b < P; b++)
@@ -403,52 +456,132 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                 L->ngx[q] = ng.x, L->ngy[q] = ng.y, L->ngz[q] = ng.z;
                 L->lr[q] = lam.x, L->lg[q] = lam.y, L->lb[q] = lam.z;
                 L->lambert[q] = ok && x->is_lambert ? -1 : 0;
+                L->key[q] = sampler_start((uint32_t)(x0 + lx), (uint32_t)(y0 + ly), sample).key;
+                L->li[q] = (uint16_t)li;
                 packet_set_ray(vp, q, o, v3_make(0, 0, 1), 0.0f);
             }
-        for (int v = 0; v < pf->per_set; v++) {
-            if (v3_is_zero(vs[v].power)) continue;
+        for (int v0 = 0; v0 < pf->per_set; v0 += IR_CHUNK) {
+            int nv = pf->per_set - v0 < IR_CHUNK ? pf->per_set - v0 : IR_CHUNK;
             uint64_t live = 0;
-            if (!vs[v].infinite)
-                lanes_to_vpl(Q, L, &vs[v], pf->clamp_d2, vp, cr, cg, cb, pt->vpl_valid);
-            for (int b = 0; b < P; b++)
-                for (int a = 0; a < P; a++) {
-                    uint32_t q = lane[b * P + a];
-                    if (!vs[v].infinite && L->lambert[q]) {
-                        pt->vpl_contrib[q] = v3_make(cr[q], cg[q], cb[q]);
-                        live += pt->vpl_valid[q] != 0;
+            for (int k = 0; k < nv; k++) {
+                const ir_vpl *vl = &vs[v0 + k];
+                if (v3_is_zero(vl->power)) {
+                    memset(c->live[k], 0, Q * sizeof c->live[k][0]);
+                    continue;
+                }
+                if (!vl->infinite) {
+                    lanes_to_vpl(Q, L, vl, pf->clamp_d2, c, k);
+                } else {
+                    for (uint32_t q = 0; q < Q; q++) {
+                        c->dx[k][q] = vl->p.x, c->dy[k][q] = vl->p.y, c->dz[k][q] = vl->p.z;
+                        c->tf[k][q] = INFINITY, c->live[k][q] = 0;
+                    }
+                }
+                for (uint32_t q = 0; q < Q; q++) {
+                    if (!vl->infinite && L->lambert[q]) {
+                        live += c->live[k][q] != 0;
                         continue;
                     }
                     /* other BSDFs and infinite VPLs: one lane at a time */
-                    int li = pt->ir_at[(size_t)(b * P + a) * (size_t)NN + (size_t)set], lx = li % T, ly = li / T;
-                    pt->vpl_valid[q] = 0;
+                    int li = L->li[q], lx = li % T, ly = li / T;
+                    c->live[k][q] = 0;
                     const ir_point *x = &pt->points[li];
                     if (lx >= tw || y0 + ly >= y1 || !x->valid) continue;
-                    v3 wi;
+                    v3 wi, cq;
                     float tfar;
-                    if (!vpl_contrib(pf, x, &vs[v], &wi, &tfar, &pt->vpl_contrib[q])) continue;
-                    packet_set_ray(vp, q, x->org, wi, tfar);
-                    pt->vpl_valid[q] = -1;
+                    if (!vpl_contrib(pf, x, vl, &wi, &tfar, &cq)) continue;
+                    c->dx[k][q] = wi.x, c->dy[k][q] = wi.y, c->dz[k][q] = wi.z, c->tf[k][q] = tfar;
+                    c->cr[k][q] = cq.x, c->cg[k][q] = cq.y, c->cb[k][q] = cq.z;
+                    c->live[k][q] = -1;
                     live++;
                 }
-            /* (Lanes that are not live hold rays of this tile's own points too, so nothing in
-             * the packet depends on what the thread traced before.) */
+            }
             if (!live) continue;
-            th->rays[RP_RAY_SHADOW] += live;
-            rp_query_n_desc qd = pbr_query(f, th, RP_RAY_SHADOW);
-            qd.traversal = pf->shadow_traversal;
-            if (vs[v].infinite) qd.frustum = RP_FRUSTUM_NONE; /* parallel rays: no common point */
-            qd.point[0] = vs[v].p.x;
-            qd.point[1] = vs[v].p.y;
-            qd.point[2] = vs[v].p.z;
-            pt->vpl_packet.valid = pt->vpl_valid;
-            rp_occluded_n(s->scene, &qd, &pt->vpl_packet);
-            for (int b = 0; b < P; b++)
-                for (int a = 0; a < P; a++) {
-                    uint32_t q = lane[b * P + a];
-                    if (!pt->vpl_valid[q] || pt->vpl_packet.tfar[q] < 0.0f) continue;
-                    int li = pt->ir_at[(size_t)(b * P + a) * (size_t)NN + (size_t)set];
-                    pt->ir_sum[li] = v3_add(pt->ir_sum[li], pt->vpl_contrib[q]);
+            if (pf->rr > 0.0f) ir_roulette(c, L, Q, nv, v0, pf->rr);
+            if (pack) {
+                /* Each VPL's live rays packed into whole SIMD rays of 16, so that each of those
+                 * ends at one point, which keeps it coherent for the kernels (per-ray masks);
+                 * the VPLs one after the other. A VPL's last few rays (fewer than IR_SIMD_REST)
+                 * would leave most of their SIMD ray's lanes idle: all VPLs' such rests go
+                 * together at the end, densely, where the kernels trace them one by one. */
+                rp_rayhit_n *rp = &pt->rr_packet;
+                uint32_t m = 0, traced = 0, nrest = 0;
+                uint16_t rest[IR_CHUNK * 16];
+                for (int k = 0; k < nv; k++) {
+                    /* the live lanes' indices, branch-free (each lane written at m, which only the
+                     * live ones advance: at most 64 k + 63 < IR_CHUNK * 64) */
+                    uint32_t m0 = m;
+                    for (uint32_t q = 0; q < Q; q++) {
+                        pt->rr_from[m] = (uint16_t)((uint32_t)k * 64u + q);
+                        m += c->live[k][q] != 0;
+                    }
+                    traced += m - m0;
+                    if ((m - m0) % 16u < IR_SIMD_REST)
+                        for (; m % 16u; m--) rest[nrest++] = pt->rr_from[m - 1];
+                    for (; m % 16u; m++) pt->rr_from[m] = IR_NO_RAY;
                 }
+                for (uint32_t i = 0; i < nrest; i++) pt->rr_from[m++] = rest[i];
+                for (uint32_t i = 0; i < m; i++) {
+                    uint32_t fr = pt->rr_from[i], k = fr / 64u, q = fr % 64u;
+                    pt->rr_valid[i] = fr == IR_NO_RAY ? 0 : -1;
+                    if (fr == IR_NO_RAY) continue;
+                    rp->org_x[i] = L->ox[q], rp->org_y[i] = L->oy[q], rp->org_z[i] = L->oz[q];
+                    rp->dir_x[i] = c->dx[k][q], rp->dir_y[i] = c->dy[k][q], rp->dir_z[i] = c->dz[k][q];
+                    rp->tnear[i] = 0.0f, rp->tfar[i] = c->tf[k][q];
+                }
+                if (!traced) continue;
+                th->rays[RP_RAY_SHADOW] += traced;
+                uint32_t n = 4;
+                while (n * n < m) n += 4;
+                for (uint32_t i = m; i < n * n; i++) pt->rr_valid[i] = 0;
+                rp->n = n;
+                rp->valid = pt->rr_valid;
+                rp_query_n_desc qd = pbr_query(f, th, RP_RAY_SHADOW);
+                qd.traversal = RP_TRAVERSAL_SIMD;
+                qd.frustum = RP_FRUSTUM_NONE;
+                rp_occluded_n(s->scene, &qd, rp);
+                for (uint32_t i = 0; i < m; i++)
+                    if (pt->rr_valid[i] && rp->tfar[i] < 0.0f) c->live[pt->rr_from[i] / 64u][pt->rr_from[i] % 64u] = 0;
+            } else {
+                for (int k = 0; k < nv; k++) {
+                    const ir_vpl *vl = &vs[v0 + k];
+                    uint64_t lk = 0;
+                    for (uint32_t q = 0; q < Q; q++) lk += c->live[k][q] != 0;
+                    if (!lk) continue;
+                    /* (Lanes that are not live hold rays of this tile's own points too, so nothing
+                     * in the packet depends on what the thread traced before.) */
+                    memcpy(vp->dir_x, c->dx[k], Q * sizeof(float));
+                    memcpy(vp->dir_y, c->dy[k], Q * sizeof(float));
+                    memcpy(vp->dir_z, c->dz[k], Q * sizeof(float));
+                    memcpy(vp->tfar, c->tf[k], Q * sizeof(float));
+                    th->rays[RP_RAY_SHADOW] += lk;
+                    rp_query_n_desc qd = pbr_query(f, th, RP_RAY_SHADOW);
+                    qd.traversal = pf->shadow_traversal;
+                    if (vl->infinite) qd.frustum = RP_FRUSTUM_NONE; /* parallel rays: no common point */
+                    qd.point[0] = vl->p.x;
+                    qd.point[1] = vl->p.y;
+                    qd.point[2] = vl->p.z;
+                    vp->valid = c->live[k];
+                    rp_occluded_n(s->scene, &qd, vp);
+                    for (uint32_t q = 0; q < Q; q++)
+                        if (vp->tfar[q] < 0.0f) c->live[k][q] = 0;
+                }
+            }
+            /* the unoccluded contributions, VPL by VPL (each pixel's sum in the VPLs' order),
+             * branch-free in the lanes' order, then into the pixels */
+            RP_ALIGN(64) float sr[64], sg[64], sb[64];
+            for (uint32_t q = 0; q < Q; q++) sr[q] = sg[q] = sb[q] = 0.0f;
+            for (int k = 0; k < nv; k++)
+                for (uint32_t q = 0; q < Q; q++) {
+                    bool on = c->live[k][q] != 0;
+                    sr[q] += on ? c->cr[k][q] : 0.0f;
+                    sg[q] += on ? c->cg[k][q] : 0.0f;
+                    sb[q] += on ? c->cb[k][q] : 0.0f;
+                }
+            for (uint32_t q = 0; q < Q; q++) {
+                v3 *sum = &pt->ir_sum[L->li[q]];
+                *sum = v3_add(*sum, v3_make(sr[q], sg[q], sb[q]));
+            }
         }
     }
     /* The pass's buffers: the VPL sum over the albedo (or as is, where there is none). */

@@ -71,10 +71,9 @@ bool pbr_thread_init(const render_frame *f, render_thread *th) {
         pt->points = calloc(nn, sizeof *pt->points);
         pt->ir_sum = calloc(nn, sizeof *pt->ir_sum);
         pt->ir_at = calloc(nn, sizeof *pt->ir_at); /* (tile / N)^2 blocks of N^2 sets */
-        pt->vpl_valid = calloc((size_t)side * side, sizeof *pt->vpl_valid);
-        pt->vpl_contrib = calloc((size_t)side * side, sizeof *pt->vpl_contrib);
-        ok = pt->points && pt->ir_sum && pt->ir_at && pt->vpl_valid && pt->vpl_contrib &&
-             rp_rayhit_n_alloc(f->s->device, side, &pt->vpl_packet);
+        pt->chunk = aligned_alloc(64, (sizeof *pt->chunk + 63u) & ~(size_t)63u);
+        ok = pt->points && pt->ir_sum && pt->ir_at && pt->chunk && rp_rayhit_n_alloc(f->s->device, side, &pt->vpl_packet) &&
+             rp_rayhit_n_alloc(f->s->device, 32, &pt->rr_packet);
     }
     return ok;
 }
@@ -84,6 +83,10 @@ void pbr_thread_free(const render_frame *f, render_thread *th) {
     if (!pt) return;
     if (pt->prim.n) rp_rayhit_n_free(f->s->device, &pt->prim);
     if (pt->vpl_packet.n) rp_rayhit_n_free(f->s->device, &pt->vpl_packet);
+    if (pt->rr_packet.org_x) {
+        pt->rr_packet.n = 32; /* ir_tile sizes it to its rays */
+        rp_rayhit_n_free(f->s->device, &pt->rr_packet);
+    }
     free(pt->prim_valid);
     free(pt->paths);
     free(pt->bounce);
@@ -93,8 +96,7 @@ void pbr_thread_free(const render_frame *f, render_thread *th) {
     free(pt->points);
     free(pt->ir_sum);
     free(pt->ir_at);
-    free(pt->vpl_valid);
-    free(pt->vpl_contrib);
+    free(pt->chunk);
     free(pt);
     th->pbr = NULL;
 }

@@ -35,6 +35,20 @@ typedef struct ir_point {
     bool valid;       /* a non-delta surface was hit */
 } ir_point;
 
+/* VPLs whose shadow rays instant radiosity decides on (Russian roulette) and traces together. */
+#define IR_CHUNK 16
+/* Russian roulette's random numbers: render_hash(the pixel sample's PCG key ^ sampler_pcg_dim(IR_RR_DIM
+ * + the VPL's index in its set)). */
+#define IR_RR_DIM 0x49520000u
+
+/* A set's shadow rays towards IR_CHUNK VPLs (row k: VPL k of the chunk, column: packet lane):
+ * direction, tfar, the unoccluded contribution and whether the ray is traced (then: unoccluded). */
+typedef struct ir_chunk {
+    float dx[IR_CHUNK][64], dy[IR_CHUNK][64], dz[IR_CHUNK][64], tf[IR_CHUNK][64];
+    float cr[IR_CHUNK][64], cg[IR_CHUNK][64], cb[IR_CHUNK][64];
+    int32_t live[IR_CHUNK][64];
+} ir_chunk;
+
 typedef struct pbr_thread {
     rp_rayhit_n prim;       /* the n x n primary packet */
     int32_t *prim_valid;
@@ -48,8 +62,10 @@ typedef struct pbr_thread {
     v3 *ir_sum;             /* tile^2: sum of VPL contributions */
     uint16_t *ir_at;        /* (tile / N)^2 x N^2: per block of the tile and set, the pixel (ly tile + lx) */
     rp_rayhit_n vpl_packet; /* a set's shadow rays towards one VPL */
-    int32_t *vpl_valid;
-    v3 *vpl_contrib;
+    ir_chunk *chunk;
+    rp_rayhit_n rr_packet;  /* a chunk's live shadow rays packed densely (SIMD-ray scenes) */
+    int32_t rr_valid[IR_CHUNK * 64];
+    uint16_t rr_from[IR_CHUNK * 64]; /* the packed ray's k * 64 + lane in the chunk */
     uint32_t lane[32 * 32]; /* rp_packet_n_index of (i, j) at j * side + i */
 } pbr_thread;
 
@@ -58,6 +74,7 @@ typedef struct pbr_frame {
     ir_vpl *vpls;
     int sets, per_set, interleave, side; /* side: rays per packet side of a set in a tile */
     float clamp_d2;                      /* minimum squared distance of the geometry term */
+    float rr;                            /* Russian roulette's threshold (ir_roulette); 0: off */
     rp_traversal shadow_traversal;       /* of the shadow packets to VPLs (ir_frame_init) */
     /* full-frame buffers for the discontinuity buffer */
     v3 *raw, *albedo, *emit, *normal;

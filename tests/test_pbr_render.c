@@ -379,6 +379,35 @@ int main(void) {
             }
             rp_render_scene_release(is);
         }
+        /* A frame takes the scratch the last one gave back (render_scratch_take): after frames of
+         * another size, sample and region on the same scene, the image is the fresh scene's bit for
+         * bit; the scratch comes back zeroed, the same block when it is large enough. */
+        {
+            rp_render_scene *is = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
+            rp_render_desc big = {.width = 80, .height = 60, .spp = 2, .integrator = RP_INTEGRATOR_IR, .sample_start = 7};
+            free(is ? render(is, &big) : NULL);
+            rp_render_desc part = {.width = W, .height = H, .spp = 1, .integrator = RP_INTEGRATOR_IR,
+                                   .region = {5, 7, 30, 41}, .sample_start = 3};
+            free(is ? render(is, &part) : NULL);
+            rp_render_desc rd = {.width = W, .height = H, .spp = 4, .integrator = RP_INTEGRATOR_IR};
+            float *px = is ? render(is, &rd) : NULL;
+            CHECKF(px && ref[1] && memcmp(px, ref[1], (size_t)W * H * 3 * sizeof(float)) == 0,
+                   "instant radiosity: a frame after others on the same scene differs from a fresh scene's");
+            free(px);
+            unsigned char *a = is ? render_scratch_take(is, 5000) : NULL;
+            CHECK(a != NULL);
+            if (a) memset(a, 0xab, 5000);
+            render_scratch_give(is, a);
+            unsigned char *b = is ? render_scratch_take(is, 4000) : NULL;
+            bool zero = b != NULL;
+            for (int i = 0; b && i < 4000; i++) zero = zero && b[i] == 0;
+            CHECKF(b == a && zero, "render_scratch_take: the block given back is not reused zeroed");
+            unsigned char *c = is ? render_scratch_take(is, 100) : NULL; /* none kept while b is out */
+            CHECK(c != NULL && c != b && ((uintptr_t)c & 63u) == 0);
+            render_scratch_give(is, c);
+            render_scratch_give(is, b); /* frees c */
+            rp_render_scene_release(is);
+        }
         /* Interleaved sampling under a narrower filter (5 x 5 sets, 3 x 3 window, the defaults) orders
          * each block's sets at random. With (x mod 5, y mod 5) in every block a grid of dots showed in
          * one sample's image, and the statistic was 3.4 (period 7: 1.0); shuffled 0.8 (each block

@@ -117,7 +117,19 @@ struct rp_render_scene {
     uint32_t *anim_moving;         /* ... and the vertices that move */
     size_t anim_moving_n;
     struct render_medium *medium;  /* the participating medium (medium.h), NULL: none */
+    /* A frame's large scratch, handed back for the next frame (render_scratch_take/give). Mutable
+     * through a const scene, as frames see it; NULL: every frame allocates its own. */
+    struct render_scratch *scratch;
 };
+
+/* Full-frame scratch that outlives a frame: instant radiosity's discontinuity-buffer planes (16 MB
+ * at 640x480). Allocated fresh each frame, their pages were faulted in anew every frame, which took
+ * half of cornell_original's CPU time on these virtual machines; a frame now takes the block the
+ * last one gave back (one is kept per scene; concurrent frames each get their own). take returns
+ * at least bytes, zeroed and 64-byte aligned, or NULL when out of memory; give keeps it (NULL is
+ * ignored), freeing the one it replaces. */
+void *render_scratch_take(const rp_render_scene *s, size_t bytes);
+void render_scratch_give(const rp_render_scene *s, void *block);
 
 /* Result of turning a hit into a shading point. */
 typedef struct render_surface {

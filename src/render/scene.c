@@ -2,9 +2,11 @@
 #include "medium.h"
 #include "render.h"
 
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 
 rp_render_scene_desc rp_render_scene_desc_defaults(const rp_render_scene_desc *desc) {
     rp_render_scene_desc d;
@@ -21,8 +23,59 @@ static float srgb_decode(float c) {
     return c <= 0.04045f ? c / 12.92f : powf((c + 0.055f) / 1.055f, 2.4f);
 }
 
+struct render_scratch {
+    _Atomic(void *) block; /* a render_block, or NULL */
+};
+
+/* A scratch block's header; the caller's bytes follow it, 64-byte aligned. */
+typedef struct render_block {
+    size_t bytes; /* usable after the header */
+    _Alignas(64) unsigned char data[];
+} render_block;
+
+void *render_scratch_take(const rp_render_scene *s, size_t bytes) {
+    render_block *b = s && s->scratch ? atomic_exchange(&s->scratch->block, NULL) : NULL;
+    if (b && b->bytes < bytes) {
+        free(b);
+        b = NULL;
+    }
+    if (!b) {
+        /* From 1 MiB on whole 2 MiB pages, where the kernel gives them: a first frame faults a
+         * few huge pages instead of thousands of small ones. */
+        const size_t huge = (size_t)2 << 20;
+        size_t total = sizeof(render_block) + bytes, align = 64;
+        if (total < bytes) return NULL;
+        if (total >= ((size_t)1 << 20)) {
+            align = huge;
+            total = (total + huge - 1) / huge * huge;
+        } else {
+            total = (total + 63u) & ~(size_t)63u;
+        }
+        b = aligned_alloc(align, total);
+        if (!b) return NULL;
+#ifdef MADV_HUGEPAGE
+        if (align == huge) madvise(b, total, MADV_HUGEPAGE);
+#endif
+        b->bytes = total - sizeof(render_block);
+    }
+    memset(b->data, 0, bytes);
+    return b->data;
+}
+
+void render_scratch_give(const rp_render_scene *s, void *block) {
+    if (!block) return;
+    render_block *b = (render_block *)((unsigned char *)block - offsetof(render_block, data));
+    if (!s || !s->scratch) {
+        free(b);
+        return;
+    }
+    free(atomic_exchange(&s->scratch->block, b));
+}
+
 static void scene_free(rp_render_scene *s) {
     if (!s) return;
+    if (s->scratch) free(atomic_load(&s->scratch->block));
+    free(s->scratch);
     if (s->scene) rp_scene_release(s->scene);
     anim_groups_free(s); /* after the top scene, whose instances hold the sub-scenes */
     if (s->device) rp_device_release(s->device);
@@ -95,6 +148,9 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
     rp_render_scene_desc dd = rp_render_scene_desc_defaults(desc);
     rp_render_scene *s = calloc(1, sizeof *s);
     if (!s) return fail(NULL, err, err_size, "out of memory");
+    s->scratch = calloc(1, sizeof *s->scratch);
+    if (!s->scratch) return fail(s, err, err_size, "out of memory");
+    atomic_init(&s->scratch->block, NULL);
     rp_device_retain(device);
     s->device = device;
     s->data = data;

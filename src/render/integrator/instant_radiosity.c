@@ -169,13 +169,18 @@ bool ir_frame_init(render_frame *f) {
     size_t np = (size_t)f->desc.width * (size_t)f->desc.height;
     size_t nv = (size_t)f->desc.spp * (size_t)pf->sets * (size_t)pf->per_set;
     pf->vpls = malloc(nv * sizeof *pf->vpls);
-    pf->raw = calloc(np, sizeof *pf->raw);
-    pf->albedo = calloc(np, sizeof *pf->albedo);
-    pf->emit = calloc(np, sizeof *pf->emit);
-    pf->normal = calloc(np, sizeof *pf->normal);
-    pf->depth = calloc(np, sizeof *pf->depth);
-    pf->valid = calloc(np, 1);
-    if (!pf->vpls || !pf->raw || !pf->albedo || !pf->emit || !pf->normal || !pf->depth || !pf->valid) return false;
+    /* The discontinuity buffer's planes, zeroed, in one block the last frame gave back. */
+    size_t v3b = (np * sizeof(v3) + 63u) & ~(size_t)63u, fb = (np * sizeof(float) + 63u) & ~(size_t)63u;
+    if (np > SIZE_MAX / 64u) return false;
+    pf->planes = render_scratch_take(f->s, 4 * v3b + fb + np);
+    if (!pf->vpls || !pf->planes) return false;
+    unsigned char *at = pf->planes;
+    pf->raw = (v3 *)at;
+    pf->albedo = (v3 *)(at + v3b);
+    pf->emit = (v3 *)(at + 2 * v3b);
+    pf->normal = (v3 *)(at + 3 * v3b);
+    pf->depth = (float *)(at + 4 * v3b);
+    pf->valid = at + 4 * v3b + fb;
     if (f->s->pb_light_count == 0 || f->desc.max_depth <= 0) { /* max_depth 0: emission only */
         memset(pf->vpls, 0, nv * sizeof *pf->vpls);
         return true;

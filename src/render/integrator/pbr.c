@@ -39,12 +39,7 @@ void pbr_frame_free(render_frame *f) {
     pbr_frame *pf = f->pbr;
     if (!pf) return;
     free(pf->vpls);
-    free(pf->raw);
-    free(pf->albedo);
-    free(pf->emit);
-    free(pf->normal);
-    free(pf->depth);
-    free(pf->valid);
+    render_scratch_give(f->s, pf->planes);
     free(pf);
     f->pbr = NULL;
 }

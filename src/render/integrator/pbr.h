@@ -80,6 +80,7 @@ typedef struct pbr_frame {
     v3 *raw, *albedo, *emit, *normal;
     float *depth;
     uint8_t *valid;
+    void *planes; /* the block that holds them (render_scratch_take) */
 } pbr_frame;
 
 float pbr_mis(float a, float b);

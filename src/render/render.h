@@ -448,11 +448,14 @@ typedef struct render_frame {
     bool packets;              /* Whitted in n x n packets */
     rp_traversal traversal[RP_RAY_KIND_COUNT];
     render_thread *threads;
+    struct pbr_frame *pbr;     /* per-frame state of the physically based integrators */
+    atomic_bool failed;        /* a thread ran out of memory */
+    /* written by every tile when there is a progress callback: 64 bytes away from what the
+     * threads read (the frame is calloc'd, so padding rather than _Alignas) */
+    unsigned char apart[64];
     atomic_uint tiles_done;
     atomic_uint_least64_t rays_done;
     atomic_flag reporting;
-    atomic_bool failed;        /* a thread ran out of memory */
-    struct pbr_frame *pbr;     /* per-frame state of the physically based integrators */
 } render_frame;
 
 /* The desc as rp_render renders it (defaults and depths resolved), and the frame's camera, lights

@@ -524,6 +524,16 @@ static double cpu_ms(void) {
     return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
 }
 
+/* Lets the process's other threads block before its CPU clock is read: the clock adds a thread
+ * that runs on another core only up to its last scheduler tick (some milliseconds stale), and a
+ * worker spins a while after a render before it sleeps. Without this, --compare charged the CPU
+ * the reference's worker spent in its last tick to the viewer's next frame: the window seemed to
+ * cost 13-20% on cornell_box when rendering alone cost the same as rp_render (issue 22). */
+static void settle_threads(void) {
+    struct timespec ts = {0, 2000000}; /* 2 ms: the pool's spin is about 0.1 ms */
+    nanosleep(&ts, NULL);
+}
+
 /* A frame's way into the window's pixels. The tile renderer calls present_tile on its threads as
  * tiles finish, while the tile is in cache; a tile that finishes while the window still sends the
  * last frame (flush, on the main thread) waits in a list, which the main thread converts once the
@@ -1002,6 +1012,7 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         bool cont = v->desc.integrator != RP_INTEGRATOR_IR && v->samples > 1;
         if (px && cont && v->cmp_samples != v->samples - 1) /* the first compared frame: start from the sum (untimed) */
             memcpy(px, v->sum, (size_t)v->w * (size_t)v->h * 3 * sizeof(float));
+        settle_threads();
         double c0 = cpu_ms();
         rp_render_desc d = v->desc;
         rp_camera cam = view_camera_get(&v->cam);
@@ -1015,6 +1026,7 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         v->cmp_samples = -1;
         if (px && rp_render(v->scene, &d, px, NULL)) {
             v->cmp_samples = v->samples;
+            settle_threads(); /* and the next frame starts from settled clocks */
             v->cmp_ref_cpu += cpu_ms() - c0;
             v->cmp_view_cpu += c0 - u0;
             v->cmp_frames++;

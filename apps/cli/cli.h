@@ -33,6 +33,9 @@ int cli_stream_bench(int argc, char **argv);
 bool cli_stream_wanted(int argc, char **argv, const char *flag, const char *value);
 /* Monotonic wall clock in milliseconds. */
 double cli_now_ms(void);
+/* malloc's heap from here on grows by `reserve` bytes of address space at once, advised onto
+ * 2 MiB pages (apps/cli/heap.c; RAYPACK_HUGE_HEAP=0 turns it off). True when the advice took. */
+bool cli_heap_hugepages(size_t reserve);
 /* CPU time of the whole process (all its threads) in milliseconds: what a frame costs whatever
  * else the machine runs. */
 double cli_cpu_ms(void);

@@ -10,6 +10,7 @@
 #include <stdint.h>
 #include <stdio.h>
 
+#if defined(CLI_HEAP_HUGE) && defined(MADV_HUGEPAGE)
 /* The smaps entry of the mapping that holds p: its VmFlags line and AnonHugePages (kB). */
 static bool mapping_of(const void *p, char *flags, size_t size, long *huge_kb) {
     FILE *f = fopen("/proc/self/smaps", "r");
@@ -42,6 +43,7 @@ static bool thp_offered(void) {
     fclose(f);
     return ok;
 }
+#endif
 
 int main(void) {
     setenv("RAYPACK_HUGE_HEAP", "0", 1);

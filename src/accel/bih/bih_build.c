@@ -109,22 +109,35 @@ typedef struct cbounds {
 } cbounds;
 
 /* What a partition found out about its two sides: the left side's upper bound and the right
- * side's lower bound (the clip planes, lane axis) and their centroids' bounds. */
+ * side's lower bound (the clip planes, lane axis), the rest of their boxes, and the centroids'
+ * bounds of the whole range. */
 typedef struct sides {
     vf4 lhi, rlo, llo, rhi; /* the clip planes are lhi and rlo; llo and rhi complete the boxes */
-    cbounds cl, cr;
+    cbounds all;
 } sides;
 
 static inline sides sides_empty(void) {
     vf4 inf = vf4_splat(INFINITY), ninf = vf4_splat(-INFINITY);
-    return (sides){ninf, inf, inf, ninf, {inf, ninf}, {inf, ninf}};
+    return (sides){ninf, inf, inf, ninf, {inf, ninf}};
 }
 
 static inline void sides_merge(sides *s, const sides *o) {
     s->lhi = vf4_max(s->lhi, o->lhi), s->rlo = vf4_min(s->rlo, o->rlo);
     s->llo = vf4_min(s->llo, o->llo), s->rhi = vf4_max(s->rhi, o->rhi);
-    s->cl.lo = vf4_min(s->cl.lo, o->cl.lo), s->cl.hi = vf4_max(s->cl.hi, o->cl.hi);
-    s->cr.lo = vf4_min(s->cr.lo, o->cr.lo), s->cr.hi = vf4_max(s->cr.hi, o->cr.hi);
+    s->all.lo = vf4_min(s->all.lo, o->all.lo), s->all.hi = vf4_max(s->all.hi, o->all.hi);
+}
+
+/* Bounds of a side's centroids (twice) from what the partition tracked: within twice its boxes'
+ * bounds (lo + hi rounds monotonically, so 2 lo <= fl(lo + hi) <= 2 hi) and the range's
+ * centroids' bounds, and on the split axis below (left) or from (right) the plane. Not tight:
+ * split partitions once more when a plane they allow leaves a side empty. */
+static inline cbounds side_cbounds(const sides *s, bool left, int axis, float twice) {
+    vf4 two = vf4_splat(2.0f);
+    cbounds b = left ? (cbounds){vf4_max(two * s->llo, s->all.lo), vf4_min(two * s->lhi, s->all.hi)}
+                     : (cbounds){vf4_max(two * s->rlo, s->all.lo), vf4_min(two * s->rhi, s->all.hi)};
+    if (left) b.hi[axis] = b.hi[axis] < twice ? b.hi[axis] : twice;
+    else b.lo[axis] = b.lo[axis] > twice ? b.lo[axis] : twice;
+    return b;
 }
 
 /* Partition of [i, j) by centroid (lo + hi < twice on axis: left), without a branch on the side
@@ -136,23 +149,21 @@ static inline void sides_merge(sides *s, const sides *o) {
 static uint32_t partition(bvh_prim *p, uint32_t i, uint32_t j, int axis, float twice, sides *s) {
     /* far[left]: where the box goes for the left side's minima (+inf: not left) */
     static const float far[2] = {INFINITY, -INFINITY};
-    vf4 llo = s->llo, lhi = s->lhi, rlo = s->rlo, rhi = s->rhi;
-    vf4 cllo = s->cl.lo, clhi = s->cl.hi, crlo = s->cr.lo, crhi = s->cr.hi;
+    vf4 llo = s->llo, lhi = s->lhi, rlo = s->rlo, rhi = s->rhi, clo = s->all.lo, chi = s->all.hi;
     uint32_t k = i;
     for (uint32_t q = i; q < j; q++) {
         vf4 lo = p[q].lo, hi = p[q].hi, c = lo + hi;
         uint32_t left = c[axis] < twice;
         vf4 a = vf4_splat(far[left]), b = vf4_splat(far[left ^ 1u]); /* b = -a */
         llo = vf4_min(llo, vf4_max(lo, a)), lhi = vf4_max(lhi, vf4_min(hi, b));
-        cllo = vf4_min(cllo, vf4_max(c, a)), clhi = vf4_max(clhi, vf4_min(c, b));
         rlo = vf4_min(rlo, vf4_max(lo, b)), rhi = vf4_max(rhi, vf4_min(hi, a));
-        crlo = vf4_min(crlo, vf4_max(c, b)), crhi = vf4_max(crhi, vf4_min(c, a));
+        clo = vf4_min(clo, c), chi = vf4_max(chi, c);
         bvh_prim t = p[k];
         p[k] = p[q], p[q] = t;
         k += left;
     }
     s->llo = llo, s->lhi = lhi, s->rlo = rlo, s->rhi = rhi;
-    s->cl = (cbounds){cllo, clhi}, s->cr = (cbounds){crlo, crhi};
+    s->all = (cbounds){clo, chi};
     return k;
 }
 
@@ -286,27 +297,35 @@ static void split(bih_ctx *c, bih_local *l, uint32_t node, uint32_t begin, uint3
         }
         /* Halve the split box until its plane parts the centroids. When every centroid lies on one
          * side the paper halves the box and partitions again; the centroids' bounds tell the
-         * outcome of that pass in advance, so the same planes are found without it. */
+         * outcome of that pass in advance, so the same planes are found without it. The bounds a
+         * parent's partition gives its children are not tight (side_cbounds); when a plane they
+         * allow leaves a side empty, that pass gives the range's own bounds, and the halving goes on
+         * from them. */
         int axis = 0;
-        float plane = 0.0f;
-        for (int tries = 0;; tries++) {
-            float e0 = sb[3] - sb[0], e1 = sb[4] - sb[1], e2 = sb[5] - sb[2];
-            axis = e1 > e0 ? (e2 > e1 ? 2 : 1) : (e2 > e0 ? 2 : 0);
-            plane = 0.5f * (sb[axis] + sb[3 + axis]);
-            /* nothing left to halve (equal centroids): a leaf of them all */
-            if (tries >= 64 || !(plane > sb[axis] && plane < sb[3 + axis])) {
-                make_leaf(c, l, node, begin, end, depth);
-                return;
+        float plane = 0.0f, twice = 0.0f;
+        sides sd;
+        uint32_t i;
+        for (;;) {
+            for (int tries = 0;; tries++) {
+                float e0 = sb[3] - sb[0], e1 = sb[4] - sb[1], e2 = sb[5] - sb[2];
+                axis = e1 > e0 ? (e2 > e1 ? 2 : 1) : (e2 > e0 ? 2 : 0);
+                plane = 0.5f * (sb[axis] + sb[3 + axis]);
+                /* nothing left to halve (equal centroids): a leaf of them all */
+                if (tries >= 64 || !(plane > sb[axis] && plane < sb[3 + axis])) {
+                    make_leaf(c, l, node, begin, end, depth);
+                    return;
+                }
+                twice = 2.0f * plane;
+                if (cb.lo[axis] >= twice) sb[axis] = plane;          /* all on the right */
+                else if (cb.hi[axis] < twice) sb[3 + axis] = plane;  /* all on the left */
+                else break;
             }
-            float twice = 2.0f * plane;
-            if (cb.lo[axis] >= twice) sb[axis] = plane;          /* all on the right */
-            else if (cb.hi[axis] < twice) sb[3 + axis] = plane;  /* all on the left */
-            else break;
+            sd = sides_empty();
+            i = spawn && c->pool && end - begin >= BIH_PAR_MIN ? partition_par(c->pool, c->p, begin, end, axis, twice, &sd)
+                                                               : partition(c->p, begin, end, axis, twice, &sd);
+            if (i != begin && i != end) break;
+            cb = sd.all; /* tight now: the next halvings need no pass */
         }
-        float twice = 2.0f * plane;
-        sides sd = sides_empty();
-        uint32_t i = spawn && c->pool && end - begin >= BIH_PAR_MIN ? partition_par(c->pool, c->p, begin, end, axis, twice, &sd)
-                                                                    : partition(c->p, begin, end, axis, twice, &sd);
         uint32_t child = node_alloc(c, l, 2);
         c->nodes[node] = (bih_node){{pad_hi(c, sd.lhi[axis]), pad_lo(c, sd.rlo[axis])}, child << BIH_TAG_BITS | (uint32_t)axis};
         float sl[6], sr[6], nl[6];
@@ -314,9 +333,9 @@ static void split(bih_ctx *c, bih_local *l, uint32_t node, uint32_t begin, uint3
         sl[3 + axis] = plane, sr[axis] = plane;
         if (sd.lhi[axis] < nl[3 + axis]) nl[3 + axis] = sd.lhi[axis];
         if (sd.rlo[axis] > nb[axis]) nb[axis] = sd.rlo[axis];
-        split(c, l, child, begin, i, sl, sd.cl, nl, sd.llo, sd.lhi, depth + 1, spawn);
+        split(c, l, child, begin, i, sl, side_cbounds(&sd, true, axis, twice), nl, sd.llo, sd.lhi, depth + 1, spawn);
         /* the right side in this frame (a loop, not a call: the recursion's depth is the left path) */
-        node = child + 1, begin = i, depth = depth + 1, cb = sd.cr, blo = sd.rlo, bhi = sd.rhi;
+        node = child + 1, begin = i, depth = depth + 1, cb = side_cbounds(&sd, false, axis, twice), blo = sd.rlo, bhi = sd.rhi;
         memcpy(sb, sr, sizeof sr);
     }
 }
@@ -435,14 +454,10 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     memcpy(out->bounds, sb, sizeof sb);
     c.abs_pad = box_pad_abs(sb, sb + 3);
     atomic_store(&c.next, 1);
-    cbounds cb = {vf4_splat(INFINITY), vf4_splat(-INFINITY)};
-    for (uint32_t i = 0; i < n; i++) {
-        vf4 c2 = in->boxes[i].lo + in->boxes[i].hi;
-        cb.lo = vf4_min(cb.lo, c2), cb.hi = vf4_max(cb.hi, c2);
-    }
     float nb[6];
     memcpy(nb, sb, sizeof nb);
     vf4 blo = {b.lo.x, b.lo.y, b.lo.z, 0.0f}, bhi = {b.hi.x, b.hi.y, b.hi.z, 0.0f};
+    cbounds cb = {vf4_splat(2.0f) * blo, vf4_splat(2.0f) * bhi}; /* not tight: see split */
     split(&c, &c.local[0], 0, 0, n, sb, cb, nb, blo, bhi, 1, pool != NULL);
     if (pool && c.task_count) {
         qsort(c.tasks, c.task_count, sizeof *c.tasks, task_larger);

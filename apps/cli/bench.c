@@ -1044,7 +1044,7 @@ static void usage(FILE *f) {
             "                     timed by the thread's CPU time\n"
             "  --builds           build times alone: the BVH, the BIH and the grid built --repeats\n"
             "                     times (default 7) in turns in one process, the kd-tree once; median,\n"
-            "                     min and the BVH's median over each\n"
+            "                     min and the BVH's median over each, wall and process CPU time\n"
             "  --engine cuda      the CUDA BVH kernels (gpu/cuda) on the same sets, checked against\n"
             "                     raypack's single rays, kernel time by CUDA events (docs/gpu.md)\n"
             "  --accel KIND       the structure of plain bench and --grid: bvh, kdtree, bih or grid\n"

@@ -3,7 +3,8 @@
  * to the two sides in place (one quicksort-like pass over the box array), and keeps each side's
  * extreme bound as its clip plane; when one side is empty the split box is halved towards the
  * other and the step repeated, so no node is made. Every inner node has two non-empty children,
- * so 2n - 1 nodes suffice: they are allocated once, from the primitive count. Nodes larger than
+ * so 2n - 1 nodes suffice: they are allocated once, from the primitive count (with room for the
+ * clip nodes and the threads' chunks of nodes, bih_build). Nodes larger than
  * a share of the primitives (BIH_TASK_SHARE per thread) are split on the calling thread, the
  * largest with a partition that all threads run (BIH_PAR_MIN); the subtrees below them are tasks,
  * handed to the threads largest first (spd_tree_s12's depth-4 subtrees, the tasks until then, held
@@ -26,8 +27,8 @@ typedef struct bih_task {
 } bih_task;
 
 /* Nodes are handed to the threads in chunks of BIH_NODE_CHUNK, one atomic per chunk: an atomic
- * add per node, and the leaves' and the depth's counters, on lines both threads wrote were a third
- * of the subtree tasks' time on two threads. A chunk too short for a pair of children leaves at most
+ * add per node, and the leaves' and the depth's counters, on lines both threads wrote, held about a
+ * third of split's own samples (perf annotate, spd_tree_s12, two threads). A chunk too short for a pair of children leaves at most
  * one node unused, and each thread's last chunk its rest; those are empty leaves (make_unused). */
 #define BIH_NODE_CHUNK 256u
 typedef struct bih_local {
@@ -143,9 +144,9 @@ static inline cbounds side_cbounds(const sides *s, bool left, int axis, float tw
 /* Partition of [i, j) by centroid (lo + hi < twice on axis: left), without a branch on the side
  * (Lomuto's scheme: each box swapped to the left side's end, which advances when it is a left
  * one): a Hoare partition's side tests are data-dependent branches that a processor mispredicts
- * about every other box, and they were most of a BIH build's time. Each side's bounds are taken
- * with the box moved to +-infinity when it is on the other side (min and max only, no select);
- * returns the first right-side position. */
+ * about every other box (the partitions are most of a BIH build's own time: docs/bih.md). Each
+ * side's bounds are taken with the box moved to +-infinity when it is on the other side (min and
+ * max only, no select); returns the first right-side position. */
 static uint32_t partition(bvh_prim *p, uint32_t i, uint32_t j, int axis, float twice, sides *s) {
     /* far[left]: where the box goes for the left side's minima (+inf: not left) */
     static const float far[2] = {INFINITY, -INFINITY};

@@ -1044,7 +1044,7 @@ static void usage(FILE *f) {
             "                     timed by the thread's CPU time\n"
             "  --builds           build times alone: the BVH, the BIH and the grid built --repeats\n"
             "                     times (default 7) in turns in one process, the kd-tree once; median,\n"
-            "                     min and the BVH's median over each\n"
+            "                     min and the BVH's median over each, wall and process CPU time\n"
             "  --engine cuda      the CUDA BVH kernels (gpu/cuda) on the same sets, checked against\n"
             "                     raypack's single rays, kernel time by CUDA events (docs/gpu.md)\n"
             "  --accel KIND       the structure of plain bench and --grid: bvh, kdtree, bih or grid\n"
@@ -1242,9 +1242,13 @@ rp_scene *bench_build_raypack(bench_ctx *ctx, double *wall_ms, rp_scene_stats *s
     rp_geometry_commit(geom);
     rp_scene_attach(scene, geom);
     rp_geometry_release(geom);
+    struct timespec c0, c1;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c0);
     double t0 = bench_now_ms();
     rp_error e = rp_scene_commit(scene);
     *wall_ms = bench_now_ms() - t0;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c1);
+    ctx->build_cpu_ms = (double)(c1.tv_sec - c0.tv_sec) * 1e3 + (double)(c1.tv_nsec - c0.tv_nsec) * 1e-6;
     if (e != RP_ERROR_NONE) {
         fprintf(stderr, "raypack bench: rp_scene_commit: %s\n", rp_error_string(e));
         rp_scene_release(scene);

@@ -196,6 +196,7 @@ typedef struct bench_ctx {
     struct rp_scene_data *data;   /* the file's scene (materials for the path-traced sets), or NULL */
     rp_device *device;
     rp_scene *scene;         /* raypack's committed scene */
+    double build_cpu_ms;     /* the last bench_build_raypack's commit: the process's CPU time (all threads) */
     bench_rays sets[BENCH_KIND_COUNT];
     bench_hits ref[BENCH_KIND_COUNT]; /* raypack's single-ray hits */
     bench_scratch scratch;

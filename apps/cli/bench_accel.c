@@ -192,7 +192,10 @@ int bench_builds(bench_ctx *ctx) {
     static const rp_accel_type turns[] = {RP_ACCEL_BVH, RP_ACCEL_BIH, RP_ACCEL_GRID};
     enum { TURNS = sizeof turns / sizeof turns[0] };
     int reps = ctx->opts.repeats;
-    double *ms = calloc((size_t)reps * RP_ACCEL_COUNT, sizeof(double));
+    /* wall times, then the process's CPU times (all threads: on a shared machine the wall time
+     * carries the other jobs' load, the CPU time less so) */
+    double *ms = calloc((size_t)reps * RP_ACCEL_COUNT * 2, sizeof(double));
+    double *cpu = ms ? ms + (size_t)reps * RP_ACCEL_COUNT : NULL;
     rp_scene_stats st[RP_ACCEL_COUNT];
     memset(st, 0, sizeof st);
     bool failed = ms == NULL;
@@ -204,6 +207,7 @@ int bench_builds(bench_ctx *ctx) {
             rp_scene *s = bench_build_raypack(ctx, &ms[(size_t)a * (size_t)reps + (size_t)r], &st[a]);
             if (!s) failed = true;
             else rp_scene_release(s);
+            if (s) cpu[(size_t)a * (size_t)reps + (size_t)r] = ctx->build_cpu_ms;
         }
     ctx->opts.accel = keep;
     if (failed) {
@@ -213,16 +217,20 @@ int bench_builds(bench_ctx *ctx) {
     }
     printf("scene     %s: %zu triangles, %d threads, %d builds each in turns (the kd-tree: 1)\n", ctx->scene_name,
            ctx->mesh.triangle_count, ctx->opts.threads, reps);
-    double bvh = 0.0;
+    double bvh = 0.0, bvh_cpu = 0.0;
     for (int a = 0; a < RP_ACCEL_COUNT; a++) {
         int n = a == RP_ACCEL_KDTREE ? 1 : reps;
-        double *v = ms + (size_t)a * (size_t)reps + (a == RP_ACCEL_KDTREE ? (size_t)reps - 1 : 0);
+        size_t first = (size_t)a * (size_t)reps + (a == RP_ACCEL_KDTREE ? (size_t)reps - 1 : 0);
+        double *v = ms + first, *c = cpu + first;
         qsort(v, (size_t)n, sizeof *v, cmp_double);
+        qsort(c, (size_t)n, sizeof *c, cmp_double);
         double med = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-        if (a == RP_ACCEL_BVH) bvh = med;
-        printf("build     %-7s median %9.2f ms, min %9.2f ms, %8.2f MiB, BVH / this %.2fx\n",
-               rp_accel_name((rp_accel_type)a), med, v[0], (double)st[a].bytes / 1048576.0,
-               med > 0.0 ? bvh / med : 0.0);
+        double cmed = n % 2 ? c[n / 2] : 0.5 * (c[n / 2 - 1] + c[n / 2]);
+        if (a == RP_ACCEL_BVH) bvh = med, bvh_cpu = cmed;
+        printf("build     %-7s median %9.2f ms, min %9.2f ms, %8.2f MiB, BVH / this %.2fx; CPU median %9.2f ms, "
+               "BVH / this %.2fx\n",
+               rp_accel_name((rp_accel_type)a), med, v[0], (double)st[a].bytes / 1048576.0, med > 0.0 ? bvh / med : 0.0,
+               cmed, cmed > 0.0 ? bvh_cpu / cmed : 0.0);
     }
     free(ms);
     return 0;

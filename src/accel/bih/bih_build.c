@@ -3,7 +3,8 @@
  * to the two sides in place (one quicksort-like pass over the box array), and keeps each side's
  * extreme bound as its clip plane; when one side is empty the split box is halved towards the
  * other and the step repeated, so no node is made. Every inner node has two non-empty children,
- * so 2n - 1 nodes suffice: they are allocated once, from the primitive count. Nodes larger than
+ * so 2n - 1 nodes suffice: they are allocated once, from the primitive count (with room for the
+ * clip nodes and the threads' chunks of nodes, bih_build). Nodes larger than
  * a share of the primitives (BIH_TASK_SHARE per thread) are split on the calling thread, the
  * largest with a partition that all threads run (BIH_PAR_MIN); the subtrees below them are tasks,
  * handed to the threads largest first (spd_tree_s12's depth-4 subtrees, the tasks until then, held
@@ -25,6 +26,18 @@ typedef struct bih_task {
     vf4 blo, bhi; /* the boxes' bounds */
 } bih_task;
 
+/* Nodes are handed to the threads in chunks of BIH_NODE_CHUNK, one atomic per chunk: an atomic
+ * add per node, and the leaves' and the depth's counters, on lines both threads wrote, held about a
+ * third of split's own samples (perf annotate, spd_tree_s12, two threads). A chunk too short for a pair of children leaves at most
+ * one node unused, and each thread's last chunk its rest; those are empty leaves (make_unused). */
+#define BIH_NODE_CHUNK 256u
+typedef struct bih_local {
+    uint32_t next, end; /* the rest of this thread's chunk */
+    uint32_t depth, unused;
+    uint64_t leaves;
+    uint8_t pad[RP_CACHE_LINE - 24];
+} bih_local;
+
 typedef struct bih_ctx {
     const accel_tri_input *in;
     bvh_prim *p;               /* the boxes, reordered in place; lo[3] holds each one's id */
@@ -34,8 +47,7 @@ typedef struct bih_ctx {
     sys_pool *pool;            /* the threads, while the top of the tree is split */
     bih_task *tasks;
     uint32_t task_count, task_cap;
-    _Atomic uint32_t depth;
-    _Atomic uint64_t leaves;
+    bih_local *local;          /* per thread */
     float abs_pad;             /* the planes' margin (pad_lo, pad_hi); 0: none */
     /* leaf packing */
     uint32_t *block_of;        /* per position: its leaf's count at a leaf's first, else 0; then its block */
@@ -56,7 +68,7 @@ static inline float pad_hi(const bih_ctx *c, float x) {
 
 /* Writes a leaf of positions [begin, end) and marks its first position with its count for
  * plan_blocks (each position belongs to one leaf, so the threads' writes never meet). */
-static void make_leaf(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, uint32_t depth) {
+static void make_leaf(bih_ctx *c, bih_local *l, uint32_t node, uint32_t begin, uint32_t end, uint32_t depth) {
     bih_node *n = &c->nodes[node];
     uint32_t first = begin, count = end - begin;
     if (count) {
@@ -66,10 +78,30 @@ static void make_leaf(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, u
     memcpy(&n->clip[0], &first, 4);
     memcpy(&n->clip[1], &count, 4);
     n->meta = BIH_LEAF;
-    atomic_fetch_add_explicit(&c->leaves, 1, memory_order_relaxed);
-    uint32_t d = atomic_load_explicit(&c->depth, memory_order_relaxed);
-    while (depth > d && !atomic_compare_exchange_weak(&c->depth, &d, depth)) {
+    l->leaves++;
+    if (depth > l->depth) l->depth = depth;
+}
+
+/* Nodes [b, e) that no node points at: empty leaves, so the copy in fill_task reads them as such. */
+static void make_unused(bih_ctx *c, bih_local *l, uint32_t b, uint32_t e) {
+    uint32_t zero = 0;
+    for (uint32_t i = b; i < e; i++) {
+        memcpy(&c->nodes[i].clip[0], &zero, 4), memcpy(&c->nodes[i].clip[1], &zero, 4);
+        c->nodes[i].meta = BIH_LEAF;
     }
+    l->unused += e - b;
+}
+
+/* k (1 or 2) consecutive nodes from the thread's chunk. */
+static uint32_t node_alloc(bih_ctx *c, bih_local *l, uint32_t k) {
+    if (l->end - l->next < k) {
+        make_unused(c, l, l->next, l->end);
+        l->next = atomic_fetch_add_explicit(&c->next, BIH_NODE_CHUNK, memory_order_relaxed);
+        l->end = l->next + BIH_NODE_CHUNK;
+    }
+    uint32_t r = l->next;
+    l->next += k;
+    return r;
 }
 
 /* Twice the centroids' bounds of a range (lo + hi of each box), lanes x, y, z. */
@@ -78,57 +110,62 @@ typedef struct cbounds {
 } cbounds;
 
 /* What a partition found out about its two sides: the left side's upper bound and the right
- * side's lower bound (the clip planes, lane axis) and their centroids' bounds. */
+ * side's lower bound (the clip planes, lane axis), the rest of their boxes, and the centroids'
+ * bounds of the whole range. */
 typedef struct sides {
     vf4 lhi, rlo, llo, rhi; /* the clip planes are lhi and rlo; llo and rhi complete the boxes */
-    cbounds cl, cr;
+    cbounds all;
 } sides;
 
 static inline sides sides_empty(void) {
     vf4 inf = vf4_splat(INFINITY), ninf = vf4_splat(-INFINITY);
-    return (sides){ninf, inf, inf, ninf, {inf, ninf}, {inf, ninf}};
+    return (sides){ninf, inf, inf, ninf, {inf, ninf}};
 }
 
 static inline void sides_merge(sides *s, const sides *o) {
     s->lhi = vf4_max(s->lhi, o->lhi), s->rlo = vf4_min(s->rlo, o->rlo);
     s->llo = vf4_min(s->llo, o->llo), s->rhi = vf4_max(s->rhi, o->rhi);
-    s->cl.lo = vf4_min(s->cl.lo, o->cl.lo), s->cl.hi = vf4_max(s->cl.hi, o->cl.hi);
-    s->cr.lo = vf4_min(s->cr.lo, o->cr.lo), s->cr.hi = vf4_max(s->cr.hi, o->cr.hi);
+    s->all.lo = vf4_min(s->all.lo, o->all.lo), s->all.hi = vf4_max(s->all.hi, o->all.hi);
 }
 
-/* Hoare's partition of [i, j) by centroid (lo + hi < twice on axis: left), each misplaced pair
- * swapped once; returns the first right-side position. */
+/* Bounds of a side's centroids (twice) from what the partition tracked: within twice its boxes'
+ * bounds (lo + hi rounds monotonically, so 2 lo <= fl(lo + hi) <= 2 hi) and the range's
+ * centroids' bounds, and on the split axis below (left) or from (right) the plane. Not tight:
+ * split partitions once more when a plane they allow leaves a side empty. */
+static inline cbounds side_cbounds(const sides *s, bool left, int axis, float twice) {
+    vf4 two = vf4_splat(2.0f);
+    cbounds b = left ? (cbounds){vf4_max(two * s->llo, s->all.lo), vf4_min(two * s->lhi, s->all.hi)}
+                     : (cbounds){vf4_max(two * s->rlo, s->all.lo), vf4_min(two * s->rhi, s->all.hi)};
+    if (left) b.hi[axis] = b.hi[axis] < twice ? b.hi[axis] : twice;
+    else b.lo[axis] = b.lo[axis] > twice ? b.lo[axis] : twice;
+    return b;
+}
+
+/* Partition of [i, j) by centroid (lo + hi < twice on axis: left), without a branch on the side
+ * (Lomuto's scheme: each box swapped to the left side's end, which advances when it is a left
+ * one): a Hoare partition's side tests are data-dependent branches that a processor mispredicts
+ * about every other box (the partitions are most of a BIH build's own time: docs/bih.md). Each
+ * side's bounds are taken with the box moved to +-infinity when it is on the other side (min and
+ * max only, no select); returns the first right-side position. */
 static uint32_t partition(bvh_prim *p, uint32_t i, uint32_t j, int axis, float twice, sides *s) {
-    for (;;) {
-        vf4 ci;
-        for (;; i++) {
-            if (i == j) return i;
-            ci = p[i].lo + p[i].hi;
-            if (!(ci[axis] < twice)) break;
-            s->lhi = vf4_max(s->lhi, p[i].hi), s->llo = vf4_min(s->llo, p[i].lo);
-            s->cl.lo = vf4_min(s->cl.lo, ci), s->cl.hi = vf4_max(s->cl.hi, ci);
-        }
-        /* p[i] is on the right */
-        vf4 cj;
-        for (;;) {
-            if (--j == i) {
-                s->rlo = vf4_min(s->rlo, p[i].lo), s->rhi = vf4_max(s->rhi, p[i].hi);
-                s->cr.lo = vf4_min(s->cr.lo, ci), s->cr.hi = vf4_max(s->cr.hi, ci);
-                return i;
-            }
-            cj = p[j].lo + p[j].hi;
-            if (cj[axis] < twice) break;
-            s->rlo = vf4_min(s->rlo, p[j].lo), s->rhi = vf4_max(s->rhi, p[j].hi);
-            s->cr.lo = vf4_min(s->cr.lo, cj), s->cr.hi = vf4_max(s->cr.hi, cj);
-        }
-        bvh_prim t = p[i];
-        p[i] = p[j], p[j] = t;
-        s->lhi = vf4_max(s->lhi, p[i].hi), s->llo = vf4_min(s->llo, p[i].lo);
-        s->cl.lo = vf4_min(s->cl.lo, cj), s->cl.hi = vf4_max(s->cl.hi, cj);
-        s->rlo = vf4_min(s->rlo, p[j].lo), s->rhi = vf4_max(s->rhi, p[j].hi);
-        s->cr.lo = vf4_min(s->cr.lo, ci), s->cr.hi = vf4_max(s->cr.hi, ci);
-        i++;
+    /* far[left]: where the box goes for the left side's minima (+inf: not left) */
+    static const float far[2] = {INFINITY, -INFINITY};
+    vf4 llo = s->llo, lhi = s->lhi, rlo = s->rlo, rhi = s->rhi, clo = s->all.lo, chi = s->all.hi;
+    uint32_t k = i;
+    for (uint32_t q = i; q < j; q++) {
+        vf4 lo = p[q].lo, hi = p[q].hi, c = lo + hi;
+        uint32_t left = c[axis] < twice;
+        vf4 a = vf4_splat(far[left]), b = vf4_splat(far[left ^ 1u]); /* b = -a */
+        llo = vf4_min(llo, vf4_max(lo, a)), lhi = vf4_max(lhi, vf4_min(hi, b));
+        rlo = vf4_min(rlo, vf4_max(lo, b)), rhi = vf4_max(rhi, vf4_min(hi, a));
+        clo = vf4_min(clo, c), chi = vf4_max(chi, c);
+        bvh_prim t = p[k];
+        p[k] = p[q], p[q] = t;
+        k += left;
     }
+    s->llo = llo, s->lhi = lhi, s->rlo = rlo, s->rhi = rhi;
+    s->all = (cbounds){clo, chi};
+    return k;
 }
 
 /* The partition of a large node by all threads: BIH_PAR_CHUNKS chunks partitioned in place, then
@@ -226,7 +263,7 @@ static uint32_t partition_par(sys_pool *pool, bvh_prim *p, uint32_t begin, uint3
 #ifndef BIH_CLIP_AXES
 #define BIH_CLIP_AXES 1
 #endif
-static uint32_t clip_empty(bih_ctx *c, uint32_t node, float nb[6], vf4 blo, vf4 bhi) {
+static uint32_t clip_empty(bih_ctx *c, bih_local *l, uint32_t node, float nb[6], vf4 blo, vf4 bhi) {
     for (int n = 0; n < BIH_CLIP_AXES; n++) {
         int best = -1;
         float best_ratio = BIH_CLIP_RATIO;
@@ -236,7 +273,7 @@ static uint32_t clip_empty(bih_ctx *c, uint32_t node, float nb[6], vf4 blo, vf4 
             if (w > best_ratio * bw) best = k, best_ratio = bw > 0.0f ? w / bw : INFINITY;
         }
         if (best < 0) break;
-        uint32_t child = atomic_fetch_add_explicit(&c->next, 1, memory_order_relaxed);
+        uint32_t child = node_alloc(c, l, 1);
         c->nodes[node] = (bih_node){{pad_lo(c, blo[best]), pad_hi(c, bhi[best])}, child << BIH_TAG_BITS | BIH_CLIP | (uint32_t)best};
         nb[best] = blo[best], nb[3 + best] = bhi[best];
         node = child;
@@ -244,12 +281,12 @@ static uint32_t clip_empty(bih_ctx *c, uint32_t node, float nb[6], vf4 blo, vf4 
     return node;
 }
 
-static void split(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, float sb[6], cbounds cb, float nb[6],
+static void split(bih_ctx *c, bih_local *l, uint32_t node, uint32_t begin, uint32_t end, float sb[6], cbounds cb, float nb[6],
                   vf4 blo, vf4 bhi, uint32_t depth, bool spawn) {
     for (;;) {
-        node = clip_empty(c, node, nb, blo, bhi);
+        node = clip_empty(c, l, node, nb, blo, bhi);
         if (end - begin <= BIH_LEAF_SIZE || depth >= BIH_MAX_DEPTH) {
-            make_leaf(c, node, begin, end, depth);
+            make_leaf(c, l, node, begin, end, depth);
             return;
         }
         /* a subtree small enough is a task (or, the task list full, built here) */
@@ -261,37 +298,45 @@ static void split(bih_ctx *c, uint32_t node, uint32_t begin, uint32_t end, float
         }
         /* Halve the split box until its plane parts the centroids. When every centroid lies on one
          * side the paper halves the box and partitions again; the centroids' bounds tell the
-         * outcome of that pass in advance, so the same planes are found without it. */
+         * outcome of that pass in advance, so the same planes are found without it. The bounds a
+         * parent's partition gives its children are not tight (side_cbounds); when a plane they
+         * allow leaves a side empty, that pass gives the range's own bounds, and the halving goes on
+         * from them. */
         int axis = 0;
-        float plane = 0.0f;
-        for (int tries = 0;; tries++) {
-            float e0 = sb[3] - sb[0], e1 = sb[4] - sb[1], e2 = sb[5] - sb[2];
-            axis = e1 > e0 ? (e2 > e1 ? 2 : 1) : (e2 > e0 ? 2 : 0);
-            plane = 0.5f * (sb[axis] + sb[3 + axis]);
-            /* nothing left to halve (equal centroids): a leaf of them all */
-            if (tries >= 64 || !(plane > sb[axis] && plane < sb[3 + axis])) {
-                make_leaf(c, node, begin, end, depth);
-                return;
+        float plane = 0.0f, twice = 0.0f;
+        sides sd;
+        uint32_t i;
+        for (;;) {
+            for (int tries = 0;; tries++) {
+                float e0 = sb[3] - sb[0], e1 = sb[4] - sb[1], e2 = sb[5] - sb[2];
+                axis = e1 > e0 ? (e2 > e1 ? 2 : 1) : (e2 > e0 ? 2 : 0);
+                plane = 0.5f * (sb[axis] + sb[3 + axis]);
+                /* nothing left to halve (equal centroids): a leaf of them all */
+                if (tries >= 64 || !(plane > sb[axis] && plane < sb[3 + axis])) {
+                    make_leaf(c, l, node, begin, end, depth);
+                    return;
+                }
+                twice = 2.0f * plane;
+                if (cb.lo[axis] >= twice) sb[axis] = plane;          /* all on the right */
+                else if (cb.hi[axis] < twice) sb[3 + axis] = plane;  /* all on the left */
+                else break;
             }
-            float twice = 2.0f * plane;
-            if (cb.lo[axis] >= twice) sb[axis] = plane;          /* all on the right */
-            else if (cb.hi[axis] < twice) sb[3 + axis] = plane;  /* all on the left */
-            else break;
+            sd = sides_empty();
+            i = spawn && c->pool && end - begin >= BIH_PAR_MIN ? partition_par(c->pool, c->p, begin, end, axis, twice, &sd)
+                                                               : partition(c->p, begin, end, axis, twice, &sd);
+            if (i != begin && i != end) break;
+            cb = sd.all; /* tight now: the next halvings need no pass */
         }
-        float twice = 2.0f * plane;
-        sides sd = sides_empty();
-        uint32_t i = spawn && c->pool && end - begin >= BIH_PAR_MIN ? partition_par(c->pool, c->p, begin, end, axis, twice, &sd)
-                                                                    : partition(c->p, begin, end, axis, twice, &sd);
-        uint32_t child = atomic_fetch_add_explicit(&c->next, 2, memory_order_relaxed);
+        uint32_t child = node_alloc(c, l, 2);
         c->nodes[node] = (bih_node){{pad_hi(c, sd.lhi[axis]), pad_lo(c, sd.rlo[axis])}, child << BIH_TAG_BITS | (uint32_t)axis};
         float sl[6], sr[6], nl[6];
         memcpy(sl, sb, sizeof sl), memcpy(sr, sb, sizeof sr), memcpy(nl, nb, sizeof nl);
         sl[3 + axis] = plane, sr[axis] = plane;
         if (sd.lhi[axis] < nl[3 + axis]) nl[3 + axis] = sd.lhi[axis];
         if (sd.rlo[axis] > nb[axis]) nb[axis] = sd.rlo[axis];
-        split(c, child, begin, i, sl, sd.cl, nl, sd.llo, sd.lhi, depth + 1, spawn);
+        split(c, l, child, begin, i, sl, side_cbounds(&sd, true, axis, twice), nl, sd.llo, sd.lhi, depth + 1, spawn);
         /* the right side in this frame (a loop, not a call: the recursion's depth is the left path) */
-        node = child + 1, begin = i, depth = depth + 1, cb = sd.cr, blo = sd.rlo, bhi = sd.rhi;
+        node = child + 1, begin = i, depth = depth + 1, cb = side_cbounds(&sd, false, axis, twice), blo = sd.rlo, bhi = sd.rhi;
         memcpy(sb, sr, sizeof sr);
     }
 }
@@ -304,10 +349,9 @@ static int task_larger(const void *a, const void *b) {
 }
 
 static void task_run(void *user, uint32_t index, uint32_t thread) {
-    (void)thread;
     bih_ctx *c = user;
     bih_task t = c->tasks[index];
-    split(c, t.node, t.begin, t.end, t.sb, (cbounds){t.clo, t.chi}, t.nb, t.blo, t.bhi, t.depth, false);
+    split(c, &c->local[thread], t.node, t.begin, t.end, t.sb, (cbounds){t.clo, t.chi}, t.nb, t.blo, t.bhi, t.depth, false);
 }
 
 
@@ -381,19 +425,25 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     memset(out, 0, sizeof *out);
     uint32_t n = in->count;
     bih_ctx c = {.in = in, .p = in->boxes};
-    /* real nodes: 2n - 1; clip nodes: at most one in front of each (clip_empty). They are copied
-     * to an allocation of their count (about n on the shared scenes) when the leaves are filled. */
-    size_t node_bytes = ((size_t)4 * n + 1) * sizeof(bih_node);
+    uint32_t threads = pool && n >= 4096 ? (uint32_t)sys_pool_threads(pool) : 1;
+    if (threads < 2) pool = NULL, threads = 1;
+    /* real nodes: 2n - 1; clip nodes: at most one in front of each (clip_empty); the chunks (each
+     * gives at least BIH_NODE_CHUNK - 1 before the next, and each thread's last one). They are
+     * copied to an allocation of their count (about n on the shared scenes) when the leaves are
+     * filled. */
+    size_t node_cap = 1 + (size_t)BIH_NODE_CHUNK * ((size_t)4 * n / (BIH_NODE_CHUNK - 1) + 1 + threads);
+    size_t node_bytes = node_cap * sizeof(bih_node), local_bytes = threads * sizeof(bih_local);
     c.nodes = sys_alloc(a, node_bytes);
     c.block_of = sys_alloc(a, (size_t)n * sizeof(uint32_t) + 4);
-    uint32_t threads = pool && n >= 4096 ? (uint32_t)sys_pool_threads(pool) : 1;
-    if (threads < 2) pool = NULL;
+    c.local = sys_alloc(a, local_bytes);
+    if (c.local) memset(c.local, 0, local_bytes);
     c.task_max = n / (BIH_TASK_SHARE * threads);
     c.task_cap = 4096;
     c.pool = pool;
     c.tasks = pool ? sys_alloc(a, c.task_cap * sizeof(bih_task)) : NULL;
-    if (!c.nodes || !c.block_of || (pool && !c.tasks)) {
+    if (!c.nodes || !c.block_of || !c.local || (pool && !c.tasks)) {
         sys_free(a, c.nodes, node_bytes), sys_free(a, c.block_of, (size_t)n * sizeof(uint32_t) + 4);
+        sys_free(a, c.local, local_bytes);
         sys_free(a, c.tasks, c.task_cap * sizeof(bih_task));
         return false;
     }
@@ -405,20 +455,22 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     memcpy(out->bounds, sb, sizeof sb);
     c.abs_pad = box_pad_abs(sb, sb + 3);
     atomic_store(&c.next, 1);
-    cbounds cb = {vf4_splat(INFINITY), vf4_splat(-INFINITY)};
-    for (uint32_t i = 0; i < n; i++) {
-        vf4 c2 = in->boxes[i].lo + in->boxes[i].hi;
-        cb.lo = vf4_min(cb.lo, c2), cb.hi = vf4_max(cb.hi, c2);
-    }
     float nb[6];
     memcpy(nb, sb, sizeof nb);
     vf4 blo = {b.lo.x, b.lo.y, b.lo.z, 0.0f}, bhi = {b.hi.x, b.hi.y, b.hi.z, 0.0f};
-    split(&c, 0, 0, n, sb, cb, nb, blo, bhi, 1, pool != NULL);
+    cbounds cb = {vf4_splat(2.0f) * blo, vf4_splat(2.0f) * bhi}; /* not tight: see split */
+    split(&c, &c.local[0], 0, 0, n, sb, cb, nb, blo, bhi, 1, pool != NULL);
     if (pool && c.task_count) {
         qsort(c.tasks, c.task_count, sizeof *c.tasks, task_larger);
         sys_pool_parallel_for(pool, c.task_count, task_run, &c);
     }
-    uint32_t node_count = atomic_load(&c.next);
+    uint32_t node_count = atomic_load(&c.next), depth = 0, unused = 0;
+    uint64_t leaves = 0;
+    for (uint32_t t = 0; t < threads; t++) {
+        bih_local *l = &c.local[t];
+        make_unused(&c, l, l->next, l->end);
+        depth = l->depth > depth ? l->depth : depth, unused += l->unused, leaves += l->leaves;
+    }
     if (c.abs_pad != 0.0f)
         for (int k = 0; k < 3; k++) out->bounds[k] = box_pad_lo(out->bounds[k], c.abs_pad), out->bounds[3 + k] = box_pad_hi(out->bounds[3 + k], c.abs_pad);
     uint32_t blocks = plan_blocks(&c, n);
@@ -434,6 +486,7 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     sys_free(a, c.block_of, (size_t)n * sizeof(uint32_t) + 4);
     sys_free(a, c.tasks, c.task_cap * sizeof(bih_task));
     sys_free(a, c.nodes, node_bytes);
+    sys_free(a, c.local, local_bytes);
     if (!ok) {
         sys_free(a, c.out, out_bytes);
         if (c.blocks) sys_free(a, c.blocks, ((size_t)blocks + 1) * sizeof(tri4));
@@ -443,10 +496,10 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
     out->node_bytes = out_bytes;
     out->blocks = c.blocks;
     out->block_count = blocks;
-    out->root_depth = atomic_load(&c.depth);
-    out->nodes_total = node_count;
-    out->leaves = atomic_load(&c.leaves);
-    out->inner_nodes = node_count - out->leaves;
+    out->root_depth = depth;
+    out->nodes_total = node_count - unused;
+    out->leaves = leaves;
+    out->inner_nodes = out->nodes_total - leaves;
     out->tri_refs = n;
     out->sah_cost = 0.0; /* the global heuristic does not estimate it */
     return true;

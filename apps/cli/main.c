@@ -33,10 +33,9 @@ int main(int argc, char **argv) {
      * rp_atomic_open) instead of killing the process half-way through. */
     signal(SIGXFSZ, SIG_IGN);
     const char *cmd = argv[1];
-    /* loads and builds fault in thousands of fresh pages: 2 MiB ones cost a fraction (heap.c) */
-    if (strcmp(cmd, "render") == 0 || strcmp(cmd, "info") == 0 || strcmp(cmd, "bench") == 0 ||
-        strcmp(cmd, "animate") == 0 || strcmp(cmd, "view") == 0)
-        cli_heap_hugepages((size_t)256 << 20);
+    /* loads and builds fault in thousands of fresh pages: 2 MiB ones cost a fraction (heap.c);
+     * for the commands that allocate nothing much it is address space only */
+    cli_heap_hugepages((size_t)256 << 20);
     if (strcmp(cmd, "render") == 0) return cli_render(argc - 1, argv + 1);
     if (strcmp(cmd, "info") == 0) return cli_info(argc - 1, argv + 1);
     if (strcmp(cmd, "bench") == 0) return cli_bench(argc - 1, argv + 1);

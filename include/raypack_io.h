@@ -43,9 +43,11 @@ typedef struct rp_material_data {
     float ior;          /* index of refraction (MTL Ni, NFF index_of_refraction); 1 if absent */
     int32_t illum;      /* MTL illum model; -1 for NFF/AFF/PLY */
     int32_t map_kd;     /* index into textures of the diffuse texture, or -1 */
-    float ka[3];        /* ambient (MTL Ka); Ka above 1 is emission by tinyobjloader's convention */
+    float ka[3];        /* ambient (MTL Ka, AFF fm); an MTL Ka above 1 is emission by tinyobjloader's convention */
     int32_t map_roughness; /* 1 + index into textures of a roughness map (MTL map_Pr), 0 if none */
     int32_t map_normal;    /* 1 + index into textures of a tangent-space normal map (MTL norm), 0 if none */
+    int32_t map_ke;        /* 1 + index into textures multiplying ke (MTL map_Ke, glTF emissive texture,
+                            * AFF's textured ambient-only surfaces), 0 if none */
 } rp_material_data;
 
 /* Image texture, decoded to 8-bit RGB (sRGB encoded, as stored in the file). */

@@ -70,6 +70,8 @@ typedef struct rp_material {
     float ke[3];
     int32_t roughness_texture; /* physically based: roughness map (its red channel, linear), or -1 */
     int32_t normal_texture;    /* physically based: tangent-space normal map, or -1 */
+    int32_t emission_texture;  /* texture multiplying ke (sRGB decoded), or -1; such an emitter is not
+                                * sampled as a light: it adds radiance where rays hit it */
     union {
         rp_mirror_params mirror;
         rp_dielectric_params dielectric;

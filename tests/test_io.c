@@ -391,7 +391,8 @@ static void test_aff(void) {
                (double)p[2]);
         const rp_material_data *m = &s.materials[s.tri_materials[0]];
         CHECK(m->map_kd == 0 && m->kd[1] == 0.6f && m->ks[0] == 0.2f && m->kr[0] == 0.2f && m->kt[0] == 0.5f &&
-              m->ns == 20.0f && m->ior == 1.3f);
+              m->ns == 20.0f && m->ior == 1.3f && m->ka[0] == 0.1f);
+        CHECK(m->ke[0] == 0.0f && m->map_ke == 0); /* ambient beside diffuse: no emission */
         CHECK(s.normal_indices && s.texcoord_indices);
         /* pp inside `x mover`: at the animation's start (a 0 ...) the spline is at key 1, (0,0,8)
          * (BART: key 0 only shapes the tangent) */
@@ -405,6 +406,38 @@ static void test_aff(void) {
     if (s.sphere_count == 1) CHECK(near(s.spheres[0].center[0], 10) && near(s.spheres[0].center[1], 2) && near(s.spheres[0].radius, 1));
     if (s.cone_count == 1) CHECK(near(s.cones[0].base[2], 8) && near(s.cones[0].apex[1], 1) && s.cones[0].apex_radius == 0.5f);
     rp_scene_data_free(&s);
+}
+
+/* BART's ambient-only surfaces (the kitchen's garden: `fm` with ambient and nothing else) emit
+ * `am` x ambient, textured as the surface is, wherever `am` stands in the file; without `am` they
+ * stay dark, as in BART's own shading. */
+static void test_aff_ambient(void) {
+    write_text("aff/amb.aff", "fm 0.4 0.5 0.6  0 0 0  0 0 0  0 0 0\n"
+                              "tt checker.ppm\n 0 0 0 0 0\n 1 0 0 1 0\n 0 1 0 0 1\n"
+                              "p 3\n 0 0 1\n 1 0 1\n 0 1 1\n"
+                              "am 2 2 2\n");
+    write_text("aff/amb_none.aff", "fm 0.4 0.5 0.6  0 0 0  0 0 0  0 0 0\np 3\n 0 0 1\n 1 0 1\n 0 1 1\n");
+    rp_scene_data s;
+    char err[512];
+    bool ok = load("aff/amb.aff", &s, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (ok && s.triangle_count == 2) {
+        const rp_material_data *t = &s.materials[s.tri_materials[0]], *p = &s.materials[s.tri_materials[1]];
+        CHECKF(near(t->ke[0], 0.8f) && near(t->ke[1], 1.0f) && near(t->ke[2], 1.2f) && t->map_ke == t->map_kd + 1 &&
+                   t->map_kd >= 0,
+               "textured ambient surface: ke %g %g %g map_ke %d map_kd %d", (double)t->ke[0], (double)t->ke[1],
+               (double)t->ke[2], t->map_ke, t->map_kd);
+        CHECK(near(p->ke[2], 1.2f) && p->map_ke == 0 && p->ka[1] == 0.5f);
+    } else {
+        CHECKF(false, "amb.aff: %zu triangles", ok ? s.triangle_count : 0);
+    }
+    if (ok) rp_scene_data_free(&s);
+    ok = load("aff/amb_none.aff", &s, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (ok) {
+        CHECK(s.triangle_count == 1 && s.materials[s.tri_materials[0]].ke[0] == 0.0f);
+        rp_scene_data_free(&s);
+    }
 }
 
 /* ---- broken files ----------------------------------------------------------------------------- */
@@ -635,6 +668,7 @@ int main(void) {
     test_points();
     test_nff_concave();
     test_aff();
+    test_aff_ambient();
     test_errors();
     test_truncations();
 

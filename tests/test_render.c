@@ -197,8 +197,79 @@ static void test_progressive(const char *name, const rp_scene_data *data) {
     rp_device_release(dev);
 }
 
+/* An emission texture (MTL map_Ke) multiplies Ke: a quad facing the camera, Ke 2 x a 4x1 texture
+ * (red, red, blue, blue), shows 2 x the texel's linear colour on each half, in Whitted and path
+ * tracing alike; only its front emits under path tracing; it is not sampled as a light, while the
+ * same quad without the texture is (two triangle lights). */
+static void test_emission_texture(void) {
+    char ppm[512], mtl[512], obj[512], obj2[512], err[512] = "";
+    tmp_path(ppm, sizeof ppm, "emit.ppm");
+    tmp_path(mtl, sizeof mtl, "emit.mtl");
+    tmp_path(obj, sizeof obj, "emit.obj");
+    tmp_path(obj2, sizeof obj2, "emit_plain.obj");
+    FILE *fp = fopen(ppm, "wb");
+    CHECK(fp != NULL);
+    if (!fp) return;
+    static const unsigned char tex[12] = {255, 0, 0, 255, 0, 0, 0, 0, 255, 0, 0, 255};
+    fprintf(fp, "P6\n4 1\n255\n");
+    fwrite(tex, 1, sizeof tex, fp);
+    fclose(fp);
+    fp = fopen(mtl, "w");
+    if (fp) {
+        fprintf(fp, "newmtl glow\nKd 0 0 0\nKe 2 2 2\nmap_Ke emit.ppm\nnewmtl plain\nKd 0 0 0\nKe 2 2 2\n");
+        fclose(fp);
+    }
+    for (int k = 0; k < 2; k++) {
+        fp = fopen(k ? obj2 : obj, "w");
+        if (!fp) continue;
+        fprintf(fp, "mtllib emit.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                    "usemtl %s\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n",
+                k ? "plain" : "glow");
+        fclose(fp);
+    }
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
+    CHECK(dev != NULL);
+    if (!dev) return;
+    for (int k = 0; k < 2; k++) {
+        rp_scene_data d;
+        bool ok = rp_scene_data_load(k ? obj2 : obj, &d, err, sizeof err);
+        CHECKF(ok, "%s", err);
+        if (!ok) continue;
+        CHECK(d.material_count >= 1 && (k ? d.materials[d.tri_materials[0]].map_ke == 0 : d.materials[d.tri_materials[0]].map_ke == 1));
+        rp_render_scene *rs = rp_render_scene_new(dev, &d, NULL, err, sizeof err);
+        CHECKF(rs != NULL, "%s", err);
+        if (rs) {
+            size_t nl = 99;
+            rp_render_scene_lights(rs, &nl);
+            CHECKF(nl == (k ? 2u : 0u), "%s: %zu lights", k ? "plain emitter" : "textured emitter", nl);
+            float *px = malloc(sizeof(float) * W * H * 3);
+            for (int pass = 0; k == 0 && px && pass < 3; pass++) {
+                /* whitted and path from the front, path from behind */
+                rp_camera cam = {.type = RP_CAMERA_PINHOLE,
+                                 .pinhole = {.eye = {0, 0, pass == 2 ? -3.0f : 3.0f}, .up = {0, 1, 0}, .fov_deg = 30}};
+                rp_render_desc desc = {.width = W, .height = H, .spp = 2, .camera = &cam,
+                                       .integrator = pass == 0 ? RP_INTEGRATOR_WHITTED : RP_INTEGRATOR_PATH};
+                CHECK(rp_render(rs, &desc, px, NULL));
+                /* a quarter of the width in from either side: u = 0.23 and 0.77 (mirrored from behind) */
+                const float *l = px + 3 * ((size_t)(H / 2) * W + W / 4), *r = px + 3 * ((size_t)(H / 2) * W + 3 * W / 4);
+                float want = pass == 2 ? 0.0f : 2.0f;
+                const float *red = pass == 2 ? r : l, *blue = pass == 2 ? l : r;
+                CHECKF(fabsf(red[0] - want) < 1e-4f && red[1] == 0.0f && fabsf(red[2]) < 1e-4f && fabsf(blue[0]) < 1e-4f &&
+                           fabsf(blue[2] - want) < 1e-4f,
+                       "pass %d: red side %g %g %g, blue side %g %g %g, want %g on each", pass, red[0], red[1], red[2],
+                       blue[0], blue[1], blue[2], want);
+            }
+            free(px);
+            rp_render_scene_release(rs);
+        }
+        rp_scene_data_free(&d);
+    }
+    rp_device_release(dev);
+}
+
 int main(void) {
     test_analytic();
+    test_emission_texture();
     rp_scene_data room;
     CHECK(rp_default_scene(&room));
     test_scene("default_room", &room);

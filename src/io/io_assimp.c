@@ -136,7 +136,8 @@ static int32_t material_texture(load_state *s, const struct aiMaterial *am, enum
  * rp_material_data grows metallic, roughness and normal maps). Until physically based materials
  * land, glTF's metallic-roughness model is read as: base colour factor (and base colour texture,
  * which multiplies it, as in glTF) -> kd, the diffuse albedo; emissive factor -> ke (emitted
- * radiance, DESIGN.md); metallic, roughness, normal, occlusion and emissive textures are not used.
+ * radiance, DESIGN.md), times the emissive texture (map_ke); metallic, roughness, normal and
+ * occlusion textures are not used.
  * Formats without base colour give their diffuse colour and texture. Returns false after an error. */
 static bool material_from_assimp(load_state *s, const struct aiMaterial *am, rp_material_data *m) {
     struct aiString name;
@@ -158,6 +159,9 @@ static bool material_from_assimp(load_state *s, const struct aiMaterial *am, rp_
     if (tex == -1) tex = material_texture(s, am, aiTextureType_DIFFUSE, m->name);
     if (tex == -2) return false;
     m->map_kd = tex;
+    int32_t etex = material_texture(s, am, aiTextureType_EMISSIVE, m->name); /* glTF: multiplies the factor */
+    if (etex == -2) return false;
+    m->map_ke = etex + 1;
     return true;
 }
 

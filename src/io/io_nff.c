@@ -67,6 +67,7 @@ typedef struct nff_state {
     bool has_range;
     float start, end;
     int32_t frames;
+    float ambient[3]; /* `am`: the global ambient light (0 when the file gives none) */
 } nff_state;
 
 typedef struct nff_file {
@@ -544,13 +545,14 @@ static bool nff_fill(nff_file *f) {
     return nff_add_material(f, &m);
 }
 
-/* `fm amb(3) diff(3) spec(3) Shine T ior` (AFF): ks = kr = spec, kt = T; ambient has no field. */
+/* `fm amb(3) diff(3) spec(3) Shine T ior` (AFF): ka = amb, ks = kr = spec, kt = T. */
 static bool nff_fill_material(nff_file *f) {
     float v[12];
     if (!nff_floats(f, v, 12, "fm")) return false;
     rp_material_data m;
     builder_material_defaults(&m, "");
     for (int i = 0; i < 3; i++) {
+        m.ka[i] = v[i];
         m.kd[i] = v[3 + i];
         m.ks[i] = m.kr[i] = v[6 + i];
         m.kt[i] = v[10];
@@ -1449,10 +1451,7 @@ static bool nff_command(nff_file *f) {
         if (c0 == 'x' && c1 == 's') return nff_transform(f, true);
         if (c0 == 't' && c1 == 't') return nff_textured_triangle(f, false);
         if (c0 == 'l' && c1 == 'a') return nff_light(f, true);
-        if (c0 == 'a' && c1 == 'm') {
-            float v[3]; /* global ambient: no field in rp_scene_data */
-            return nff_floats(f, v, 3, "am");
-        }
+        if (c0 == 'a' && c1 == 'm') return nff_floats(f, f->st->ambient, 3, "am");
         break;
     case 3:
         if (memcmp(p, "ttp", 3) == 0) return nff_textured_triangle(f, true);
@@ -1523,6 +1522,25 @@ static bool nff_parse(io_ctx *ctx, nff_state *st, const char *path, const nff_fi
     return ok;
 }
 
+/* BART's shading adds `am` x the material's ambient colour (x its texture) to every surface. A
+ * surface that has nothing else (no diffuse, specular or transmission: the kitchen's garden seen
+ * through the windows) is a picture that lights itself, so it becomes an emitter of that radiance,
+ * textured as the surface is. The ambient term of the other surfaces is not carried over (DESIGN.md:
+ * no ambient term in a physically based image; Whitted keeps its own). */
+static void nff_ambient_emitters(io_ctx *ctx, const nff_state *st) {
+    for (size_t i = 0; i < ctx->b.material_n; i++) {
+        rp_material_data *m = &ctx->b.materials[i];
+        bool other = false, ambient = false;
+        for (int c = 0; c < 3; c++) {
+            other |= m->kd[c] > 0.0f || m->ks[c] > 0.0f || m->kr[c] > 0.0f || m->kt[c] > 0.0f || m->ke[c] > 0.0f;
+            ambient |= m->ka[c] * st->ambient[c] > 0.0f;
+        }
+        if (other || !ambient || m->illum >= 0) continue;
+        for (int c = 0; c < 3; c++) m->ke[c] = fmaxf(m->ka[c] * st->ambient[c], 0.0f);
+        if (m->map_kd >= 0) m->map_ke = m->map_kd + 1;
+    }
+}
+
 bool nff_load(io_ctx *ctx, const char *path) {
     nff_state *st = io_calloc(1, sizeof *st);
     if (!st) {
@@ -1534,6 +1552,7 @@ bool nff_load(io_ctx *ctx, const char *path) {
     xf_identity(&st->stack[0].xf);
     st->stack[0].anim = -1;
     bool ok = nff_parse(ctx, st, path, NULL, path);
+    if (ok) nff_ambient_emitters(ctx, st);
     if (ok) {
         char shown[IO_PATH_MAX + 256];
         vfs_display(&ctx->vfs, path, shown, sizeof shown);

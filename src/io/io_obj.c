@@ -148,6 +148,7 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
                 return io_error(ctx, f.shown, f.line, "illum: expected an integer 0-10");
             m->illum = (int32_t)il;
         } else if ((kw == 6 && strncmp(p, "map_Kd", 6) == 0) || (kw == 6 && strncmp(p, "map_Pr", 6) == 0) ||
+                   (kw == 6 && strncmp(p, "map_Ke", 6) == 0) ||
                    (kw == 4 && strncmp(p, "norm", 4) == 0)) {
             /* Options (-s 1 1 1, -clamp on, ...) come before the file name; the name is the rest. */
             const char *r = skip_blank(q);
@@ -176,6 +177,7 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
             if (t == IO_NONE) return false;
             if (p[0] == 'n') m->map_normal = (int32_t)t + 1;           /* PBR extension: tangent-space normals */
             else if (p[5] == 'r') m->map_roughness = (int32_t)t + 1;   /* PBR extension: roughness */
+            else if (p[5] == 'e') m->map_ke = (int32_t)t + 1;          /* emission texture */
             else m->map_kd = (int32_t)t;
         }
         /* Everything else (map_Ks, bump, PBR extensions...) has no field in rp_material_data. */

@@ -322,6 +322,12 @@ static float light_power(const rp_render_scene *s, const rp_light_source *l) {
     return 0.0f;
 }
 
+/* Emissive triangles become area lights, except textured emitters (their radiance varies over the
+ * triangle): rays that hit them add their radiance, next-event estimation does not aim at them. */
+static bool sampled_emitter(const rp_render_scene *s, uint32_t m) {
+    return !v3_is_zero(material_ke(s, m)) && rp_render_scene_material(s, m)->emission_texture < 0;
+}
+
 bool light_scene_init(rp_render_scene *s, const rp_render_scene_desc *desc, char *err, size_t err_size) {
     const rp_scene_data *d = s->data;
     const rp_bounds *b = &s->bounds;
@@ -339,7 +345,7 @@ bool light_scene_init(rp_render_scene *s, const rp_render_scene_desc *desc, char
     for (size_t i = 0; i < d->triangle_count; i++) {
         s->tri_light[i] = -1;
         uint32_t m = d->tri_materials ? d->tri_materials[i] : 0;
-        if (!v3_is_zero(material_ke(s, m))) emissive++;
+        if (sampled_emitter(s, m)) emissive++;
     }
     bool env = desc && (desc->environment || !v3_is_zero(v3_load(desc->environment_scale)));
     s->pb_lights = calloc(n + emissive + 1, sizeof *s->pb_lights);
@@ -347,8 +353,8 @@ bool light_scene_init(rp_render_scene *s, const rp_render_scene_desc *desc, char
     size_t k = 0;
     for (size_t i = 0; i < d->triangle_count; i++) {
         uint32_t m = d->tri_materials ? d->tri_materials[i] : 0;
+        if (!sampled_emitter(s, m)) continue;
         v3 ke = material_ke(s, m);
-        if (v3_is_zero(ke)) continue;
         rp_light_source *l = &s->pb_lights[k];
         l->type = RP_LIGHT_SOURCE_TRIANGLE;
         for (int c = 0; c < 3; c++) memcpy(l->triangle.p[c], d->positions + 3 * (size_t)d->indices[3 * i + (size_t)c], 3 * sizeof(float));

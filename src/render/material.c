@@ -18,6 +18,7 @@ rp_material rp_material_from_data(const rp_material_data *d) {
     m.texture = d->map_kd;
     m.roughness_texture = d->map_roughness - 1;
     m.normal_texture = d->map_normal - 1;
+    m.emission_texture = d->map_ke - 1;
     if (any_positive(d->kt)) {
         m.type = RP_MATERIAL_DIELECTRIC;
         memcpy(m.dielectric.kt, d->kt, sizeof m.dielectric.kt);
@@ -99,7 +100,10 @@ float material_fresnel(float cos_i, float eta) {
  *   - emission: MTL Ke is the emitted radiance on the front side (that of the geometric normal,
  *     counter-clockwise winding); a material with Ke 0 and Ka above 1 in some channel emits Ka
  *     instead (the classic cornell_box's `Ka 20` light, tinyobjloader's and Mitsuba's importers'
- *     convention); Ka at most 1 is an ambient colour and ignored, as there is no ambient term. */
+ *     convention; MTL only); Ka at most 1 is an ambient colour and ignored, as there is no ambient
+ *     term. An emission texture (MTL map_Ke, glTF's emissive texture, AFF's textured ambient-only
+ *     surfaces) multiplies Ke; such a surface is not sampled as a light (light.c), it adds its
+ *     radiance where a ray hits it, which path tracing weighs in full (no MIS partner). */
 
 static float clamp01(float x) { return fminf(fmaxf(x, 0.0f), 1.0f); }
 static v3 clamp3(v3 c) { return v3_make(clamp01(c.x), clamp01(c.y), clamp01(c.z)); }
@@ -148,16 +152,21 @@ render_bsdf material_bsdf(const rp_render_scene *s, const rp_material *m, const 
 v3 material_ke(const rp_render_scene *s, uint32_t material) {
     const rp_material *m = rp_render_scene_material(s, material);
     v3 ke = v3_load(m->ke);
-    if (v3_is_zero(ke) && material < s->data->material_count) {
+    if (v3_is_zero(ke) && material < s->data->material_count && s->data->materials[material].illum >= 0) {
         v3 ka = v3_load(s->data->materials[material].ka);
         if (v3_max_abs(ka) > 1.0f) ke = ka;
     }
     return v3_make(fmaxf(ke.x, 0.0f), fmaxf(ke.y, 0.0f), fmaxf(ke.z, 0.0f));
 }
 
+v3 material_ke_textured(const rp_render_scene *s, const rp_material *m, v3 ke, const render_surface *surf) {
+    if (m->emission_texture < 0 || !surf->has_uv) return ke;
+    return v3_mul(ke, material_texture(s, m->emission_texture, surf->uv));
+}
+
 v3 material_emission(const rp_render_scene *s, uint32_t material, const render_surface *surf) {
     if (!surf->entering) return v3_make(0, 0, 0);
-    return material_ke(s, material);
+    return material_ke_textured(s, rp_render_scene_material(s, material), material_ke(s, material), surf);
 }
 
 v3 material_texture_linear(const rp_render_scene *s, int32_t texture, const float uv[2]) {

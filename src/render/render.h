@@ -334,6 +334,8 @@ void material_normal_map(const rp_render_scene *s, const rp_material *m, render_
 v3 material_emission(const rp_render_scene *s, uint32_t material, const render_surface *surf);
 /* Emitted radiance of material i on its front side, whatever the side it is seen from. */
 v3 material_ke(const rp_render_scene *s, uint32_t material);
+/* ke times the material's emission texture at the hit (ke itself where it has none). */
+v3 material_ke_textured(const rp_render_scene *s, const rp_material *m, v3 ke, const render_surface *surf);
 
 /* ---- lights (light.c) ---- */
 

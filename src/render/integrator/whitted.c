@@ -32,7 +32,7 @@ void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_hit *hit
     const rp_material *m = &s->materials[sf.material];
     v3 dir = v3_make(ray->dir_x, ray->dir_y, ray->dir_z);
     v3 kd = material_albedo(s, m, &sf);
-    o->color = v3_add(v3_load(m->ke), v3_scale(kd, f->desc.ambient));
+    o->color = v3_add(material_ke_textured(s, m, v3_load(m->ke), &sf), v3_scale(kd, f->desc.ambient));
     /* reflect_depth / refract_depth: resolved by rp_render (positive, or -1 for none) */
     bool more_r = depth < f->desc.reflect_depth, more_t = depth < f->desc.refract_depth;
     float eps = ray_offset(s);

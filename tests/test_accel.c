@@ -490,6 +490,16 @@ int main(void) {
         spheres[4 * i] = 0.1f * (float)i, spheres[4 * i + 1] = 0.5f, spheres[4 * i + 2] = 0.5f, spheres[4 * i + 3] = 0.05f;
     check_mesh("soup and spheres", &soup, small ? 512 : 2048, false, spheres, 8);
     test_mesh_free(&soup);
+    /* the BIH's radix build: thousands of copies of three triangles (equal centroids, so equal
+     * codes: leaves of hundreds), past the size where the build runs on all threads; and a scene
+     * flat in z (an axis that is never halved) */
+    test_mesh stack = test_mesh_soup(6000, 0.3f, 5);
+    for (uint32_t t = 3; t < stack.nt; t++) memcpy(&stack.v[9 * t], &stack.v[9 * (t % 3)], 9 * sizeof(float));
+    check_mesh("three triangles stacked", &stack, small ? 512 : 2048, true, NULL, 0);
+    test_mesh_free(&stack);
+    test_mesh flat = flat_mesh();
+    check_mesh("flat", &flat, small ? 512 : 2048, true, NULL, 0);
+    test_mesh_free(&flat);
     test_mesh bx = boxes_mesh(small ? 4 : 7);
     check_mesh("boxes", &bx, small ? 512 : 4096, true, NULL, 0);
     test_mesh_free(&bx);

@@ -694,7 +694,10 @@ int cli_render(int argc, char **argv) {
                                    o.integrator == RP_INTEGRATOR_IR);
     size_t pb_lights = 0;
     rp_render_scene_lights(scene, &pb_lights);
-    if (physical && pb_lights == 0)
+    bool emits = false; /* textured emitters are not sampled lights, but light the scene */
+    for (size_t i = 0; i < data.material_count && !emits; i++)
+        for (int c = 0; c < 3; c++) emits |= data.materials[i].ke[c] > 0.0f && data.materials[i].map_ke > 0;
+    if (physical && pb_lights == 0 && !emits)
         fprintf(stderr, "raypack render: warning: %s has no light (no emissive material, no point light; no --env): "
                         "the physically based image is black, as no fallback light is added\n",
                 builtin ? "the built-in room" : o.scene);

@@ -178,6 +178,18 @@ static void check_scene(const char *name, rp_scene_data *s) {
         }
     }
 
+    if (s->material_count) { /* a texture index past the textures, in each of a material's maps */
+        rp_material_data keep = s->materials[0];
+        int32_t *maps[3] = {&s->materials[0].map_roughness, &s->materials[0].map_normal, &s->materials[0].map_ke};
+        for (int k = 0; k < 3; k++) {
+            *maps[k] = (int32_t)s->texture_count + 1;
+            check_bad_animation(name, s, "material textures");
+            s->materials[0] = keep;
+        }
+        s->materials[0].map_kd = (int32_t)s->texture_count;
+        check_bad_animation(name, s, "material textures");
+        s->materials[0] = keep;
+    }
     if (s->volume && s->volume->brick_count) {
         rp_volume_data *v = s->volume;
         size_t cells = (size_t)v->dims[0] * v->dims[1] * v->dims[2], k = 0;

@@ -181,7 +181,6 @@ typedef struct rx_ctx {
     int bits[3];
     uint8_t axis_of_bit[64];
     uint64_t spread[3][8][256]; /* a byte of an axis' quantized value -> its code bits */
-    uint64_t (*cmin)[2];        /* per chunk: its codes' min and max */
     uint32_t (*hist)[256];      /* per chunk: a parallel pass's counts, then offsets */
     uint32_t pb, pe;            /* a parallel pass's positions, its buffer and digit */
     int psrc, shift;
@@ -240,19 +239,20 @@ static void rx_chunk(const rx_ctx *x, uint32_t index, uint32_t *b, uint32_t *e) 
     *b = x->pb + (uint32_t)(n * index / x->chunks), *e = x->pb + (uint32_t)(n * (index + 1) / x->chunks);
 }
 
-/* Codes of a chunk of the boxes, and their min and max. */
+/* Codes of a chunk of the boxes. */
 static void rx_code_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     rx_ctx *x = user;
     uint32_t b, e;
     rx_chunk(x, index, &b, &e);
-    uint64_t mn = UINT64_MAX, mx = 0;
-    for (uint32_t i = b; i < e; i++) {
-        uint64_t k = rx_code(x, &x->c->p[i]);
-        x->key[i] = (rx_key){k, i, 0};
-        mn = k < mn ? k : mn, mx = k > mx ? k : mx;
-    }
-    x->cmin[index][0] = mn, x->cmin[index][1] = mx;
+    for (uint32_t i = b; i < e; i++) x->key[i] = (rx_key){rx_code(x, &x->c->p[i]), i, 0};
+}
+
+/* The highest bit in which the codes of [b, e) differ; -1 when they are all equal. */
+static int rx_high_bit(const rx_key *k, uint32_t b, uint32_t e) {
+    uint64_t mn = k[b].code, mx = mn;
+    for (uint32_t i = b + 1; i < e; i++) mn = k[i].code < mn ? k[i].code : mn, mx = k[i].code > mx ? k[i].code : mx;
+    return mn == mx ? -1 : 63 - __builtin_clzll(mn ^ mx);
 }
 
 static void rx_hist_task(void *user, uint32_t index, uint32_t thread) {
@@ -281,25 +281,22 @@ static void rx_scatter_task(void *user, uint32_t index, uint32_t thread) {
  * from the range's highest differing bit (8 bits, fewer for small ranges), then each bucket. */
 static void rx_sort(rx_ctx *x, int src, uint32_t b, uint32_t e) {
     rx_key *ks = src ? x->key2 : x->key, *kd = src ? x->key : x->key2;
-    if (e - b <= RX_SMALL) {
+    if (e - b <= RX_SMALL) { /* insertion sort */
         for (uint32_t i = b + 1; i < e; i++) {
             rx_key k = ks[i];
             uint32_t j = i;
             for (; j > b && ks[j - 1].code > k.code; j--) ks[j] = ks[j - 1];
             ks[j] = k;
         }
-        if (src) memcpy(kd + b, ks + b, (e - b) * sizeof *kd);
-        return;
     }
-    uint64_t mn = ks[b].code, mx = mn;
-    for (uint32_t i = b + 1; i < e; i++) mn = ks[i].code < mn ? ks[i].code : mn, mx = ks[i].code > mx ? ks[i].code : mx;
-    if (mn == mx) {
+    int hb = e - b > RX_SMALL ? rx_high_bit(ks, b, e) : -1;
+    if (hb < 0) { /* sorted: into buffer 0 */
         if (src) memcpy(kd + b, ks + b, (e - b) * sizeof *kd);
         return;
     }
     int bits = e - b > 4096 ? 8 : e - b > 512 ? 6 : 4;
     uint32_t nd = 1u << bits, mask = nd - 1;
-    int hb = 63 - __builtin_clzll(mn ^ mx), shift = hb >= bits - 1 ? hb - (bits - 1) : 0;
+    int shift = hb >= bits - 1 ? hb - (bits - 1) : 0;
     uint32_t cnt[256], off[256], start[256];
     memset(cnt, 0, nd * sizeof *cnt);
     for (uint32_t i = b; i < e; i++) cnt[(ks[i].code >> shift) & mask]++;
@@ -336,16 +333,17 @@ static int rx_bucket_larger(const void *a, const void *b) {
 
 /* One digit of positions [b, e) (held in buffer src) by all threads; the buckets of at most a share
  * of the positions become tasks, the larger ones get a pass of their own. */
+static void rx_bucket(rx_ctx *x, uint32_t b, uint32_t e, int src) {
+    x->buckets[x->bucket_n][0] = b, x->buckets[x->bucket_n][1] = e, x->buckets[x->bucket_n][2] = (uint32_t)src;
+    x->bucket_n++;
+}
+
 static void rx_pass_par(rx_ctx *x, sys_pool *pool, int src, uint32_t b, uint32_t e) {
-    const rx_key *ks = src ? x->key2 : x->key;
-    uint64_t mn = ks[b].code, mx = mn;
-    for (uint32_t i = b + 1; i < e; i++) mn = ks[i].code < mn ? ks[i].code : mn, mx = ks[i].code > mx ? ks[i].code : mx;
-    if (mn == mx || x->bucket_n + 256 > RX_BUCKETS) {
-        x->buckets[x->bucket_n][0] = b, x->buckets[x->bucket_n][1] = e, x->buckets[x->bucket_n][2] = (uint32_t)src;
-        x->bucket_n++;
+    int hb = rx_high_bit(src ? x->key2 : x->key, b, e);
+    if (hb < 0 || x->bucket_n + 256 > RX_BUCKETS) {
+        rx_bucket(x, b, e, src);
         return;
     }
-    int hb = 63 - __builtin_clzll(mn ^ mx);
     x->shift = hb >= 7 ? hb - 7 : 0, x->pb = b, x->pe = e, x->psrc = src;
     sys_pool_parallel_for(pool, x->chunks, rx_hist_task, x);
     uint32_t o = b, bounds[257], nb = 0;
@@ -361,12 +359,8 @@ static void rx_pass_par(rx_ctx *x, sys_pool *pool, int src, uint32_t b, uint32_t
     sys_pool_parallel_for(pool, x->chunks, rx_scatter_task, x);
     for (uint32_t k = 0; k < nb; k++) {
         uint32_t bb = bounds[k], be = bounds[k + 1];
-        if (be - bb > x->n / (4 * x->threads)) {
-            rx_pass_par(x, pool, !src, bb, be);
-        } else {
-            x->buckets[x->bucket_n][0] = bb, x->buckets[x->bucket_n][1] = be, x->buckets[x->bucket_n][2] = (uint32_t)!src;
-            x->bucket_n++;
-        }
+        if (be - bb > x->n / (4 * x->threads)) rx_pass_par(x, pool, !src, bb, be);
+        else rx_bucket(x, bb, be, !src);
     }
 }
 
@@ -593,17 +587,16 @@ static bool rx_build(bih_ctx *c, const sys_allocator *a, sys_pool *pool, uint32_
     x->task_cap = pool ? RX_TASKS : 1;
     x->task_max = pool ? n / (BIH_TASK_SHARE * threads) : n;
     size_t key_bytes = (size_t)n * sizeof(rx_key), t_bytes = (size_t)x->t_cap * sizeof(rx_node);
-    size_t tl_bytes = threads * sizeof(rx_local), cmin_bytes = x->chunks * sizeof *x->cmin;
+    size_t tl_bytes = threads * sizeof(rx_local);
     size_t hist_bytes = x->chunks * sizeof *x->hist, task_bytes = x->task_cap * sizeof(rx_task);
     x->key = sys_alloc(a, key_bytes);
     x->key2 = sys_alloc(a, key_bytes);
     x->box2 = *sorted = sys_alloc(a, (size_t)n * sizeof(bvh_prim));
     x->t = sys_alloc(a, t_bytes);
     x->tl = sys_alloc(a, tl_bytes);
-    x->cmin = sys_alloc(a, cmin_bytes);
     x->hist = sys_alloc(a, hist_bytes);
     x->tasks = sys_alloc(a, task_bytes);
-    bool ok = x->key && x->key2 && x->box2 && x->t && x->tl && x->cmin && x->hist && x->tasks;
+    bool ok = x->key && x->key2 && x->box2 && x->t && x->tl && x->hist && x->tasks;
     if (ok) {
         memset(x->tl, 0, tl_bytes);
         atomic_store(&x->t_next, 1);
@@ -632,7 +625,7 @@ static bool rx_build(bih_ctx *c, const sys_allocator *a, sys_pool *pool, uint32_
             for (uint32_t i = 0; i < x->task_n; i++) rx_emit_task(x, i, 0);
     }
     sys_free(a, x->key, key_bytes), sys_free(a, x->key2, key_bytes);
-    sys_free(a, x->t, t_bytes), sys_free(a, x->tl, tl_bytes), sys_free(a, x->cmin, cmin_bytes);
+    sys_free(a, x->t, t_bytes), sys_free(a, x->tl, tl_bytes);
     sys_free(a, x->hist, hist_bytes), sys_free(a, x->tasks, task_bytes);
     sys_free(a, x, sizeof *x);
     return ok;

@@ -94,10 +94,14 @@ static void test_not_regular_scenes(void) {
     unlink(fifo);
     CHECK(mkfifo(fifo, 0600) == 0);
     snprintf(prefix, sizeof prefix, "(timeout 20 cat '%s' > '%s' &);", scene, fifo);
-    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/fifo.ppm'", fifo, tmp);
-    EXPECT_P(prefix, args, 0, "1 triangles");
-    snprintf(args, sizeof args, "info '%s'", fifo);
-    EXPECT_P(prefix, args, 0, "1 triangles");
+    /* several times: a probe that opened the FIFO and closed it unread (the gzip check did) lost the
+     * writer's bytes only when the writer was quicker than the probe, about one run in seven */
+    for (int i = 0; i < 8; i++) {
+        snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/fifo.ppm'", fifo, tmp);
+        EXPECT_P(prefix, args, 0, "1 triangles");
+        snprintf(args, sizeof args, "info '%s'", fifo);
+        EXPECT_P(prefix, args, 0, "1 triangles");
+    }
     unlink(fifo);
     snprintf(args, sizeof args, "render '%s' -o '%s/x.png'", tmp, tmp);
     EXPECT(args, 1, strerror(EISDIR));

@@ -181,9 +181,12 @@ size_t io_cut_lines(const char *data, size_t size) {
 }
 
 io_stream *io_stream_open(io_ctx *ctx, const char *path, size_t min_text, size_t block, io_cut_fn cut) {
+    struct stat st;
+    /* stat first: opening a FIFO here would take its writer's bytes and drop them on close, and the
+     * reader that follows (vfs_read) would then wait for a writer forever */
+    if (stat(path, &st) != 0 || !S_ISREG(st.st_mode)) return NULL;
     int fd = open(path, O_RDONLY | O_CLOEXEC);
     if (fd < 0) return NULL;
-    struct stat st;
     unsigned char magic[2];
     if (fstat(fd, &st) != 0 || !S_ISREG(st.st_mode) || pread(fd, magic, 2, 0) != 2 || magic[0] != 0x1f ||
         magic[1] != 0x8b) {

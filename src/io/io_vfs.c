@@ -392,9 +392,9 @@ bool vfs_open_archive(io_ctx *ctx, const char *path, const void *image, size_t i
     io_buf raw = {0};
 #if RP_IO_HAVE_LIBDEFLATE
     /* a .tar.gz inflated whole by libdeflate (deflate_read), then read as a plain tar */
-    if (!image) {
+    struct stat st;
+    if (!image && stat(path, &st) == 0 && S_ISREG(st.st_mode)) { /* not a FIFO: read once, below */
         int fd = open(path, O_RDONLY | O_CLOEXEC);
-        struct stat st;
         if (fd >= 0 && fstat(fd, &st) == 0 && S_ISREG(st.st_mode) &&
             deflate_read(fd, (size_t)st.st_size, ctx->limits.max_file_bytes, ctx->threads > 1, &raw))
             image = raw.data, image_size = raw.size;

@@ -11,9 +11,11 @@
  * with a gather (the octave's shift and first bucket come from a register), chosen once by the CPU
  * (test_view_srgb checks each against the table on every float in [0, 1]). The gathers were most of
  * the cost: 1.2-1.6 ms of CPU a 1024x768 frame on the EPYC (Zen 4) test machine, 2-3 ms inside the
- * viewer, where the rendering between tiles evicts the table. AVX-512
- * therefore computes the code by a polynomial and gathers only for lanes near a code's edge (about
- * 0.1% of them): 25-30% less CPU on the same frame, and nothing for the rendering to evict. */
+ * viewer, where the rendering between tiles evicts the table. AVX-512, and AVX2 with FMA,
+ * therefore compute the code by a polynomial and gather only for lanes near a code's edge (about
+ * 0.1% of them): 25-30% less CPU on the same frame (AVX-512, Zen 4), and nothing for the rendering
+ * to evict. On Zen 3 (AVX2), whose gathers are slower still, the polynomial and the codes packed in
+ * registers took the conversion from 11.9% to 4.7% of the viewer's samples (cornell_box). */
 #include "viewer.h"
 
 #include <math.h>
@@ -116,14 +118,6 @@ static void pixels_scalar(float *sum, const float *add, size_t stride, float inv
 #include <immintrin.h>
 #define VIEW_SRGB_X86 1
 
-/* 16 bytes of RGB (4 pixels, the last 4 bytes unused) to 4 xRGB8888 words: SSSE3's byte shuffle. */
-__attribute__((target("avx2"))) static inline void rgb4_to_xrgb(const uint8_t *rgb, uint32_t *out) {
-    const __m128i order = _mm_setr_epi8(2, 1, 0, -1, 5, 4, 3, -1, 8, 7, 6, -1, 11, 10, 9, -1);
-    __m128i p = _mm_or_si128(_mm_shuffle_epi8(_mm_loadu_si128((const __m128i *)rgb), order),
-                             _mm_set1_epi32((int)0xFF000000u));
-    _mm_storeu_si128((__m128i *)out, p);
-}
-
 /* The table lookup of view_srgb8 on 8 lanes: clamp (max first: NaN becomes 2^-13), the octave's
  * shift and first bucket from registers (octaves 8-13 from the second half), gather. */
 __attribute__((target("avx2"))) static inline __m256i codes8(__m256 v, __m256i sh0, __m256i sh1, __m256i f0,
@@ -144,36 +138,86 @@ __attribute__((target("avx2"))) static inline __m256i codes8(__m256 v, __m256i s
     return _mm256_add_epi32(_mm256_add_epi32(c, _mm256_set1_epi32(1)), below);
 }
 
-/* The low byte of each of 8 codes, in order, into 8 bytes. */
-__attribute__((target("avx2"))) static inline void store_bytes8(__m256i c, uint8_t *dst) {
-    const __m256i low = _mm256_setr_epi8(0, 4, 8, 12, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, 0, 4, 8, 12, -1,
-                                         -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1);
-    c = _mm256_permutevar8x32_epi32(_mm256_shuffle_epi8(c, low), _mm256_setr_epi32(0, 4, 1, 1, 1, 1, 1, 1));
-    _mm_storel_epi64((__m128i *)dst, _mm256_castsi256_si128(c));
+/* codes16_poly (below) on 8 lanes, for AVX2 with FMA: the table's gather takes only the lanes
+ * within 5e-4 of a code's edge. Gathers are slow on some AVX2 processors (Zen 2 and 3: `perf` had
+ * the table's conversion at 12% of the viewer's samples on cornell_box, Zen 3). */
+__attribute__((target("avx2,fma"))) static inline __m256i codes8_poly(__m256 v, __m256 pow2lo, __m256 pow2hi,
+                                                                      __m256i sh0, __m256i sh1, __m256i f0,
+                                                                      __m256i f1) {
+    __m256 c = _mm256_min_ps(_mm256_max_ps(v, _mm256_set1_ps(0x1p-13f)), _mm256_set1_ps(1.0f));
+    __m256i b = _mm256_castps_si256(c);
+    __m256 x = _mm256_castsi256_ps(
+        _mm256_or_si256(_mm256_and_si256(b, _mm256_set1_epi32(0x7FFFFF)), _mm256_set1_epi32(0x3F800000)));
+    __m256 t = _mm256_fmadd_ps(x, _mm256_set1_ps(2.0f), _mm256_set1_ps(-3.0f)); /* exact */
+    __m256 g = _mm256_set1_ps(1.149400295e-05f);
+    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(-4.286558067e-05f));
+    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(1.435515284e-04f));
+    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(-6.016229575e-04f));
+    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(2.812993774e-03f));
+    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(-1.598916955e-02f));
+    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(1.644518801e-01f));
+    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(1.184053612e+00f));
+    /* 2^(e/2.4) for octave e = 0..13: a permute of each half of the 16 entries, by e's bit 3 */
+    __m256i e = _mm256_sub_epi32(_mm256_srli_epi32(b, 23), _mm256_set1_epi32(VIEW_SRGB_E0));
+    __m256 hi = _mm256_castsi256_ps(_mm256_cmpgt_epi32(e, _mm256_set1_epi32(7)));
+    __m256 p2 = _mm256_blendv_ps(_mm256_permutevar8x32_ps(pow2lo, e), _mm256_permutevar8x32_ps(pow2hi, e), hi);
+    __m256 y = _mm256_fmadd_ps(_mm256_mul_ps(g, p2), _mm256_set1_ps(269.025f), _mm256_set1_ps(-13.525f));
+    __m256 r = _mm256_sub_ps(y, _mm256_round_ps(y, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC));
+    __m256 edge = _mm256_cmp_ps(_mm256_andnot_ps(_mm256_set1_ps(-0.0f), r), _mm256_set1_ps(5e-4f), _CMP_LT_OQ);
+    __m256 lin = _mm256_cmp_ps(c, _mm256_set1_ps(0.0031308f), _CMP_LE_OQ);
+    if (_mm256_movemask_ps(lin)) { /* the formula's own operations where some lane is that dark */
+        __m256 yl = _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(c, _mm256_set1_ps(12.92f)), _mm256_set1_ps(255.0f)),
+                                  _mm256_set1_ps(0.5f));
+        y = _mm256_blendv_ps(y, yl, lin);
+        edge = _mm256_andnot_ps(lin, edge);
+    }
+    __m256i code = _mm256_cvttps_epi32(y);
+    if (_mm256_movemask_ps(edge))
+        code = _mm256_castps_si256(_mm256_blendv_ps(_mm256_castsi256_ps(code),
+                                                    _mm256_castsi256_ps(codes8(v, sh0, sh1, f0, f1)), edge));
+    return code;
 }
 
-__attribute__((target("avx2"))) static void pixels_avx2(float *sum, const float *add, size_t stride, float inv,
-                                                        uint32_t *out, size_t pitch, int n, int rows) {
+/* 8 pixels' codes, channels interleaved as the floats were (c0: R0 G0 B0 R1 G1 B1 R2 G2, c1, c2), to
+ * 8 xRGB8888 words in registers (as xrgb16): packed to bytes, the 24 in order in the low half and
+ * bytes 8-23 in the high one, then one byte shuffle per half. Codes stored as bytes and reloaded
+ * 12 apart (as this routine did before) stall on store forwarding: `perf annotate` put half of
+ * the conversion's samples on that reload (Zen 3). */
+__attribute__((target("avx2"))) static inline __m256i xrgb8(__m256i c0, __m256i c1, __m256i c2) {
+    /* per 128-bit half: [c0 0-3, c1 0-3, c2 0-3, c2 0-3] and [c0 4-7, c1 4-7, c2 4-7, c2 4-7] */
+    __m256i b = _mm256_packus_epi16(_mm256_packus_epi32(c0, c1), _mm256_packus_epi32(c2, c2));
+    b = _mm256_permutevar8x32_epi32(b, _mm256_setr_epi32(0, 4, 1, 5, 1, 5, 2, 6));
+    const __m256i order = _mm256_setr_epi8(2, 1, 0, -1, 5, 4, 3, -1, 8, 7, 6, -1, 11, 10, 9, -1, /* pixels 0-3 */
+                                           6, 5, 4, -1, 9, 8, 7, -1, 12, 11, 10, -1, 15, 14, 13, -1); /* 4-7 */
+    return _mm256_or_si256(_mm256_shuffle_epi8(b, order), _mm256_set1_epi32((int)0xFF000000u));
+}
+
+__attribute__((target("avx2,fma"))) static void pixels_avx2(float *sum, const float *add, size_t stride, float inv,
+                                                            uint32_t *out, size_t pitch, int n, int rows) {
     const __m256 s = _mm256_set1_ps(inv);
     const __m256i sh0 = _mm256_loadu_si256((const __m256i *)view_srgb_shift),
                   sh1 = _mm256_loadu_si256((const __m256i *)(view_srgb_shift + 8)),
                   f0 = _mm256_loadu_si256((const __m256i *)view_srgb_first),
                   f1 = _mm256_loadu_si256((const __m256i *)(view_srgb_first + 8));
+    const __m256 pow2lo = _mm256_loadu_ps(view_srgb_pow2), pow2hi = _mm256_loadu_ps(view_srgb_pow2 + 8);
     for (int y = 0; y < rows; y++, sum += stride, add = add ? add + stride : NULL, out += pitch) {
         int i = 0;
         for (; i + 8 <= n; i += 8) { /* 8 pixels: 24 floats, 3 vectors */
-            uint8_t rgb[32];
-            for (int k = 0; k < 3; k++) {
-                float *p = sum + 3 * i + 8 * k;
-                __m256 v = _mm256_loadu_ps(p);
-                if (add) {
-                    v = _mm256_add_ps(v, _mm256_loadu_ps(add + 3 * i + 8 * k));
-                    _mm256_storeu_ps(p, v);
-                }
-                store_bytes8(codes8(_mm256_mul_ps(v, s), sh0, sh1, f0, f1), rgb + 8 * k);
+            float *p = sum + 3 * i;
+            __m256 v0 = _mm256_loadu_ps(p), v1 = _mm256_loadu_ps(p + 8), v2 = _mm256_loadu_ps(p + 16);
+            if (add) {
+                const float *a = add + 3 * i;
+                v0 = _mm256_add_ps(v0, _mm256_loadu_ps(a));
+                v1 = _mm256_add_ps(v1, _mm256_loadu_ps(a + 8));
+                v2 = _mm256_add_ps(v2, _mm256_loadu_ps(a + 16));
+                _mm256_storeu_ps(p, v0);
+                _mm256_storeu_ps(p + 8, v1);
+                _mm256_storeu_ps(p + 16, v2);
             }
-            rgb4_to_xrgb(rgb, out + i);
-            rgb4_to_xrgb(rgb + 12, out + i + 4);
+            __m256i c0 = codes8_poly(_mm256_mul_ps(v0, s), pow2lo, pow2hi, sh0, sh1, f0, f1);
+            __m256i c1 = codes8_poly(_mm256_mul_ps(v1, s), pow2lo, pow2hi, sh0, sh1, f0, f1);
+            __m256i c2 = codes8_poly(_mm256_mul_ps(v2, s), pow2lo, pow2hi, sh0, sh1, f0, f1);
+            _mm256_storeu_si256((__m256i *)(out + i), xrgb8(c0, c1, c2));
         }
         row_scalar(sum + 3 * i, add ? add + 3 * i : NULL, inv, out + i, n - i);
     }
@@ -305,7 +349,7 @@ const char *view_srgb_select(int isa) {
         pixels_fn = pixels_avx512;
         return "avx512";
     }
-    if ((isa == 0 || isa >= 8) && avx2) {
+    if ((isa == 0 || isa >= 8) && avx2 && __builtin_cpu_supports("fma")) {
         pixels_fn = pixels_avx2;
         return "avx2";
     }

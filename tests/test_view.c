@@ -260,6 +260,53 @@ static void test_screenshot(const char *scene, const char *extra, const char *sc
                extra, script);
 }
 
+/* Still frames are shown once per frame budget (--fps 1: once a second, so none of these small
+ * frames but the first and the last), the others only add their samples; the last frame, a quit
+ * before it and F12 show every sample so far, as raypack render of that many samples. */
+static void test_paced(const char *scene) {
+    char args[8192], shot[1024], ref[1024];
+    snprintf(shot, sizeof shot, "%s/paced.ppm", tmp);
+    snprintf(ref, sizeof ref, "%s/paced_ref.ppm", tmp);
+    static const struct {
+        const char *script;
+        int frames, spp;
+    } runs[] = {{"", 12, 12}, {"8 quit", 40, 9}, {"5 key F12", 7, 7}};
+    for (int r = 0; r < 3; r++) {
+        remove(shot);
+        snprintf(args, sizeof args,
+                 "view '%s' --width 96 --height 72 --threads 2 --fps 1 --frames %d --log --no-overlay --screenshot "
+                 "'%s' --script '%s'",
+                 scene, runs[r].frames, shot, runs[r].script);
+        int rc = run(true, args);
+        CHECKF(rc == 0, "exit %d:\n%s", rc, output);
+        /* frames 1..7 (but the last) were not shown: the budget of a second had not passed */
+        for (int f = 1; f < 8 && f < runs[r].frames - 1; f++) {
+            char key[64];
+            snprintf(key, sizeof key, "frame %d: ", f);
+            const char *l = strstr(output, key), *e = l ? strchr(l, '\n') : NULL;
+            CHECKF(l && e && e - l > 8 && memcmp(e - 8, " shown 0", 8) == 0, "frame %d shown (--fps 1):\n%s", f,
+                   output);
+        }
+        if (r == 2) { /* F12 before frame 5 rendered: the five samples so far, not the one shown */
+            const char *s = strstr(output, "screenshot: ");
+            CHECKF(s && strstr(s, "(96x72, 5 samples)") == strstr(s, "("), "F12 after 5 frames:\n%s", output);
+        }
+        const char *s = output, *last = NULL;
+        while ((s = strstr(s, "screenshot: "))) last = s++;
+        int spp = 0;
+        cam c;
+        bool ok = last && strstr(last, ", ") && sscanf(strstr(last, ", "), ", %d samples", &spp) == 1 &&
+                  spp == runs[r].spp && camera_line(-1, &c);
+        CHECKF(ok, "screenshot of %d samples expected:\n%s", runs[r].spp, output);
+        if (!ok) continue;
+        snprintf(args, sizeof args, "render '%s' --width 96 --height 72 --threads 1 --spp %d %s -o '%s' --quiet", scene,
+                 spp, c.flags, ref);
+        CHECK(run(false, args) == 0);
+        CHECKF(same_file(shot, ref), "[%s] paced frames: the window's pixels differ from raypack render's",
+               runs[r].script);
+    }
+}
+
 /* The overlay is part of what the window shows: with it the screenshot is not the render. */
 static void test_overlay(const char *scene) {
     char args[4096], shot[1024], ref[1024];
@@ -546,6 +593,7 @@ int main(void) {
         test_screenshot(original, "--integrator direct", "0 down d; 2 up d", 5, -1);
         test_screenshot(original, "--integrator ir", "", 3, 3);
     }
+    test_paced(cornell);
     test_overlay(cornell);
     test_resolution(cornell);
     test_controller(cornell);

@@ -42,7 +42,11 @@ static void view_usage(FILE *out) {
             "\n"
             "view options:\n"
             "  --fps F              frame budget while the camera moves: frames that would take longer\n"
-            "                       than 1/F s render at a lower resolution, 1..1000 [20]\n"
+            "                       than 1/F s render at a lower resolution, 1..1000 [20]; while it is\n"
+            "                       still, the window shows the accumulating image F times a second\n"
+            "                       (the frames between add their samples unseen; F12 and the last\n"
+            "                       frame show all of them)\n"
+            "  --every-frame        show every frame, also while the camera is still\n"
             "  --frames N           render N frames, then (with --screenshot) save the window, and quit\n"
             "  --screenshot FILE    where --frames and F12 save the window (.png or .ppm, 8-bit sRGB)\n"
             "                       [raypack-view-N.png for F12]\n"
@@ -71,7 +75,7 @@ typedef struct view_options {
     int frames, max_scale;
     float fps;
     const char *screenshot, *events, *script;
-    bool overlay, log, compare;
+    bool overlay, log, compare, every_frame;
 } view_options;
 
 /* Splits argv into the viewer's own flags and the render flags (left in rargv for cli_render_parse). */
@@ -116,6 +120,8 @@ static int parse_view_options(int argc, char **argv, view_options *o, char **rar
             o->compare = true;
         } else if (strcmp(a, "--log") == 0) {
             o->log = true;
+        } else if (strcmp(a, "--every-frame") == 0) {
+            o->every_frame = true;
         } else if (strcmp(a, "-o") == 0 || strcmp(a, "--output") == 0 || strcmp(a, "--stats") == 0 ||
                    strcmp(a, "--stats-json") == 0 || strcmp(a, "--quiet") == 0 || strcmp(a, "-q") == 0) {
             fprintf(stderr, "raypack view: %s is an option of raypack render (the viewer saves with --screenshot)\n",
@@ -240,6 +246,8 @@ typedef struct viewer {
     int out_pitch;              /* in pixels */
     bool direct;                /* out is the window's surface */
     int samples;                /* accumulated at full resolution */
+    int shown_samples;          /* of the frame in the window's pixels */
+    double shown_ms;            /* when the last frame that the window shows was rendered */
     int spp_max;
     int depth;                  /* max depth, 0..64 (rp_render_desc's 0 is its default, 5) */
     int scale;                  /* divisor of the last frame's resolution */
@@ -292,10 +300,11 @@ static void print_settings(const viewer *v) {
 }
 
 static bool flush(viewer *v);
+static bool catch_up(viewer *v);
 
 /* Writes the window's pixels (read back from its surface, after showing what is pending) to path. */
 static bool save_screenshot(viewer *v, const char *path) {
-    if (!flush(v)) return false;
+    if (!catch_up(v) || !flush(v)) return false;
     SDL_Surface *s = SDL_GetWindowSurface(v->win);
     if (!s) {
         fprintf(stderr, "raypack view: cannot read the window: %s\n", SDL_GetError());
@@ -325,7 +334,7 @@ static bool save_screenshot(viewer *v, const char *path) {
             ok = stbi_write_png(path, s->w, s->h, 3, rgb, s->w * 3) != 0;
         }
         if (!ok) fprintf(stderr, "raypack view: cannot write %s: %s\n", path, strerror(errno));
-        else printf("screenshot: %s (%dx%d, %d samples)\n", path, s->w, s->h, v->samples);
+        else printf("screenshot: %s (%dx%d, %d samples)\n", path, s->w, s->h, v->shown_samples);
         fflush(stdout);
     }
     free(rgb);
@@ -798,6 +807,19 @@ static bool show(viewer *v) {
     return true;
 }
 
+/* The window shows fewer samples than the sum holds (still frames since the last shown one were not
+ * shown, see step): converts the whole sum into the window's pixels now, for F12 and at the end. */
+static bool catch_up(viewer *v) {
+    if (v->shown_samples == v->samples || v->samples == 0 || v->scale != 1) return true;
+    if (!flush(v) || !target(v)) return false;
+    present_job j = {.v = v, .fw = v->w, .fh = v->h, .scale = 1, .accumulate = true, .samples = v->samples};
+    present_rect(&j, 0, 0, v->w, v->h, false, v->lines + (size_t)rp_device_thread_count(v->dev) * (size_t)v->w);
+    if (v->overlay) overlay_text(v, v->w, v->h);
+    v->shown_samples = v->samples;
+    v->pending = true;
+    return true;
+}
+
 /* The resolution divisor for a frame during motion: the smallest whose estimated time fits. */
 static int motion_scale(const viewer *v) {
     /* a fifth of the frame kept in reserve: a frame's cost varies with what comes into view */
@@ -888,6 +910,18 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
     bool render = moved || v->samples < cap;
     int fw = (v->w + scale - 1) / scale, fh = (v->h + scale - 1) / scale;
     present_job job = {.v = v, .fw = fw, .fh = fh, .scale = scale};
+    bool ir = v->desc.integrator == RP_INTEGRATOR_IR;
+    /* While the camera is still, the window shows the accumulating image once per frame budget
+     * (1/fps), as a display would, not every sample: a frame is shown when the one after it would
+     * end past the budget since the last shown one, and the first and the last (the cap, --frames)
+     * always are. The others only add their samples into the sum (rp_render's accumulate), so the
+     * window costs no conversion there. Instant radiosity adds its samples in the tile callback:
+     * every frame shown. */
+    bool show_frame = true;
+    if (render && scale == 1 && !ir && !v->opt.every_frame && v->samples > 0) {
+        bool last = v->samples + 1 >= cap || (v->opt.frames > 0 && frame + 1 >= v->opt.frames);
+        show_frame = last || cli_now_ms() + 2.0 * v->full_ms - v->shown_ms > 1000.0 / (double)v->opt.fps;
+    }
     uint64_t rays = 0;
     double render_ms = 0.0, tiles_ms = 0.0, late_ms = 0.0, show_ms = 0.0, overlay_ms = 0.0, bytes = 0.0;
     double busy_sum = 0.0; /* thread time in present_tile */
@@ -913,7 +947,6 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         /* still frames render into the sum, which rp_render continues (accumulate) from the second
          * sample on; instant radiosity, whose pixels come from a filter over the whole frame,
          * renders each sample apart and its tiles are added here */
-        bool ir = v->desc.integrator == RP_INTEGRATOR_IR;
         job.add = job.accumulate && ir && job.samples > 1;
         render_call rc = {.scene = v->scene, .desc = v->desc, .cam = cam,
                           .pixels = job.accumulate && !job.add ? v->sum : v->frame};
@@ -924,7 +957,7 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         rc.desc.max_depth = v->depth == 0 ? -1 : v->depth;
         rc.desc.spp = 1;
         rc.desc.sample_start = scale == 1 ? v->samples : 0;
-        rc.desc.tile_done = present_tile;
+        rc.desc.tile_done = show_frame ? present_tile : NULL;
         rc.desc.tile_user = &job;
         /* the window shows the last frame while this one renders: its round trip to the display
          * server overlaps the rendering instead of adding to it */
@@ -959,11 +992,14 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
         if (scale == 1) v->samples++;
         /* what the encoding reads (the sum, and the frame it adds) and writes (the sum, the pixels) */
         double px = (double)v->w * (double)v->h, fpx = (double)fw * (double)fh;
-        bytes = job.add ? 40.0 * px : job.accumulate ? 16.0 * px : 12.0 * fpx + 4.0 * px;
-        if (v->overlay) overlay_text(v, fw, fh);
+        bytes = !show_frame ? 0.0 : job.add ? 40.0 * px : job.accumulate ? 16.0 * px : 12.0 * fpx + 4.0 * px;
+        if (show_frame) {
+            if (v->overlay) overlay_text(v, fw, fh);
+            v->pending = true;
+            v->shown_samples = v->samples;
+            v->shown_ms = c1;
+        }
         overlay_ms = cli_now_ms() - c1;
-
-        v->pending = true;
     } else if (v->pending || v->redraw) {
         /* nothing new: show what is pending, or send the surface again */
         if (!v->pending) v->pending = true;
@@ -972,7 +1008,7 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
     v->redraw = false;
     double t1 = cli_now_ms();
     double frame_ms = t1 - t0;
-    if (render && v->frames_done > 0) { /* the first frame also maps the window */
+    if (render && show_frame && v->frames_done > 0) { /* the first frame also maps the window */
         double over = frame_ms - render_ms;
         v->overhead_ms = v->frames_done > 1 ? 0.8 * v->overhead_ms + 0.2 * over : over;
     }
@@ -1034,9 +1070,9 @@ static bool step(viewer *v, view_script *script, int frame, double dt) {
     }
     if (v->opt.log)
         printf("frame %d: %dx%d scale %d samples %d moved %d render %.2f ms (tiles %.2f) show %.2f ms late %.2f ms "
-               "events %.2f ms overlay %.2f ms frame %.2f ms cpu %.2f ms\n",
+               "events %.2f ms overlay %.2f ms frame %.2f ms cpu %.2f ms shown %d\n",
                frame, fw, fh, scale, v->samples, moved ? 1 : 0, render_ms, tiles_ms, show_ms, late_ms, events_ms,
-               overlay_ms, frame_ms, frame_cpu);
+               overlay_ms, frame_ms, frame_cpu, render && show_frame ? 1 : 0);
     v->frames_done++;
     return true;
 }
@@ -1202,7 +1238,7 @@ int cli_view(int argc, char **argv) {
             int cap = accumulates(&v.desc) ? v.spp_max : 1;
             if (!v.deterministic && v.samples >= cap && !v.camera_moved) SDL_WaitEventTimeout(NULL, 50);
         }
-        if (status == CLI_EXIT_OK && !flush(&v)) status = CLI_EXIT_FAILURE;
+        if (status == CLI_EXIT_OK && (!catch_up(&v) || !flush(&v))) status = CLI_EXIT_FAILURE;
         if (status == CLI_EXIT_OK && v.opt.frames > 0 && v.opt.screenshot && !save_screenshot(&v, v.opt.screenshot))
             status = CLI_EXIT_FAILURE;
         double wall = cli_now_ms() - start;

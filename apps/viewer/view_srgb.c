@@ -118,6 +118,10 @@ static void pixels_scalar(float *sum, const float *add, size_t stride, float inv
 #include <immintrin.h>
 #define VIEW_SRGB_X86 1
 
+/* x^(1/2.4) for x in [1, 2) as a polynomial in t = 2x - 3, highest degree first (codes16_poly). */
+static const float SRGB_POLY[8] = {1.149400295e-05f, -4.286558067e-05f, 1.435515284e-04f, -6.016229575e-04f,
+                                   2.812993774e-03f, -1.598916955e-02f, 1.644518801e-01f,  1.184053612e+00f};
+
 /* The table lookup of view_srgb8 on 8 lanes: clamp (max first: NaN becomes 2^-13), the octave's
  * shift and first bucket from registers (octaves 8-13 from the second half), gather. */
 __attribute__((target("avx2"))) static inline __m256i codes8(__m256 v, __m256i sh0, __m256i sh1, __m256i f0,
@@ -149,14 +153,8 @@ __attribute__((target("avx2,fma"))) static inline __m256i codes8_poly(__m256 v, 
     __m256 x = _mm256_castsi256_ps(
         _mm256_or_si256(_mm256_and_si256(b, _mm256_set1_epi32(0x7FFFFF)), _mm256_set1_epi32(0x3F800000)));
     __m256 t = _mm256_fmadd_ps(x, _mm256_set1_ps(2.0f), _mm256_set1_ps(-3.0f)); /* exact */
-    __m256 g = _mm256_set1_ps(1.149400295e-05f);
-    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(-4.286558067e-05f));
-    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(1.435515284e-04f));
-    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(-6.016229575e-04f));
-    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(2.812993774e-03f));
-    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(-1.598916955e-02f));
-    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(1.644518801e-01f));
-    g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(1.184053612e+00f));
+    __m256 g = _mm256_set1_ps(SRGB_POLY[0]);
+    for (int k = 1; k < 8; k++) g = _mm256_fmadd_ps(g, t, _mm256_set1_ps(SRGB_POLY[k]));
     /* 2^(e/2.4) for octave e = 0..13: a permute of each half of the 16 entries, by e's bit 3 */
     __m256i e = _mm256_sub_epi32(_mm256_srli_epi32(b, 23), _mm256_set1_epi32(VIEW_SRGB_E0));
     __m256 hi = _mm256_castsi256_ps(_mm256_cmpgt_epi32(e, _mm256_set1_epi32(7)));
@@ -255,14 +253,8 @@ __attribute__((target("avx512f,avx512dq,avx2,fma"))) static inline __m512i codes
     __m512 x = _mm512_castsi512_ps(
         _mm512_ternarylogic_epi32(b, _mm512_set1_epi32(0x7FFFFF), _mm512_set1_epi32(0x3F800000), 0xEA));
     __m512 t = _mm512_fmadd_ps(x, _mm512_set1_ps(2.0f), _mm512_set1_ps(-3.0f)); /* exact */
-    __m512 g = _mm512_set1_ps(1.149400295e-05f);
-    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(-4.286558067e-05f));
-    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(1.435515284e-04f));
-    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(-6.016229575e-04f));
-    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(2.812993774e-03f));
-    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(-1.598916955e-02f));
-    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(1.644518801e-01f));
-    g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(1.184053612e+00f));
+    __m512 g = _mm512_set1_ps(SRGB_POLY[0]);
+    for (int k = 1; k < 8; k++) g = _mm512_fmadd_ps(g, t, _mm512_set1_ps(SRGB_POLY[k]));
     /* pow2 is indexed by the exponent field's low 4 bits (the permute reads no more): pixels_avx512
      * rotated it so, which saves subtracting the first octave's exponent */
     __m512 p = _mm512_mul_ps(g, _mm512_permutexvar_ps(_mm512_srli_epi32(b, 23), pow2));

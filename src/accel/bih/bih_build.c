@@ -5,17 +5,13 @@
  * (a quicksort-like pass over the boxes, about 24 passes over spd_tree_s12's boxes); this builder
  * finds the same planes from one radix sort of the centroids (the radix build below). Every inner
  * node has two non-empty children; with the clip nodes at most 4n - 2 nodes are written, into an
- * allocation sized from the tree's entries, and copied to one of their count when the leaves are
- * filled. */
+ * allocation sized from the tree's entries, and copied to one of their count at the end. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "accel/accel.h"
 #include "accel/bih/bih.h"
-
-/* Subtrees of at most 1 / (BIH_TASK_SHARE x threads) of the primitives are tasks. */
-#define BIH_TASK_SHARE 8u
 
 /* Nodes are handed to the threads in chunks of BIH_NODE_CHUNK, one atomic per chunk: an atomic
  * add per node, and the leaves' and the depth's counters, on lines both threads wrote, held about a
@@ -32,14 +28,13 @@ typedef struct bih_local {
 
 typedef struct bih_ctx {
     const accel_tri_input *in;
-    bvh_prim *p;               /* the boxes (sorted by code by the radix build); lo[3] holds each one's id */
     bih_node *nodes;           /* node_bytes: sized from the radix tree's entries */
     size_t node_bytes;
     _Atomic uint32_t next;     /* first free node */
     bih_local *local;          /* per thread */
     float abs_pad;             /* the planes' margin (pad_lo, pad_hi); 0: none */
     /* leaf packing */
-    uint32_t *block_of;        /* per position: its leaf's count at a leaf's first, else 0; then its block */
+    uint32_t *block_of;        /* per position: its block (accel_tri_input.fill) */
     tri4 *blocks;
     bih_node *out;             /* the nodes, copied to an allocation of their final count */
 } bih_ctx;
@@ -55,23 +50,22 @@ static inline float pad_hi(const bih_ctx *c, float x) {
     return c->abs_pad != 0.0f && fabsf(x) < INFINITY ? box_pad_hi(x, c->abs_pad) : x;
 }
 
-/* Writes a leaf of positions [begin, end) and marks its first position with its count for
- * plan_blocks (each position belongs to one leaf, so the threads' writes never meet). */
-static void make_leaf(bih_ctx *c, bih_local *l, uint32_t node, uint32_t begin, uint32_t end, uint32_t depth) {
+/* Writes a leaf of positions [begin, end), its triangles in blocks from `block` on (four to a
+ * block, in order), and each position's block for the fill (each position belongs to one leaf, so
+ * the threads' writes never meet). */
+static void make_leaf(bih_ctx *c, bih_local *l, uint32_t node, uint32_t begin, uint32_t end, uint32_t block, uint32_t depth) {
     bih_node *n = &c->nodes[node];
-    uint32_t first = begin, count = end - begin;
-    if (count) {
-        c->block_of[begin] = count;
-        for (uint32_t i = begin + 1; i < end; i++) c->block_of[i] = 0;
-    }
-    memcpy(&n->clip[0], &first, 4);
-    memcpy(&n->clip[1], &count, 4);
+    uint32_t count = end - begin, blocks = (count + 3) / 4;
+    for (uint32_t i = 0; i < count; i++) c->block_of[begin + i] = block + i / 4;
+    if (!count) block = 0;
+    memcpy(&n->clip[0], &block, 4);
+    memcpy(&n->clip[1], &blocks, 4);
     n->meta = BIH_LEAF;
     l->leaves++;
     if (depth > l->depth) l->depth = depth;
 }
 
-/* Nodes [b, e) that no node points at: empty leaves, so the copy in fill_task reads them as such. */
+/* Nodes [b, e) that no node points at: empty leaves, so the final copy holds no garbage. */
 static void make_unused(bih_ctx *c, bih_local *l, uint32_t b, uint32_t e) {
     uint32_t zero = 0;
     for (uint32_t i = b; i < e; i++) {
@@ -134,39 +128,55 @@ static uint32_t clip_empty(bih_ctx *c, bih_local *l, uint32_t node, float nb[6],
  * of each halving is then one bit of a code (the centroid quantized on each axis to as many bits as
  * that axis is halved, its bits interleaved in the halvings' order; 63 halvings), and a node's
  * plane is the highest bit in which its centroids' codes differ: the BIH is the binary radix tree
- * of the sorted codes (as an LBVH's over Morton codes). So the boxes are sorted once by code (a
- * most-significant-digit radix sort: about three passes over the boxes where the partitions took
- * 24), the tree's splits are found by binary search in the sorted codes, the boxes' bounds are
+ * of the sorted codes (as an LBVH's over Morton codes). So the (code, id) keys are sorted once (a
+ * most-significant-digit radix sort: about three passes where the partitions took 24 over the
+ * boxes), the tree's splits are found by binary search in the sorted codes, the boxes' bounds are
  * taken bottom-up, and the nodes (with their clip nodes, which need the ancestors' planes) are
- * written top-down. Waechter and Keller's bucket-sort preprocess (sec. 2.3) carried to the end. */
+ * written top-down. Waechter and Keller's bucket-sort preprocess (sec. 2.3) carried to the end.
+ *
+ * The codes with a common prefix are one subtree of a radix tree (a node's entries are all the
+ * codes that share the bits above its plane). Each bucket the sort leaves to a task (all the codes
+ * with the prefix of the digits sorted so far) is therefore a subtree: the task sorts it and builds
+ * its entries at once, while its keys are in cache, and then writes its nodes, its leaves' blocks
+ * numbered from the bucket's first block (each entry counts its subtree's blocks) and filled by
+ * the same task. The tree above the buckets is small and built on the calling thread. */
 
 #define RX_SMALL 32u        /* ranges sorted by insertion */
 #define RX_CHUNK 1024u      /* tree entries handed to a thread at a time */
 #define RX_LEAF 3u
-#define RX_TASK_ROOT 4u     /* flag on a subtree built (and written) by a task */
-#define RX_BUCKETS 2048u   /* ranges left to the sort's tasks */
-#ifndef RX_TASKS
-#define RX_TASKS 4096u      /* subtrees built by tasks */
-#endif
+#define RX_TASK_ROOT 4u     /* flag on a bucket's root: its nodes are a task's */
+#define RX_BUCKETS 2048u    /* ranges left to the sort's tasks */
+#define RX_AHEAD 16u        /* positions whose boxes are prefetched ahead of the leaves' bounds */
 
-/* An entry of the radix tree: the bounds of its boxes; inner: its children's entries and the
- * plane's axis; leaf: its positions [a, b). */
+/* An entry of the radix tree: the bounds of its boxes and the tri4 blocks of its leaves; inner:
+ * its children's entries and the plane's axis; leaf: its positions [a, b). */
 typedef struct rx_node {
     float lo[3], hi[3];
-    uint32_t a, b, axis;
+    uint32_t a, b;
+    uint32_t axis;   /* or RX_LEAF; | RX_TASK_ROOT at a bucket's root */
+    uint32_t blocks;
 } rx_node;
 
 typedef struct rx_local {
-    uint32_t next, end;
-    uint8_t pad[RP_CACHE_LINE - 8];
+    uint32_t next, end; /* the rest of this thread's chunk of entries */
+    uint32_t ahead;     /* the end of the range being built: boxes are prefetched up to it */
+    uint8_t pad[RP_CACHE_LINE - 12];
 } rx_local;
 
+/* A range left to the sort's tasks (its keys in buffer src: 0 key, 1 key2) and, once sorted, the
+ * root entry of its subtree. */
+typedef struct rx_bucket {
+    uint32_t b, e, src, entry;
+} rx_bucket;
+
+/* A bucket's nodes: its root entry, the node it goes in, its depth and first block, and its box
+ * (the root box cut by its ancestors' planes). */
 typedef struct rx_task {
-    uint32_t entry, begin, end; /* phase 1: the range; phase 2: the node (begin) and depth (end) */
+    uint32_t entry, node, depth, block, blocks;
     float nb[6];
 } rx_task;
 
-/* A box's code and its position in the gathered boxes. */
+/* A box's code and its position in the input. */
 typedef struct rx_key {
     uint64_t code;
     uint32_t id, pad;
@@ -176,22 +186,23 @@ typedef struct rx_ctx {
     bih_ctx *c;
     uint32_t n, threads, chunks;
     rx_key *key, *key2;         /* the keys, and the sort's second buffer */
-    bvh_prim *box2;             /* the boxes in the keys' order */
     double qlo[3], qscale[3];   /* twice a centroid -> [0, 2^bits) on each axis */
     int bits[3];
     uint8_t axis_of_bit[64];
     uint64_t spread[3][8][256]; /* a byte of an axis' quantized value -> its code bits */
     uint32_t (*hist)[256];      /* per chunk: a parallel pass's counts, then offsets */
+    uint64_t (*mm)[2];          /* per chunk: a parallel pass's lowest and highest code */
     uint32_t pb, pe;            /* a parallel pass's positions, its buffer and digit */
     int psrc, shift;
-    uint32_t buckets[RX_BUCKETS][3]; /* the ranges left to sort: begin, end, buffer */
-    uint32_t bucket_n;
+    rx_bucket buckets[RX_BUCKETS];
+    uint32_t bucket_n, cursor;  /* cursor: the next bucket (by position) the tree above them meets */
+    bool bad;                   /* a bucket that is not a subtree (never expected): the build fails */
     rx_node *t;
     uint32_t t_cap;
     _Atomic uint32_t t_next;
     rx_local *tl;
-    rx_task *tasks;
-    uint32_t task_n, task_cap, task_max;
+    rx_task *tasks;             /* RX_BUCKETS */
+    uint32_t task_n;
 } rx_ctx;
 
 /* The halving sequence of the root split box and the tables that spread a quantized coordinate's
@@ -239,13 +250,14 @@ static void rx_chunk(const rx_ctx *x, uint32_t index, uint32_t *b, uint32_t *e) 
     *b = x->pb + (uint32_t)(n * index / x->chunks), *e = x->pb + (uint32_t)(n * (index + 1) / x->chunks);
 }
 
-/* Codes of a chunk of the boxes. */
+/* Keys of a chunk of the boxes. */
 static void rx_code_task(void *user, uint32_t index, uint32_t thread) {
     (void)thread;
     rx_ctx *x = user;
     uint32_t b, e;
     rx_chunk(x, index, &b, &e);
-    for (uint32_t i = b; i < e; i++) x->key[i] = (rx_key){rx_code(x, &x->c->p[i]), i, 0};
+    const bvh_prim *p = x->c->in->boxes;
+    for (uint32_t i = b; i < e; i++) x->key[i] = (rx_key){rx_code(x, &p[i]), i, 0};
 }
 
 /* The highest bit in which the codes of [b, e) differ; -1 when they are all equal. */
@@ -253,6 +265,17 @@ static int rx_high_bit(const rx_key *k, uint32_t b, uint32_t e) {
     uint64_t mn = k[b].code, mx = mn;
     for (uint32_t i = b + 1; i < e; i++) mn = k[i].code < mn ? k[i].code : mn, mx = k[i].code > mx ? k[i].code : mx;
     return mn == mx ? -1 : 63 - __builtin_clzll(mn ^ mx);
+}
+
+static void rx_minmax_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    rx_ctx *x = user;
+    uint32_t b, e;
+    rx_chunk(x, index, &b, &e);
+    const rx_key *k = x->psrc ? x->key2 : x->key;
+    uint64_t mn = UINT64_MAX, mx = 0;
+    for (uint32_t i = b; i < e; i++) mn = k[i].code < mn ? k[i].code : mn, mx = k[i].code > mx ? k[i].code : mx;
+    x->mm[index][0] = mn, x->mm[index][1] = mx;
 }
 
 static void rx_hist_task(void *user, uint32_t index, uint32_t thread) {
@@ -278,18 +301,25 @@ static void rx_scatter_task(void *user, uint32_t index, uint32_t thread) {
 }
 
 /* Sorts positions [b, e), held in buffer src (0: key, 1: key2), by code into buffer 0: a digit
- * from the range's highest differing bit (8 bits, fewer for small ranges), then each bucket. */
+ * from the range's highest differing bit (8 bits, fewer for small ranges), then each bucket. A
+ * range of at most BIH_LEAF_SIZE keys is left as it is: its keys share the bits above the digit
+ * that made it, so the tree makes one leaf of them (or of more) whatever their order, and a larger
+ * range's first and last keys still differ in its highest differing bit, which is the same
+ * throughout each such small range (rx_split). */
 static void rx_sort(rx_ctx *x, int src, uint32_t b, uint32_t e) {
     rx_key *ks = src ? x->key2 : x->key, *kd = src ? x->key : x->key2;
-    if (e - b <= RX_SMALL) { /* insertion sort */
+    int hb = -1;
+    if (e - b <= BIH_LEAF_SIZE) {
+    } else if (e - b <= RX_SMALL) { /* insertion sort */
         for (uint32_t i = b + 1; i < e; i++) {
             rx_key k = ks[i];
             uint32_t j = i;
             for (; j > b && ks[j - 1].code > k.code; j--) ks[j] = ks[j - 1];
             ks[j] = k;
         }
+    } else {
+        hb = rx_high_bit(ks, b, e);
     }
-    int hb = e - b > RX_SMALL ? rx_high_bit(ks, b, e) : -1;
     if (hb < 0) { /* sorted: into buffer 0 */
         if (src) memcpy(kd + b, ks + b, (e - b) * sizeof *kd);
         return;
@@ -297,90 +327,25 @@ static void rx_sort(rx_ctx *x, int src, uint32_t b, uint32_t e) {
     int bits = e - b > 4096 ? 8 : e - b > 512 ? 6 : 4;
     uint32_t nd = 1u << bits, mask = nd - 1;
     int shift = hb >= bits - 1 ? hb - (bits - 1) : 0;
-    uint32_t cnt[256], off[256], start[256];
-    memset(cnt, 0, nd * sizeof *cnt);
-    for (uint32_t i = b; i < e; i++) cnt[(ks[i].code >> shift) & mask]++;
-    for (uint32_t k = 0, o = b; k < nd; k++) start[k] = off[k] = o, o += cnt[k];
-    for (uint32_t i = b; i < e; i++) kd[off[(ks[i].code >> shift) & mask]++] = ks[i];
+    /* four counters per digit, so that runs of one digit (clustered codes) do not wait on each
+     * other's increments */
+    uint32_t cnt[4][256], off[256], start[256];
+    for (int r = 0; r < 4; r++) memset(cnt[r], 0, nd * sizeof cnt[r][0]);
+    uint32_t i = b;
+    for (; i + 4 <= e; i += 4) {
+        cnt[0][(ks[i].code >> shift) & mask]++;
+        cnt[1][(ks[i + 1].code >> shift) & mask]++;
+        cnt[2][(ks[i + 2].code >> shift) & mask]++;
+        cnt[3][(ks[i + 3].code >> shift) & mask]++;
+    }
+    for (; i < e; i++) cnt[0][(ks[i].code >> shift) & mask]++;
+    for (uint32_t k = 0, o = b; k < nd; k++) {
+        cnt[0][k] += cnt[1][k] + cnt[2][k] + cnt[3][k];
+        start[k] = off[k] = o, o += cnt[0][k];
+    }
+    for (i = b; i < e; i++) kd[off[(ks[i].code >> shift) & mask]++] = ks[i];
     for (uint32_t k = 0; k < nd; k++)
-        if (cnt[k]) rx_sort(x, !src, start[k], start[k] + cnt[k]);
-}
-
-/* The boxes of a chunk of the sorted keys, in their order. */
-static void rx_gather_task(void *user, uint32_t index, uint32_t thread) {
-    (void)thread;
-    rx_ctx *x = user;
-    uint32_t b, e;
-    rx_chunk(x, index, &b, &e);
-    const bvh_prim *p = x->c->p;
-    for (uint32_t i = b; i < e; i++) {
-        if (i + 16 < e) __builtin_prefetch(&p[x->key[i + 16].id]);
-        x->box2[i] = p[x->key[i].id];
-    }
-}
-
-static void rx_bucket_task(void *user, uint32_t index, uint32_t thread) {
-    (void)thread;
-    rx_ctx *x = user;
-    rx_sort(x, (int)x->buckets[index][2], x->buckets[index][0], x->buckets[index][1]);
-}
-
-static int rx_bucket_larger(const void *a, const void *b) {
-    const uint32_t *x = a, *y = b;
-    uint32_t nx = x[1] - x[0], ny = y[1] - y[0];
-    return nx > ny ? -1 : nx < ny ? 1 : (x[0] > y[0]) - (x[0] < y[0]);
-}
-
-/* One digit of positions [b, e) (held in buffer src) by all threads; the buckets of at most a share
- * of the positions become tasks, the larger ones get a pass of their own. */
-static void rx_bucket(rx_ctx *x, uint32_t b, uint32_t e, int src) {
-    x->buckets[x->bucket_n][0] = b, x->buckets[x->bucket_n][1] = e, x->buckets[x->bucket_n][2] = (uint32_t)src;
-    x->bucket_n++;
-}
-
-static void rx_pass_par(rx_ctx *x, sys_pool *pool, int src, uint32_t b, uint32_t e) {
-    int hb = rx_high_bit(src ? x->key2 : x->key, b, e);
-    if (hb < 0 || x->bucket_n + 256 > RX_BUCKETS) {
-        rx_bucket(x, b, e, src);
-        return;
-    }
-    x->shift = hb >= 7 ? hb - 7 : 0, x->pb = b, x->pe = e, x->psrc = src;
-    sys_pool_parallel_for(pool, x->chunks, rx_hist_task, x);
-    uint32_t o = b, bounds[257], nb = 0;
-    for (uint32_t k = 0; k < 256; k++) {
-        uint32_t start = o;
-        for (uint32_t i = 0; i < x->chunks; i++) {
-            uint32_t c = x->hist[i][k];
-            x->hist[i][k] = o, o += c;
-        }
-        if (o > start) bounds[nb++] = start;
-    }
-    bounds[nb] = e;
-    sys_pool_parallel_for(pool, x->chunks, rx_scatter_task, x);
-    for (uint32_t k = 0; k < nb; k++) {
-        uint32_t bb = bounds[k], be = bounds[k + 1];
-        if (be - bb > x->n / (4 * x->threads)) rx_pass_par(x, pool, !src, bb, be);
-        else rx_bucket(x, bb, be, !src);
-    }
-}
-
-/* Sorts the boxes by code: the codes and the digits of large ranges by all threads, then each
- * bucket by a task. */
-static void rx_sort_all(rx_ctx *x, sys_pool *pool) {
-    x->pb = 0, x->pe = x->n;
-    if (pool) sys_pool_parallel_for(pool, x->chunks, rx_code_task, x);
-    else rx_code_task(x, 0, 0);
-    if (!pool) {
-        rx_sort(x, 0, 0, x->n);
-        rx_gather_task(x, 0, 0);
-        return;
-    }
-    x->bucket_n = 0;
-    rx_pass_par(x, pool, 0, 0, x->n);
-    qsort(x->buckets, x->bucket_n, sizeof x->buckets[0], rx_bucket_larger);
-    sys_pool_parallel_for(pool, x->bucket_n, rx_bucket_task, x);
-    x->pb = 0, x->pe = x->n;
-    sys_pool_parallel_for(pool, x->chunks, rx_gather_task, x);
+        if (cnt[0][k]) rx_sort(x, !src, start[k], start[k] + cnt[0][k]);
 }
 
 static uint32_t rx_alloc(rx_ctx *x, rx_local *l) {
@@ -411,15 +376,25 @@ static inline bool rx_is_leaf(const rx_ctx *x, uint32_t b, uint32_t e) {
     return e - b <= BIH_LEAF_SIZE || x->key[b].code == x->key[e - 1].code;
 }
 
-/* Builds the subtree of positions [b, e) in entry `entry`, bounds included. */
+static inline void rx_union(rx_node *r, const rx_node *L, const rx_node *R) {
+    for (int k = 0; k < 3; k++) /* (fminf and fmaxf are calls) */
+        r->lo[k] = L->lo[k] < R->lo[k] ? L->lo[k] : R->lo[k], r->hi[k] = L->hi[k] > R->hi[k] ? L->hi[k] : R->hi[k];
+    r->blocks = L->blocks + R->blocks;
+}
+
+/* Builds the subtree of positions [b, e) (sorted) in entry `entry`, bounds and blocks included.
+ * The leaves come in the positions' order; each prefetches the boxes RX_AHEAD positions on, up
+ * to l->ahead. */
 static void rx_tree(rx_ctx *x, rx_local *l, uint32_t entry, uint32_t b, uint32_t e) {
     rx_node *r = &x->t[entry];
     if (rx_is_leaf(x, b, e)) {
-        const bvh_prim *p = x->c->p;
-        vf4 lo = p[b].lo, hi = p[b].hi;
-        for (uint32_t i = b + 1; i < e; i++) lo = vf4_min(lo, p[i].lo), hi = vf4_max(hi, p[i].hi);
-        for (int k = 0; k < 3; k++) r->lo[k] = lo[k], r->hi[k] = hi[k];
-        r->a = b, r->b = e, r->axis = RX_LEAF;
+        const bvh_prim *p = x->c->in->boxes;
+        const rx_key *k = x->key;
+        for (uint32_t i = b + RX_AHEAD; i < e + RX_AHEAD && i < l->ahead; i++) __builtin_prefetch(&p[k[i].id]);
+        vf4 lo = p[k[b].id].lo, hi = p[k[b].id].hi;
+        for (uint32_t i = b + 1; i < e; i++) lo = vf4_min(lo, p[k[i].id].lo), hi = vf4_max(hi, p[k[i].id].hi);
+        for (int j = 0; j < 3; j++) r->lo[j] = lo[j], r->hi[j] = hi[j];
+        r->a = b, r->b = e, r->axis = RX_LEAF, r->blocks = (e - b + 3) / 4;
         return;
     }
     int axis;
@@ -427,66 +402,150 @@ static void rx_tree(rx_ctx *x, rx_local *l, uint32_t entry, uint32_t b, uint32_t
     uint32_t left = rx_alloc(x, l), right = rx_alloc(x, l);
     rx_tree(x, l, left, b, m);
     rx_tree(x, l, right, m, e);
-    const rx_node *L = &x->t[left], *R = &x->t[right];
-    for (int k = 0; k < 3; k++) r->lo[k] = fminf(L->lo[k], R->lo[k]), r->hi[k] = fmaxf(L->hi[k], R->hi[k]);
+    rx_union(r, &x->t[left], &x->t[right]);
     r->a = left, r->b = right, r->axis = (uint32_t)axis;
 }
 
-/* The top of the tree on the calling thread: subtrees of at most task_max positions are tasks. */
-static void rx_tree_top(rx_ctx *x, uint32_t entry, uint32_t b, uint32_t e) {
-    if (x->task_n == x->task_cap) { /* the list full: built here */
-        rx_tree(x, &x->tl[0], entry, b, e);
+/* A bucket: its keys sorted, then its subtree built while they are in cache. */
+static void rx_bucket_task(void *user, uint32_t index, uint32_t thread) {
+    rx_ctx *x = user;
+    rx_bucket *k = &x->buckets[index];
+    rx_sort(x, (int)k->src, k->b, k->e);
+    rx_local *l = &x->tl[thread];
+    const bvh_prim *p = x->c->in->boxes;
+    for (uint32_t i = k->b; i < k->b + RX_AHEAD && i < k->e; i++) __builtin_prefetch(&p[x->key[i].id]);
+    l->ahead = k->e;
+    k->entry = rx_alloc(x, l);
+    rx_tree(x, l, k->entry, k->b, k->e);
+    x->t[k->entry].axis |= RX_TASK_ROOT;
+}
+
+/* Larger buckets first (the tasks' order), then by position. */
+static int rx_bucket_larger(const void *a, const void *b) {
+    const rx_bucket *x = a, *y = b;
+    uint32_t nx = x->e - x->b, ny = y->e - y->b;
+    return nx > ny ? -1 : nx < ny ? 1 : (x->b > y->b) - (x->b < y->b);
+}
+
+static int rx_bucket_first(const void *a, const void *b) {
+    const rx_bucket *x = a, *y = b;
+    return (x->b > y->b) - (x->b < y->b);
+}
+
+static void rx_push_bucket(rx_ctx *x, uint32_t b, uint32_t e, int src) {
+    x->buckets[x->bucket_n++] = (rx_bucket){b, e, (uint32_t)src, 0};
+}
+
+/* One digit of positions [b, e) (held in buffer src) by all threads; the buckets of at most a share
+ * of the positions are left to tasks, the larger ones get a pass of their own. */
+static void rx_pass_par(rx_ctx *x, sys_pool *pool, int src, uint32_t b, uint32_t e) {
+    x->pb = b, x->pe = e, x->psrc = src;
+    sys_pool_parallel_for(pool, x->chunks, rx_minmax_task, x);
+    uint64_t mn = UINT64_MAX, mx = 0;
+    for (uint32_t i = 0; i < x->chunks; i++) mn = x->mm[i][0] < mn ? x->mm[i][0] : mn, mx = x->mm[i][1] > mx ? x->mm[i][1] : mx;
+    int hb = mn == mx ? -1 : 63 - __builtin_clzll(mn ^ mx);
+    if (hb < 0 || x->bucket_n + 256 > RX_BUCKETS) {
+        rx_push_bucket(x, b, e, src);
         return;
     }
-    if (e - b <= x->task_max || rx_is_leaf(x, b, e)) {
-        x->tasks[x->task_n++] = (rx_task){entry, b, e, {0}};
-        x->t[entry].axis = RX_TASK_ROOT; /* until the task writes it */
-        return;
+    x->shift = hb >= 7 ? hb - 7 : 0;
+    sys_pool_parallel_for(pool, x->chunks, rx_hist_task, x);
+    uint32_t o = b, bounds[257], nb = 0;
+    for (uint32_t k = 0; k < 256; k++) {
+        uint32_t start = o;
+        for (uint32_t i = 0; i < x->chunks; i++) {
+            uint32_t c = x->hist[i][k];
+            x->hist[i][k] = o, o += c;
+        }
+        if (o > start) bounds[nb++] = start;
+    }
+    bounds[nb] = e;
+    sys_pool_parallel_for(pool, x->chunks, rx_scatter_task, x);
+    for (uint32_t k = 0; k < nb; k++) {
+        uint32_t bb = bounds[k], be = bounds[k + 1];
+        if (be - bb > x->n / (4 * x->threads)) rx_pass_par(x, pool, !src, bb, be);
+        else rx_push_bucket(x, bb, be, !src);
+    }
+}
+
+/* Sorts the keys by code (the codes and the digits of large ranges by all threads, then each
+ * bucket by a task, which builds its subtree too); the buckets end in the positions' order. */
+static void rx_sort_all(rx_ctx *x, sys_pool *pool) {
+    x->pb = 0, x->pe = x->n;
+    x->bucket_n = 0;
+    if (pool) {
+        sys_pool_parallel_for(pool, x->chunks, rx_code_task, x);
+        rx_pass_par(x, pool, 0, 0, x->n);
+        qsort(x->buckets, x->bucket_n, sizeof x->buckets[0], rx_bucket_larger);
+        sys_pool_parallel_for(pool, x->bucket_n, rx_bucket_task, x);
+        qsort(x->buckets, x->bucket_n, sizeof x->buckets[0], rx_bucket_first);
+    } else {
+        rx_code_task(x, 0, 0);
+        rx_push_bucket(x, 0, x->n, 0);
+        rx_bucket_task(x, 0, 0);
+    }
+}
+
+/* The tree above the buckets on the calling thread, left to right; returns the entry of positions
+ * [b, e). The codes with a common prefix are one subtree, so a range is the next bucket or holds
+ * several whole ones, unless the tree makes a leaf of them (a few positions, or equal codes):
+ * buckets finer than a leaf are left unused, and the leaf made here as rx_tree makes it. */
+static uint32_t rx_tree_top(rx_ctx *x, uint32_t b, uint32_t e) {
+    const rx_bucket *k = x->cursor < x->bucket_n ? &x->buckets[x->cursor] : NULL;
+    if (!k || k->b != b || k->e > e) {
+        x->bad = true;
+        return 0;
+    }
+    if (k->e == e) {
+        x->cursor++;
+        return k->entry;
+    }
+    rx_local *l = &x->tl[0];
+    uint32_t entry = rx_alloc(x, l);
+    if (rx_is_leaf(x, b, e)) {
+        l->ahead = e;
+        rx_tree(x, l, entry, b, e);
+        while (x->cursor < x->bucket_n && x->buckets[x->cursor].e <= e) x->cursor++;
+        return entry;
     }
     int axis;
     uint32_t m = rx_split(x, b, e, &axis);
-    uint32_t left = rx_alloc(x, &x->tl[0]), right = rx_alloc(x, &x->tl[0]);
-    x->t[entry].a = left, x->t[entry].b = right, x->t[entry].axis = (uint32_t)axis;
-    rx_tree_top(x, left, b, m);
-    rx_tree_top(x, right, m, e);
-}
-
-static void rx_tree_task(void *user, uint32_t index, uint32_t thread) {
-    rx_ctx *x = user;
-    rx_task t = x->tasks[index];
-    rx_tree(x, &x->tl[thread], t.entry, t.begin, t.end);
-    x->t[t.entry].axis |= RX_TASK_ROOT;
-}
-
-/* Bounds of the top of the tree, once its tasks are done. */
-static void rx_tree_bounds(rx_ctx *x, uint32_t entry) {
+    uint32_t left = rx_tree_top(x, b, m), right = rx_tree_top(x, m, e);
     rx_node *r = &x->t[entry];
-    if (r->axis & RX_TASK_ROOT || r->axis == RX_LEAF) return;
-    rx_tree_bounds(x, r->a);
-    rx_tree_bounds(x, r->b);
-    const rx_node *L = &x->t[r->a], *R = &x->t[r->b];
-    for (int k = 0; k < 3; k++) r->lo[k] = fminf(L->lo[k], R->lo[k]), r->hi[k] = fmaxf(L->hi[k], R->hi[k]);
+    rx_union(r, &x->t[left], &x->t[right]);
+    r->a = left, r->b = right, r->axis = (uint32_t)axis;
+    return entry;
 }
 
-/* Writes the BIH nodes of the subtree at entry `entry` into node `node`, as the partition build's
- * split did: the clip node in front (from the node's box nb, the root box cut by its ancestors'
- * planes), then the leaf, or the node with its two planes and its children. With stop, subtrees
- * that a task built are left to a task of their own. */
-static void rx_emit(rx_ctx *x, bih_local *l, uint32_t entry, uint32_t node, float nb[6], uint32_t depth, bool stop) {
+/* Fills the blocks of positions [b, e) (block_of written by their leaves). */
+static void rx_fill(const rx_ctx *x, uint32_t b, uint32_t e) {
+    const accel_tri_input *in = x->c->in;
+    in->fill(in->user, in->refs, &x->key[0].id, sizeof(rx_key) / sizeof(uint32_t), x->c->block_of, b, e, x->c->blocks);
+}
+
+/* Writes the BIH nodes of the subtree at entry `entry` into node `node`, its leaves' blocks from
+ * `block` on, as the partition build's split did: the clip node in front (from the node's box nb,
+ * the root box cut by its ancestors' planes), then the leaf, or the node with its two planes and
+ * its children. With top, a bucket's subtree is left to a task, and a leaf above the buckets is
+ * filled at once. Each inner entry's children differ in a lower bit of the code than it, so an
+ * inner node is at most at depth 63 (the root: 1), within BIH_MAX_DEPTH. */
+static void rx_emit(rx_ctx *x, bih_local *l, uint32_t entry, uint32_t node, float nb[6], uint32_t depth, uint32_t block,
+                    bool top) {
     bih_ctx *c = x->c;
     for (;;) {
         const rx_node *r = &x->t[entry];
-        if (stop && (r->axis & RX_TASK_ROOT)) {
+        if (top && (r->axis & RX_TASK_ROOT)) {
             rx_task *t = &x->tasks[x->task_n++];
-            *t = (rx_task){entry, node, depth, {0}};
+            *t = (rx_task){entry, node, depth, block, r->blocks, {0}};
             memcpy(t->nb, nb, sizeof t->nb);
             return;
         }
         vf4 blo = {r->lo[0], r->lo[1], r->lo[2], 0.0f}, bhi = {r->hi[0], r->hi[1], r->hi[2], 0.0f};
         node = clip_empty(c, l, node, nb, blo, bhi);
         uint32_t axis = r->axis & ~RX_TASK_ROOT;
-        if (axis == RX_LEAF || depth >= BIH_MAX_DEPTH) {
-            make_leaf(c, l, node, r->a, r->b, depth);
+        if (axis == RX_LEAF) {
+            make_leaf(c, l, node, r->a, r->b, block, depth);
+            if (top) rx_fill(x, r->a, r->b);
             return;
         }
         const rx_node *L = &x->t[r->a], *R = &x->t[r->b];
@@ -496,133 +555,78 @@ static void rx_emit(rx_ctx *x, bih_local *l, uint32_t entry, uint32_t node, floa
         memcpy(nl, nb, sizeof nl);
         if (L->hi[axis] < nl[3 + axis]) nl[3 + axis] = L->hi[axis];
         if (R->lo[axis] > nb[axis]) nb[axis] = R->lo[axis];
-        rx_emit(x, l, r->a, child, nl, depth + 1, stop);
-        entry = r->b, node = child + 1, depth++;
+        rx_emit(x, l, r->a, child, nl, depth + 1, block, top);
+        entry = r->b, node = child + 1, depth++, block += L->blocks;
     }
 }
 
+/* Larger tasks first. */
+static int rx_task_larger(const void *a, const void *b) {
+    const rx_task *x = a, *y = b;
+    return x->blocks > y->blocks ? -1 : x->blocks < y->blocks ? 1 : (x->block > y->block) - (x->block < y->block);
+}
+
+/* A bucket's nodes, then its blocks (its positions: from its first leaf's to its last leaf's). */
 static void rx_emit_task(void *user, uint32_t index, uint32_t thread) {
     rx_ctx *x = user;
     rx_task t = x->tasks[index];
-    rx_emit(x, &x->c->local[thread], t.entry, t.begin, t.nb, t.end, false);
+    uint32_t first = t.entry, last = t.entry;
+    while ((x->t[first].axis & ~RX_TASK_ROOT) != RX_LEAF) first = x->t[first].a;
+    while ((x->t[last].axis & ~RX_TASK_ROOT) != RX_LEAF) last = x->t[last].b;
+    rx_emit(x, &x->c->local[thread], t.entry, t.node, t.nb, t.depth, t.block, false);
+    rx_fill(x, x->t[first].a, x->t[last].b);
 }
 
-/* Numbers the blocks: every position gets its block (a leaf's triangles fill blocks of four in
- * order, its first position starting one), as the BVH's tri_pack_plan; make_leaf has marked each
- * leaf's first position with its count. */
-static uint32_t plan_blocks(bih_ctx *c, uint32_t n) {
-    uint32_t next = 0, block = 0, k = 0; /* k: position in the current leaf */
-    for (uint32_t p = 0; p < n; p++) {
-        uint32_t count = c->block_of[p];
-        if (count) block = next, next += (count + 3) / 4, k = 0;
-        c->block_of[p] = block + k++ / 4;
-    }
-    return next;
-}
-
-typedef struct fill_ctx {
-    bih_ctx *c;
-    uint32_t node_count, n, chunks;
-} fill_ctx;
-
-/* First position of chunk `index`, moved on to the start of a block. */
-static uint32_t fill_chunk_start(const fill_ctx *f, uint32_t index) {
-    uint32_t p = (uint32_t)((uint64_t)f->n * index / f->chunks);
-    while (p > 0 && p < f->n && f->c->block_of[p] == f->c->block_of[p - 1]) p++;
-    return p;
-}
-
-/* Fills the blocks of a chunk of the positions (the scene's fill, accel_tri_input.fill, reading
- * each position's id from its box, lo's w lane) and copies a chunk of the nodes to their final
- * allocation, pointing the leaves at their blocks. */
-static void fill_task(void *user, uint32_t index, uint32_t thread) {
-    (void)thread;
-    const fill_ctx *f = user;
-    bih_ctx *c = f->c;
-    uint32_t pb = fill_chunk_start(f, index), pe = fill_chunk_start(f, index + 1);
-    const uint32_t *ids = (const uint32_t *)(const void *)&c->p[0].lo[3];
-    c->in->fill(c->in->user, c->in->refs, ids, sizeof(bvh_prim) / sizeof(uint32_t), c->block_of, pb, pe, c->blocks);
-    uint64_t nn = f->node_count;
-    uint32_t b = (uint32_t)(nn * index / f->chunks), e = (uint32_t)(nn * (index + 1) / f->chunks);
-    for (uint32_t i = b; i < e; i++) {
-        bih_node *nd = &c->out[i];
-        *nd = c->nodes[i];
-        if (nd->meta != BIH_LEAF) continue;
-        uint32_t first, count;
-        memcpy(&first, &nd->clip[0], 4), memcpy(&count, &nd->clip[1], 4);
-        uint32_t block = count ? c->block_of[first] : 0, blocks = (count + 3) / 4;
-        memcpy(&nd->clip[0], &block, 4), memcpy(&nd->clip[1], &blocks, 4);
-    }
-}
-
-/* Stamps each box with its id (lo's w lane, unused by the build). */
-typedef struct stamp_ctx {
-    bvh_prim *p;
-    uint32_t n, chunks;
-} stamp_ctx;
-
-static void stamp_task(void *user, uint32_t index, uint32_t thread) {
-    (void)thread;
-    const stamp_ctx *s = user;
-    uint32_t b = (uint32_t)((uint64_t)s->n * index / s->chunks), e = (uint32_t)((uint64_t)s->n * (index + 1) / s->chunks);
-    for (uint32_t i = b; i < e; i++) {
-        float f;
-        memcpy(&f, &i, 4);
-        s->p[i].lo[3] = f;
-    }
-}
-
-/* Sorts the boxes by code (into *sorted, which the caller frees: n boxes; c->p points at them),
- * then writes the nodes into c->nodes (allocated here, c->node_bytes, from node 0; c->local's
- * counters); false when out of memory. */
+/* Sorts the keys, builds the tree and writes its nodes into c->nodes (allocated here,
+ * c->node_bytes, from node 0; c->local's counters) and its *block_count blocks into c->blocks
+ * (allocated here, filled); false when out of memory. */
 static bool rx_build(bih_ctx *c, const sys_allocator *a, sys_pool *pool, uint32_t threads, const float sb[6], float nb[6],
-                     bvh_prim **sorted) {
+                     uint32_t *block_count) {
     rx_ctx *x = sys_alloc(a, sizeof *x);
     if (!x) return false;
     memset(x, 0, sizeof *x);
     uint32_t n = c->in->count;
     x->c = c, x->n = n, x->threads = threads, x->chunks = pool ? threads * 4 : 1;
     rx_setup(x, sb);
-    x->t_cap = 2 * n + RX_CHUNK * (threads + 1); /* 2n - 1 entries at most, and the threads' chunks */
-    x->task_cap = pool ? RX_TASKS : 1;
-    x->task_max = pool ? n / (BIH_TASK_SHARE * threads) : n;
+    /* the buckets' subtrees hold 2n - 1 entries at most, the tree above them one per bucket */
+    x->t_cap = 2 * n + RX_BUCKETS + RX_CHUNK * (threads + 1);
     size_t key_bytes = (size_t)n * sizeof(rx_key), t_bytes = (size_t)x->t_cap * sizeof(rx_node);
     size_t tl_bytes = threads * sizeof(rx_local);
-    size_t hist_bytes = x->chunks * sizeof *x->hist, task_bytes = x->task_cap * sizeof(rx_task);
+    size_t hist_bytes = x->chunks * (sizeof *x->hist + sizeof *x->mm), task_bytes = RX_BUCKETS * sizeof(rx_task);
     x->key = sys_alloc(a, key_bytes);
     x->key2 = sys_alloc(a, key_bytes);
-    x->box2 = *sorted = sys_alloc(a, (size_t)n * sizeof(bvh_prim));
     x->t = sys_alloc(a, t_bytes);
     x->tl = sys_alloc(a, tl_bytes);
     x->hist = sys_alloc(a, hist_bytes);
     x->tasks = sys_alloc(a, task_bytes);
-    bool ok = x->key && x->key2 && x->box2 && x->t && x->tl && x->hist && x->tasks;
+    bool ok = x->key && x->key2 && x->t && x->tl && x->hist && x->tasks;
+    if (ok) x->mm = (uint64_t(*)[2])(void *)(x->hist + x->chunks);
     if (ok) {
         memset(x->tl, 0, tl_bytes);
-        atomic_store(&x->t_next, 1);
+        atomic_store(&x->t_next, 0);
+        /* phase 1: the keys sorted, the tree's entries, their bounds and blocks */
         rx_sort_all(x, pool);
-        c->p = x->box2;
-        /* phase 1: the tree's entries and their bounds */
-        rx_tree_top(x, 0, 0, n);
-        if (pool && x->task_n > 1) sys_pool_parallel_for(pool, x->task_n, rx_tree_task, x);
-        else
-            for (uint32_t i = 0; i < x->task_n; i++) rx_tree_task(x, i, 0);
-        rx_tree_bounds(x, 0);
+        sys_free(a, x->key2, key_bytes), x->key2 = NULL;
+        uint32_t root = rx_tree_top(x, 0, n);
+        ok = !x->bad;
         /* phase 2: the nodes, top-down. Each entry is a node, and may have a clip node in front
          * (clip_empty); a chunk of nodes (node_alloc) leaves at most one unused, and each
          * thread's last chunk its rest. */
         size_t entries = atomic_load(&x->t_next);
         c->node_bytes = (2 * entries + 2 * entries / (BIH_NODE_CHUNK - 1) + (size_t)BIH_NODE_CHUNK * (threads + 1) + 1) *
                         sizeof(bih_node);
-        c->nodes = sys_alloc(a, c->node_bytes);
-        ok = c->nodes != NULL;
-    }
-    if (ok) {
-        x->task_n = 0;
-        rx_emit(x, &c->local[0], 0, 0, nb, 1, pool != NULL);
-        if (pool && x->task_n > 1) sys_pool_parallel_for(pool, x->task_n, rx_emit_task, x);
-        else
-            for (uint32_t i = 0; i < x->task_n; i++) rx_emit_task(x, i, 0);
+        c->nodes = ok ? sys_alloc(a, c->node_bytes) : NULL;
+        *block_count = ok ? x->t[root].blocks : 0;
+        c->blocks = ok ? accel_blocks_alloc(a, *block_count) : NULL;
+        ok = ok && c->nodes && c->blocks;
+        if (ok) {
+            x->task_n = 0;
+            rx_emit(x, &c->local[0], root, 0, nb, 1, 0, true);
+            qsort(x->tasks, x->task_n, sizeof *x->tasks, rx_task_larger);
+            if (pool && x->task_n > 1) sys_pool_parallel_for(pool, x->task_n, rx_emit_task, x);
+            else
+                for (uint32_t i = 0; i < x->task_n; i++) rx_emit_task(x, i, 0);
+        }
     }
     sys_free(a, x->key, key_bytes), sys_free(a, x->key2, key_bytes);
     sys_free(a, x->t, t_bytes), sys_free(a, x->tl, tl_bytes);
@@ -631,10 +635,24 @@ static bool rx_build(bih_ctx *c, const sys_allocator *a, sys_pool *pool, uint32_
     return ok;
 }
 
+/* The nodes copied to their final allocation. */
+typedef struct copy_ctx {
+    bih_ctx *c;
+    uint32_t count, chunks;
+} copy_ctx;
+
+static void copy_task(void *user, uint32_t index, uint32_t thread) {
+    (void)thread;
+    const copy_ctx *f = user;
+    uint64_t nn = f->count;
+    uint32_t b = (uint32_t)(nn * index / f->chunks), e = (uint32_t)(nn * (index + 1) / f->chunks);
+    memcpy(&f->c->out[b], &f->c->nodes[b], (size_t)(e - b) * sizeof(bih_node));
+}
+
 static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *in, accel_built *out) {
     memset(out, 0, sizeof *out);
     uint32_t n = in->count;
-    bih_ctx c = {.in = in, .p = in->boxes};
+    bih_ctx c = {.in = in};
     uint32_t threads = pool && n >= 4096 ? (uint32_t)sys_pool_threads(pool) : 1;
     if (threads < 2) pool = NULL, threads = 1;
     size_t local_bytes = threads * sizeof(bih_local), block_of_bytes = (size_t)n * sizeof(uint32_t) + 4;
@@ -645,18 +663,15 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
         return false;
     }
     memset(c.local, 0, local_bytes);
-    stamp_ctx st = {in->boxes, n, pool ? threads * 4 : 1};
-    if (pool) sys_pool_parallel_for(pool, st.chunks, stamp_task, &st);
-    else stamp_task(&st, 0, 0);
     box3 b = in->bounds;
     float sb[6] = {b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z}, nb[6];
     memcpy(out->bounds, sb, sizeof sb);
     memcpy(nb, sb, sizeof nb);
     c.abs_pad = box_pad_abs(sb, sb + 3);
     atomic_store(&c.next, 1);
-    bvh_prim *sorted = NULL;
-    bool ok = rx_build(&c, a, pool, threads, sb, nb, &sorted);
-    uint32_t node_count = atomic_load(&c.next), depth = 0, unused = 0, blocks = 0;
+    uint32_t blocks = 0;
+    bool ok = rx_build(&c, a, pool, threads, sb, nb, &blocks);
+    uint32_t node_count = atomic_load(&c.next), depth = 0, unused = 0;
     uint64_t leaves = 0;
     size_t out_bytes = 0;
     if (ok) {
@@ -668,18 +683,15 @@ static bool bih_build(const sys_allocator *a, sys_pool *pool, accel_tri_input *i
         if (c.abs_pad != 0.0f)
             for (int k = 0; k < 3; k++)
                 out->bounds[k] = box_pad_lo(out->bounds[k], c.abs_pad), out->bounds[3 + k] = box_pad_hi(out->bounds[3 + k], c.abs_pad);
-        blocks = plan_blocks(&c, n);
-        c.blocks = accel_blocks_alloc(a, blocks);
         out_bytes = (size_t)node_count * sizeof(bih_node);
         c.out = sys_alloc(a, out_bytes);
-        ok = c.blocks != NULL && c.out != NULL;
+        ok = c.out != NULL;
     }
     if (ok) {
-        fill_ctx f = {&c, node_count, n, pool ? threads * 8 : 1};
-        if (pool) sys_pool_parallel_for(pool, f.chunks, fill_task, &f);
-        else fill_task(&f, 0, 0);
+        copy_ctx f = {&c, node_count, pool ? threads * 4 : 1};
+        if (pool) sys_pool_parallel_for(pool, f.chunks, copy_task, &f);
+        else copy_task(&f, 0, 0);
     }
-    sys_free(a, sorted, (size_t)n * sizeof(bvh_prim));
     sys_free(a, c.block_of, block_of_bytes);
     sys_free(a, c.nodes, c.node_bytes);
     sys_free(a, c.local, local_bytes);

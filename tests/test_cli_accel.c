@@ -78,6 +78,24 @@ int main(void) {
         CHECKF(png[0] && png[a] && sizes[a] == sizes[0] && memcmp(png[a], png[0], sizes[0]) == 0,
                "the %s image equals the bvh one", names[a]);
     for (int a = 0; a < RP_ACCEL_COUNT; a++) free(png[a]);
+    /* builds on 2 threads (the BVH's and the BIH's builds go parallel from 4096 triangles: the
+     * bunny), checked under ThreadSanitizer too */
+    char buf2[512];
+    const char *bunny = rp_test_scene("stanford_bunny_bun_zipper.ply.gz", buf2, sizeof buf2);
+    CHECK(bunny != NULL);
+    for (int a = 0; bunny && a < RP_ACCEL_COUNT; a++) {
+        char path[1024];
+        snprintf(path, sizeof path, "%s/bunny_%s.png", tmp, names[a]);
+        snprintf(args, sizeof args, "render '%s' --accel %s --threads 2 --width 64 --height 48 -o '%s'", bunny,
+                 names[a], path);
+        EXPECT(args, 0, "");
+        png[a] = slurp(path, &sizes[a]);
+        CHECKF(png[a] && sizes[a] > 100, "%s renders the bunny", names[a]);
+    }
+    for (int a = 1; bunny && a < RP_ACCEL_COUNT; a++)
+        CHECKF(png[0] && png[a] && sizes[a] == sizes[0] && memcmp(png[a], png[0], sizes[0]) == 0,
+               "the bunny's %s image equals the bvh one", names[a]);
+    for (int a = 0; bunny && a < RP_ACCEL_COUNT; a++) free(png[a]);
     /* the grid on a tiny image */
     char json[1024];
     snprintf(json, sizeof json, "%s/accel_grid.json", tmp);

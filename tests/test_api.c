@@ -388,6 +388,62 @@ int main(void) {
         rp_scene_release(big);
     }
 
+    /* Axis-parallel rays lying in box faces at coordinate 0, where the boxes' relative margin is 0:
+     * a grid of 2 x 32 x 32 triangles at z = 2 whose vertices lie on x, y = -1 .. 1 in steps of
+     * 1/16, rays along +z through x = 0 (or y = 0) exactly. The slab test takes their zero direction
+     * components as +-1e-18 (the zero's sign picks the side of the face) and keeps them inside the
+     * faces at 0 only for t up to the absolute margin (box_pad_abs) times 1e18; the watertight test
+     * gives the edge's hit to the triangle on the zero's side, so the hits are found even with no
+     * absolute margin (measured), and must stay found with every structure, query and zero sign. */
+    for (int acc = 0; acc < RP_ACCEL_COUNT; acc++) {
+        enum { G = 32, GV = G + 1 };
+        rp_scene *pl = rp_scene_new(dev, &(rp_scene_desc){.accel = (rp_accel_type)acc});
+        rp_geometry *pg = rp_geometry_new(dev, RP_GEOMETRY_TRIANGLE);
+        float *pv = rp_geometry_new_buffer(pg, RP_BUFFER_VERTEX, RP_FORMAT_FLOAT3, 0, GV * GV);
+        uint32_t *pi = rp_geometry_new_buffer(pg, RP_BUFFER_INDEX, RP_FORMAT_UINT3, 0, 2 * G * G);
+        for (int j = 0; j < GV; j++)
+            for (int i = 0; i < GV; i++) {
+                float *pvi = pv + 3 * (GV * j + i);
+                pvi[0] = -1.0f + (float)i / 16.0f, pvi[1] = -1.0f + (float)j / 16.0f, pvi[2] = 2.0f;
+            }
+        for (uint32_t j = 0, t = 0; j < G; j++)
+            for (uint32_t i = 0; i < G; i++, t += 2) {
+                uint32_t a = GV * j + i;
+                uint32_t q[6] = {a, a + 1, a + GV + 1, a, a + GV + 1, a + GV};
+                memcpy(pi + 3 * t, q, sizeof q);
+            }
+        rp_scene_attach(pl, pg);
+        rp_geometry_release(pg);
+        CHECK(rp_scene_commit(pl) == RP_ERROR_NONE);
+        uint32_t lost = 0, lost16 = 0, lost_any = 0, n = 0;
+        for (int k = 0; k < 64 * 8; k++, n++) {
+            float c = -0.984375f + (float)(k % 64) / 32.0f; /* the other coordinate: on edges and inside */
+            /* the zero components' signs choose the side of the face the slab test keeps them on */
+            float zx = k / 64 & 1 ? -0.0f : 0.0f, zy = k / 128 & 1 ? -0.0f : 0.0f;
+            rp_rayhit r1 = k / 256 ? ray_at(c, 0.0f, -1.0f, zx, zy, 1) : ray_at(0.0f, c, -1.0f, zx, zy, 1);
+            rp_ray ro = r1.ray;
+            rp_intersect1(pl, &r1);
+            lost += !(r1.hit.geom_id == 0 && r1.ray.tfar == 3.0f);
+            rp_occluded1(pl, &ro);
+            lost_any += ro.tfar != -INFINITY;
+            rp_rayhit16 r16;
+            int32_t on[16];
+            for (int l = 0; l < 16; l++) {
+                on[l] = -1;
+                r16.ray.org_x[l] = r1.ray.org_x, r16.ray.org_y[l] = r1.ray.org_y, r16.ray.org_z[l] = -1.0f;
+                r16.ray.dir_x[l] = zx, r16.ray.dir_y[l] = zy, r16.ray.dir_z[l] = 1.0f;
+                r16.ray.tnear[l] = 0.0f, r16.ray.tfar[l] = INFINITY, r16.ray.mask[l] = ~0u;
+                r16.hit.geom_id[l] = RP_INVALID_ID;
+            }
+            rp_intersect16(pl, on, &r16);
+            for (int l = 0; l < 16; l++) lost16 += !(r16.hit.geom_id[l] == 0 && r16.ray.tfar[l] == 3.0f);
+        }
+        CHECKF(lost == 0 && lost16 == 0 && lost_any == 0,
+               "%s: rays in box faces at 0 lost %u closest hits, %u in 16-ray packets, %u occlusions of %u",
+               rp_accel_name((rp_accel_type)acc), lost, lost16 / 16, lost_any, n);
+        rp_scene_release(pl);
+    }
+
     /* parallel_for hands out every index exactly once, on the device's threads */
     pf p = {calloc(10000, sizeof(uint32_t)), rp_device_thread_count(dev)};
     rp_device_parallel_for(dev, 10000, pf_task, &p);

@@ -1,7 +1,8 @@
 // rp-test: labels=core timeout=120
 /* The compact layouts of the triangle BVH (accel/bvh/bvh.h): the quantized binary BVH's decoded
- * boxes hold the exact ones (boxes far from the origin, tiny, flat and point-like ones, and one
- * scene of a single box), with the same topology (pairs of one-block leaves stored as one leaf and
+ * boxes hold the exact ones, at most three steps of their parent's grid wider (boxes far from the
+ * origin, tiny, flat and point-like ones, a small object on a large ground, and one scene of a
+ * single box), with the same topology (pairs of one-block leaves stored as one leaf and
  * split again by bvh2q_to_bvh2); the compact wide BVH holds, node for node, the
  * children and boxes of the full-width one, each node as narrow as its children allow. */
 #include <math.h>
@@ -26,6 +27,12 @@ static void make_boxes(bvh_prim *p, uint32_t n, float centre, float extent, int 
             s[a] = shape == 0 ? rng_f() * extent * 1e-3f : shape == 1 ? rng_f() * extent * 1e-6f : 0.0f;
         }
         if (shape == 3) s[0] = extent * 0.01f, s[1] = 0.0f, s[2] = extent * 0.01f; /* flat */
+        if (shape == 4) { /* a small object on a large ground: box 0 the ground, the others 10^-4 of it */
+            for (int a = 0; a < 3; a++) {
+                c[a] = i == 0 ? centre : centre + (rng_f() - 0.5f) * extent * 1e-4f;
+                s[a] = i == 0 ? (a == 1 ? 0.0f : extent) : rng_f() * extent * 1e-7f;
+            }
+        }
         b.lo = v3(c[0] - s[0], c[1] - s[1], c[2] - s[2]);
         b.hi = v3(c[0] + s[0], c[1] + s[1], c[2] + s[2]);
         p[i] = bvh_prim_of(b);
@@ -55,11 +62,19 @@ static uint32_t number_blocks(bvh_node *nodes, uint32_t i, uint32_t next) {
 /* Walks float node i of t and node j of the quantized tree together: the decoded boxes hold the
  * exact ones, leaves keep their blocks and a pair is an inner node of two one-block leaves in
  * adjacent blocks. Counts the bad planes, the moved leaves and the pairs. */
-static void walk_quant(const bvh2 *t, uint32_t i, const bvh2q *q, uint32_t j, uint32_t *bad, uint32_t *moved,
-                       uint32_t *pairs) {
+static void walk_quant(const bvh2 *t, uint32_t i, const bvh2q *q, uint32_t j, const float org[3], const float scale[3],
+                       const float step[3], uint32_t *bad, uint32_t *loose, uint32_t *moved, uint32_t *pairs) {
     const bvh_node *n = &t->nodes[i];
-    bvh_node d = bvh2q_decode(&q->nodes[j], q->org, q->scale);
-    for (int k = 0; k < 3; k++) *bad += !(d.lo[k] <= n->lo[k]) || !(d.hi[k] >= n->hi[k]);
+    bvh_node d = bvh2q_decode(&q->nodes[j], org, scale);
+    for (int k = 0; k < 3; k++) {
+        *bad += !(d.lo[k] <= n->lo[k]) || !(d.hi[k] >= n->hi[k]);
+        /* at most three steps of a grid over its parent's decoded box (1/64000 of it) wider on each
+         * side: one for the rounding outward, one of margin, and a few of the float's ulps where the
+         * grid is finer than they are (a grid over the whole scene made the small boxes of a scene
+         * with a large ground as wide as 1/65535 of the ground) */
+        float tol_lo = 3.0f * step[k] + fabsf(n->lo[k]) * 0x1p-21f, tol_hi = 3.0f * step[k] + fabsf(n->hi[k]) * 0x1p-21f;
+        *loose += !(n->lo[k] - d.lo[k] <= tol_lo && d.hi[k] - n->hi[k] <= tol_hi);
+    }
     if (q->nodes[j].ic & BVH2Q_PAIR) {
         const bvh_node *l = &t->nodes[n->index], *r = l + 1;
         (*pairs)++;
@@ -71,8 +86,11 @@ static void walk_quant(const bvh2 *t, uint32_t i, const bvh2q *q, uint32_t j, ui
         *moved += d.index != n->index || d.count != n->count;
         return;
     }
-    walk_quant(t, n->index, q, d.index, bad, moved, pairs);
-    walk_quant(t, n->index + 1, q, d.index + 1, bad, moved, pairs);
+    float corg[3], cscale[3], cstep[3];
+    bvh2q_child_grid(&d, corg, cscale);
+    for (int k = 0; k < 3; k++) cstep[k] = (d.hi[k] - d.lo[k]) * (1.0f / 64000.0f);
+    walk_quant(t, n->index, q, d.index, corg, cscale, cstep, bad, loose, moved, pairs);
+    walk_quant(t, n->index + 1, q, d.index + 1, corg, cscale, cstep, bad, loose, moved, pairs);
 }
 
 /* The same topology and leaves, node for node. */
@@ -96,9 +114,10 @@ static void check_quant(const sys_allocator *a, const bvh2 *b) {
         free(nodes);
         return;
     }
-    uint32_t bad = 0, moved = 0, pairs = 0;
-    if (nodes[0].count || nodes[0].index) walk_quant(&t, 0, &q, 0, &bad, &moved, &pairs);
+    uint32_t bad = 0, loose = 0, moved = 0, pairs = 0;
+    if (nodes[0].count || nodes[0].index) walk_quant(&t, 0, &q, 0, q.org, q.scale, q.scale, &bad, &loose, &moved, &pairs);
     CHECKF(bad == 0, "%u planes of decoded boxes cut into the exact boxes", bad);
+    CHECKF(loose == 0, "%u planes of decoded boxes more than three grid steps outside the exact boxes", loose);
     CHECK(moved == 0);
     total_pairs += pairs;
     CHECKF(q.node_count == 2 * t.leaf_count - 1 - 2 * pairs, "%u nodes for %u leaves and %u pairs", q.node_count,
@@ -161,12 +180,35 @@ static void check_compact(const sys_allocator *a, const bvh2 *b, int width) {
     bvhw_free(a, &comp);
 }
 
+/* The margin bvh2_pad_boxes adds keeps a small object's boxes small on a large ground (shape 4
+ * around the origin: the object spans 10^-4 of the ground): every box of the object's (all but
+ * the root's and the ground's leaf) grows by under 10^-3 of the object's span per side. The
+ * absolute part of the margin had been 2^-20 of the scene (20 times the object's triangles'
+ * boxes here), which slowed every structure by 100-1000x on such scenes. */
+static void check_pad_small(const bvh2 *b, float extent) {
+    bvh2 t = *b;
+    t.nodes = malloc((size_t)b->node_count * sizeof *t.nodes);
+    memcpy(t.nodes, b->nodes, (size_t)b->node_count * sizeof *t.nodes);
+    bvh2_pad_boxes(&t);
+    const float span = extent * 1e-4f, most = span * 1e-3f;
+    uint32_t grown = 0, checked = 0;
+    for (uint32_t i = 1; i < b->node_count; i++) {
+        const bvh_node *n = &b->nodes[i], *p = &t.nodes[i];
+        if (!(n->lo[0] <= n->hi[0]) || n->hi[0] - n->lo[0] > span) continue; /* unused, or holds the ground */
+        checked++;
+        for (int k = 0; k < 3; k++) grown += !(n->lo[k] - p->lo[k] < most && p->hi[k] - n->hi[k] < most);
+    }
+    CHECKF(checked > 0 && grown == 0, "%u planes of %u small boxes moved out by more than %g", grown, checked,
+           (double)most);
+    free(t.nodes);
+}
+
 int main(void) {
     const sys_allocator a = {sys_default_alloc, NULL};
     const float centres[3] = {0.0f, 1.0e4f, -3.0e6f};
     const uint32_t sizes[4] = {1, 7, 1000, 20000};
     for (int c = 0; c < 3; c++)
-        for (int shape = 0; shape < 4; shape++)
+        for (int shape = 0; shape < 5; shape++)
             for (int si = 0; si < 4; si++) {
                 uint32_t n = sizes[si];
                 bvh_prim *p = malloc((size_t)n * sizeof *p);
@@ -175,6 +217,7 @@ int main(void) {
                 bvh_build_desc d = {.bins = 16, .max_leaf_size = 8, .block_size = 4, .trav_cost = 0.5f};
                 CHECK(bvh_build(&a, NULL, p, n, &d, &b));
                 check_quant(&a, &b);
+                if (shape == 4 && c == 0 && n > 1) check_pad_small(&b, 100.0f);
                 for (int w = 4; w <= 16; w *= 2) check_compact(&a, &b, w);
                 bvh2_free(&a, &b);
                 free(p);

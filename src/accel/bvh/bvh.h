@@ -4,6 +4,7 @@
 #ifndef RP_BVH_H
 #define RP_BVH_H
 
+#include <float.h>
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
@@ -62,20 +63,23 @@ double bvh2_blocks_cost(const bvh2 *bvh, double trav_cost);
 /* Refits such a BVH to its blocks' vertices (topology unchanged) and returns its new cost. */
 struct tri4;
 double bvh2_refit_blocks(bvh2 *bvh, const struct tri4 *blocks, double trav_cost);
-/* Widens every box of the tree outward by 2^-22 of each coordinate's size plus 2^-20 of the root's
+/* Widens every box of the tree outward by 2^-22 of each coordinate's size plus 2^-32 of the root's
  * largest side, before the traversal layouts are made from it. The kernels' slab test takes a
  * direction component of 0 as +-1e-18 (safe_rcp): a ray lying in a box's face plane (an axis-parallel
  * ray through a vertex) then leaves the exact box at t = 0 and misses hits the watertight triangle test
- * gives it on that face; with the margin it stays inside for t up to about 1e11 scene sizes. */
+ * gives it on that face; with the margin it stays inside for t up to about 2e8 scene sizes (distances
+ * in units of the ray's direction). The absolute part was 2^-20 of the side (t up to 1e12 scene
+ * sizes): a small object on a ground 10^5 times its size then had every triangle's box grown by the
+ * object's own size, and every structure traced it 100-1000x slower. */
 void bvh2_pad_boxes(bvh2 *bvh);
-/* That margin's absolute part for a scene of box lo..hi (2^-20 of its largest side; a tiny one
+/* That margin's absolute part for a scene of box lo..hi (2^-32 of its largest side; a tiny one
  * for a point or a flat scene; 0 for an infinite box, which is left as it is). */
 static inline float box_pad_abs(const float lo[3], const float hi[3]) {
     float side = 0.0f;
     for (int k = 0; k < 3; k++)
         if (hi[k] - lo[k] > side) side = hi[k] - lo[k];
     if (!(side < INFINITY)) return 0.0f;
-    float abs_pad = side * 0x1p-20f;
+    float abs_pad = side * 0x1p-32f;
     return abs_pad > 0.0f ? abs_pad : 0x1p-100f;
 }
 /* A lower / upper plane moved outward by the margin (the kd-tree's and the BIH's boxes too). */
@@ -84,9 +88,12 @@ static inline float box_pad_hi(float x, float abs_pad) { return x + (fabsf(x) * 
 
 /* The binary BVH the large packets walk (and the refit and the CUDA layout start from), kept
  * beside the wide one in 16 bytes a node instead of 32: each box is quantized to 16 bits per plane
- * on a grid over the root's box, rounded outward (lower planes down, upper planes up, checked when
- * encoded, with one more step of margin), so a decoded box holds the exact one and no ray loses a
- * hit; a grid step is 1/65535 of the scene's extent. ic: BVH2Q_PAIR | index << 4 | count, as
+ * on a grid over its parent's decoded box (the root's on a grid over the scene's box), rounded
+ * outward (lower planes down, upper planes up, checked when encoded, with one more step of margin),
+ * so a decoded box holds the exact one and no ray loses a hit; a grid step is a little over 1/65535
+ * of the parent's extent (bvh2q_child_grid). One grid over the whole scene, as before, made every
+ * box at least 1/65535 of the scene wide: a bunny on a ground 10^4 times its size had its
+ * triangles' boxes grow to a quarter of the bunny, and its n x n packets ran 20-30x slower. ic: BVH2Q_PAIR | index << 4 | count, as
  * bvh_node's index and count (a leaf's count is its tri4 blocks, at most 15). A pair is an inner
  * node of the float tree whose two children are leaves of one block each, in adjacent blocks:
  * stored as one leaf of those two blocks (the flag says so), which saves its two children's 32
@@ -108,7 +115,8 @@ typedef struct bvh2q {
     float org[3], scale[3]; /* a plane q decodes to org + q * scale (no fused multiply-add) */
 } bvh2q;
 
-/* A node with its box decoded (conservative) and its index and count. */
+/* A node with its box decoded (conservative) and its index and count, on the grid org, scale: the
+ * scene's for the root, bvh2q_child_grid of its parent's decoded box for the others. */
 static inline bvh_node bvh2q_decode(const bvh2q_node *n, const float org[3], const float scale[3]) {
     bvh_node d;
     for (int a = 0; a < 3; a++) {
@@ -128,17 +136,58 @@ typedef uint16_t bvh2q_u16x8 __attribute__((vector_size(16)));
 typedef int32_t bvh2q_i32x8 __attribute__((vector_size(32)));
 typedef float bvh2q_f32x8 __attribute__((vector_size(32)));
 
+/* A node's children's grid per axis: from its decoded box's lower plane in steps of its extent
+ * over 65000 (so q = 65535 lies a little past its upper plane), as hi k - lo k, which does not
+ * overflow; planes that decoded to infinity (boxes out to FLT_MAX) count as +-FLT_MAX. The scalar
+ * and the vector forms make the same IEEE operations, so the encoder's checks hold for the
+ * traversal. */
+#define BVH2Q_CHILD_STEP (1.0f / 65000.0f)
+static inline void bvh2q_child_grid(const bvh_node *parent, float org[3], float scale[3]) {
+    for (int a = 0; a < 3; a++) {
+        float lo = parent->lo[a] > -FLT_MAX ? parent->lo[a] : -FLT_MAX;
+        float hi = parent->hi[a] < FLT_MAX ? parent->hi[a] : FLT_MAX;
+        org[a] = lo;
+        scale[a] = hi * BVH2Q_CHILD_STEP - lo * BVH2Q_CHILD_STEP;
+    }
+}
+
 static inline void bvh2q_grid8(const float org[3], const float scale[3], bvh2q_f32x8 *o8, bvh2q_f32x8 *s8) {
     *o8 = (bvh2q_f32x8){org[0], org[1], org[2], org[0], org[1], org[2], 0.0f, 0.0f};
     *s8 = (bvh2q_f32x8){scale[0], scale[1], scale[2], scale[0], scale[1], scale[2], 0.0f, 0.0f};
 }
 
-static inline bvh_node bvh2q_decode8(const bvh2q_node *n, bvh2q_f32x8 o8, bvh2q_f32x8 s8) {
+/* A node's decoded box as lo x y z, hi x y z, 0, 0, on the grid o8, s8. */
+static inline bvh2q_f32x8 bvh2q_box8(const bvh2q_node *n, bvh2q_f32x8 o8, bvh2q_f32x8 s8) {
     bvh2q_u16x8 q;
     memcpy(&q, n, sizeof q);
-    bvh2q_f32x8 b = o8 + __builtin_convertvector(__builtin_convertvector(q, bvh2q_i32x8), bvh2q_f32x8) * s8;
+    return o8 + __builtin_convertvector(__builtin_convertvector(q, bvh2q_i32x8), bvh2q_f32x8) * s8;
+}
+
+/* The grid of the children of a node whose decoded box is b (bvh2q_child_grid, 8 lanes). */
+static inline void bvh2q_child_grid8(bvh2q_f32x8 b, bvh2q_f32x8 *o8, bvh2q_f32x8 *s8) {
+    const bvh2q_f32x8 big = {FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX};
+    bvh2q_f32x8 lo = __builtin_shufflevector(b, b, 0, 1, 2, 0, 1, 2, 6, 7);
+    bvh2q_f32x8 hi = __builtin_shufflevector(b, b, 3, 4, 5, 3, 4, 5, 6, 7);
+    /* as the scalar form: lo > -FLT_MAX ? lo : -FLT_MAX, and hi likewise (the planes are finite or
+     * infinite, never NaN) */
+    bvh2q_i32x8 mlo = lo > -big, mhi = hi < big;
+    lo = (bvh2q_f32x8)(((bvh2q_i32x8)lo & mlo) | ((bvh2q_i32x8)-big & ~mlo));
+    hi = (bvh2q_f32x8)(((bvh2q_i32x8)hi & mhi) | ((bvh2q_i32x8)big & ~mhi));
+    *o8 = lo;
+    *s8 = hi * BVH2Q_CHILD_STEP - lo * BVH2Q_CHILD_STEP;
+}
+
+/* Node n with its decoded box b. */
+static inline bvh_node bvh2q_node8(const bvh2q_node *n, bvh2q_f32x8 b) {
     bvh_node d = {{b[0], b[1], b[2]}, n->ic >> 4 & BVH2Q_MAX_INDEX, {b[3], b[4], b[5]}, n->ic & 15u};
     return d;
+}
+
+/* The root's decoded box, on the grid over the scene's box. */
+static inline bvh2q_f32x8 bvh2q_root8(const bvh2q_node *nodes, const float org[3], const float scale[3]) {
+    bvh2q_f32x8 o8, s8;
+    bvh2q_grid8(org, scale, &o8, &s8);
+    return bvh2q_box8(nodes, o8, s8);
 }
 
 /* Encodes a binary BVH whose leaves are ranges of at most 15 tri4 blocks; false when out of
@@ -149,6 +198,8 @@ bool bvh2q_from_bvh2(const sys_allocator *alloc, const bvh2 *src, bvh2q *out);
  * two leaves it was (the leaves with the pair's box: the refit recomputes them), so the tree is
  * the encoded one again; else a pair is a leaf of two blocks. */
 bool bvh2q_to_bvh2(const sys_allocator *alloc, const bvh2q *src, bool split_pairs, bvh2 *out);
+/* Every node decoded into out[0 .. node_count) (parents come before their children). */
+void bvh2q_decode_all(const bvh2q *q, bvh_node *out);
 void bvh2q_free(const sys_allocator *alloc, bvh2q *q);
 
 /* Wide node of width W (4, 8 or 16) is stored as floats bounds[6][W] (lo_x, hi_x, lo_y, hi_y,

@@ -39,6 +39,7 @@ static bool is_pair(const bvh2 *src, const bvh_node *n) {
 /* A node of the float tree and the place it goes to in the other tree. */
 typedef struct quant_move {
     uint32_t from, to;
+    float org[3], scale[3]; /* the grid it goes on: its parent's children's */
 } quant_move;
 
 bool bvh2q_from_bvh2(const sys_allocator *alloc, const bvh2 *src, bvh2q *out) {
@@ -72,26 +73,38 @@ bool bvh2q_from_bvh2(const sys_allocator *alloc, const bvh2 *src, bvh2q *out) {
     out->depth = src->depth;
     out->leaf_count = src->leaf_count;
     uint32_t sp = 0, next = 1;
-    if (!empty) stack[sp++] = (quant_move){0, 0};
+    if (!empty) {
+        stack[sp] = (quant_move){0, 0, {0}, {0}};
+        memcpy(stack[sp].org, out->org, sizeof out->org);
+        memcpy(stack[sp++].scale, out->scale, sizeof out->scale);
+    }
     while (sp) {
         quant_move m = stack[--sp];
         const bvh_node *n = &src->nodes[m.from];
         uint32_t index = n->index, cnt = n->count, flag = 0;
+        bool inner = false;
         if (is_pair(src, n)) {
             index = src->nodes[n->index].index, cnt = 2, flag = BVH2Q_PAIR;
         } else if (!cnt) {
             if (sp + 2 > stack_cap || next + 2 > count) goto fail;
             index = next, next += 2;
-            stack[sp++] = (quant_move){n->index + 1, index + 1};
-            stack[sp++] = (quant_move){n->index, index};
+            inner = true;
         }
         if (index > BVH2Q_MAX_INDEX || cnt > 15u) goto fail;
         bvh2q_node *q = &out->nodes[m.to];
         q->ic = flag | index << 4 | cnt;
         for (int a = 0; a < 3; a++)
-            if (!quant_lo(out->org[a], out->scale[a], n->lo[a], &q->lo[a]) ||
-                !quant_hi(out->org[a], out->scale[a], n->hi[a], &q->hi[a]))
+            if (!quant_lo(m.org[a], m.scale[a], n->lo[a], &q->lo[a]) || !quant_hi(m.org[a], m.scale[a], n->hi[a], &q->hi[a]))
                 goto fail;
+        if (inner) { /* the children go on the grid of this node's decoded box */
+            bvh_node d = bvh2q_decode(q, m.org, m.scale);
+            quant_move c = {n->index, index, {0}, {0}};
+            bvh2q_child_grid(&d, c.org, c.scale);
+            for (int a = 0; a < 3; a++)
+                if (!isfinite(c.scale[a]) || c.scale[a] < 0.0f) goto fail;
+            stack[sp] = c, stack[sp].from++, stack[sp++].to++;
+            stack[sp++] = c;
+        }
     }
     sys_free(alloc, stack, stack_cap * sizeof *stack);
     if (next == count) return true;
@@ -109,10 +122,11 @@ bool bvh2q_to_bvh2(const sys_allocator *alloc, const bvh2q *src, bool split_pair
     uint32_t count = src->node_count + (split_pairs ? 2 * pairs : 0);
     out->nodes = sys_alloc(alloc, (size_t)count * sizeof(bvh_node));
     if (!out->nodes) return false;
+    bvh2q_decode_all(src, out->nodes);
     /* the nodes where they are, each pair's two leaves after them */
     uint32_t next = src->node_count;
     for (uint32_t i = 0; i < src->node_count; i++) {
-        bvh_node d = bvh2q_decode(&src->nodes[i], src->org, src->scale);
+        bvh_node d = out->nodes[i];
         if (split_pairs && (src->nodes[i].ic & BVH2Q_PAIR)) {
             for (uint32_t k = 0; k < 2; k++) {
                 bvh_node *leaf = &out->nodes[next + k];
@@ -127,6 +141,19 @@ bool bvh2q_to_bvh2(const sys_allocator *alloc, const bvh2q *src, bool split_pair
     out->depth = src->depth;
     out->leaf_count = split_pairs ? src->leaf_count : src->leaf_count - pairs;
     return true;
+}
+
+void bvh2q_decode_all(const bvh2q *q, bvh_node *out) {
+    if (q->node_count == 0) return;
+    out[0] = bvh2q_decode(&q->nodes[0], q->org, q->scale);
+    for (uint32_t i = 0; i < q->node_count; i++) {
+        const bvh_node *d = &out[i];
+        if (d->count || (q->nodes[i].ic & BVH2Q_PAIR) || d->index <= i || d->index + 1 >= q->node_count) continue;
+        float org[3], scale[3];
+        bvh2q_child_grid(d, org, scale);
+        out[d->index] = bvh2q_decode(&q->nodes[d->index], org, scale);
+        out[d->index + 1] = bvh2q_decode(&q->nodes[d->index + 1], org, scale);
+    }
 }
 
 void bvh2q_free(const sys_allocator *alloc, bvh2q *q) {

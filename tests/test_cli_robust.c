@@ -175,6 +175,21 @@ static void test_bad_env_maps(void) {
     EXPECT(args, 1, "30000x30000 is more than 67108864 pixels");
 }
 
+/* An environment map cut short (robust6): a 91-byte HDR header claiming 8000 x 8000 flat pixels
+ * rendered, 1.5 GB later, with a black sky; refused. */
+static void test_env_cut_short(void) {
+    char scene[1200], env[1200], args[8192];
+    snprintf(scene, sizeof scene, "%s/tri.obj", tmp);
+    CHECK(write_text(scene, TRI_OBJ));
+    snprintf(env, sizeof env, "%s/cut.hdr", tmp);
+    CHECK(write_text(env, "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 8000 +X 8000\n\x80\x80\x80\x81"));
+    snprintf(args, sizeof args, "render '%s' --env '%s' --integrator path --width 8 --height 8 -o '%s/cut.png' --quiet",
+             scene, env, tmp);
+    EXPECT(args, 1, "cut.hdr: error: corrupt Radiance HDR image");
+    snprintf(args, sizeof args, "%s/cut.png", tmp);
+    CHECK(access(args, F_OK) != 0);
+}
+
 int main(void) {
     if (!find_exe()) {
         fprintf(stderr, "raypack binary not found at %s\n", exe);
@@ -189,5 +204,6 @@ int main(void) {
     test_not_regular_scenes();
     test_cameras_and_sizes();
     test_bad_env_maps();
+    test_env_cut_short();
     return RP_TEST_END();
 }

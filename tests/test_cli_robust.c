@@ -175,6 +175,22 @@ static void test_bad_env_maps(void) {
     EXPECT(args, 1, "30000x30000 is more than 67108864 pixels");
 }
 
+/* Devices named as files (robust6): `mtllib /dev/zero` hung the load (an endless read, 4 GiB before
+ * the size limit for an include), now refused at the line that names it, quickly. */
+static void test_devices(void) {
+    char scene[1200], args[8192];
+    snprintf(scene, sizeof scene, "%s/dev.obj", tmp);
+    CHECK(write_text(scene, "mtllib /dev/zero\nv -1 -1 0\nv 1 -1 0\nv 0 1 0\nf 1 2 3\n"));
+    snprintf(args, sizeof args, "info '%s'", scene);
+    EXPECT(args, 1, "dev.obj:1: error: cannot open material library '/dev/zero' (/dev/zero): a device or socket, not a file");
+    snprintf(scene, sizeof scene, "%s/dev.aff", tmp);
+    CHECK(write_text(scene, "i 0 /dev/zero\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/dev.png' --quiet", scene, tmp);
+    EXPECT(args, 1, "dev.aff:1: error: cannot open include '/dev/zero' (/dev/zero): a device or socket, not a file");
+    snprintf(args, sizeof args, "%s/dev.png", tmp);
+    CHECK(access(args, F_OK) != 0);
+}
+
 /* An environment map cut short (robust6): a 91-byte HDR header claiming 8000 x 8000 flat pixels
  * rendered, 1.5 GB later, with a black sky; refused. */
 static void test_env_cut_short(void) {
@@ -204,6 +220,7 @@ int main(void) {
     test_not_regular_scenes();
     test_cameras_and_sizes();
     test_bad_env_maps();
+    test_devices();
     test_env_cut_short();
     return RP_TEST_END();
 }

@@ -191,6 +191,27 @@ static void test_devices(void) {
     CHECK(access(args, F_OK) != 0);
 }
 
+/* Colours that render negative radiance (robust6): a negative MTL Kd or NFF fill colour gave
+ * Whitted images with pixels below 0, a negative --env-scale path-traced ones; refused. */
+static void test_negative_colours(void) {
+    char scene[1200], mtl[1200], args[8192];
+    snprintf(mtl, sizeof mtl, "%s/neg.mtl", tmp);
+    CHECK(write_text(mtl, "newmtl m\nKd -1 0.5 0.5\n"));
+    snprintf(scene, sizeof scene, "%s/neg.obj", tmp);
+    CHECK(write_text(scene, "mtllib neg.mtl\nusemtl m\nv -1 -1 0\nv 1 -1 0\nv 0 1 0\nf 1 2 3\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/neg.pfm' --quiet", scene, tmp);
+    EXPECT(args, 1, "neg.mtl:2: error: Kd: negative colour component -1 (expected >= 0)");
+    snprintf(scene, sizeof scene, "%s/neg.nff", tmp);
+    CHECK(write_text(scene, "l 0 0 3\nf -1 0.5 0.5 1 0 0 0 1\np 3\n-1 -1 0\n1 -1 0\n0 1 0\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/neg.pfm' --quiet", scene, tmp);
+    EXPECT(args, 1, "neg.nff:2: error: f: negative colour or coefficient -1 (expected >= 0)");
+    CHECK(write_text(scene, "l 0 0 3 1 -2 1\np 3\n-1 -1 0\n1 -1 0\n0 1 0\n"));
+    EXPECT(args, 1, "neg.nff:1: error: l colour: negative colour or coefficient -2 (expected >= 0)");
+    snprintf(args, sizeof args, "%s/neg.pfm", tmp);
+    CHECK(access(args, F_OK) != 0);
+    EXPECT("render --env-scale -1,1,1 --integrator path --quiet", 2, "--env-scale expects three numbers >= 0, got '-1,1,1'");
+}
+
 /* An environment map cut short (robust6): a 91-byte HDR header claiming 8000 x 8000 flat pixels
  * rendered, 1.5 GB later, with a black sky; refused. */
 static void test_env_cut_short(void) {
@@ -221,6 +242,7 @@ int main(void) {
     test_cameras_and_sizes();
     test_bad_env_maps();
     test_devices();
+    test_negative_colours();
     test_env_cut_short();
     return RP_TEST_END();
 }

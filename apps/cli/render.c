@@ -251,6 +251,11 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
         } else if (strcmp(a, "--env-scale") == 0) {
             VALUE();
             if (!cli_parse_vec3(CMD, a, v, o->env_scale)) return CLI_EXIT_USAGE;
+            if (o->env_scale[0] < 0.0f || o->env_scale[1] < 0.0f || o->env_scale[2] < 0.0f) {
+                /* a negative radiance has no meaning: it rendered negative pixels */
+                fprintf(stderr, "raypack render: --env-scale expects three numbers >= 0, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
             o->has_env_scale = true;
         } else if (strcmp(a, "--ir-interleave") == 0) {
             VALUE();

@@ -227,6 +227,24 @@ static void test_env_cut_short(void) {
     CHECK(access(args, F_OK) != 0);
 }
 
+/* Radiance near FLT_MAX (robust6): a texel of RGBE exponent 255 (1.7e38) overflowed to Inf, NaN in
+ * instant radiosity's image and a black one when path tracing with --env-scale 10; refused. */
+static void test_env_overflow(void) {
+    char scene[1200], env[1200], args[8192];
+    snprintf(scene, sizeof scene, "%s/tri.obj", tmp);
+    CHECK(write_text(scene, TRI_OBJ));
+    snprintf(env, sizeof env, "%s/bright.hdr", tmp);
+    CHECK(write_text(env, "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 1 +X 2\n\x80\x80\x80\x81\xff\xff\xff\xff"));
+    snprintf(args, sizeof args, "render '%s' --env '%s' --integrator ir --width 8 --height 8 -o '%s/bright.pfm' --quiet",
+             scene, env, tmp);
+    EXPECT(args, 1, "bright.hdr: error: pixel (1, 0)'s radiance, times the scale, is over 1e+30");
+    /* the same map is fine, its bright pixel dimmed by the scale */
+    snprintf(args, sizeof args,
+             "render '%s' --env '%s' --env-scale 1e-10,1e-10,1e-10 --integrator ir --width 8 --height 8 -o '%s/bright.pfm' --quiet",
+             scene, env, tmp);
+    EXPECT(args, 0, "");
+}
+
 int main(void) {
     if (!find_exe()) {
         fprintf(stderr, "raypack binary not found at %s\n", exe);
@@ -244,5 +262,6 @@ int main(void) {
     test_devices();
     test_negative_colours();
     test_env_cut_short();
+    test_env_overflow();
     return RP_TEST_END();
 }

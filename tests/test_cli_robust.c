@@ -245,6 +245,13 @@ static void test_env_overflow(void) {
     EXPECT(args, 0, "");
 }
 
+/* A frame pattern whose width makes every name kilobytes of blanks (robust6): a usage error. */
+static void test_animate_pattern(void) {
+    char args[8192];
+    snprintf(args, sizeof args, "animate '%s/none.aff' -o '%s/f%%999999999d.png'", tmp, tmp);
+    EXPECT(args, 2, "-o expects a pattern with one integer conversion (of width 99 at most)");
+}
+
 int main(void) {
     if (!find_exe()) {
         fprintf(stderr, "raypack binary not found at %s\n", exe);
@@ -263,5 +270,6 @@ int main(void) {
     test_negative_colours();
     test_env_cut_short();
     test_env_overflow();
+    test_animate_pattern();
     return RP_TEST_END();
 }

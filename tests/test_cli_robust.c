@@ -245,6 +245,35 @@ static void test_env_overflow(void) {
     EXPECT(args, 0, "");
 }
 
+/* Scenes with large coordinates (robust6). The float tests multiply coordinates: a triangle 1e11
+ * across rendered black (its unit normal overflowed), 4e12 across with NaN pixels (hits lost),
+ * both with exit 0; one 2e30 across could not even be framed (the camera squared its extent in
+ * float: "the scene's camera: not finite", a usage error naming no file). Now the camera frames it
+ * (info prints a finite one) and render refuses a scene spanning more than 1e9, naming the file;
+ * past 1e38 no float camera frames it. */
+static void test_huge_scenes(void) {
+    char scene[1200], args[8192];
+    snprintf(scene, sizeof scene, "%s/wide.obj", tmp);
+    CHECK(write_text(scene, "v 1e6 -1e6 0\nv -1e6 -1e6 0\nv 0 1e6 0\nf 1 2 3\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/wide.pfm' --quiet", scene, tmp);
+    EXPECT(args, 0, "");
+    snprintf(args, sizeof args, "render '%s' --eye 0,0,2e9 --width 8 --height 8 -o '%s/wide.pfm' --quiet", scene, tmp);
+    EXPECT(args, 1, "wide.obj: error: the scene and the eye span 2e+09: past 1e+09");
+    CHECK(write_text(scene, "v 4e12 -4e12 0\nv -4e12 -4e12 0\nv 0 4e12 0\nf 1 2 3\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/wide.pfm' --quiet", scene, tmp);
+    EXPECT(args, 1, "wide.obj: error: the scene and the eye span");
+    CHECK(write_text(scene, "v 1e30 -1e30 0\nv -1e30 -1e30 0\nv 0 1e30 0\nf 1 2 3\n"));
+    EXPECT(args, 1, "wide.obj: error: the scene and the eye span");
+    snprintf(args, sizeof args, "info '%s'", scene);
+    int rc = run(args);
+    CHECKF(rc == 0 && !strstr(output, "nan") && !strstr(output, "inf,"), "exit %d:\n%s", rc, output);
+    CHECK(write_text(scene, "v 3e38 0 0\nv -3e38 1 0\nv 0 1 0\nf 1 2 3\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/wide.pfm' --quiet", scene, tmp);
+    EXPECT(args, 1, "wide.obj: error: the scene's camera: not finite");
+    snprintf(args, sizeof args, "%s/wide.pfm", tmp);
+    unlink(args);
+}
+
 /* A frame pattern whose width makes every name kilobytes of blanks (robust6): a usage error. */
 static void test_animate_pattern(void) {
     char args[8192];
@@ -270,6 +299,7 @@ int main(void) {
     test_negative_colours();
     test_env_cut_short();
     test_env_overflow();
+    test_huge_scenes();
     test_animate_pattern();
     return RP_TEST_END();
 }

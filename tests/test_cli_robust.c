@@ -274,6 +274,51 @@ static void test_huge_scenes(void) {
     unlink(args);
 }
 
+/* Sum of a binary PPM's bytes after its header (P6, width, height, 255); -1 when unreadable. */
+static long ppm_sum(const char *path) {
+    FILE *f = fopen(path, "rb");
+    if (!f) return -1;
+    int w, h, maxv;
+    long sum = fscanf(f, "P6 %d %d %d", &w, &h, &maxv) == 3 && fgetc(f) != EOF ? 0 : -1;
+    for (int c; sum >= 0 && (c = fgetc(f)) != EOF;) sum += c;
+    fclose(f);
+    return sum;
+}
+
+/* A keyframed scale of 0 (robust6): the block's instance transform has no inverse, which
+ * rp_geometry_set_instance refuses. At the first frame the commit failed ("a geometry lacks a
+ * buffer", naming no file); later it kept the previous frame's transform, so the block showed
+ * whole where the flat build shows nothing. Now hidden at that frame, shown at the others. */
+static void test_anim_zero_scale(void) {
+    char scene[1200], args[8192], frame[1200];
+    static const char cam[] = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nhither 1\nresolution 8 8\n";
+    static const char block[] = "x obj {\np 3\n-1 -1 0\n1 -1 0\n0 1 0\n}\n";
+    static const char *const keys[2] = {
+        /* 1 at t = 0 and 2, 0 at t = 1 */
+        "k obj {\nscale 5\n-1 1 1 1 0 0 0\n0 1 1 1 0 0 0\n1 0 0 0 0 0 0\n2 1 1 1 0 0 0\n3 1 1 1 0 0 0\n}\n",
+        /* 0 from the start */
+        "k obj {\nscale 4\n0 0 0 0 0 0 0\n1 0 0 0 0 0 0\n2 0 0 0 0 0 0\n3 0 0 0 0 0 0\n}\n"};
+    for (int k = 0; k < 2; k++) {
+        char text[1024];
+        snprintf(text, sizeof text, "%sa 0 2 3\n%s%s", cam, block, keys[k]);
+        snprintf(scene, sizeof scene, "%s/shrink.aff", tmp);
+        CHECK(write_text(scene, text));
+        for (int flat = 0; flat < 2; flat++) {
+            snprintf(args, sizeof args, "animate '%s' -o '%s/shrink%%d.ppm' --integrator eyelight --width 16 --height 12 --quiet%s",
+                     scene, tmp, flat ? " --anim-flat" : "");
+            EXPECT(args, 0, "");
+            for (int i = 0; i < 3; i++) {
+                snprintf(frame, sizeof frame, "%s/shrink%d.ppm", tmp, i);
+                long sum = ppm_sum(frame);
+                bool shown = k == 0 && i != 1;
+                CHECKF(shown ? sum > 0 : sum == 0, "%s frame %d (%s build): pixel sum %ld", k ? "scale 0" : "scale 1, 0, 1",
+                       i, flat ? "flat" : "instanced", sum);
+                unlink(frame);
+            }
+        }
+    }
+}
+
 /* A frame pattern whose width makes every name kilobytes of blanks (robust6): a usage error. */
 static void test_animate_pattern(void) {
     char args[8192];
@@ -301,5 +346,6 @@ int main(void) {
     test_env_overflow();
     test_huge_scenes();
     test_animate_pattern();
+    test_anim_zero_scale();
     return RP_TEST_END();
 }

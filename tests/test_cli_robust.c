@@ -274,6 +274,18 @@ static void test_huge_scenes(void) {
     unlink(args);
 }
 
+/* bench --json into a missing folder or onto a folder (robust6): the benchmark ran whole (8 s on a
+ * triangle, minutes on a real scene) before the write failed; now refused first, as render does. */
+static void test_bench_json_folder(void) {
+    char args[8192];
+    snprintf(args, sizeof args, "bench --json '%s/missing/b.json' --repeats 1", tmp);
+    EXPECT(args, 1, "raypack bench: cannot write");
+    CHECKF(strstr(output, "missing does not exist") && !strstr(output, "Mrays"), "%s", output);
+    snprintf(args, sizeof args, "bench --json '%s' --repeats 1", tmp);
+    EXPECT(args, 1, "it is a directory");
+    CHECKF(!strstr(output, "Mrays"), "%s", output);
+}
+
 /* Sum of a binary PPM's bytes after its header (P6, width, height, 255); -1 when unreadable. */
 static long ppm_sum(const char *path) {
     FILE *f = fopen(path, "rb");
@@ -347,5 +359,6 @@ int main(void) {
     test_huge_scenes();
     test_animate_pattern();
     test_anim_zero_scale();
+    test_bench_json_folder();
     return RP_TEST_END();
 }

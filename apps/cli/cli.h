@@ -135,6 +135,9 @@ bool cli_check_paths(const char *cmd, const cli_path *paths, int count);
 /* True when the scene file exists, is no folder and may be read; else prints why (errno's text). Never
  * opens it (a FIFO is read once, by the loader). */
 bool cli_scene_readable(const char *cmd, const char *path);
+/* An output path that can be written (not a folder, its folder there and writable), checked before
+ * the work so that a typo does not cost a whole render or benchmark; false after printing why. */
+bool cli_output_writable(const char *cmd, const char *path);
 /* Why a pinhole camera cannot be formed from eye, look-at point and up (DESIGN.md's frame): NaN/Inf,
  * eye == look, a zero up or one parallel to the view; NULL when it can. */
 const char *cli_camera_problem(const float eye[3], const float look[3], const float up[3]);

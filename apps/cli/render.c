@@ -425,36 +425,6 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
     return CLI_EXIT_OK;
 }
 
-/* Checks before the work that the image can be written: its folder exists and is writable, and an
- * existing file there is a writable regular file. */
-static bool output_writable(const char *path) {
-    struct stat st;
-    if (stat(path, &st) == 0) {
-        if (S_ISDIR(st.st_mode)) {
-            fprintf(stderr, "raypack render: cannot write %s: it is a directory\n", path);
-            return false;
-        }
-        if (access(path, W_OK) != 0) {
-            fprintf(stderr, "raypack render: cannot write %s: %s\n", path, strerror(errno));
-            return false;
-        }
-        return true;
-    }
-    char *copy = strdup(path);
-    if (!copy) return true;
-    const char *dir = dirname(copy);
-    bool ok = true;
-    if (stat(dir, &st) != 0 || !S_ISDIR(st.st_mode)) {
-        fprintf(stderr, "raypack render: cannot write %s: folder %s does not exist\n", path, dir);
-        ok = false;
-    } else if (access(dir, W_OK) != 0) {
-        fprintf(stderr, "raypack render: cannot write %s: folder %s: %s\n", path, dir, strerror(errno));
-        ok = false;
-    }
-    free(copy);
-    return ok;
-}
-
 typedef struct progress_state {
     double start_ms, last_ms;
     bool tty, quiet;
@@ -638,8 +608,8 @@ int cli_render(int argc, char **argv) {
                               {"--aovs (albedo)", guide_path[0][0] ? guide_path[0] : NULL, false},
                               {"--aovs (normal)", guide_path[1][0] ? guide_path[1] : NULL, false}};
     if (!cli_check_paths(CMD, paths, (int)(sizeof paths / sizeof paths[0]))) return CLI_EXIT_USAGE;
-    if (!output_writable(o.output)) return CLI_EXIT_FAILURE;
-    if (o.stats_json && !output_writable(o.stats_json)) return CLI_EXIT_FAILURE;
+    if (!cli_output_writable(CMD, o.output)) return CLI_EXIT_FAILURE;
+    if (o.stats_json && !cli_output_writable(CMD, o.stats_json)) return CLI_EXIT_FAILURE;
 
     /* Load. */
     double t0 = cli_now_ms();

@@ -2,6 +2,7 @@
 #include "cli.h"
 
 #include <errno.h>
+#include <libgen.h>
 #include <limits.h>
 #include <math.h>
 #include <stdio.h>
@@ -183,6 +184,34 @@ bool cli_check_paths(const char *cmd, const cli_path *paths, int count) {
         }
     }
     return true;
+}
+
+bool cli_output_writable(const char *cmd, const char *path) {
+    struct stat st;
+    if (stat(path, &st) == 0) {
+        if (S_ISDIR(st.st_mode)) {
+            fprintf(stderr, "raypack %s: cannot write %s: it is a directory\n", cmd, path);
+            return false;
+        }
+        if (access(path, W_OK) != 0) {
+            fprintf(stderr, "raypack %s: cannot write %s: %s\n", cmd, path, strerror(errno));
+            return false;
+        }
+        return true;
+    }
+    char *copy = strdup(path);
+    if (!copy) return true;
+    const char *dir = dirname(copy);
+    bool ok = true;
+    if (stat(dir, &st) != 0 || !S_ISDIR(st.st_mode)) {
+        fprintf(stderr, "raypack %s: cannot write %s: folder %s does not exist\n", cmd, path, dir);
+        ok = false;
+    } else if (access(dir, W_OK) != 0) {
+        fprintf(stderr, "raypack %s: cannot write %s: folder %s: %s\n", cmd, path, dir, strerror(errno));
+        ok = false;
+    }
+    free(copy);
+    return ok;
 }
 
 bool cli_scene_readable(const char *cmd, const char *path) {

@@ -272,6 +272,13 @@ static void test_huge_scenes(void) {
     EXPECT(args, 1, "wide.obj: error: the scene's camera: not finite");
     snprintf(args, sizeof args, "%s/wide.pfm", tmp);
     unlink(args);
+    /* animate checks every frame: a block keyframed 1e13 away at t = 1 */
+    snprintf(scene, sizeof scene, "%s/flyaway.aff", tmp);
+    CHECK(write_text(scene, "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nhither 1\nresolution 8 8\na 0 2 3\n"
+                            "x obj {\np 3\n-1 -1 0\n1 -1 0\n0 1 0\n}\nk obj {\ntransl 5\n-1 0 0 0 0 0 0\n0 0 0 0 0 0 0\n"
+                            "1 0 0 -1e13 0 0 0\n2 0 0 0 0 0 0\n3 0 0 0 0 0 0\n}\n"));
+    snprintf(args, sizeof args, "animate '%s' --width 8 --height 8 --quiet", scene);
+    EXPECT(args, 1, "flyaway.aff: error: the scene and the eye span 1e+13");
 }
 
 /* bench --json into a missing folder or onto a folder (robust6): the benchmark ran whole (8 s on a

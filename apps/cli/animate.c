@@ -233,6 +233,7 @@ int cli_animate(int argc, char **argv) {
             goto done;
         }
         rp_camera cam = cli_render_camera(&setup, scene);
+        if (!cli_scene_in_reach(CMD, setup.scene, scene, &cam)) goto done; /* the blocks moved out of range */
         desc.camera = &cam;
         rp_render_stats rs;
         if (!rp_render(scene, &desc, pixels, &rs)) {

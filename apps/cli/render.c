@@ -17,8 +17,6 @@
 
 static const char *const CMD = "render";
 /* --width x --height at most: 8192 x 8192, or any shape of as many pixels (each side up to 16384) */
-/* The largest distance, along an axis, between two points of the scene or the scene and the eye. */
-#define RENDER_MAX_REACH 1e9
 #define RENDER_MAX_PIXELS 67108864
 
 static void render_usage(FILE *out) {
@@ -722,24 +720,9 @@ int cli_render(int argc, char **argv) {
         }
         goto done;
     }
-    /* The float shading and intersection tests multiply coordinates relative to the eye (a normal
-     * is the product of two edges, its squared length four of them; the watertight test's t three):
-     * a scene 1e11 across rendered black (unit normals overflowed), 3e12 across NaN (hits lost). */
-    rp_bounds sb;
-    rp_scene_get_bounds(rp_render_scene_core(scene), &sb);
-    if (sb.lower_x <= sb.upper_x && sb.lower_y <= sb.upper_y && sb.lower_z <= sb.upper_z) {
-        const float lo[3] = {sb.lower_x, sb.lower_y, sb.lower_z}, hi[3] = {sb.upper_x, sb.upper_y, sb.upper_z};
-        double reach = 0.0;
-        for (int k = 0; k < 3; k++)
-            reach = fmax(reach, fmax((double)hi[k] - lo[k], fmax(fabs((double)hi[k] - cam.pinhole.eye[k]),
-                                                                 fabs((double)lo[k] - cam.pinhole.eye[k]))));
-        if (!(reach <= RENDER_MAX_REACH)) {
-            fprintf(stderr, "raypack render: %s: error: the scene and the eye span %g: past %g the float shading "
-                            "and intersection tests overflow (scale the scene down)\n",
-                    o.scene ? o.scene : "(built-in scene)", reach, RENDER_MAX_REACH);
-            status = CLI_EXIT_FAILURE;
-            goto done;
-        }
+    if (!cli_scene_in_reach(CMD, o.scene, scene, &cam)) {
+        status = CLI_EXIT_FAILURE;
+        goto done;
     }
     if (sst.rejected_prims)
         fprintf(stderr, "raypack render: warning: %llu primitives with NaN/Inf coordinates (an overflowing "

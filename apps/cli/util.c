@@ -214,6 +214,21 @@ bool cli_output_writable(const char *cmd, const char *path) {
     return ok;
 }
 
+bool cli_scene_in_reach(const char *cmd, const char *path, rp_render_scene *scene, const rp_camera *cam) {
+    rp_bounds b;
+    rp_scene_get_bounds(rp_render_scene_core(scene), &b);
+    if (!(b.lower_x <= b.upper_x && b.lower_y <= b.upper_y && b.lower_z <= b.upper_z)) return true; /* nothing */
+    const float lo[3] = {b.lower_x, b.lower_y, b.lower_z}, hi[3] = {b.upper_x, b.upper_y, b.upper_z};
+    const float *eye = cam->pinhole.eye;
+    double reach = 0.0;
+    for (int k = 0; k < 3; k++)
+        reach = fmax(reach, fmax((double)hi[k] - lo[k], fmax(fabs((double)hi[k] - eye[k]), fabs((double)lo[k] - eye[k]))));
+    if (reach <= CLI_MAX_REACH) return true;
+    fprintf(stderr, "raypack %s: %s: error: the scene and the eye span %g: past %g the float shading and intersection "
+                    "tests overflow (scale the scene down)\n", cmd, path ? path : "(built-in scene)", reach, CLI_MAX_REACH);
+    return false;
+}
+
 bool cli_scene_readable(const char *cmd, const char *path) {
     struct stat st;
     int e = stat(path, &st) != 0 ? errno : S_ISDIR(st.st_mode) ? EISDIR : access(path, R_OK) != 0 ? errno : 0;

@@ -175,6 +175,176 @@ static void test_bad_env_maps(void) {
     EXPECT(args, 1, "30000x30000 is more than 67108864 pixels");
 }
 
+/* Devices named as files (robust6): `mtllib /dev/zero` hung the load (an endless read, 4 GiB before
+ * the size limit for an include), now refused at the line that names it, quickly. */
+static void test_devices(void) {
+    char scene[1200], args[8192];
+    snprintf(scene, sizeof scene, "%s/dev.obj", tmp);
+    CHECK(write_text(scene, "mtllib /dev/zero\nv -1 -1 0\nv 1 -1 0\nv 0 1 0\nf 1 2 3\n"));
+    snprintf(args, sizeof args, "info '%s'", scene);
+    EXPECT(args, 1, "dev.obj:1: error: cannot open material library '/dev/zero' (/dev/zero): a device or socket, not a file");
+    snprintf(scene, sizeof scene, "%s/dev.aff", tmp);
+    CHECK(write_text(scene, "i 0 /dev/zero\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/dev.png' --quiet", scene, tmp);
+    EXPECT(args, 1, "dev.aff:1: error: cannot open include '/dev/zero' (/dev/zero): a device or socket, not a file");
+    snprintf(args, sizeof args, "%s/dev.png", tmp);
+    CHECK(access(args, F_OK) != 0);
+}
+
+/* Colours that render negative radiance (robust6): a negative MTL Kd or NFF fill colour gave
+ * Whitted images with pixels below 0, a negative --env-scale path-traced ones; refused. */
+static void test_negative_colours(void) {
+    char scene[1200], mtl[1200], args[8192];
+    snprintf(mtl, sizeof mtl, "%s/neg.mtl", tmp);
+    CHECK(write_text(mtl, "newmtl m\nKd -1 0.5 0.5\n"));
+    snprintf(scene, sizeof scene, "%s/neg.obj", tmp);
+    CHECK(write_text(scene, "mtllib neg.mtl\nusemtl m\nv -1 -1 0\nv 1 -1 0\nv 0 1 0\nf 1 2 3\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/neg.pfm' --quiet", scene, tmp);
+    EXPECT(args, 1, "neg.mtl:2: error: Kd: negative colour component -1 (expected >= 0)");
+    snprintf(scene, sizeof scene, "%s/neg.nff", tmp);
+    CHECK(write_text(scene, "l 0 0 3\nf -1 0.5 0.5 1 0 0 0 1\np 3\n-1 -1 0\n1 -1 0\n0 1 0\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/neg.pfm' --quiet", scene, tmp);
+    EXPECT(args, 1, "neg.nff:2: error: f: negative colour or coefficient -1 (expected >= 0)");
+    CHECK(write_text(scene, "l 0 0 3 1 -2 1\np 3\n-1 -1 0\n1 -1 0\n0 1 0\n"));
+    EXPECT(args, 1, "neg.nff:1: error: l colour: negative colour or coefficient -2 (expected >= 0)");
+    snprintf(args, sizeof args, "%s/neg.pfm", tmp);
+    CHECK(access(args, F_OK) != 0);
+    EXPECT("render --env-scale -1,1,1 --integrator path --quiet", 2, "--env-scale expects three numbers >= 0, got '-1,1,1'");
+}
+
+/* An environment map cut short (robust6): a 91-byte HDR header claiming 8000 x 8000 flat pixels
+ * rendered, 1.5 GB later, with a black sky; refused. */
+static void test_env_cut_short(void) {
+    char scene[1200], env[1200], args[8192];
+    snprintf(scene, sizeof scene, "%s/tri.obj", tmp);
+    CHECK(write_text(scene, TRI_OBJ));
+    snprintf(env, sizeof env, "%s/cut.hdr", tmp);
+    CHECK(write_text(env, "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 8000 +X 8000\n\x80\x80\x80\x81"));
+    snprintf(args, sizeof args, "render '%s' --env '%s' --integrator path --width 8 --height 8 -o '%s/cut.png' --quiet",
+             scene, env, tmp);
+    EXPECT(args, 1, "cut.hdr: error: corrupt Radiance HDR image");
+    snprintf(args, sizeof args, "%s/cut.png", tmp);
+    CHECK(access(args, F_OK) != 0);
+}
+
+/* Radiance near FLT_MAX (robust6): a texel of RGBE exponent 255 (1.7e38) overflowed to Inf, NaN in
+ * instant radiosity's image and a black one when path tracing with --env-scale 10; refused. */
+static void test_env_overflow(void) {
+    char scene[1200], env[1200], args[8192];
+    snprintf(scene, sizeof scene, "%s/tri.obj", tmp);
+    CHECK(write_text(scene, TRI_OBJ));
+    snprintf(env, sizeof env, "%s/bright.hdr", tmp);
+    CHECK(write_text(env, "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 1 +X 2\n\x80\x80\x80\x81\xff\xff\xff\xff"));
+    snprintf(args, sizeof args, "render '%s' --env '%s' --integrator ir --width 8 --height 8 -o '%s/bright.pfm' --quiet",
+             scene, env, tmp);
+    EXPECT(args, 1, "bright.hdr: error: pixel (1, 0)'s radiance, times the scale, is over 1e+30");
+    /* the same map is fine, its bright pixel dimmed by the scale */
+    snprintf(args, sizeof args,
+             "render '%s' --env '%s' --env-scale 1e-10,1e-10,1e-10 --integrator ir --width 8 --height 8 -o '%s/bright.pfm' --quiet",
+             scene, env, tmp);
+    EXPECT(args, 0, "");
+}
+
+/* Scenes with large coordinates (robust6). The float tests multiply coordinates: a triangle 1e11
+ * across rendered black (its unit normal overflowed), 4e12 across with NaN pixels (hits lost),
+ * both with exit 0; one 2e30 across could not even be framed (the camera squared its extent in
+ * float: "the scene's camera: not finite", a usage error naming no file). Now the camera frames it
+ * (info prints a finite one) and render refuses a scene spanning more than 1e9, naming the file;
+ * past 1e38 no float camera frames it. */
+static void test_huge_scenes(void) {
+    char scene[1200], args[8192];
+    snprintf(scene, sizeof scene, "%s/wide.obj", tmp);
+    CHECK(write_text(scene, "v 1e6 -1e6 0\nv -1e6 -1e6 0\nv 0 1e6 0\nf 1 2 3\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/wide.pfm' --quiet", scene, tmp);
+    EXPECT(args, 0, "");
+    snprintf(args, sizeof args, "render '%s' --eye 0,0,2e9 --width 8 --height 8 -o '%s/wide.pfm' --quiet", scene, tmp);
+    EXPECT(args, 1, "wide.obj: error: the scene and the eye span 2e+09: past 1e+09");
+    CHECK(write_text(scene, "v 4e12 -4e12 0\nv -4e12 -4e12 0\nv 0 4e12 0\nf 1 2 3\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/wide.pfm' --quiet", scene, tmp);
+    EXPECT(args, 1, "wide.obj: error: the scene and the eye span");
+    CHECK(write_text(scene, "v 1e30 -1e30 0\nv -1e30 -1e30 0\nv 0 1e30 0\nf 1 2 3\n"));
+    EXPECT(args, 1, "wide.obj: error: the scene and the eye span");
+    snprintf(args, sizeof args, "info '%s'", scene);
+    int rc = run(args);
+    CHECKF(rc == 0 && !strstr(output, "nan") && !strstr(output, "inf,"), "exit %d:\n%s", rc, output);
+    CHECK(write_text(scene, "v 3e38 0 0\nv -3e38 1 0\nv 0 1 0\nf 1 2 3\n"));
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/wide.pfm' --quiet", scene, tmp);
+    EXPECT(args, 1, "wide.obj: error: the scene's camera: not finite");
+    snprintf(args, sizeof args, "%s/wide.pfm", tmp);
+    unlink(args);
+    /* animate checks every frame: a block keyframed 1e13 away at t = 1 */
+    snprintf(scene, sizeof scene, "%s/flyaway.aff", tmp);
+    CHECK(write_text(scene, "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nhither 1\nresolution 8 8\na 0 2 3\n"
+                            "x obj {\np 3\n-1 -1 0\n1 -1 0\n0 1 0\n}\nk obj {\ntransl 5\n-1 0 0 0 0 0 0\n0 0 0 0 0 0 0\n"
+                            "1 0 0 -1e13 0 0 0\n2 0 0 0 0 0 0\n3 0 0 0 0 0 0\n}\n"));
+    snprintf(args, sizeof args, "animate '%s' --width 8 --height 8 --quiet", scene);
+    EXPECT(args, 1, "flyaway.aff: error: the scene and the eye span 1e+13");
+}
+
+/* bench --json into a missing folder or onto a folder (robust6): the benchmark ran whole (8 s on a
+ * triangle, minutes on a real scene) before the write failed; now refused first, as render does. */
+static void test_bench_json_folder(void) {
+    char args[8192];
+    snprintf(args, sizeof args, "bench --json '%s/missing/b.json' --repeats 1", tmp);
+    EXPECT(args, 1, "raypack bench: cannot write");
+    CHECKF(strstr(output, "missing does not exist") && !strstr(output, "Mrays"), "%s", output);
+    snprintf(args, sizeof args, "bench --json '%s' --repeats 1", tmp);
+    EXPECT(args, 1, "it is a directory");
+    CHECKF(!strstr(output, "Mrays"), "%s", output);
+}
+
+/* Sum of a binary PPM's bytes after its header (P6, width, height, 255); -1 when unreadable. */
+static long ppm_sum(const char *path) {
+    FILE *f = fopen(path, "rb");
+    if (!f) return -1;
+    int w, h, maxv;
+    long sum = fscanf(f, "P6 %d %d %d", &w, &h, &maxv) == 3 && fgetc(f) != EOF ? 0 : -1;
+    for (int c; sum >= 0 && (c = fgetc(f)) != EOF;) sum += c;
+    fclose(f);
+    return sum;
+}
+
+/* A keyframed scale of 0 (robust6): the block's instance transform has no inverse, which
+ * rp_geometry_set_instance refuses. At the first frame the commit failed ("a geometry lacks a
+ * buffer", naming no file); later it kept the previous frame's transform, so the block showed
+ * whole where the flat build shows nothing. Now hidden at that frame, shown at the others. */
+static void test_anim_zero_scale(void) {
+    char scene[1200], args[8192], frame[1200];
+    static const char cam[] = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nhither 1\nresolution 8 8\n";
+    static const char block[] = "x obj {\np 3\n-1 -1 0\n1 -1 0\n0 1 0\n}\n";
+    static const char *const keys[2] = {
+        /* 1 at t = 0 and 2, 0 at t = 1 */
+        "k obj {\nscale 5\n-1 1 1 1 0 0 0\n0 1 1 1 0 0 0\n1 0 0 0 0 0 0\n2 1 1 1 0 0 0\n3 1 1 1 0 0 0\n}\n",
+        /* 0 from the start */
+        "k obj {\nscale 4\n0 0 0 0 0 0 0\n1 0 0 0 0 0 0\n2 0 0 0 0 0 0\n3 0 0 0 0 0 0\n}\n"};
+    for (int k = 0; k < 2; k++) {
+        char text[1024];
+        snprintf(text, sizeof text, "%sa 0 2 3\n%s%s", cam, block, keys[k]);
+        snprintf(scene, sizeof scene, "%s/shrink.aff", tmp);
+        CHECK(write_text(scene, text));
+        for (int flat = 0; flat < 2; flat++) {
+            snprintf(args, sizeof args, "animate '%s' -o '%s/shrink%%d.ppm' --integrator eyelight --width 16 --height 12 --quiet%s",
+                     scene, tmp, flat ? " --anim-flat" : "");
+            EXPECT(args, 0, "");
+            for (int i = 0; i < 3; i++) {
+                snprintf(frame, sizeof frame, "%s/shrink%d.ppm", tmp, i);
+                long sum = ppm_sum(frame);
+                bool shown = k == 0 && i != 1;
+                CHECKF(shown ? sum > 0 : sum == 0, "%s frame %d (%s build): pixel sum %ld", k ? "scale 0" : "scale 1, 0, 1",
+                       i, flat ? "flat" : "instanced", sum);
+                unlink(frame);
+            }
+        }
+    }
+}
+
+/* A frame pattern whose width makes every name kilobytes of blanks (robust6): a usage error. */
+static void test_animate_pattern(void) {
+    char args[8192];
+    snprintf(args, sizeof args, "animate '%s/none.aff' -o '%s/f%%999999999d.png'", tmp, tmp);
+    EXPECT(args, 2, "-o expects a pattern with one integer conversion (of width 99 at most)");
+}
+
 int main(void) {
     if (!find_exe()) {
         fprintf(stderr, "raypack binary not found at %s\n", exe);
@@ -189,5 +359,13 @@ int main(void) {
     test_not_regular_scenes();
     test_cameras_and_sizes();
     test_bad_env_maps();
+    test_devices();
+    test_negative_colours();
+    test_env_cut_short();
+    test_env_overflow();
+    test_huge_scenes();
+    test_animate_pattern();
+    test_anim_zero_scale();
+    test_bench_json_folder();
     return RP_TEST_END();
 }

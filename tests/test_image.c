@@ -322,6 +322,53 @@ static void test_hdr_nul_header_line(void) {
            "%s", err);
 }
 
+/* HDR pixels cut short: stb_image fills what an RLE file lacks with zeros and leaves a flat file's
+ * missing pixels unwritten, with no error, so `render --env` lit the scene with a black (or garbage)
+ * sky; a 91-byte header claiming 8000 x 8000 flat pixels took 1.5 GB and rendered (robust6).
+ * Refused: flat scanlines (width under 8), an RLE-sized image whose first scanline is flat, an RLE
+ * dump cut short. The complete files load. */
+static void test_hdr_cut_short(void) {
+    static const struct {
+        const char *name;
+        const char *data;
+        size_t size;
+        bool ok;
+    } cases[] = {
+#define HDR_HEAD "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n"
+#define HDR_CASE(name, text, ok) {name, HDR_HEAD text, sizeof HDR_HEAD text - 1, ok}
+        HDR_CASE("flat_ok.hdr", "-Y 1 +X 2\n\x80\x80\x80\x81\x80\x80\x80\x81", true),
+        HDR_CASE("flat_short.hdr", "-Y 2 +X 2\n\x80\x80\x80\x81\x80\x80\x80\x81", false),
+        HDR_CASE("flat_wide.hdr", "-Y 8000 +X 8000\n\x80\x80\x80\x81", false),
+        HDR_CASE("negative.hdr", "-Y 4 +X -5\n\x80\x80\x80\x81", false), /* was "-5x4 is more than N pixels" */
+        /* one 8-pixel RLE scanline: R, G, B as runs of 8, E as a dump of 8 bytes, 2 of them missing */
+        HDR_CASE("rle_ok.hdr",
+                 "-Y 1 +X 8\n\x02\x02\x00\x08\x88\x80\x88\x80\x88\x80\x08\x81\x81\x81\x81\x81\x81\x81\x81",
+                 true),
+        HDR_CASE("rle_short.hdr",
+                 "-Y 1 +X 8\n\x02\x02\x00\x08\x88\x80\x88\x80\x88\x80\x08\x81\x81\x81\x81\x81\x81",
+                 false),
+#undef HDR_CASE
+#undef HDR_HEAD
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        char path[512], err[512] = "";
+        FILE *f = fopen(tmp_path(path, sizeof path, cases[i].name), "wb");
+        if (f) {
+            fwrite(cases[i].data, 1, cases[i].size, f);
+            fclose(f);
+        }
+        int w = 0, h = 0;
+        float *px = rp_image_read_hdr(path, &w, &h, err, sizeof err);
+        if (cases[i].ok) {
+            CHECKF(px && w * h >= 2 && px[0] > 0.5f && px[3 * w * h - 1] > 0.5f, "%s: %s", cases[i].name, err);
+        } else {
+            CHECKF(!px && strstr(err, "corrupt Radiance HDR image") && strstr(err, cases[i].name), "%s loaded (%dx%d): %s",
+                   cases[i].name, w, h, err);
+        }
+        free(px);
+    }
+}
+
 int main(void) {
     test_declared_sizes();
     test_pfm_roundtrip(1);
@@ -330,5 +377,6 @@ int main(void) {
     test_errors();
     test_jpeg_dc_range();
     test_hdr_nul_header_line();
+    test_hdr_cut_short();
     return RP_TEST_END();
 }

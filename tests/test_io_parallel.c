@@ -293,10 +293,10 @@ static void check_ply(void) {
         const char *from, *to, *error;
         unsigned line; /* of the body */
     } bad[] = {
-        {"0 3 7 6 5 0", "0 3 7 6 x 0", "expected a integer, got 'x'", 15},
+        {"0 3 7 6 5 0", "0 3 7 6 x 0", "expected an integer, got 'x'", 15},
         {"0 3 7 6 5 0", "0 3 7 6 8 0", "face 3: vertex index 8 out of range (8 vertices)", 15},
         {"0 3 7 6 5 0", "0 2 7 6", "face 3 has 2 vertices (at least 3 needed)", 15},
-        {"2.5 0.5 0 0 0 1 3", "2.5 0.5 0 0 0 1 3 4", "expected a integer, got '0.8'", 10},
+        {"2.5 0.5 0 0 0 1 3", "2.5 0.5 0 0 0 1 3 4", "expected an integer, got '0.8'", 10},
         {"0 3 7 6 5 0", "0 3 7 6 5 0\n1", "data after the last element", 16},
         {"0 3 7 6 5 0", "", "unexpected end of file", 15},
     };

@@ -51,7 +51,8 @@ static int cmp_double(const void *a, const void *b) {
     return x < y ? -1 : x > y;
 }
 
-/* True when pattern holds exactly one integer conversion (%d, %04d, ...) and no other. */
+/* True when pattern holds exactly one integer conversion (%d, %04d, ...) and no other, of a width
+ * up to 2 digits (%999999999d made every frame's name a 4 KiB run of blanks, cut short). */
 static bool pattern_ok(const char *p) {
     int conv = 0;
     for (; *p; p++) {
@@ -61,8 +62,9 @@ static bool pattern_ok(const char *p) {
             continue;
         }
         p++;
+        const char *digits = p;
         while (*p >= '0' && *p <= '9') p++;
-        if (*p != 'd') return false;
+        if (*p != 'd' || p - digits > 2) return false;
         conv++;
     }
     return conv == 1;
@@ -116,7 +118,7 @@ int cli_animate(int argc, char **argv) {
     if (rc == CLI_EXIT_OK && pattern) {
         const char *dot = strrchr(pattern, '.');
         if (!pattern_ok(pattern)) {
-            fprintf(stderr, "raypack animate: -o expects a pattern with one integer conversion such as "
+            fprintf(stderr, "raypack animate: -o expects a pattern with one integer conversion (of width 99 at most) such as "
                             "frames/%%04d.png, got '%s'\n", pattern);
             rc = CLI_EXIT_USAGE;
         } else if (!dot || (strcasecmp(dot, ".png") != 0 && strcasecmp(dot, ".pfm") != 0 && strcasecmp(dot, ".ppm") != 0 &&
@@ -231,6 +233,7 @@ int cli_animate(int argc, char **argv) {
             goto done;
         }
         rp_camera cam = cli_render_camera(&setup, scene);
+        if (!cli_scene_in_reach(CMD, setup.scene, scene, &cam)) goto done; /* the blocks moved out of range */
         desc.camera = &cam;
         rp_render_stats rs;
         if (!rp_render(scene, &desc, pixels, &rs)) {

@@ -1150,6 +1150,8 @@ static int parse_args(int argc, char **argv, bench_opts *o) {
     }
     const cli_path paths[] = {{"SCENE", o->scene_path, true}, {"--json", o->json_path, false}};
     if (!cli_check_paths(cmd, paths, 2)) return CLI_EXIT_USAGE;
+    /* before the runs, as render does: a --json into a missing folder failed only at the end */
+    if (o->json_path && !cli_output_writable(cmd, o->json_path)) return CLI_EXIT_FAILURE;
     return CLI_EXIT_OK;
 }
 

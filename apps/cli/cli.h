@@ -135,9 +135,20 @@ bool cli_check_paths(const char *cmd, const cli_path *paths, int count);
 /* True when the scene file exists, is no folder and may be read; else prints why (errno's text). Never
  * opens it (a FIFO is read once, by the loader). */
 bool cli_scene_readable(const char *cmd, const char *path);
+/* An output path that can be written (not a folder, its folder there and writable), checked before
+ * the work so that a typo does not cost a whole render or benchmark; false after printing why. */
+bool cli_output_writable(const char *cmd, const char *path);
 /* Why a pinhole camera cannot be formed from eye, look-at point and up (DESIGN.md's frame): NaN/Inf,
  * eye == look, a zero up or one parallel to the view; NULL when it can. */
 const char *cli_camera_problem(const float eye[3], const float look[3], const float up[3]);
+/* The float shading and intersection tests multiply coordinates relative to the eye (a normal is
+ * the product of two edges, its squared length of four; the watertight test's t of three): a scene
+ * 1e11 across rendered black (unit normals overflowed), 4e12 across with NaN pixels (hits lost),
+ * with exit 0. Largest distance along an axis between two points of the scene, or one and the eye: */
+#define CLI_MAX_REACH 1e9
+/* False, after printing the error naming path, when the scene (its bounds) and the camera's eye
+ * span more than CLI_MAX_REACH. */
+bool cli_scene_in_reach(const char *cmd, const char *path, rp_render_scene *scene, const rp_camera *cam);
 /* Largest thread count accepted by --threads. */
 #define CLI_MAX_THREADS 1024
 

@@ -251,6 +251,11 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
         } else if (strcmp(a, "--env-scale") == 0) {
             VALUE();
             if (!cli_parse_vec3(CMD, a, v, o->env_scale)) return CLI_EXIT_USAGE;
+            if (o->env_scale[0] < 0.0f || o->env_scale[1] < 0.0f || o->env_scale[2] < 0.0f) {
+                /* a negative radiance has no meaning: it rendered negative pixels */
+                fprintf(stderr, "raypack render: --env-scale expects three numbers >= 0, got '%s'\n", v);
+                return CLI_EXIT_USAGE;
+            }
             o->has_env_scale = true;
         } else if (strcmp(a, "--ir-interleave") == 0) {
             VALUE();
@@ -416,36 +421,6 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
         return CLI_EXIT_USAGE;
     }
     return CLI_EXIT_OK;
-}
-
-/* Checks before the work that the image can be written: its folder exists and is writable, and an
- * existing file there is a writable regular file. */
-static bool output_writable(const char *path) {
-    struct stat st;
-    if (stat(path, &st) == 0) {
-        if (S_ISDIR(st.st_mode)) {
-            fprintf(stderr, "raypack render: cannot write %s: it is a directory\n", path);
-            return false;
-        }
-        if (access(path, W_OK) != 0) {
-            fprintf(stderr, "raypack render: cannot write %s: %s\n", path, strerror(errno));
-            return false;
-        }
-        return true;
-    }
-    char *copy = strdup(path);
-    if (!copy) return true;
-    const char *dir = dirname(copy);
-    bool ok = true;
-    if (stat(dir, &st) != 0 || !S_ISDIR(st.st_mode)) {
-        fprintf(stderr, "raypack render: cannot write %s: folder %s does not exist\n", path, dir);
-        ok = false;
-    } else if (access(dir, W_OK) != 0) {
-        fprintf(stderr, "raypack render: cannot write %s: folder %s: %s\n", path, dir, strerror(errno));
-        ok = false;
-    }
-    free(copy);
-    return ok;
 }
 
 typedef struct progress_state {
@@ -631,8 +606,8 @@ int cli_render(int argc, char **argv) {
                               {"--aovs (albedo)", guide_path[0][0] ? guide_path[0] : NULL, false},
                               {"--aovs (normal)", guide_path[1][0] ? guide_path[1] : NULL, false}};
     if (!cli_check_paths(CMD, paths, (int)(sizeof paths / sizeof paths[0]))) return CLI_EXIT_USAGE;
-    if (!output_writable(o.output)) return CLI_EXIT_FAILURE;
-    if (o.stats_json && !output_writable(o.stats_json)) return CLI_EXIT_FAILURE;
+    if (!cli_output_writable(CMD, o.output)) return CLI_EXIT_FAILURE;
+    if (o.stats_json && !cli_output_writable(CMD, o.stats_json)) return CLI_EXIT_FAILURE;
 
     /* Load. */
     double t0 = cli_now_ms();
@@ -735,9 +710,18 @@ int cli_render(int argc, char **argv) {
         if (o.has_look) strcat(from, "--look ");
         if (o.has_up) strcat(from, "--up ");
         if (from[0]) from[strlen(from) - 1] = '\0';
-        fprintf(stderr, "raypack render: %s%s: %s\n", from[0] ? from : "the scene's camera",
-                from[0] && !(o.has_eye && o.has_look && o.has_up) ? " with the scene's camera" : "", cam_why);
-        status = CLI_EXIT_USAGE;
+        if (from[0]) {
+            fprintf(stderr, "raypack render: %s%s: %s\n", from, !(o.has_eye && o.has_look && o.has_up) ? " with the scene's camera" : "",
+                    cam_why);
+            status = CLI_EXIT_USAGE;
+        } else { /* the file's camera, or the one framing its bounds (past 1e38 they overflow) */
+            fprintf(stderr, "raypack render: %s: error: the scene's camera: %s\n", o.scene ? o.scene : "(built-in scene)", cam_why);
+            status = CLI_EXIT_FAILURE;
+        }
+        goto done;
+    }
+    if (!cli_scene_in_reach(CMD, o.scene, scene, &cam)) {
+        status = CLI_EXIT_FAILURE;
         goto done;
     }
     if (sst.rejected_prims)

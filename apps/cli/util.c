@@ -2,6 +2,7 @@
 #include "cli.h"
 
 #include <errno.h>
+#include <libgen.h>
 #include <limits.h>
 #include <math.h>
 #include <stdio.h>
@@ -183,6 +184,49 @@ bool cli_check_paths(const char *cmd, const cli_path *paths, int count) {
         }
     }
     return true;
+}
+
+bool cli_output_writable(const char *cmd, const char *path) {
+    struct stat st;
+    if (stat(path, &st) == 0) {
+        if (S_ISDIR(st.st_mode)) {
+            fprintf(stderr, "raypack %s: cannot write %s: it is a directory\n", cmd, path);
+            return false;
+        }
+        if (access(path, W_OK) != 0) {
+            fprintf(stderr, "raypack %s: cannot write %s: %s\n", cmd, path, strerror(errno));
+            return false;
+        }
+        return true;
+    }
+    char *copy = strdup(path);
+    if (!copy) return true;
+    const char *dir = dirname(copy);
+    bool ok = true;
+    if (stat(dir, &st) != 0 || !S_ISDIR(st.st_mode)) {
+        fprintf(stderr, "raypack %s: cannot write %s: folder %s does not exist\n", cmd, path, dir);
+        ok = false;
+    } else if (access(dir, W_OK) != 0) {
+        fprintf(stderr, "raypack %s: cannot write %s: folder %s: %s\n", cmd, path, dir, strerror(errno));
+        ok = false;
+    }
+    free(copy);
+    return ok;
+}
+
+bool cli_scene_in_reach(const char *cmd, const char *path, rp_render_scene *scene, const rp_camera *cam) {
+    rp_bounds b;
+    rp_scene_get_bounds(rp_render_scene_core(scene), &b);
+    if (!(b.lower_x <= b.upper_x && b.lower_y <= b.upper_y && b.lower_z <= b.upper_z)) return true; /* nothing */
+    const float lo[3] = {b.lower_x, b.lower_y, b.lower_z}, hi[3] = {b.upper_x, b.upper_y, b.upper_z};
+    const float *eye = cam->pinhole.eye;
+    double reach = 0.0;
+    for (int k = 0; k < 3; k++)
+        reach = fmax(reach, fmax((double)hi[k] - lo[k], fmax(fabs((double)hi[k] - eye[k]), fabs((double)lo[k] - eye[k]))));
+    if (reach <= CLI_MAX_REACH) return true;
+    fprintf(stderr, "raypack %s: %s: error: the scene and the eye span %g: past %g the float shading and intersection "
+                    "tests overflow (scale the scene down)\n", cmd, path ? path : "(built-in scene)", reach, CLI_MAX_REACH);
+    return false;
 }
 
 bool cli_scene_readable(const char *cmd, const char *path) {

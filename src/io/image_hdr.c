@@ -87,10 +87,13 @@ static unsigned char *read_all(const char *path, size_t limit, size_t *size, cha
 
 /* stb_image 2.27 (Debian's) decodes an RLE scanline with a loop that never ends on a count of 0,
  * which is also what it reads past the end of the file: an 88-byte file hung the reader (found by
- * the texture fuzzer). False when the RLE scanlines hold such a count or stop before their last
- * pixel; true for everything else, which stb decodes in bounds or refuses itself (flat scanlines,
- * a bad header, a scanline of another width). Follows stbi__hdr_load's parsing step by step. */
-static bool hdr_rle_ok(const unsigned char *d, size_t n) {
+ * the texture fuzzer). And a file cut short anywhere else is no error to stb: it fills the pixels
+ * the file lacks with zeros (RLE) or leaves them unwritten (flat), so a 91-byte header claiming
+ * 8000 x 8000 pixels rendered as a black environment. False when the RLE scanlines hold a count
+ * of 0 or the pixels, flat or RLE, stop before the last one; true for everything else, which stb
+ * decodes in bounds or refuses itself (a bad header, a scanline of another width). Follows
+ * stbi__hdr_load's parsing step by step. */
+static bool hdr_complete(const unsigned char *d, size_t n) {
     size_t pos = 0;
     char line[1024];
     int lines = 0;
@@ -120,9 +123,14 @@ static bool hdr_rle_ok(const unsigned char *d, size_t n) {
     while (*t == ' ') t++;
     if (strncmp(t, "+X ", 3) != 0) return true;
     long width = strtol(t + 3, NULL, 10);
-    if (width < 8 || width >= 32768 || height <= 0) return true; /* flat scanlines */
+    if (width <= 0 || height <= 0 || width > INT32_MAX || height > INT32_MAX) return true; /* stb refuses it */
+    /* flat pixels, 4 bytes each, to the end of the image (stb restarts at the first pixel when a
+     * scanline of an RLE file turns out flat) */
+    uint64_t flat = (uint64_t)width * (uint64_t)height * 4;
+    if (width < 8 || width >= 32768) return pos <= n && n - pos >= flat;
     for (long y = 0; y < height; y++) {
-        if (pos + 4 > n || d[pos] != 2 || d[pos + 1] != 2 || (d[pos + 2] & 0x80)) return true; /* flat from here */
+        if (pos + 4 > n) return false;
+        if (d[pos] != 2 || d[pos + 1] != 2 || (d[pos + 2] & 0x80)) return n - pos >= flat;
         if (((long)d[pos + 2] << 8 | d[pos + 3]) != width) return true;
         pos += 4;
         for (int k = 0; k < 4; k++)
@@ -138,6 +146,7 @@ static bool hdr_rle_ok(const unsigned char *d, size_t n) {
                     pos += (size_t)count;
                 }
                 if (count > width - x) return true;
+                if (pos > n) return false; /* the run's value or the dump cut short */
                 x += count;
             }
     }
@@ -156,20 +165,24 @@ float *rp_image_read_hdr(const char *path, int *width, int *height, char *err, s
         if (err && err_size) snprintf(err, err_size, "%s: error: cannot read a Radiance HDR image: %s", path, why);
         return NULL;
     }
-    if (!hdr_rle_ok(data, size) || size > INT32_MAX) {
+    /* the declared size first: stb allocates it whole before reading a pixel (a 40-byte header may
+     * claim 30000 x 30000 pixels, 10 GB); then that the file holds them all */
+    if (size <= INT32_MAX && stbi_info_from_memory(data, (int)size, &w, &h, &comp) &&
+        (w <= 0 || h <= 0 || (uint64_t)w * (uint64_t)h > max_pixels())) {
+        free(data);
+        if (err && err_size) {
+            if (w <= 0 || h <= 0) snprintf(err, err_size, "%s: error: corrupt Radiance HDR image (%dx%d pixels)", path, w, h);
+            else
+                snprintf(err, err_size, "%s: error: %dx%d is more than %llu pixels; RP_MAX_TEXTURE_PIXELS raises the limit",
+                         path, w, h, (unsigned long long)max_pixels());
+        }
+        return NULL;
+    }
+    if (!hdr_complete(data, size) || size > INT32_MAX) {
         free(data);
         if (err && err_size)
             snprintf(err, err_size, "%s: error: corrupt Radiance HDR image (an RLE scanline with a run of length 0, or cut short)",
                      path);
-        return NULL;
-    }
-    /* the declared size next: stb allocates it whole before reading a pixel, and fills what a
-     * short file lacks with zeros (a 40-byte header may claim 30000 x 30000 pixels, 10 GB) */
-    if (stbi_info_from_memory(data, (int)size, &w, &h, &comp) && (uint64_t)w * (uint64_t)h > max_pixels()) {
-        free(data);
-        if (err && err_size)
-            snprintf(err, err_size, "%s: error: %dx%d is more than %llu pixels; RP_MAX_TEXTURE_PIXELS raises the limit",
-                     path, w, h, (unsigned long long)max_pixels());
         return NULL;
     }
     unsigned long failures = io_alloc_failures();

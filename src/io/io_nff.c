@@ -150,6 +150,16 @@ static bool nff_floats(nff_file *f, float *v, int n, const char *what) {
     return true;
 }
 
+/* v[first..first+n-1] are colours or reflection coefficients: a negative one rendered negative
+ * radiance (Whitted's image had pixels below 0). */
+static bool nff_nonnegative(nff_file *f, const float *v, int first, int n, const char *what) {
+    for (int i = first; i < first + n; i++)
+        if (v[i] < 0.0f)
+            return io_error(f->ctx, f->shown, f->line, "%s: negative colour or coefficient %g (expected >= 0)", what,
+                            (double)v[i]);
+    return true;
+}
+
 static bool nff_int(nff_file *f, int64_t *v, const char *what) {
     nff_skip(f);
     const char *q = io_parse_int(f->p, v);
@@ -521,6 +531,7 @@ static bool nff_light(nff_file *f, bool animated) {
     if (!nff_floats(f, l.position, 3, "l")) return false;
     bool colour = nff_number_next(f);
     if (f->starved || (colour && !nff_floats(f, l.color, 3, "l colour"))) return false;
+    if (!nff_nonnegative(f, l.color, 0, 3, "l colour")) return false;
     xf_point(nff_top(f), l.position);
     io_builder *b = &f->ctx->b;
     if (!io_reserve((void **)&b->lights, &b->light_cap, b->light_n + 1, sizeof l))
@@ -532,7 +543,7 @@ static bool nff_light(nff_file *f, bool animated) {
 /* `f r g b Kd Ks Shine T ior`: kd = colour * Kd, ks = kr = Ks, kt = T. */
 static bool nff_fill(nff_file *f) {
     float v[8];
-    if (!nff_floats(f, v, 8, "f")) return false;
+    if (!nff_floats(f, v, 8, "f") || !nff_nonnegative(f, v, 0, 5, "f") || !nff_nonnegative(f, v, 6, 1, "f")) return false;
     rp_material_data m;
     builder_material_defaults(&m, "");
     for (int i = 0; i < 3; i++) {
@@ -548,7 +559,8 @@ static bool nff_fill(nff_file *f) {
 /* `fm amb(3) diff(3) spec(3) Shine T ior` (AFF): ka = amb, ks = kr = spec, kt = T. */
 static bool nff_fill_material(nff_file *f) {
     float v[12];
-    if (!nff_floats(f, v, 12, "fm")) return false;
+    if (!nff_floats(f, v, 12, "fm") || !nff_nonnegative(f, v, 0, 9, "fm") || !nff_nonnegative(f, v, 10, 1, "fm"))
+        return false;
     rp_material_data m;
     builder_material_defaults(&m, "");
     for (int i = 0; i < 3; i++) {
@@ -1414,7 +1426,7 @@ static bool nff_command(nff_file *f) {
         case 'b': {
             io_builder *b = &f->ctx->b;
             b->has_background = true;
-            return nff_floats(f, b->background, 3, "b");
+            return nff_floats(f, b->background, 3, "b") && nff_nonnegative(f, b->background, 0, 3, "b");
         }
         case 'v': return nff_viewpoint(f);
         case 'm': return nff_mesh(f);

@@ -95,6 +95,9 @@ static bool mtl_color(obj_file *f, const char **pp, float c[3], const char *what
     } else if (!(p = obj_float(f, p, &c[1], what)) || !(p = obj_float(f, p, &c[2], what))) {
         return false;
     }
+    /* a negative colour rendered negative radiance (Whitted's image had pixels below 0) */
+    for (int k = 0; k < 3; k++)
+        if (c[k] < 0.0f) return io_error(f->ctx, f->shown, f->line, "%s: negative colour component %g (expected >= 0)", what, (double)c[k]);
     *pp = p;
     return true;
 }

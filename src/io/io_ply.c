@@ -216,8 +216,8 @@ static bool ply_ascii_value(ply_file *f, ply_type t, double *out) {
     if (!q) {
         int len = 0;
         while (len < 24 && p[len] && !io_is_space(p[len]) && p[len] != '\n') len++;
-        return io_error(f->ctx, f->shown, f->line, "expected a %s, got '%.*s'",
-                        t == PLY_F32 || t == PLY_F64 ? "finite number" : "integer", len, p);
+        return io_error(f->ctx, f->shown, f->line, "expected %s, got '%.*s'",
+                        t == PLY_F32 || t == PLY_F64 ? "a finite number" : "an integer", len, p);
     }
     f->p = q;
     return true;

@@ -134,9 +134,13 @@ static bool deflate_read(int fd, size_t file_size, uint64_t limit, bool prefault
  * inflated size is capped (ctx->limits.max_file_bytes). FIFOs and other streams are read the same
  * way, opened once. */
 static bool disk_read(io_ctx *ctx, const char *path, io_buf *out) {
+    /* a device never ends (/dev/zero: 4 GiB read before the size limit) or may block on open (a
+     * terminal): refused before opening it, by stat, which leaves a FIFO's bytes to the read below */
+    struct stat st;
+    if (stat(path, &st) == 0 && (S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) || S_ISSOCK(st.st_mode)))
+        return vfs_fail(ctx, "a device or socket, not a file");
     int fd = open(path, O_RDONLY | O_CLOEXEC);
     if (fd < 0) return vfs_fail(ctx, "%s", strerror(errno));
-    struct stat st;
     if (fstat(fd, &st) != 0) {
         int e = errno;
         close(fd);

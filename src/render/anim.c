@@ -113,6 +113,21 @@ static const float *group_xfm(const rp_animation_data *a, const render_group *g)
     return g->node >= 0 && (!g->deform || g->tpa) ? a->nodes[g->node].xfm : identity_xfm;
 }
 
+/* Places a group's instance at xfm, shown when visible. A map with no inverse (a keyframed scale of
+ * 0: the block shrunk to nothing) is one rp_geometry_set_instance refuses, which left the instance
+ * without a scene and failed the commit ("a geometry lacks a buffer"); the block is hidden instead,
+ * where it was (at the identity before its first placement), as the flat build shows nothing of it
+ * either. The test is the core's: the 3x3 part's determinant. */
+static void group_place(rp_geometry *inst, rp_scene *sub, const float xfm[12], bool placed, bool visible) {
+    const float *m = xfm;
+    double det = (double)m[0] * ((double)m[5] * m[10] - (double)m[6] * m[9]) +
+                 (double)m[1] * ((double)m[6] * m[8] - (double)m[4] * m[10]) +
+                 (double)m[2] * ((double)m[4] * m[9] - (double)m[5] * m[8]);
+    bool invertible = fabs(det) > 1e-30 && isfinite(det);
+    if (invertible || !placed) rp_geometry_set_instance(inst, sub, invertible ? xfm : identity_xfm);
+    rp_geometry_set_mask(inst, visible && invertible ? 0xFFFFFFFFu : 0u);
+}
+
 /* One group's sub-scene: its triangles (indices into the rest positions), spheres and cones. */
 static bool group_build(rp_render_scene *s, const rp_scene_data *d, const rp_render_scene_desc *desc, render_group *g,
                         const uint32_t count[3]) {
@@ -161,8 +176,7 @@ static bool group_build(rp_render_scene *s, const rp_scene_data *d, const rp_ren
     if (rp_scene_commit(g->sub) != RP_ERROR_NONE) return false;
     rp_geometry *inst = rp_geometry_new(s->device, RP_GEOMETRY_INSTANCE);
     if (!inst) return false;
-    rp_geometry_set_instance(inst, g->sub, group_xfm(a, g));
-    if (g->node >= 0 && !a->nodes[g->node].visible) rp_geometry_set_mask(inst, 0);
+    group_place(inst, g->sub, group_xfm(a, g), false, g->node < 0 || a->nodes[g->node].visible);
     g->inst = inst;
     g->top_id = attach_to(s->scene, inst);
     return g->top_id != RP_INVALID_ID;
@@ -284,13 +298,12 @@ bool rp_render_scene_set_time(rp_render_scene *s, rp_scene_data *data, float tim
                 ok = ok && rp_scene_commit(g->sub) == RP_ERROR_NONE;
                 st.refit_ms += now_ms() - r0;
                 count_commit(g->sub, &st);
-                rp_geometry_set_instance(g->inst, g->sub, group_xfm(a, g));
+                group_place(g->inst, g->sub, group_xfm(a, g), true, g->node < 0 || a->nodes[g->node].visible);
                 st.instances++;
             } else if (g->node >= 0) {
-                rp_geometry_set_instance(g->inst, g->sub, a->nodes[g->node].xfm);
+                group_place(g->inst, g->sub, a->nodes[g->node].xfm, true, a->nodes[g->node].visible);
                 st.instances++;
             }
-            if (g->node >= 0) rp_geometry_set_mask(g->inst, a->nodes[g->node].visible ? 0xFFFFFFFFu : 0u);
         }
         double r0 = now_ms();
         ok = ok && rp_scene_commit(s->scene) == RP_ERROR_NONE;

@@ -124,6 +124,10 @@ rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b) {
     v3 hi = v3_make(b->upper_x, b->upper_y, b->upper_z);
     v3 c = v3_scale(v3_add(lo, hi), 0.5f);
     float radius = 0.5f * v3_length(v3_sub(hi, lo));
+    if (!isfinite(radius)) { /* the squared extent of a scene 1e20 wide overflows a float: an Inf, NaN eye */
+        double dx = (double)b->upper_x - b->lower_x, dy = (double)b->upper_y - b->lower_y, dz = (double)b->upper_z - b->lower_z;
+        radius = (float)(0.5 * sqrt(dx * dx + dy * dy + dz * dz));
+    }
     if (!(radius > 0.0f)) radius = 1.0f;
     float dist = radius / sinf(p->fov_deg * 0.5f * (3.14159265358979f / 180.0f));
     /* Candidate directions, y up (the common convention); the first best one wins. */

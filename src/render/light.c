@@ -104,6 +104,22 @@ static bool env_build(render_envmap *e) {
     return total > 0.0;
 }
 
+/* The largest radiance a scaled texel may hold: a texel near FLT_MAX (an RGBE exponent of 255 is
+ * 1.7e38) overflowed to Inf in instant radiosity's VPLs and in the light's power (a black or NaN
+ * image); 1e30 leaves the sums and the estimators' factors 8 orders of magnitude. */
+#define ENV_MAX_RADIANCE 1e30
+
+/* False, with the first texel past ENV_MAX_RADIANCE (times scale) in *x, *y, when there is one. */
+static bool env_in_range(const render_envmap *e, const float scale[3], int *x, int *y) {
+    for (size_t i = 0; i < (size_t)e->width * (size_t)e->height; i++)
+        for (int c = 0; c < 3; c++)
+            if (!((double)e->rgb[3 * i + (size_t)c] * (double)scale[c] <= ENV_MAX_RADIANCE)) {
+                *x = (int)(i % (size_t)e->width), *y = (int)(i / (size_t)e->width);
+                return false;
+            }
+    return true;
+}
+
 /* Index of the interval of cdf[0..n] holding u. */
 static int cdf_find(const float *cdf, int n, float u) {
     int lo = 0, hi = n - 1;
@@ -388,6 +404,13 @@ bool light_scene_init(rp_render_scene *s, const rp_render_scene_desc *desc, char
         if (desc->environment) {
             s->env.rgb = rp_image_read_hdr(desc->environment, &s->env.width, &s->env.height, err, err_size);
             if (!s->env.rgb) return false;
+            int x, y;
+            if (!env_in_range(&s->env, l->environment.scale, &x, &y)) {
+                if (err && err_size)
+                    snprintf(err, err_size, "%s: error: pixel (%d, %d)'s radiance, times the scale, is over %g", desc->environment,
+                             x, y, ENV_MAX_RADIANCE);
+                return false;
+            }
             if (!env_build(&s->env)) {
                 if (err && err_size) snprintf(err, err_size, "%s: error: the environment map is black", desc->environment);
                 return false;

@@ -149,6 +149,8 @@ const char *cli_camera_problem(const float eye[3], const float look[3], const fl
 /* False, after printing the error naming path, when the scene (its bounds) and the camera's eye
  * span more than CLI_MAX_REACH. */
 bool cli_scene_in_reach(const char *cmd, const char *path, rp_render_scene *scene, const rp_camera *cam);
+/* The same for a core scene and an eye (bench). */
+bool cli_core_in_reach(const char *cmd, const char *path, rp_scene *scene, const float eye[3]);
 /* Largest thread count accepted by --threads. */
 #define CLI_MAX_THREADS 1024
 

@@ -215,11 +215,14 @@ bool cli_output_writable(const char *cmd, const char *path) {
 }
 
 bool cli_scene_in_reach(const char *cmd, const char *path, rp_render_scene *scene, const rp_camera *cam) {
+    return cli_core_in_reach(cmd, path, rp_render_scene_core(scene), cam->pinhole.eye);
+}
+
+bool cli_core_in_reach(const char *cmd, const char *path, rp_scene *scene, const float eye[3]) {
     rp_bounds b;
-    rp_scene_get_bounds(rp_render_scene_core(scene), &b);
+    rp_scene_get_bounds(scene, &b);
     if (!(b.lower_x <= b.upper_x && b.lower_y <= b.upper_y && b.lower_z <= b.upper_z)) return true; /* nothing */
     const float lo[3] = {b.lower_x, b.lower_y, b.lower_z}, hi[3] = {b.upper_x, b.upper_y, b.upper_z};
-    const float *eye = cam->pinhole.eye;
     double reach = 0.0;
     for (int k = 0; k < 3; k++)
         reach = fmax(reach, fmax((double)hi[k] - lo[k], fmax(fabs((double)hi[k] - eye[k]), fabs((double)lo[k] - eye[k]))));

@@ -1115,6 +1115,7 @@ static bool viewer_init(viewer *v) {
     v->desc = v->setup.desc;
     v->depth = rp_render_desc_defaults(&v->desc).max_depth;
     rp_camera cam = cli_render_camera(&v->setup, v->scene);
+    if (!cli_scene_in_reach(CMD, v->setup.scene, v->scene, &cam)) return false;
     memcpy(v->cam.eye, cam.pinhole.eye, sizeof v->cam.eye);
     memcpy(v->cam.look, cam.pinhole.look, sizeof v->cam.look);
     memcpy(v->cam.up, cam.pinhole.up, sizeof v->cam.up);

@@ -269,5 +269,37 @@ int main(void) {
         EXPECT("render --volume /nonexistent/cloud.vdb", 1, "/nonexistent/cloud.vdb");
         EXPECT("render --volume-fit 1,1,1,0,0,0", 2, "--volume-fit: the second corner must be above the first");
     }
+    {
+        /* Secondary rays start off a surface by the float spacing of its point, its ray and its
+         * primitive, not the scene's: sphere B (radius 0.1) lies 0.1 under sphere A, below a point
+         * light, on a ground 2 or 2e5 across. B's lit-side pixel is in A's shadow (ambient only) on
+         * both grounds; with the scene's offset (2e-5 of 1e5: 2 units) its shadow ray started beyond
+         * A on the large ground and the pixel was lit (0.65 against 0.08). */
+        float centre[2] = {0};
+        for (int g = 0; g < 2; g++) {
+            const char *half = g ? "100000" : "1";
+            snprintf(path, sizeof path, "%s/two_spheres.nff", tmp);
+            FILE *nf = fopen(path, "w");
+            CHECK(nf != NULL);
+            if (!nf) break;
+            fprintf(nf, "v\nfrom 1 0.28 0\nat 0 0.28 0\nup 0 1 0\nangle 10\nhither 0.001\nresolution 32 32\n"
+                        "l 0 5 0\nf 1 1 1 1 0 0 0 0\ns 0 0.5 0 0.1\ns 0 0.2 0 0.1\n"
+                        "p 4\n-%s 0 -%s\n-%s 0 %s\n%s 0 %s\n%s 0 -%s\n",
+                    half, half, half, half, half, half, half, half);
+            fclose(nf);
+            snprintf(args, sizeof args, "render '%s' -o '%s/two.pfm' --quiet", path, tmp);
+            EXPECT(args, 0, "");
+            snprintf(path, sizeof path, "%s/two.pfm", tmp);
+            int tw = 0, th = 0, tc = 0;
+            char err2[512] = "";
+            float *two = rp_image_read_pfm(path, &tw, &th, &tc, err2, sizeof err2);
+            CHECKF(two && tw == 32 && th == 32 && tc == 3, "%s", err2);
+            if (two) centre[g] = two[(16 * 32 + 16) * 3];
+            free(two);
+        }
+        CHECKF(centre[0] > 0.0f && centre[0] < 0.2f && centre[1] == centre[0],
+               "sphere B's shadowed pixel: %g on the small ground, %g on the large one", (double)centre[0],
+               (double)centre[1]);
+    }
     return RP_TEST_END();
 }

@@ -143,6 +143,7 @@ typedef struct render_surface {
     uint32_t material;
     v3 dpdu;     /* triangles with texture coordinates whose material has a normal map: the position's
                   * derivative along u (for the tangent-space normal map), else 0 */
+    float eps;   /* how far rays leaving the point start off it (ray_offset_at) */
 } render_surface;
 
 /* Cone user geometry callbacks (cone.c). */
@@ -219,6 +220,12 @@ rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b);
 
 /* Distance secondary rays start off the surface, along the geometric normal. */
 static inline float ray_offset(const rp_render_scene *s) { return 2e-5f * s->scale; }
+/* The offset of rays leaving a surface point whose float spacing is that of coordinates of size
+ * mag: the largest coordinate of the point, of the ray that found it and of its triangle's
+ * vertices (scene_surface). It had been the scene's (ray_offset): a bunny on a ground 10^5 times
+ * its size started its shadow and bounce rays 2 units off a 0.15-unit bunny, which lost its
+ * shadows and grew black blotches. */
+static inline float ray_offset_at(float mag) { return 2e-5f * (mag > 1e-3f ? mag : 1e-3f); }
 
 /* Deterministic random number in [0,1) from (pixel x, pixel y, sample, dimension). */
 static inline uint32_t render_hash(uint32_t x) {
@@ -380,6 +387,7 @@ typedef struct whitted_slot {
     v3 color;               /* background on a miss; ke + ambient, then + direct, then + children */
     v3 direct;              /* sum of the unoccluded lights, in light order */
     v3 org, ns, ng, kd, dir; /* shading point (lifted off the surface) for the shadow rays */
+    float eps;              /* the surface's ray offset (render_surface.eps) */
     const rp_material *m;
     bool lit, highlight;    /* lit: the ray hit a surface, whose lights must be gathered */
     bool has_r, has_t;      /* a reflection / refraction ray follows */
@@ -403,6 +411,7 @@ typedef struct whitted_shadow_soa {
     float gx[WHITTED_SOA], gy[WHITTED_SOA], gz[WHITTED_SOA]; /* geometric normal */
     float ex[WHITTED_SOA], ey[WHITTED_SOA], ez[WHITTED_SOA]; /* the ray's direction */
     float dist[WHITTED_SOA], cs[WHITTED_SOA], rv[WHITTED_SOA]; /* to the light, its cos, the highlight's */
+    float eps[WHITTED_SOA];                                   /* the surface's ray offset */
     int32_t lit[WHITTED_SOA];
 } whitted_shadow_soa;
 

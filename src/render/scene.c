@@ -274,7 +274,15 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
     out->uv[0] = out->uv[1] = 0.0f;
     out->dpdu = v3_make(0, 0, 0);
     out->material = 0;
+    /* the float spacing around the point: the point's, the ray's origin's and the primitive's */
+    float mag = v3_max_abs(out->p);
+    float om = v3_max_abs(v3_make(ray->org_x, ray->org_y, ray->org_z));
+    if (om > mag) mag = om;
     if (geom == s->geom_ids[RENDER_GEOM_TRIANGLES] && prim < d->triangle_count) {
+        for (int c = 0; c < 3; c++) {
+            float vm = v3_max_abs(corner3(d->positions, d->indices, prim, c));
+            if (vm > mag) mag = vm;
+        }
         float u = hit_in->u, v = hit_in->v;
         float b0 = 1.0f - u - v, b1 = u, b2 = v;
         if (d->normals && d->normal_indices) {
@@ -308,12 +316,15 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
     } else if (geom == s->geom_ids[RENDER_GEOM_SPHERES] && prim < d->sphere_count) {
         const rp_sphere_data *sp = &d->spheres[prim];
         ng = v3_sub(out->p, v3_load(sp->center));
+        float cm = v3_max_abs(v3_load(sp->center)) + fabsf(sp->radius);
+        if (cm > mag) mag = cm;
         out->material = sp->material;
     } else if (geom == s->geom_ids[RENDER_GEOM_CONES] && prim < d->cone_count) {
         out->material = d->cones[prim].material;
     }
     size_t nm = d->material_count > 0 ? d->material_count : 1;
     if (out->material >= nm) out->material = 0;
+    out->eps = ray_offset_at(mag);
 
     ng = v3_normalize(ng);
     if (!(v3_dot(ng, ng) > 0.5f)) ng = v3_neg(dir); /* zero-area or NaN normal */

@@ -77,7 +77,6 @@ static void ir_set(const render_frame *f, uint32_t sample, uint32_t set, ir_vpl 
     memset(out, 0, (size_t)V * sizeof *out);
     /* max_depth counts reflections as the path tracer does, the gathering surface's included. */
     int depth = f->desc.ir.depth > 0 ? f->desc.ir.depth : f->desc.max_depth - 1;
-    float eps = ray_offset(s);
     render_sampler pick = sampler_start(0xFFFFFFF0u - set, 0xFFFFFFFFu, sample);
     for (int path = 0; path < V; path++) {
         render_sampler rng = sampler_start(0xFFFFFFF0u - set, (uint32_t)path, sample);
@@ -104,7 +103,7 @@ static void ir_set(const render_frame *f, uint32_t sample, uint32_t set, ir_vpl 
             if (!light_sample_le(s, l, u, &p, &n, &dir, &power)) continue;
             power = v3_scale(power, 1.0f / pmf);
             vpl_keep(out, V, &seen, (ir_vpl){.p = p, .n = n, .power = power}, &pick);
-            org = v3_is_zero(n) ? p : v3_madd(p, n, eps);
+            org = v3_is_zero(n) ? p : v3_madd(p, n, ray_offset_at(v3_max_abs(p)));
         }
         for (int bounce = 0; bounce < depth; bounce++) {
             rp_rayhit rh;
@@ -119,7 +118,7 @@ static void ir_set(const render_frame *f, uint32_t sample, uint32_t set, ir_vpl 
             v3 kd = diffuse_albedo(&b);
             if (v3_is_zero(kd)) break;
             power = v3_mul(power, kd);
-            vpl_keep(out, V, &seen, (ir_vpl){.p = v3_madd(sf.p, sf.ng, eps), .n = sf.ns, .power = power}, &pick);
+            vpl_keep(out, V, &seen, (ir_vpl){.p = v3_madd(sf.p, sf.ng, sf.eps), .n = sf.ns, .power = power}, &pick);
             float q = fminf(1.0f, max3(kd));
             if (!(sampler_1d(&rng) < q)) break;
             power = v3_scale(power, 1.0f / q);
@@ -127,7 +126,7 @@ static void ir_set(const render_frame *f, uint32_t sample, uint32_t set, ir_vpl 
             bsdf_frame(sf.ns, &t, &bb);
             dir = bsdf_to_world(bsdf_cosine_hemisphere(sampler_1d(&rng), sampler_1d(&rng)), t, bb, sf.ns);
             if (v3_dot(dir, sf.ng) <= 0.0f) break;
-            org = v3_madd(sf.p, sf.ng, eps);
+            org = v3_madd(sf.p, sf.ng, sf.eps);
         }
     }
     float w = (seen > V ? (float)seen / (float)V : 1.0f) / (float)V;
@@ -309,7 +308,6 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
     pbr_frame *pf = f->pbr;
     const rp_render_scene *s = f->s;
     int N = pf->interleave, P = pf->side, T = N * P, tw = x1 - x0;
-    float eps = ray_offset(s);
     const uint32_t *lane = pt->lane;
     /* This pass's primary hits, P x P packets of neighbouring pixels, spread over each pixel like
      * the path tracer's (the box filter of DESIGN.md's radiometry contract). */
@@ -379,7 +377,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                         beta = v3_mul(beta, v3_scale(bs.f, fabsf(bs.wi.z) / bs.pdf));
                         v3 wi = bsdf_to_world(bs.wi, t, b, sf.ns);
                         rp_rayhit rh;
-                        render_ray_init(&rh.ray, v3_madd(sf.p, sf.ng, bs.wi.z < 0.0f ? -eps : eps), wi, INFINITY);
+                        render_ray_init(&rh.ray, v3_madd(sf.p, sf.ng, bs.wi.z < 0.0f ? -sf.eps : sf.eps), wi, INFINITY);
                         rh.hit.geom_id = rh.hit.prim_id = rh.hit.inst_id = RP_INVALID_ID;
                         rp_intersect1(s->scene, &rh);
                         th->rays[bs.wi.z < 0.0f ? RP_RAY_REFRACTION : RP_RAY_REFLECTION]++;
@@ -397,7 +395,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                     }
                     pf->emit[gi] = emit;
                     pt_->bsdf = bsdf;
-                    pt_->org = v3_madd(sf.p, sf.ng, eps);
+                    pt_->org = v3_madd(sf.p, sf.ng, sf.eps);
                     pt_->ng = sf.ng;
                     pt_->ns = sf.ns;
                     bsdf_frame(sf.ns, &pt_->t, &pt_->b);

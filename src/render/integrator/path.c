@@ -47,7 +47,7 @@ bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, const r
     }
     render_surface sf;
     scene_surface(s, &rh->ray, &rh->hit, &sf);
-    float eps = ray_offset(s);
+    float eps = sf.eps;
     if (ao) {
         v3 t, b;
         bsdf_frame(sf.ns, &t, &b);

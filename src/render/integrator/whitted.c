@@ -35,12 +35,13 @@ void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_hit *hit
     o->color = v3_add(material_ke_textured(s, m, v3_load(m->ke), &sf), v3_scale(kd, f->desc.ambient));
     /* reflect_depth / refract_depth: resolved by rp_render (positive, or -1 for none) */
     bool more_r = depth < f->desc.reflect_depth, more_t = depth < f->desc.refract_depth;
-    float eps = ray_offset(s);
+    float eps = sf.eps;
     float cos_i = -v3_dot(dir, sf.ns);
     if (cos_i < 0.0f) cos_i = 0.0f;
     v3 above = v3_madd(sf.p, sf.ng, eps);
     o->lit = true;
     o->direct = v3_make(0, 0, 0);
+    o->eps = eps;
     o->org = above;
     o->ns = sf.ns;
     o->ng = sf.ng;
@@ -99,6 +100,7 @@ void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_hit *hit
  * ray is needed. */
 bool whitted_light(const render_frame *f, const whitted_slot *o, const rp_light_source *light, rp_ray *sr,
                    whitted_light_term *lt) {
+    (void)f; /* the offset is the slot's now (its surface's), not the scene's */
     v3 pos = v3_make(0, 0, 0), intensity = pos;
     bool inverse_square = false;
     switch (light->type) {
@@ -113,7 +115,7 @@ bool whitted_light(const render_frame *f, const whitted_slot *o, const rp_light_
     case RP_LIGHT_SOURCE_ENVIRONMENT:
         return false; /* Whitted sees the files' point lights only */
     }
-    float eps = ray_offset(f->s);
+    float eps = o->eps;
     v3 to = v3_sub(pos, o->org);
     float dist = v3_length(to);
     if (!(dist > eps)) return false;
@@ -238,7 +240,7 @@ rp_query_n_desc whitted_packet_query(const render_frame *f, render_thread *th, w
 /* whitted_light's arithmetic towards the light at pos for every lane of a (see packet_shadows):
  * the shadow packet's directions and ends, live where the light can reach the lit point; returns
  * the live count. */
-static uint64_t shadow_lanes(uint32_t nn, whitted_shadow_soa *restrict a, v3 pos, float eps,
+static uint64_t shadow_lanes(uint32_t nn, whitted_shadow_soa *restrict a, v3 pos,
                              float *restrict dx, float *restrict dy, float *restrict dz, float *restrict tfar,
                              int32_t *restrict valid) {
     const float px = pos.x, py = pos.y, pz = pos.z;
@@ -252,8 +254,8 @@ static uint64_t shadow_lanes(uint32_t nn, whitted_shadow_soa *restrict a, v3 pos
         float s2 = 2.0f * c;
         a->rv[q] = -((a->nx[q] * s2 - x) * a->ex[q] + (a->ny[q] * s2 - y) * a->ey[q] + (a->nz[q] * s2 - z) * a->ez[q]);
         a->dist[q] = d, a->cs[q] = c;
-        dx[q] = x, dy[q] = y, dz[q] = z, tfar[q] = d * (1.0f - 1e-5f) - eps;
-        int32_t ok = a->lit[q] & (d > eps && !(c <= 0.0f) && !(cg <= 0.0f));
+        dx[q] = x, dy[q] = y, dz[q] = z, tfar[q] = d * (1.0f - 1e-5f) - a->eps[q];
+        int32_t ok = a->lit[q] & (d > a->eps[q] && !(c <= 0.0f) && !(cg <= 0.0f));
         valid[q] = -ok;
         live += (uint64_t)ok;
     }
@@ -278,6 +280,7 @@ static void packet_shadows(const render_frame *f, render_thread *th, whitted_lev
         a->nx[q] = lit ? o->ns.x : 0.0f, a->ny[q] = lit ? o->ns.y : 0.0f, a->nz[q] = lit ? o->ns.z : 0.0f;
         a->gx[q] = lit ? o->ng.x : 0.0f, a->gy[q] = lit ? o->ng.y : 0.0f, a->gz[q] = lit ? o->ng.z : 0.0f;
         a->ex[q] = lit ? o->dir.x : 0.0f, a->ey[q] = lit ? o->dir.y : 0.0f, a->ez[q] = lit ? o->dir.z : 0.0f;
+        a->eps[q] = lit ? o->eps : 0.0f;
         a->lit[q] = lit;
     }
     if (!any) return;
@@ -286,12 +289,11 @@ static void packet_shadows(const render_frame *f, render_thread *th, whitted_lev
         sp->org_x[q] = a->ox[q], sp->org_y[q] = a->oy[q], sp->org_z[q] = a->oz[q], sp->tnear[q] = 0.0f;
         sp->geom_id[q] = sp->prim_id[q] = sp->inst_id[q] = RP_INVALID_ID;
     }
-    float eps = ray_offset(f->s);
     for (size_t i = 0; i < f->light_count; i++) {
         const rp_light_source *light = &f->lights[i];
         if (light->type != RP_LIGHT_SOURCE_POINT) continue; /* Whitted sees the files' point lights only */
         v3 pos = v3_load(light->point.position), intensity = v3_load(light->point.intensity);
-        uint64_t live = shadow_lanes(nn, a, pos, eps, sp->dir_x, sp->dir_y, sp->dir_z, sp->tfar, th->shadow_valid);
+        uint64_t live = shadow_lanes(nn, a, pos, sp->dir_x, sp->dir_y, sp->dir_z, sp->tfar, th->shadow_valid);
         if (!live) continue;
         th->rays[RP_RAY_SHADOW] += live;
         rp_query_n_desc qd = whitted_packet_query(f, th, lv, RP_RAY_SHADOW);

@@ -274,12 +274,18 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
     out->uv[0] = out->uv[1] = 0.0f;
     out->dpdu = v3_make(0, 0, 0);
     out->material = 0;
-    /* the float spacing around the point: the point's, the ray's origin's and the primitive's */
+    /* The float spacing around the point: that of the point, of the ray's origin and of the
+     * primitive's coordinates. Where the point or the origin is already within 1/16 of the scene's
+     * largest coordinate, the scene's (the offset before session 28, no vertex loads); only hits
+     * much nearer the origin than the scene's extent (a small object on a large ground) look at
+     * their primitive. */
     float mag = v3_max_abs(out->p);
     float om = v3_max_abs(v3_make(ray->org_x, ray->org_y, ray->org_z));
     if (om > mag) mag = om;
+    const bool near = mag * 16.0f < s->scale;
+    if (!near) mag = s->scale;
     if (geom == s->geom_ids[RENDER_GEOM_TRIANGLES] && prim < d->triangle_count) {
-        for (int c = 0; c < 3; c++) {
+        for (int c = 0; near && c < 3; c++) {
             float vm = v3_max_abs(corner3(d->positions, d->indices, prim, c));
             if (vm > mag) mag = vm;
         }
@@ -317,7 +323,7 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
         const rp_sphere_data *sp = &d->spheres[prim];
         ng = v3_sub(out->p, v3_load(sp->center));
         float cm = v3_max_abs(v3_load(sp->center)) + fabsf(sp->radius);
-        if (cm > mag) mag = cm;
+        if (near && cm > mag) mag = cm;
         out->material = sp->material;
     } else if (geom == s->geom_ids[RENDER_GEOM_CONES] && prim < d->cone_count) {
         out->material = d->cones[prim].material;

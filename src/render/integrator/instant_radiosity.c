@@ -103,7 +103,7 @@ static void ir_set(const render_frame *f, uint32_t sample, uint32_t set, ir_vpl 
             if (!light_sample_le(s, l, u, &p, &n, &dir, &power)) continue;
             power = v3_scale(power, 1.0f / pmf);
             vpl_keep(out, V, &seen, (ir_vpl){.p = p, .n = n, .power = power}, &pick);
-            org = v3_is_zero(n) ? p : v3_madd(p, n, ray_offset_at(v3_max_abs(p)));
+            org = v3_is_zero(n) ? p : v3_madd(p, n, ray_offset(s)); /* a light's point: its triangle unknown here */
         }
         for (int bounce = 0; bounce < depth; bounce++) {
             rp_rayhit rh;

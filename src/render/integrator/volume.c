@@ -46,9 +46,7 @@ int volume_path_vertex(const render_frame *f, render_thread *th, pbr_path *st, c
             float w = ls.delta ? 1.0f : pbr_mis(pl, ph);
             v3 c = v3_scale(v3_mul(st->beta, ls.L), ph * w / pl);
             if (max3(c) > 0.0f) {
-                float tfar = isfinite(ls.dist)
-                                 ? ls.dist * (1.0f - 1e-4f) - ray_offset_at(fmaxf(v3_max_abs(p), v3_max_abs(v3_madd(p, ls.wi, ls.dist))))
-                                 : INFINITY;
+                float tfar = isfinite(ls.dist) ? ls.dist * (1.0f - 1e-4f) - ray_offset(s) : INFINITY;
                 medium_rng trng = vertex_rng(st, 1);
                 float tr = medium_transmittance(m, p, ls.wi, tfar, &trng);
                 if (tr > 0.0f && tfar > 0.0f) {

@@ -263,6 +263,18 @@ int main(void) {
     rc = run_mpi("", 1, "--mpi --anim-time 1 --width 16 --height 16 -o /dev/null.png");
     CHECKF(rc != 0 && rc != 124 && strstr(output, "--anim-time: the scene is not animated"),
            "--anim-time on a still scene: exit %d:\n%s", rc, output);
+    /* A camera with no frame is refused as `raypack render` refuses it, not rendered (it wrote an
+     * image with exit 0): an up along the view, and a --to-eye path through the look-at point, whose
+     * middle frame has no view direction. */
+    rc = run_mpi("", 2, "--mpi --eye 0,0,0 --look 0,1,0 --up 0,1,0 --width 16 --height 16 -o /dev/null.png");
+    CHECKF(rc == 2 && strstr(output, "--eye, --look and --up: the up vector is parallel to the view direction"),
+           "an up along the view: exit %d:\n%s", rc, output);
+    file_in_tmp(got, sizeof got, "through.png");
+    snprintf(args, sizeof args, "--mpi --eye 1,1,4 --to-eye -1,1,-4 --look 0,1,0 --frames 3 --width 16 --height 16 -o '%s'",
+             got);
+    rc = run_mpi("", 2, args);
+    CHECKF(rc != 0 && rc != 124 && strstr(output, "the eye is the look-at point") && strstr(output, "frame 1's camera"),
+           "a camera path through the look-at point: exit %d:\n%s", rc, output);
 
     /* BART's museum played for 3 frames with -np 3, each rank loading the file and with
      * --mpi-bcast (the animation on the wire): every frame equals `raypack render --anim-time T` at

@@ -394,25 +394,9 @@ static int parse_options(int argc, char **argv, render_options *o, bool *help) {
                 o->height, RENDER_MAX_PIXELS);
         return CLI_EXIT_USAGE;
     }
-    if (o->has_eye && o->has_look) {
-        static const float any_up[3] = {0.0f, 1.0f, 0.0f}, other_up[3] = {1.0f, 0.0f, 0.0f};
-        const char *why = cli_camera_problem(o->eye, o->look, any_up);
-        if (why && cli_camera_problem(o->eye, o->look, other_up)) {
-            fprintf(stderr, "raypack render: --eye and --look: %s\n", why);
-            return CLI_EXIT_USAGE;
-        }
-    }
-    if (o->has_eye && o->has_look && o->has_up) {
-        const char *why = cli_camera_problem(o->eye, o->look, o->up);
-        if (why) {
-            fprintf(stderr, "raypack render: --eye, --look and --up: %s\n", why);
-            return CLI_EXIT_USAGE;
-        }
-    }
-    if (o->has_up && !(o->up[0] != 0.0f || o->up[1] != 0.0f || o->up[2] != 0.0f)) {
-        fprintf(stderr, "raypack render: --up 0,0,0 is not a direction\n");
-        return CLI_EXIT_USAGE;
-    }
+    int cam_status = cli_camera_flags_check(CMD, o->has_eye ? o->eye : NULL, o->has_look ? o->look : NULL,
+                                            o->has_up ? o->up : NULL);
+    if (cam_status != CLI_EXIT_OK) return cam_status;
     const char *dot = strrchr(o->output, '.');
     if (!dot || (strcasecmp(dot, ".png") != 0 && strcasecmp(dot, ".pfm") != 0 && strcasecmp(dot, ".ppm") != 0 &&
                  strcasecmp(dot, ".hdr") != 0 && strcasecmp(dot, ".exr") != 0)) {
@@ -701,24 +685,12 @@ int cli_render(int argc, char **argv) {
         status = CLI_EXIT_USAGE;
         goto done;
     }
-    const char *cam_why = cam.type == RP_CAMERA_PINHOLE
-                              ? cli_camera_problem(cam.pinhole.eye, cam.pinhole.look, cam.pinhole.up) : NULL;
-    if (cam_why) {
-        /* name the flags that made it, else the scene's camera */
-        char from[64] = "";
-        if (o.has_eye) strcat(from, "--eye ");
-        if (o.has_look) strcat(from, "--look ");
-        if (o.has_up) strcat(from, "--up ");
-        if (from[0]) from[strlen(from) - 1] = '\0';
-        if (from[0]) {
-            fprintf(stderr, "raypack render: %s%s: %s\n", from, !(o.has_eye && o.has_look && o.has_up) ? " with the scene's camera" : "",
-                    cam_why);
-            status = CLI_EXIT_USAGE;
-        } else { /* the file's camera, or the one framing its bounds (past 1e38 they overflow) */
-            fprintf(stderr, "raypack render: %s: error: the scene's camera: %s\n", o.scene ? o.scene : "(built-in scene)", cam_why);
-            status = CLI_EXIT_FAILURE;
+    if (cam.type == RP_CAMERA_PINHOLE) {
+        int cs = cli_camera_check(CMD, o.scene, &cam, o.has_eye, o.has_look, o.has_up);
+        if (cs != CLI_EXIT_OK) {
+            status = cs;
+            goto done;
         }
-        goto done;
     }
     if (!cli_scene_in_reach(CMD, o.scene, scene, &cam)) {
         status = CLI_EXIT_FAILURE;

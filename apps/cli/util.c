@@ -256,6 +256,45 @@ const char *cli_camera_problem(const float eye[3], const float look[3], const fl
     return NULL;
 }
 
+int cli_camera_flags_check(const char *cmd, const float *eye, const float *look, const float *up) {
+    if (eye && look) {
+        /* whether some up could make a frame, then the given one */
+        static const float any_up[3] = {0.0f, 1.0f, 0.0f}, other_up[3] = {1.0f, 0.0f, 0.0f};
+        const char *why = cli_camera_problem(eye, look, any_up);
+        if (why && cli_camera_problem(eye, look, other_up)) {
+            fprintf(stderr, "raypack %s: --eye and --look: %s\n", cmd, why);
+            return CLI_EXIT_USAGE;
+        }
+        if (up && (why = cli_camera_problem(eye, look, up)) != NULL) {
+            fprintf(stderr, "raypack %s: --eye, --look and --up: %s\n", cmd, why);
+            return CLI_EXIT_USAGE;
+        }
+    }
+    if (up && !(up[0] != 0.0f || up[1] != 0.0f || up[2] != 0.0f)) {
+        fprintf(stderr, "raypack %s: --up 0,0,0 is not a direction\n", cmd);
+        return CLI_EXIT_USAGE;
+    }
+    return CLI_EXIT_OK;
+}
+
+int cli_camera_check(const char *cmd, const char *path, const rp_camera *cam, bool has_eye, bool has_look, bool has_up) {
+    const char *why = cli_camera_problem(cam->pinhole.eye, cam->pinhole.look, cam->pinhole.up);
+    if (!why) return CLI_EXIT_OK;
+    /* name the flags that made it, else the scene's camera */
+    char from[64] = "";
+    if (has_eye) strcat(from, "--eye ");
+    if (has_look) strcat(from, "--look ");
+    if (has_up) strcat(from, "--up ");
+    if (!from[0]) { /* the file's camera, or the one framing its bounds (past 1e38 they overflow) */
+        fprintf(stderr, "raypack %s: %s: error: the scene's camera: %s\n", cmd, path ? path : "(built-in scene)", why);
+        return CLI_EXIT_FAILURE;
+    }
+    from[strlen(from) - 1] = '\0';
+    fprintf(stderr, "raypack %s: %s%s: %s\n", cmd, from, !(has_eye && has_look && has_up) ? " with the scene's camera" : "",
+            why);
+    return CLI_EXIT_USAGE;
+}
+
 bool cli_is_medium_flag(const char *a) {
     return strcmp(a, "--density-scale") == 0 || strcmp(a, "--albedo") == 0 || strcmp(a, "--hg-g") == 0 ||
            strcmp(a, "--medium-box") == 0 || strcmp(a, "--vdb-grid") == 0 || strcmp(a, "--volume") == 0 ||

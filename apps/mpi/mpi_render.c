@@ -232,6 +232,9 @@ static int parse_mpi_options(int argc, char **argv, mpir_options *o, bool *help)
         }
 #undef VALUE
     }
+    int cam_status = cli_camera_flags_check(MPIR_CMD, o->has_eye ? o->eye : NULL, o->has_look ? o->look : NULL,
+                                            o->has_up ? o->up : NULL);
+    if (cam_status != CLI_EXIT_OK) return cam_status;
     const char *dot = strrchr(o->output, '.');
     if (!dot || (strcasecmp(dot, ".png") != 0 && strcasecmp(dot, ".pfm") != 0 && strcasecmp(dot, ".ppm") != 0)) {
         fprintf(stderr, "raypack render: -o expects a file ending in .png, .pfm or .ppm, got '%s'\n", o->output);

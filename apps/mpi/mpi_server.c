@@ -655,6 +655,18 @@ int mpir_server_run(const mpir_options *o, int size) {
         }
         rp_camera base = cli_render_camera(&view, rs.scene);
         rp_camera fc = play ? base : frame_camera(o, &base, f);
+        /* as `raypack render`: a camera with no frame (an up along the view, the eye on the look-at
+         * point, a path through it) or a scene past the float tests' reach is an error, not an image */
+        if (fc.type == RP_CAMERA_PINHOLE) {
+            int cs = cli_camera_check(MPIR_CMD, o->scene, &fc, o->has_eye || o->has_to_eye || (o->has_orbit && f),
+                                      o->has_look || o->has_to_look, o->has_up);
+            if (cs != CLI_EXIT_OK) {
+                if (frames > 1) fprintf(stderr, "raypack render: (frame %d's camera)\n", f);
+                status = cs;
+                goto done;
+            }
+        }
+        if (!cli_scene_in_reach(MPIR_CMD, o->scene, rs.scene, &fc)) goto done;
         s.proto_job = (job_msg){.frame = (uint32_t)f, .width = wd, .height = ht, .spp = o->spp,
                                 .animated = anim != NULL, .anim_time = ft,
                                 .integrator = (int32_t)o->integrator, .packet = o->packet, .camera = fc,

@@ -140,6 +140,17 @@ static void test_cameras_and_sizes(void) {
     EXPECT(args, 2, "--look with the scene's camera: the eye is the look-at point");
     snprintf(args, sizeof args, "render '%s' --up 0,0,1 -o '%s/same.png' --quiet", path, tmp);
     EXPECT(args, 2, "--up with the scene's camera: the up vector is parallel");
+    /* ... and so do the other commands that make rays from a camera: the stream engine and bench
+     * rendered or timed NaN rays (or one line of them), exit 0; with the scene's camera they exit 1 */
+    snprintf(args, sizeof args, "render '%s' --engine stream --up 0,0,1 -o '%s/same.png' --quiet", path, tmp);
+    EXPECT(args, 1, "--up with the scene's camera: the up vector is parallel");
+    EXPECT("render x.obj --engine stream --eye 1,1,1 --look 1,1,1 --quiet", 2, "--eye and --look: the eye is the look-at point");
+    snprintf(args, sizeof args, "bench '%s' --look 0,0,5 --width 8 --height 8 --repeats 1", path);
+    EXPECT(args, 1, "--look with the scene's camera: the eye is the look-at point");
+    EXPECT("bench --eye 0,0,0 --look 0,0,-1 --up 0,0,2", 2, "parallel to the view direction");
+    snprintf(args, sizeof args, "bench --render '%s' --look 0,0,5 --width 8 --height 8 --frames 1", path);
+    EXPECT(args, 1, "--look with the scene's camera: the eye is the look-at point");
+    EXPECT("bench --render x.obj --eye 1,1,1 --look 1,1,1", 2, "--eye and --look: the eye is the look-at point");
     /* a transform (scale 1e30) that overflows to inf drops its primitives, with a warning; nothing else left:
      * the nothing-to-hit warning as well */
     snprintf(path, sizeof path, "%s/overflow.aff", tmp);

@@ -1271,13 +1271,18 @@ rp_scene *bench_build_raypack(bench_ctx *ctx, double *wall_ms, rp_scene_stats *s
 }
 
 /* Generates the ray sets; shadow, reflection and diffuse rays start at raypack's single-ray
- * primary hits, bounce1 and bounce2 come from a path-traced frame. */
+ * primary hits, bounce1 and bounce2 come from a path-traced frame. False after printing why. */
 static bool make_ray_sets(bench_ctx *ctx) {
     for (int k = 0; k < BENCH_KIND_COUNT; k++)
         if (!bench_rays_alloc(&ctx->sets[k], (bench_kind)k, ctx->opts.width, ctx->opts.height) ||
-            !bench_hits_alloc(&ctx->ref[k], ctx->sets[k].slots))
+            !bench_hits_alloc(&ctx->ref[k], ctx->sets[k].slots)) {
+            fprintf(stderr, "raypack bench: out of memory for the ray sets\n");
             return false;
+        }
     finish_camera_and_light(ctx);
+    if (cli_camera_check("bench", ctx->opts.scene_path, ctx->camera.eye, ctx->camera.look, ctx->camera.up,
+                         ctx->opts.has_eye, ctx->opts.has_look, ctx->opts.has_up) != CLI_EXIT_OK)
+        return false; /* its rays would all be NaN, or all one line */
     make_primary(&ctx->sets[BENCH_PRIMARY], &ctx->camera, ctx->opts.width, ctx->opts.height);
     bench_mode single[1];
     bench_raypack_modes(ctx, &ctx->sets[BENCH_PRIMARY], single, 1);
@@ -1497,10 +1502,7 @@ static int bench_core(bench_ctx *ctx) {
     memset(&st, 0, sizeof st);
     ctx->scene = bench_build_raypack(ctx, &build_ms, &st);
     if (!ctx->scene) return 1;
-    if (!make_ray_sets(ctx)) {
-        fprintf(stderr, "raypack bench: out of memory\n");
-        return 1;
-    }
+    if (!make_ray_sets(ctx)) return 1;
     bench_print_header(ctx);
     if (ctx->load_ms > 0.0)
         printf("load      %.2f ms on %d threads, %.1f MB parsed (%.0f MB/s)\n", ctx->load_ms, ctx->opts.threads,
@@ -1688,6 +1690,9 @@ int cli_bench(int argc, char **argv) {
         return CLI_EXIT_USAGE;
     }
 #endif
+    rc = cli_camera_flags_check("bench", ctx.opts.has_eye ? ctx.opts.eye : NULL, ctx.opts.has_look ? ctx.opts.look : NULL,
+                                ctx.opts.has_up ? ctx.opts.up : NULL);
+    if (rc != CLI_EXIT_OK) return rc;
     if ((ctx.opts.grid || ctx.opts.accel_grid) && !ctx.opts.repeats_set) ctx.opts.repeats = 3;
 #if !defined(RP_HAVE_EMBREE)
     if (ctx.opts.vs_embree) {

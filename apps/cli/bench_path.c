@@ -27,7 +27,10 @@ bool bench_make_path_sets(bench_ctx *ctx) {
     uint32_t *mats = NULL;
     if (!data) {
         mats = calloc(ctx->mesh.triangle_count, sizeof *mats);
-        if (!mats) return false;
+        if (!mats) {
+            fprintf(stderr, "raypack bench: path-traced rays: out of memory\n");
+            return false;
+        }
         own = (rp_scene_data){.vertex_count = ctx->mesh.vertex_count, .positions = ctx->mesh.positions,
                               .triangle_count = ctx->mesh.triangle_count, .indices = ctx->mesh.indices,
                               .tri_materials = mats, .material_count = 1, .materials = &grey};
@@ -38,7 +41,7 @@ bool bench_make_path_sets(bench_ctx *ctx) {
     rp_ray *rays = malloc(2 * (size_t)w * (size_t)h * sizeof *rays);
     float *px = malloc((size_t)w * (size_t)h * 3 * sizeof *px);
     bool ok = rs && rays && px;
-    if (!rs) fprintf(stderr, "raypack bench: path-traced rays: %s\n", err[0] ? err : "out of memory");
+    if (!ok) fprintf(stderr, "raypack bench: path-traced rays: %s\n", !rs && err[0] ? err : "out of memory");
     if (ok) {
         const bench_camera *c = &ctx->camera;
         rp_camera cam = {.type = RP_CAMERA_PINHOLE};
@@ -49,6 +52,7 @@ bool bench_make_path_sets(bench_ctx *ctx) {
         rp_render_desc d = {.width = w, .height = h, .integrator = RP_INTEGRATOR_PATH, .max_depth = 2,
                             .camera = &cam, .bounce_rays = rays};
         ok = rp_render(rs, &d, px, NULL);
+        if (!ok) fprintf(stderr, "raypack bench: path-traced rays: rendering failed (out of memory?)\n");
     }
     for (int k = 0; ok && k < 2; k++) {
         bench_rays *set = &ctx->sets[BENCH_BOUNCE1 + k];

@@ -197,6 +197,8 @@ int cli_bench_render(int argc, char **argv) {
         fprintf(stderr, "raypack bench --render: expected at least one SCENE\n");
         return CLI_EXIT_USAGE;
     }
+    int cam_status = cli_camera_flags_check(CMD, has_eye ? eye : NULL, has_look ? look : NULL, NULL);
+    if (cam_status != CLI_EXIT_OK) return cam_status;
     rp_device *dev = cli_device_new(CMD, threads, 0);
     if (!dev) return CLI_EXIT_FAILURE;
     float *px = malloc((size_t)w * (size_t)h * 3 * sizeof(float));
@@ -227,6 +229,19 @@ int cli_bench_render(int argc, char **argv) {
             if (has_look) cam.pinhole.look[k] = look[k];
         }
         if (has_fov) cam.pinhole.fov_deg = fov;
+        if (cam.type == RP_CAMERA_PINHOLE && cli_camera_check(CMD, scenes[si], cam.pinhole.eye, cam.pinhole.look,
+                                                              cam.pinhole.up, has_eye, has_look, false) != CLI_EXIT_OK) {
+            rp_render_scene_release(scene);
+            rp_scene_data_free(&data);
+            status = CLI_EXIT_FAILURE;
+            continue;
+        }
+        if (!cli_scene_in_reach(CMD, scenes[si], scene, &cam)) {
+            rp_render_scene_release(scene);
+            rp_scene_data_free(&data);
+            status = CLI_EXIT_FAILURE;
+            continue;
+        }
         size_t packets = 0;
         float *krays = kernels ? kernel_rays(&cam, w, h, &packets) : NULL;
         rp_rayhit_n pk = {0};

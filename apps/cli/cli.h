@@ -146,7 +146,8 @@ const char *cli_camera_problem(const float eye[3], const float look[3], const fl
 int cli_camera_flags_check(const char *cmd, const float *eye, const float *look, const float *up);
 /* A pinhole camera that cannot be formed (cli_camera_problem): prints why, naming the flags that made
  * it (CLI_EXIT_USAGE) or the scene's camera (CLI_EXIT_FAILURE); CLI_EXIT_OK when it can. */
-int cli_camera_check(const char *cmd, const char *path, const rp_camera *cam, bool has_eye, bool has_look, bool has_up);
+int cli_camera_check(const char *cmd, const char *path, const float eye[3], const float look[3], const float up[3],
+                     bool has_eye, bool has_look, bool has_up);
 /* The float shading and intersection tests multiply coordinates relative to the eye (a normal is
  * the product of two edges, its squared length of four; the watertight test's t of three): a scene
  * 1e11 across rendered black (unit normals overflowed), 4e12 across with NaN pixels (hits lost),

@@ -686,7 +686,7 @@ int cli_render(int argc, char **argv) {
         goto done;
     }
     if (cam.type == RP_CAMERA_PINHOLE) {
-        int cs = cli_camera_check(CMD, o.scene, &cam, o.has_eye, o.has_look, o.has_up);
+        int cs = cli_camera_check(CMD, o.scene, cam.pinhole.eye, cam.pinhole.look, cam.pinhole.up, o.has_eye, o.has_look, o.has_up);
         if (cs != CLI_EXIT_OK) {
             status = cs;
             goto done;

@@ -189,6 +189,9 @@ static int parse(const char *cmd, int argc, char **argv, stream_opts *o, bool be
         fprintf(stderr, "raypack %s: the stream engine needs a SCENE\n", cmd);
         return CLI_EXIT_USAGE;
     }
+    int cam_status = cli_camera_flags_check(cmd, o->has_eye ? o->eye : NULL, o->has_look ? o->look : NULL,
+                                            o->has_up ? o->up : NULL);
+    if (cam_status != CLI_EXIT_OK) return cam_status;
     /* rp_render_desc's depths as `render` sets them: 0 is the default (5), negative is none */
     const int *in[3] = {&o->max_depth, &o->reflect_depth, &o->refract_depth};
     int *out[3] = {&o->rd.max_depth, &o->rd.reflect_depth, &o->rd.refract_depth};
@@ -275,6 +278,9 @@ static bool load(const char *cmd, const stream_opts *o, int default_w, int defau
     if (o->has_look) memcpy(l->cam.pinhole.look, o->look, sizeof o->look);
     if (o->has_up) memcpy(l->cam.pinhole.up, o->up, sizeof o->up);
     if (o->has_fov) l->cam.pinhole.fov_deg = o->fov;
+    if (cli_camera_check(cmd, o->scene, l->cam.pinhole.eye, l->cam.pinhole.look, l->cam.pinhole.up, o->has_eye,
+                         o->has_look, o->has_up) != CLI_EXIT_OK)
+        return false; /* its rays would be NaN, or one line */
     int sw = default_w ? default_w : (l->data.camera.width > 0 ? l->data.camera.width : 512);
     int sh = default_h ? default_h : (l->data.camera.height > 0 ? l->data.camera.height : 512);
     l->w = o->width, l->h = o->height;

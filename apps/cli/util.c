@@ -277,8 +277,9 @@ int cli_camera_flags_check(const char *cmd, const float *eye, const float *look,
     return CLI_EXIT_OK;
 }
 
-int cli_camera_check(const char *cmd, const char *path, const rp_camera *cam, bool has_eye, bool has_look, bool has_up) {
-    const char *why = cli_camera_problem(cam->pinhole.eye, cam->pinhole.look, cam->pinhole.up);
+int cli_camera_check(const char *cmd, const char *path, const float eye[3], const float look[3], const float up[3],
+                     bool has_eye, bool has_look, bool has_up) {
+    const char *why = cli_camera_problem(eye, look, up);
     if (!why) return CLI_EXIT_OK;
     /* name the flags that made it, else the scene's camera */
     char from[64] = "";

@@ -658,7 +658,8 @@ int mpir_server_run(const mpir_options *o, int size) {
         /* as `raypack render`: a camera with no frame (an up along the view, the eye on the look-at
          * point, a path through it) or a scene past the float tests' reach is an error, not an image */
         if (fc.type == RP_CAMERA_PINHOLE) {
-            int cs = cli_camera_check(MPIR_CMD, o->scene, &fc, o->has_eye || o->has_to_eye || (o->has_orbit && f),
+            int cs = cli_camera_check(MPIR_CMD, o->scene, fc.pinhole.eye, fc.pinhole.look, fc.pinhole.up,
+                                      o->has_eye || o->has_to_eye || (o->has_orbit && f),
                                       o->has_look || o->has_to_look, o->has_up);
             if (cs != CLI_EXIT_OK) {
                 if (frames > 1) fprintf(stderr, "raypack render: (frame %d's camera)\n", f);

@@ -329,7 +329,8 @@ RP_API int rp_render_channels(const rp_render_desc *desc);
 /* Renders a frame into pixels (width * height * rp_render_channels floats, linear, top row first)
  * on the device's threads; with desc.region only the pixels inside it are written, each exactly as
  * the whole frame would have it. stats may be NULL. Returns false on bad arguments (a packet size
- * other than 4, 8, 16 or 32, a region not inside the image, accumulate with instant radiosity)
+ * other than 4, 8, 16 or 32, a region not inside the image, accumulate with instant radiosity, a
+ * camera with no frame: not finite, eye == look, up along the view, fov outside (0, 180))
  * or out of memory. Instant radiosity renders a region's margin of its filter radius too (its
  * discontinuity buffer reads those neighbours). */
 RP_API bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels,

@@ -63,6 +63,22 @@ static void check_scene(rp_device *dev, const char *name, const rp_scene_data *d
     /* a packet size the tracer does not take is refused */
     desc.packet = 12;
     CHECK(!rp_render(rs, &desc, px, NULL));
+    /* so is a camera with no frame, whose rays would be NaN (or one line): the image was NaN */
+    desc.packet = 16;
+    rp_camera cam = rp_render_scene_default_camera(rs);
+    CHECK(rp_render(rs, &(rp_render_desc){.width = w, .height = h, .camera = &cam}, px, NULL));
+    for (int k = 0; k < 3; k++) cam.pinhole.up[k] = cam.pinhole.look[k] - cam.pinhole.eye[k];
+    CHECK(!rp_render(rs, &(rp_render_desc){.width = w, .height = h, .camera = &cam}, px, NULL));
+    cam = rp_render_scene_default_camera(rs);
+    memcpy(cam.pinhole.look, cam.pinhole.eye, sizeof cam.pinhole.eye);
+    CHECK(!rp_render(rs, &(rp_render_desc){.width = w, .height = h, .camera = &cam, .integrator = RP_INTEGRATOR_PATH},
+                     px, NULL));
+    cam = rp_render_scene_default_camera(rs);
+    cam.pinhole.eye[1] = NAN;
+    CHECK(!rp_render(rs, &(rp_render_desc){.width = w, .height = h, .camera = &cam}, px, NULL));
+    cam = rp_render_scene_default_camera(rs);
+    cam.pinhole.fov_deg = 180.0f;
+    CHECK(!rp_render(rs, &(rp_render_desc){.width = w, .height = h, .camera = &cam}, px, NULL));
     free(ref);
     free(px);
     rp_render_scene_release(rs);

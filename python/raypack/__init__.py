@@ -181,6 +181,18 @@ def render(scene, width=512, height=512, eye=None, look=None, up=(0, 1, 0), fov=
     "albedo" instead."""
     if (eye is None) != (look is None):
         raise ValueError("give both eye and look, or neither")
+    if not 0.0 < float(fov) < 180.0:
+        raise ValueError(f"fov {fov}: the vertical field of view must be in (0, 180) degrees")
+    if eye is not None:
+        e, l, u = (np.asarray(x, np.float64).reshape(3) for x in (eye, look, up))
+        d = np.float32(l) - np.float32(e)  # in float, as the renderer forms the frame
+        if not (np.all(np.isfinite([e, l, u])) and np.all(np.isfinite(d))):
+            raise ValueError("eye, look and up must be finite")
+        dd, uu, c = float(d @ d), float(u @ u), np.cross(d.astype(np.float64), u)
+        if dd == 0.0:
+            raise ValueError("the eye is the look-at point (no view direction)")
+        if not float(c @ c) > 1e-10 * dd * uu:
+            raise ValueError("the up vector is zero or parallel to the view direction")
     integ = _INTEGRATORS["aov"] if aov is not None else _INTEGRATORS[integrator]
     a = _AOVS[aov] if aov is not None else 0
     ch = lib.rpy_render_channels(integ, a)

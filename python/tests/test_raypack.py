@@ -204,4 +204,11 @@ def test_bad_input():
         raypack.load("/nonexistent/no_such_scene.obj")
     with pytest.raises(ValueError):
         raypack.render(s, 8, 8, eye=(0, 0, 1))
+    # a camera with no frame: the image would be NaN
+    with pytest.raises(ValueError, match="look-at point"):
+        raypack.render(s, 8, 8, eye=(0, 0, 1), look=(0, 0, 1))
+    with pytest.raises(ValueError, match="parallel"):
+        raypack.render(s, 8, 8, eye=(0, 0, 1), look=(0, 0, 0), up=(0, 0, 2))
+    with pytest.raises(ValueError, match="fov"):
+        raypack.render(s, 8, 8, fov=180)
     assert s.intersect(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32))["t"].shape == (0,)

@@ -2,6 +2,7 @@
 #include "render.h"
 
 #include <float.h>
+#include <math.h>
 
 void camera_setup(const rp_camera *cam, int width, int height, render_camera *out) {
     switch (cam->type) {
@@ -18,6 +19,22 @@ void camera_setup(const rp_camera *cam, int width, int height, render_camera *ou
     out->width = (float)width;
     out->height = (float)height;
     out->aspect = (float)width / (float)height;
+}
+
+bool camera_valid(const rp_camera *cam) {
+    if (cam->type != RP_CAMERA_PINHOLE) return false;
+    const rp_pinhole_camera *p = &cam->pinhole;
+    if (!(p->fov_deg > 0.0f && p->fov_deg < 180.0f)) return false;
+    double d[3], u[3], dd = 0.0, uu = 0.0;
+    for (int k = 0; k < 3; k++) {
+        float dk = p->look[k] - p->eye[k]; /* in float, as camera_setup */
+        if (!isfinite(p->eye[k]) || !isfinite(p->look[k]) || !isfinite(p->up[k]) || !isfinite(dk)) return false;
+        d[k] = dk, u[k] = p->up[k];
+        dd += d[k] * d[k], uu += u[k] * u[k];
+    }
+    double c[3] = {d[1] * u[2] - d[2] * u[1], d[2] * u[0] - d[0] * u[2], d[0] * u[1] - d[1] * u[0]};
+    /* sin^2 of the angle between the view and up at least 1e-10: else the right vector is noise */
+    return dd > 0.0 && uu > 0.0 && c[0] * c[0] + c[1] * c[1] + c[2] * c[2] > 1e-10 * dd * uu;
 }
 
 /* dir = normalize(f + (2x/W - 1) tan(fov/2) (W/H) r + (1 - 2y/H) tan(fov/2) u), x and y already

@@ -191,6 +191,9 @@ typedef struct render_camera {
     float tan_half, aspect, width, height;
 } render_camera;
 void camera_setup(const rp_camera *cam, int width, int height, render_camera *out);
+/* A camera camera_setup can frame: finite, eye != look, up not along the view (sin^2 > 1e-10), the
+ * vertical fov in (0, 180) degrees. */
+bool camera_valid(const rp_camera *cam);
 /* A ray from org along dir over [0, tfar], visible to every geometry. */
 static inline void render_ray_init(rp_ray *r, v3 org, v3 dir, float tfar) {
     r->org_x = org.x;

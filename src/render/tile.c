@@ -249,6 +249,9 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
                     rg[3] <= dd.height))
         return false;
     if (dd.accumulate && dd.integrator == RP_INTEGRATOR_IR) return false;
+    /* a camera with no frame would trace NaN rays (or one line of rays) into a wrong image */
+    rp_camera cam = dd.camera ? *dd.camera : rp_render_scene_default_camera(scene);
+    if (!camera_valid(&cam)) return false;
     render_frame *f = calloc(1, sizeof *f);
     if (!f) return false;
     f->ox0 = f->rx0 = whole ? 0 : rg[0];

@@ -815,6 +815,12 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
         snprintf(err, err_size, "stream: missing scene, grid or pixels");
         return false;
     }
+    rp_camera cam = d.camera ? *d.camera : rp_render_scene_default_camera(rs);
+    if (!camera_valid(&cam)) {
+        snprintf(err, err_size, "stream: the camera has no frame (not finite, eye == look, up along the view or fov "
+                                "outside (0, 180))");
+        return false;
+    }
     size_t n = (size_t)d.width * (size_t)d.height;
     if (d.render && d.render->integrator != RP_INTEGRATOR_EYELIGHT) {
         if (!render_integrator(rs, g, &d, pixels, &st, err, err_size)) return false;
@@ -826,7 +832,6 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
         return false;
     }
     /* Kernel: eye-ray generation, the renderer's camera (pixel centres) */
-    rp_camera cam = d.camera ? *d.camera : rp_render_scene_default_camera(rs);
     render_camera rc;
     camera_setup(&cam, d.width, d.height, &rc);
     for (size_t i = 0; i < n; i++)

@@ -181,7 +181,9 @@ RP_API rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_da
 RP_API void rp_render_scene_release(rp_render_scene *scene);
 /* The committed core scene (not retained; valid while the render scene lives). */
 RP_API rp_scene *rp_render_scene_core(rp_render_scene *scene);
-/* The scene file's camera, or one that frames the scene's bounds when the file had none. */
+/* The scene file's camera, or one that frames the scene's bounds when the file had none: y up, fov 45,
+ * from +z (glTF's front) unless -z, +x or -x sees clearly more front faces (an eighth more of a 12 x 12
+ * grid of rays); a room or building that shows back faces from every side is seen from inside. */
 RP_API rp_camera rp_render_scene_default_camera(rp_render_scene *scene);
 /* True when the scene holds a participating medium (its data had a volume); its world box in
  * *bounds when bounds is not NULL. */

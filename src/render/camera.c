@@ -2,6 +2,7 @@
 #include "render.h"
 
 #include <float.h>
+#include <stdlib.h>
 #include <math.h>
 
 void camera_setup(const rp_camera *cam, int width, int height, render_camera *out) {
@@ -147,7 +148,10 @@ rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b) {
     }
     if (!(radius > 0.0f)) radius = 1.0f;
     float dist = radius / sinf(p->fov_deg * 0.5f * (3.14159265358979f / 180.0f));
-    /* Candidate directions, y up (the common convention); the first best one wins. */
+    /* Candidate directions, y up (the common convention). +z first: glTF's front faces +z, and so do
+     * most models made for a y-up viewer (Suzanne, the Stanford bunny). Another direction wins only
+     * when it sees clearly more front faces (by an eighth): Suzanne's back of the head scores 26 of
+     * 144 rays against her face's 24, and was the view. */
     static const float dirs[4][3] = {{0, 0, 1}, {0, 0, -1}, {1, 0, 0}, {-1, 0, 0}};
     int best = -1, best_score = 0, best_distinct = 0;
     for (int i = 0; i < 4; i++) {
@@ -158,7 +162,7 @@ rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b) {
             cand.pinhole.up[k] = k == 1 ? 1.0f : 0.0f;
         }
         int distinct, s = view_score(scene, &cand, &distinct);
-        if (best < 0 || s > best_score) {
+        if (best < 0 || s > best_score + abs(best_score) / 8) {
             best = i;
             best_score = s;
             best_distinct = distinct;

@@ -48,6 +48,13 @@ typedef struct rp_material_data {
     int32_t map_normal;    /* 1 + index into textures of a tangent-space normal map (MTL norm), 0 if none */
     int32_t map_ke;        /* 1 + index into textures multiplying ke (MTL map_Ke, glTF emissive texture,
                             * AFF's textured ambient-only surfaces), 0 if none */
+    /* glTF's metallic-roughness model (base colour: kd, map_kd), when metal_rough is true; the
+     * Phong fields above then say nothing more */
+    bool metal_rough;
+    float metallic;        /* metallic factor in [0, 1] */
+    float roughness;       /* perceptual roughness factor r in [0, 1] (GGX alpha = r^2) */
+    int32_t map_metal_rough; /* 1 + index into textures whose green channel (roughness) and blue
+                              * channel (metallic), linear, multiply the factors; 0 if none */
 } rp_material_data;
 
 /* Image texture, decoded to 8-bit RGB (sRGB encoded, as stored in the file). */

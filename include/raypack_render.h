@@ -72,6 +72,11 @@ typedef struct rp_material {
     int32_t normal_texture;    /* physically based: tangent-space normal map, or -1 */
     int32_t emission_texture;  /* texture multiplying ke (sRGB decoded), or -1; such an emitter is not
                                 * sampled as a light: it adds radiance where rays hit it */
+    /* glTF's metallic-roughness model (type PHONG; kd and texture are the base colour; ks and ns
+     * its Phong look for Whitted): the physically based integrators read these per hit */
+    bool metal_rough;
+    float metallic, roughness;     /* factors, [0, 1] */
+    int32_t metal_rough_texture;   /* green: roughness, blue: metallic (linear), times the factors; or -1 */
     union {
         rp_mirror_params mirror;
         rp_dielectric_params dielectric;

@@ -183,6 +183,10 @@ static void test_handwritten_gltf(const char *name) {
         CHECKF(near(md->ke[0], 1.0f, 1e-6f) && near(md->ke[1], 0.5f, 1e-6f) && near(md->ke[2], 0.25f, 1e-6f),
                "ke %g %g %g", (double)md->ke[0], (double)md->ke[1], (double)md->ke[2]);
         CHECK(strcmp(md->name, "paint") == 0);
+        /* metallic-roughness: metallicFactor 0 as written, roughnessFactor glTF's default 1, no texture */
+        CHECKF(md->metal_rough && md->metallic == 0.0f && md->roughness == 1.0f && md->map_metal_rough == 0,
+               "metal_rough %d metallic %g roughness %g map %d", (int)md->metal_rough, (double)md->metallic,
+               (double)md->roughness, (int)md->map_metal_rough);
         CHECK(md->map_kd >= 0 && (size_t)md->map_kd < s.texture_count);
         if (md->map_kd >= 0 && (size_t)md->map_kd < s.texture_count) {
             const rp_texture_data *t = &s.textures[md->map_kd];
@@ -334,8 +338,9 @@ static void test_shared(void) {
         CHECKF(ok, "%s", err);
         if (ok) {
             CHECK(s.triangle_count == 12 && s.normals && s.texcoords);
-            CHECK(s.texture_count == 1 && s.textures[0].width == 512 && s.textures[0].height == 512);
+            CHECK(s.texture_count == 2 && s.textures[0].width == 512 && s.textures[0].height == 512);
             CHECK(s.materials[s.tri_materials[0]].map_kd == 0);
+            CHECK(s.materials[s.tri_materials[0]].metal_rough && s.materials[s.tri_materials[0]].map_metal_rough == 2);
             rp_scene_data_free(&s);
         }
     } else {
@@ -349,7 +354,13 @@ static void test_shared(void) {
     CHECKF(ok, "%s", err);
     if (!ok) return;
     CHECK(s.triangle_count == 3936 && s.normals && s.texcoords && s.normal_count == s.vertex_count);
-    CHECK(s.texture_count == 1 && s.textures[0].width == 1024);
+    /* base colour and the metallic-roughness texture (glTF's defaults: factors 1 and 1) */
+    CHECK(s.texture_count == 2 && s.textures[0].width == 1024);
+    const rp_material_data *sm = &s.materials[s.tri_materials[0]];
+    CHECKF(sm->metal_rough && sm->metallic == 1.0f && sm->roughness == 1.0f && sm->map_metal_rough == 2 &&
+               strstr(s.textures[1].path, "Suzanne_MetallicRoughness.png"),
+           "Suzanne: metal_rough %d metallic %g roughness %g map %d", (int)sm->metal_rough, (double)sm->metallic,
+           (double)sm->roughness, (int)sm->map_metal_rough);
     rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
     rp_render_scene *rs = rp_render_scene_new(dev, &s, NULL, err, sizeof err);
     CHECKF(rs != NULL, "%s", err);

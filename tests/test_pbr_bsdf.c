@@ -176,6 +176,44 @@ int main(void) {
             CHECKF(a <= 1.0 + 1e-3, "white BSDF %d, theta_o %.1f: albedo %.5f > 1", i, thetas[t], a);
             if (i == 0) CHECKF(fabs(a - 1.0) < 1e-3, "Lambert albedo %.5f != 1", a);
         }
+    /* glTF's metallic-roughness (material_bsdf): a metal is its base colour's coat and no diffuse, a
+     * dielectric its base colour's diffuse under a 4% coat, in between both in proportion; white at
+     * every metallic and roughness reflects at most what arrives; the factors map through
+     * rp_material_from_data (the loader's fields). */
+    {
+        const float metals[4] = {0.0f, 0.3f, 0.7f, 1.0f}, roughs[3] = {0.0f, 0.5f, 0.9f};
+        for (int mi = 0; mi < 4; mi++)
+            for (int ri = 0; ri < 3; ri++) {
+                rp_material_data d = {.kd = {0.9f, 0.6f, 0.2f}, .map_kd = -1, .illum = -1, .ior = 1.0f,
+                                      .metal_rough = true, .metallic = metals[mi], .roughness = roughs[ri]};
+                rp_material m = rp_material_from_data(&d);
+                render_surface sf = {.ns = {0, 0, 1}, .ng = {0, 0, 1}, .entering = true};
+                render_bsdf b = material_bsdf(NULL, &m, &sf);
+                float mt = metals[mi], r = roughs[ri];
+                CHECKF(b.type == BSDF_PLASTIC, "metallic %g: BSDF %d, not the plastic", mt, (int)b.type);
+                float want_ks[3] = {0.04f * (1 - mt) + 0.9f * mt, 0.04f * (1 - mt) + 0.6f * mt, 0.04f * (1 - mt) + 0.2f * mt};
+                float keep = 1.0f - want_ks[0];
+                /* the diffuse the plastic reflects: kd (1 - max ks) = base (1 - metallic) */
+                v3 diffuse = v3_scale(b.kd, keep);
+                CHECKF(fabsf(b.ks.x - want_ks[0]) < 1e-6f && fabsf(b.ks.y - want_ks[1]) < 1e-6f &&
+                           fabsf(b.ks.z - want_ks[2]) < 1e-6f,
+                       "metallic %g: coat %g %g %g", mt, b.ks.x, b.ks.y, b.ks.z);
+                CHECKF(fabsf(diffuse.x - 0.9f * (1 - mt)) < 1e-5f && fabsf(diffuse.y - 0.6f * (1 - mt)) < 1e-5f &&
+                           fabsf(diffuse.z - 0.2f * (1 - mt)) < 1e-5f,
+                       "metallic %g: diffuse %g %g %g", mt, diffuse.x, diffuse.y, diffuse.z);
+                CHECKF(fabsf(b.alpha - (r * r >= 1e-3f ? r * r : 0.0f)) < 1e-6f, "roughness %g: alpha %g", r, b.alpha);
+                if (r > 0.0f) {
+                    d.kd[0] = d.kd[1] = d.kd[2] = 1.0f;
+                    m = rp_material_from_data(&d);
+                    render_bsdf w = material_bsdf(NULL, &m, &sf);
+                    for (int t = 0; t < 3; t++) {
+                        double a = albedo(&w, dir_of(thetas[t], 0.3));
+                        CHECKF(a <= 1.0 + 1e-3, "white metallic %g roughness %g, theta_o %.1f: albedo %.5f > 1", mt, r,
+                               thetas[t], a);
+                    }
+                }
+            }
+    }
     /* Rough glass reflects and transmits at most what arrives (its radiance scaling 1/eta^2 undone). */
     for (int t = 0; t < 3; t++) {
         const render_bsdf *g = &glass[0];

@@ -122,10 +122,14 @@ int cli_info(int argc, char **argv) {
         const rp_material_data *m = &d.materials[i];
         const rp_material *rm = rp_render_scene_material(rs, i);
         printf("  %-3zu %-24s %-10s kd (%.2f %.2f %.2f) ks (%.2f %.2f %.2f) ns %g kr (%.2f %.2f %.2f) "
-               "kt (%.2f %.2f %.2f) ior %g%s\n",
+               "kt (%.2f %.2f %.2f) ior %g%s",
                i, m->name[0] ? m->name : "-", material_type_name(rm->type), m->kd[0], m->kd[1], m->kd[2], m->ks[0],
                m->ks[1], m->ks[2], m->ns, m->kr[0], m->kr[1], m->kr[2], m->kt[0], m->kt[1], m->kt[2], m->ior,
                m->map_kd >= 0 ? " textured" : "");
+        if (m->metal_rough)
+            printf(" metallic %.2f roughness %.2f%s", m->metallic, m->roughness,
+                   m->map_metal_rough ? " (times the metallic-roughness texture)" : "");
+        printf("\n");
     }
     if (shown < d.material_count) printf("  ... %zu more (--materials lists all)\n", d.material_count - shown);
     printf("textures    %zu\n", d.texture_count);

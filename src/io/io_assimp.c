@@ -133,10 +133,10 @@ static int32_t material_texture(load_state *s, const struct aiMaterial *am, enum
 }
 
 /* assimp's material -> rp_material_data, the one place the mapping lives (extend it here when
- * rp_material_data grows metallic, roughness and normal maps). Until physically based materials
- * land, glTF's metallic-roughness model is read as: base colour factor (and base colour texture,
+ * rp_material_data grows normal maps). glTF's metallic-roughness model is read as: base colour factor (and base colour texture,
  * which multiplies it, as in glTF) -> kd, the diffuse albedo; emissive factor -> ke (emitted
- * radiance, DESIGN.md), times the emissive texture (map_ke); metallic, roughness, normal and
+ * radiance, DESIGN.md), times the emissive texture (map_ke); metallic and roughness factors and
+ * the metallic-roughness texture -> metal_rough (the renderer's mapping: material.c); normal and
  * occlusion textures are not used.
  * Formats without base colour give their diffuse colour and texture. Returns false after an error. */
 static bool material_from_assimp(load_state *s, const struct aiMaterial *am, rp_material_data *m) {
@@ -162,6 +162,21 @@ static bool material_from_assimp(load_state *s, const struct aiMaterial *am, rp_
     int32_t etex = material_texture(s, am, aiTextureType_EMISSIVE, m->name); /* glTF: multiplies the factor */
     if (etex == -2) return false;
     m->map_ke = etex + 1;
+    float metallic;
+    if (aiGetMaterialFloatArray(am, AI_MATKEY_METALLIC_FACTOR, &metallic, NULL) == aiReturn_SUCCESS) {
+        /* glTF (assimp gives the factors with glTF's defaults, 1 and 1, filled in) */
+        float roughness = 1.0f;
+        aiGetMaterialFloatArray(am, AI_MATKEY_ROUGHNESS_FACTOR, &roughness, NULL);
+        m->metal_rough = true;
+        m->metallic = isfinite(metallic) ? fminf(fmaxf(metallic, 0.0f), 1.0f) : 1.0f;
+        m->roughness = isfinite(roughness) ? fminf(fmaxf(roughness, 0.0f), 1.0f) : 1.0f;
+        /* the one texture glTF has for both: assimp lists it as the metalness texture, and as glTF's
+         * own key (aiTextureType_UNKNOWN) */
+        int32_t mr = material_texture(s, am, aiTextureType_METALNESS, m->name);
+        if (mr == -1) mr = material_texture(s, am, aiTextureType_UNKNOWN, m->name);
+        if (mr == -2) return false;
+        m->map_metal_rough = mr + 1;
+    }
     return true;
 }
 

@@ -19,6 +19,23 @@ rp_material rp_material_from_data(const rp_material_data *d) {
     m.roughness_texture = d->map_roughness - 1;
     m.normal_texture = d->map_normal - 1;
     m.emission_texture = d->map_ke - 1;
+    m.metal_rough_texture = -1;
+    if (d->metal_rough) {
+        /* glTF's metallic-roughness: the physically based integrators read it per hit
+         * (metal_rough_bsdf), Whitted too (material_phong); ks and ns here are the factors' Phong
+         * look: a highlight of lerp(0.04, base, metallic), Blinn-Phong exponent 2 / alpha^2 - 2
+         * (alpha = r^2) */
+        float metallic = fminf(fmaxf(d->metallic, 0.0f), 1.0f), r = fminf(fmaxf(d->roughness, 0.0f), 1.0f);
+        m.type = RP_MATERIAL_PHONG;
+        m.metal_rough = true;
+        m.metallic = metallic;
+        m.roughness = r;
+        m.metal_rough_texture = d->map_metal_rough - 1;
+        for (int k = 0; k < 3; k++) m.ks[k] = 0.04f * (1.0f - metallic) + fminf(fmaxf(d->kd[k], 0.0f), 1.0f) * metallic;
+        float alpha = fmaxf(r * r, 0.01f);
+        m.ns = fmaxf(2.0f / (alpha * alpha) - 2.0f, 1.0f);
+        return m;
+    }
     if (any_positive(d->kt)) {
         m.type = RP_MATERIAL_DIELECTRIC;
         memcpy(m.dielectric.kt, d->kt, sizeof m.dielectric.kt);
@@ -97,6 +114,7 @@ float material_fresnel(float cos_i, float eta) {
  *     coat of weight Kr over that diffuse base.
  *   - transmission (MTL d < 1 / Tr > 0 / Tf with illum 4/6/7/9, NFF T > 0): a smooth dielectric of
  *     index Ni (NFF index_of_refraction; 1.5 when absent), transmission tinted by Kt.
+ *   - glTF's metallic-roughness (assimp's glTF reader): metal_rough_bsdf.
  *   - emission: MTL Ke is the emitted radiance on the front side (that of the geometric normal,
  *     counter-clockwise winding); a material with Ke 0 and Ka above 1 in some channel emits Ka
  *     instead (the classic cornell_box's `Ka 20` light, tinyobjloader's and Mitsuba's importers'
@@ -108,6 +126,52 @@ float material_fresnel(float cos_i, float eta) {
 static float clamp01(float x) { return fminf(fmaxf(x, 0.0f), 1.0f); }
 static v3 clamp3(v3 c) { return v3_make(clamp01(c.x), clamp01(c.y), clamp01(c.z)); }
 
+/* glTF's metallic-roughness model on the plastic BSDF: a GGX coat (alpha = r^2; smooth under r^2 =
+ * 1e-3) of reflectance lerp(0.04, base, metallic) (the dielectric's 4% at normal incidence, the
+ * metal's base colour), over a diffuse base of base (1 - metallic), the plastic's kd (1 - max ks)
+ * made so. glTF's Fresnel rise at grazing angles is left out (the coat's weight is constant). The
+ * texture's green channel scales roughness and its blue channel metallic (linear). */
+static void metal_rough_at(const rp_render_scene *s, const rp_material *m, const render_surface *surf,
+                           float *metallic, float *r) {
+    *metallic = m->metallic, *r = m->roughness;
+    if (m->metal_rough_texture >= 0 && surf->has_uv) {
+        v3 t = material_texture_linear(s, m->metal_rough_texture, surf->uv);
+        *r *= t.y;
+        *metallic *= t.z;
+    }
+}
+
+static void metal_rough_bsdf(const rp_render_scene *s, const rp_material *m, const render_surface *surf,
+                             render_bsdf *b) {
+    float metallic, r;
+    metal_rough_at(s, m, surf, &metallic, &r);
+    v3 base = b->kd; /* the base colour (times its texture), clamped */
+    b->type = BSDF_PLASTIC;
+    b->ks = v3_add(v3_scale(v3_make(0.04f, 0.04f, 0.04f), 1.0f - metallic), v3_scale(base, metallic));
+    float keep = 1.0f - fmaxf(b->ks.x, fmaxf(b->ks.y, b->ks.z)); /* at least 0.96 (1 - metallic) */
+    b->kd = keep > 0.0f ? clamp3(v3_scale(base, (1.0f - metallic) / keep)) : v3_make(0, 0, 0);
+    b->alpha = r * r >= 1e-3f ? r * r : 0.0f;
+}
+
+void material_phong(const rp_render_scene *s, const rp_material *m, const render_surface *surf, v3 *kd, v3 *ks,
+                    float *ns) {
+    *kd = material_albedo(s, m, surf);
+    if (!m->metal_rough) {
+        *ks = v3_load(m->ks);
+        *ns = m->ns;
+        return;
+    }
+    /* metallic-roughness: rp_material_from_data's Phong look, per hit (its textures) */
+    float metallic, r;
+    metal_rough_at(s, m, surf, &metallic, &r);
+    v3 base = clamp3(*kd);
+    *ks = v3_add(v3_scale(v3_make(0.04f, 0.04f, 0.04f), 1.0f - metallic), v3_scale(base, metallic));
+    /* kd stays the base colour: a metal has no diffuse term, and under Whitted's point lights (no
+     * environment, no glossy reflection) it would be black but for its highlights */
+    float alpha = fmaxf(r * r, 0.01f);
+    *ns = fmaxf(2.0f / (alpha * alpha) - 2.0f, 1.0f);
+}
+
 render_bsdf material_bsdf(const rp_render_scene *s, const rp_material *m, const render_surface *surf) {
     render_bsdf b;
     memset(&b, 0, sizeof b);
@@ -118,6 +182,10 @@ render_bsdf material_bsdf(const rp_render_scene *s, const rp_material *m, const 
         b.type = BSDF_LAMBERT;
         break;
     case RP_MATERIAL_PHONG:
+        if (m->metal_rough) {
+            metal_rough_bsdf(s, m, surf, &b);
+            break;
+        }
         b.type = BSDF_PLASTIC;
         b.ks = clamp3(v3_load(m->ks));
         b.alpha = sqrtf(2.0f / (fmaxf(m->ns, 0.0f) + 2.0f));

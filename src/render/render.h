@@ -182,6 +182,10 @@ void anim_groups_free(rp_render_scene *s);
 v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]);
 /* Base colour of a material at a surface: kd times its texture (material.c). */
 v3 material_albedo(const rp_render_scene *s, const rp_material *m, const render_surface *surf);
+/* Whitted's Phong terms at a hit: the diffuse kd (textured), the highlight's ks and exponent ns (a
+ * metallic-roughness material's from its textures there; its kd is the base colour, metal or not). */
+void material_phong(const rp_render_scene *s, const rp_material *m, const render_surface *surf, v3 *kd, v3 *ks,
+                    float *ns);
 /* Exact Fresnel reflectance of a dielectric interface; cos_i > 0, eta = n_incident / n_transmitted. */
 float material_fresnel(float cos_i, float eta);
 
@@ -392,6 +396,8 @@ typedef struct whitted_slot {
     v3 org, ns, ng, kd, dir; /* shading point (lifted off the surface) for the shadow rays */
     float eps;              /* the surface's ray offset (render_surface.eps) */
     const rp_material *m;
+    v3 ks;                  /* the highlight's colour and exponent (material_phong) */
+    float shininess;
     bool lit, highlight;    /* lit: the ray hit a surface, whose lights must be gathered */
     bool has_r, has_t;      /* a reflection / refraction ray follows */
     float w_r, w_t;         /* path weights of the children */

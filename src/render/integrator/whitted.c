@@ -31,7 +31,8 @@ void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_hit *hit
     scene_surface(s, ray, hit, &sf);
     const rp_material *m = &s->materials[sf.material];
     v3 dir = v3_make(ray->dir_x, ray->dir_y, ray->dir_z);
-    v3 kd = material_albedo(s, m, &sf);
+    v3 kd;
+    material_phong(s, m, &sf, &kd, &o->ks, &o->shininess);
     o->color = v3_add(material_ke_textured(s, m, v3_load(m->ke), &sf), v3_scale(kd, f->desc.ambient));
     /* reflect_depth / refract_depth: resolved by rp_render (positive, or -1 for none) */
     bool more_r = depth < f->desc.reflect_depth, more_t = depth < f->desc.refract_depth;
@@ -139,7 +140,7 @@ bool whitted_light(const render_frame *f, const whitted_slot *o, const rp_light_
  * powf only then: most of a kitchen's shadow rays are occluded). */
 v3 whitted_light_contrib(const whitted_slot *o, const whitted_light_term *lt) {
     v3 term = lt->term;
-    if (lt->rv > 0.0f) term = v3_add(term, v3_scale(v3_load(o->m->ks), powf(lt->rv, o->m->ns)));
+    if (lt->rv > 0.0f) term = v3_add(term, v3_scale(o->ks, powf(lt->rv, o->shininess)));
     return v3_mul(lt->intensity, term);
 }
 

@@ -64,12 +64,22 @@ typedef struct rp_texture_data {
     uint8_t *rgb;       /* width * height * 3 bytes, top row first */
 } rp_texture_data;
 
-typedef enum rp_light_type { RP_LIGHT_DATA_POINT = 0 } rp_light_type;
+/* Point lights (NFF/AFF, glTF); spot and directional lights come from glTF's KHR_lights_punctual
+ * (and assimp's other formats). Whitted renders the point lights; the physically based integrators
+ * all three. */
+typedef enum rp_light_type {
+    RP_LIGHT_DATA_POINT = 0,
+    RP_LIGHT_DATA_SPOT = 1,
+    RP_LIGHT_DATA_DIRECTIONAL = 2
+} rp_light_type;
 
 typedef struct rp_light_data {
     rp_light_type type;
-    float position[3];
-    float color[3];     /* intensity; NFF lights without a colour get 1,1,1 */
+    float position[3];  /* point and spot */
+    float color[3];     /* point, spot (on its axis): intensity; directional: irradiance. NFF lights
+                         * without a colour get 1,1,1 */
+    float direction[3]; /* spot: unit, where its cone points; directional: unit, where the light travels */
+    float cos_inner, cos_outer; /* spot: full intensity inside cos_inner, none outside cos_outer */
 } rp_light_data;
 
 /* Pinhole camera of DESIGN.md (eye, look-at point, up, vertical field of view in degrees). */

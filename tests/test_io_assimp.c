@@ -391,6 +391,86 @@ static void test_shared(void) {
     rp_scene_data_free(&s);
 }
 
+/* KHR_lights_punctual's spot and directional lights (they were left out: a glTF lit by a sun
+ * rendered black): a spot 2 above a triangle in y = 0 pointing down (cone 0.2..0.5 radians from its
+ * axis), a sun travelling along (0, -1, -1) / sqrt 2 with 3 lux. */
+static const char lights_gltf[] =
+    "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_lights_punctual\"],\n"
+    "\"extensions\":{\"KHR_lights_punctual\":{\"lights\":[\n"
+    "  {\"type\":\"spot\",\"color\":[1,0.5,0.25],\"intensity\":10,\"spot\":{\"innerConeAngle\":0.2,\"outerConeAngle\":0.5}},\n"
+    "  {\"type\":\"directional\",\"color\":[1,1,1],\"intensity\":3}]}},\n"
+    "\"scene\":0,\"scenes\":[{\"nodes\":[0,1,2]}],\n"
+    "\"nodes\":[{\"mesh\":0},\n"
+    "  {\"name\":\"spotnode\",\"translation\":[0,2,0],\"rotation\":[-0.7071068,0,0,0.7071068],\"extensions\":{\"KHR_lights_punctual\":{\"light\":0}}},\n"
+    "  {\"name\":\"sun\",\"rotation\":[-0.3826834,0,0,0.9238795],\"extensions\":{\"KHR_lights_punctual\":{\"light\":1}}}],\n"
+    "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":1},\"indices\":0,\"material\":0}]}],\n"
+    "\"materials\":[{\"pbrMetallicRoughness\":{\"baseColorFactor\":[0.5,0.5,0.5,1],\"metallicFactor\":0}}],\n"
+    "\"buffers\":[{\"uri\":\"data:application/octet-stream;base64,AAABAAIAAAAAAIC/AAAAAAAAgL8AAAAAAAAAAAAAgD8AAIA/AAAAAAAAgL8=\",\"byteLength\":44}],\n"
+    "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":6},{\"buffer\":0,\"byteOffset\":8,\"byteLength\":36}],\n"
+    "\"accessors\":[{\"bufferView\":0,\"componentType\":5123,\"count\":3,\"type\":\"SCALAR\"},\n"
+    "  {\"bufferView\":1,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\",\"min\":[-1,0,-1],\"max\":[1,0,1]}]}\n";
+
+/* The triangle's centre pixel, seen from straight above, direct lighting with the scene's lights. */
+static float lit_centre(rp_scene_data *s) {
+    char err[512] = "";
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
+    rp_render_scene *rs = rp_render_scene_new(dev, s, NULL, err, sizeof err);
+    CHECKF(rs != NULL, "%s", err);
+    float v = -1.0f;
+    if (rs) {
+        enum { W = 8, H = 8 };
+        float px[W * H * 3];
+        rp_camera cam = {.type = RP_CAMERA_PINHOLE,
+                         .pinhole = {.eye = {0, 3, -0.33f}, .look = {0, 0, -0.33f}, .up = {0, 0, -1}, .fov_deg = 10}};
+        rp_render_desc rd = {.width = W, .height = H, .spp = 64, .integrator = RP_INTEGRATOR_DIRECT, .camera = &cam};
+        CHECK(rp_render(rs, &rd, px, NULL));
+        v = px[3 * (H / 2 * W + W / 2)];
+        rp_render_scene_release(rs);
+    }
+    rp_device_release(dev);
+    return v;
+}
+
+static void test_gltf_lights(void) {
+    write_text("lights.gltf", lights_gltf);
+    char path[1024], err[1024] = "";
+    rp_scene_data s;
+    bool ok = rp_scene_data_load(tmp_path("lights.gltf", path, sizeof path), &s, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (!ok) return;
+    CHECKF(s.light_count == 2, "%zu lights", s.light_count);
+    if (s.light_count == 2) {
+        const rp_light_data *sp = &s.lights[0], *dl = &s.lights[1];
+        CHECK(sp->type == RP_LIGHT_DATA_SPOT && dl->type == RP_LIGHT_DATA_DIRECTIONAL);
+        CHECKF(near(sp->position[1], 2, 1e-5f) && near(sp->direction[1], -1, 1e-5f) && near(sp->direction[2], 0, 1e-5f),
+               "spot at y %g along %g %g %g", (double)sp->position[1], (double)sp->direction[0], (double)sp->direction[1],
+               (double)sp->direction[2]);
+        CHECKF(near(sp->cos_inner, cosf(0.2f), 1e-5f) && near(sp->cos_outer, cosf(0.5f), 1e-5f), "spot cone cos %g %g",
+               (double)sp->cos_inner, (double)sp->cos_outer);
+        CHECK(near(sp->color[0], 10, 1e-4f) && near(sp->color[1], 5, 1e-4f) && near(sp->color[2], 2.5f, 1e-4f));
+        CHECKF(near(dl->direction[0], 0, 1e-5f) && near(dl->direction[1], -0.7071068f, 1e-5f) &&
+                   near(dl->direction[2], -0.7071068f, 1e-5f) && near(dl->color[0], 3, 1e-5f),
+               "sun along %g %g %g, %g lux", (double)dl->direction[0], (double)dl->direction[1], (double)dl->direction[2],
+               (double)dl->color[0]);
+        /* the sun alone: a 0.5 diffuse base (metallic 0) under 3 lux at 45 degrees reflects
+         * 0.5 (1 - 0.04) / 0.96 / pi x 3 cos 45 = 0.338, plus the rough 4% coat's little */
+        uint32_t sun = 1;
+        CHECK(rp_scene_data_keep_lights(&s, &sun, 1));
+        float v = lit_centre(&s);
+        CHECKF(v > 0.338f && v < 0.338f * 1.15f, "the sun alone: %g, want 0.338 and a little", (double)v);
+    }
+    rp_scene_data_free(&s);
+    /* the spot alone: 10 cd from 2 above (0, 0, 0) onto (0, 0, -0.33), inside the inner cone (9.4
+     * degrees off its axis): 0.5 / pi x 10 cos / d^2 = 0.5 / pi x 10 x 0.9866 / 4.109 = 0.382 */
+    ok = rp_scene_data_load(tmp_path("lights.gltf", path, sizeof path), &s, err, sizeof err);
+    if (!ok) return;
+    uint32_t spot = 0;
+    CHECK(rp_scene_data_keep_lights(&s, &spot, 1));
+    float v = lit_centre(&s);
+    CHECKF(v > 0.382f && v < 0.382f * 1.15f, "the spot alone: %g, want 0.382 and a little", (double)v);
+    rp_scene_data_free(&s);
+}
+
 int main(void) {
     const char *t = getenv("RP_TEST_TMP");
     snprintf(tmp_dir, sizeof tmp_dir, "%s", t ? t : "/tmp/rp_test_io_assimp");
@@ -402,6 +482,7 @@ int main(void) {
     test_handwritten_gltf("scene.glb");
     test_stl();
     test_collada();
+    test_gltf_lights();
     test_errors();
     test_shared();
     return RP_TEST_END();

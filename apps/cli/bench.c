@@ -1189,10 +1189,11 @@ static bool load_scene(bench_ctx *ctx) {
             ctx->camera.fov_deg = data.camera.fov_deg;
             have_camera = true;
         }
-        if (data.light_count > 0) {
-            memcpy(ctx->light, data.lights[0].position, sizeof ctx->light);
-            have_light = true;
-        }
+        for (size_t i = 0; i < data.light_count && !have_light; i++)
+            if (data.lights[i].type != RP_LIGHT_DATA_DIRECTIONAL) { /* the first with a position */
+                memcpy(ctx->light, data.lights[i].position, sizeof ctx->light);
+                have_light = true;
+            }
         if (data.sphere_count || data.cone_count)
             printf("note: %zu spheres and %zu cones of the scene are not benchmarked (triangles only)\n",
                    data.sphere_count, data.cone_count);

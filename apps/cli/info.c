@@ -2,6 +2,7 @@
 #include "cli.h"
 
 #include <errno.h>
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -136,9 +137,20 @@ int cli_info(int argc, char **argv) {
     for (size_t i = 0; i < d.texture_count && i < 16; i++)
         printf("  %-3zu %s (%dx%d)\n", i, d.textures[i].path, d.textures[i].width, d.textures[i].height);
     printf("lights      %zu%s\n", d.light_count, d.light_count ? "" : " (renders light the scene from the eye)");
-    for (size_t i = 0; i < d.light_count && i < 16; i++)
-        printf("  point at (%g, %g, %g), colour (%g, %g, %g)\n", d.lights[i].position[0], d.lights[i].position[1],
-               d.lights[i].position[2], d.lights[i].color[0], d.lights[i].color[1], d.lights[i].color[2]);
+    for (size_t i = 0; i < d.light_count && i < 16; i++) {
+        const rp_light_data *l = &d.lights[i];
+        if (l->type == RP_LIGHT_DATA_DIRECTIONAL)
+            printf("  directional along (%g, %g, %g), irradiance (%g, %g, %g) (not in Whitted)\n", l->direction[0],
+                   l->direction[1], l->direction[2], l->color[0], l->color[1], l->color[2]);
+        else if (l->type == RP_LIGHT_DATA_SPOT)
+            printf("  spot at (%g, %g, %g) along (%g, %g, %g), cone %g..%g degrees, colour (%g, %g, %g) (not in "
+                   "Whitted)\n", l->position[0], l->position[1], l->position[2], l->direction[0], l->direction[1],
+                   l->direction[2], acos(fmin(1.0, l->cos_inner)) * 180.0 / M_PI, acos(fmin(1.0, l->cos_outer)) * 180.0 / M_PI,
+                   l->color[0], l->color[1], l->color[2]);
+        else
+            printf("  point at (%g, %g, %g), colour (%g, %g, %g)\n", l->position[0], l->position[1], l->position[2],
+                   l->color[0], l->color[1], l->color[2]);
+    }
     rp_bounds mb;
     if (d.volume && rp_render_scene_medium(rs, &mb)) {
         const rp_volume_data *v = d.volume;

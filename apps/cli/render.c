@@ -657,7 +657,7 @@ int cli_render(int argc, char **argv) {
     for (size_t i = 0; i < data.material_count && !emits; i++)
         for (int c = 0; c < 3; c++) emits |= data.materials[i].ke[c] > 0.0f && data.materials[i].map_ke > 0;
     if (physical && pb_lights == 0 && !emits)
-        fprintf(stderr, "raypack render: warning: %s has no light (no emissive material, no point light; no --env): "
+        fprintf(stderr, "raypack render: warning: %s has no light (no emissive material, no point, spot or directional light; no --env): "
                         "the physically based image is black, as no fallback light is added\n",
                 builtin ? "the built-in room" : o.scene);
     rp_scene_stats sst;
@@ -996,7 +996,7 @@ int cli_render_scene_flags(const char *cmd, const cli_render_setup *setup, rp_sc
             fprintf(stderr, "raypack %s: --lights: the scene has %zu lights (indices 0..%zu)\n", cmd, data->light_count,
                     data->light_count - 1);
         else
-            fprintf(stderr, "raypack %s: --lights: the scene has no point lights\n", cmd);
+            fprintf(stderr, "raypack %s: --lights: the scene has no lights\n", cmd);
         return CLI_EXIT_USAGE;
     }
     if (setup->has_anim_time && !rp_scene_data_set_time(data, setup->anim_time)) {

@@ -417,7 +417,11 @@ static size_t bench_secondary(rp_scene *scene, const grid *g, const loaded *l, c
      * front of an object) */
     float light[3];
     for (int k = 0; k < 3; k++) light[k] = 0.25f * (lo[k] + hi[k]) + 0.5f * l->cam.pinhole.eye[k];
-    if (d->light_count) memcpy(light, d->lights[0].position, sizeof light);
+    for (size_t i = 0; i < d->light_count; i++)
+        if (d->lights[i].type == RP_LIGHT_DATA_POINT) {
+            memcpy(light, d->lights[i].position, sizeof light);
+            break;
+        }
     size_t differ_all = 0;
     for (int kind = 0; kind < 2; kind++) {
         size_t m = secondary_rays(eye, n, light, size, kind == 0, rays), differ = 0, hit = 0;

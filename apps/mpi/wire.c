@@ -449,6 +449,8 @@ bool wire_scene_unpack(const uint8_t *buf, size_t size, rp_scene_data *s, char *
             if (s->spheres[i].material >= s->material_count) r.what = "sphere materials";
         for (size_t i = 0; !r.what && i < s->cone_count; i++)
             if (s->cones[i].material >= s->material_count) r.what = "cone materials";
+        for (size_t i = 0; !r.what && i < s->light_count; i++)
+            if ((unsigned)s->lights[i].type > (unsigned)RP_LIGHT_DATA_DIRECTIONAL) r.what = "light types";
         for (size_t i = 0; !r.what && i < s->material_count; i++) {
             const rp_material_data *m = &s->materials[i];
             int32_t t = m->map_kd, more[4] = {m->map_roughness, m->map_normal, m->map_ke, m->map_metal_rough}; /* 1 + index, 0: none */

@@ -269,17 +269,48 @@ static void add_camera(load_state *s, const struct aiCamera *cam, const mat4 *t,
     s->have_camera = c->valid;
 }
 
-static bool add_light(load_state *s, const struct aiLight *l, const mat4 *t) {
-    if (l->mType != aiLightSource_POINT) return true;
+/* A direction through the node's transform (its upper 3x3), unit; false when it has none left. */
+static bool xform_direction(const mat4 *t, const struct aiVector3D *v, float out[3]) {
+    const float o[3] = {0, 0, 0}, p[3] = {v->x, v->y, v->z};
+    float a[3], b[3];
+    xform_point(t, o, a);
+    xform_point(t, p, b);
+    double d[3] = {(double)b[0] - a[0], (double)b[1] - a[1], (double)b[2] - a[2]};
+    double len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    if (!(len > 0.0) || !isfinite(len)) return false;
+    for (int k = 0; k < 3; k++) out[k] = (float)(d[k] / len);
+    return true;
+}
+
+/* Point, spot and directional lights (glTF's KHR_lights_punctual); area and ambient lights are left out. */
+static bool add_light(load_state *s, const struct aiLight *l, const mat4 *t, bool gltf) {
+    if (l->mType != aiLightSource_POINT && l->mType != aiLightSource_SPOT && l->mType != aiLightSource_DIRECTIONAL)
+        return true;
     io_builder *b = &s->ctx->b;
     if (!io_reserve((void **)&b->lights, &b->light_cap, b->light_n + 1, sizeof *b->lights))
         return io_error(s->ctx, s->path, 0, "out of memory");
-    rp_light_data *d = &b->lights[b->light_n++];
+    rp_light_data *d = &b->lights[b->light_n];
     memset(d, 0, sizeof *d);
-    d->type = RP_LIGHT_DATA_POINT;
+    d->type = l->mType == aiLightSource_SPOT ? RP_LIGHT_DATA_SPOT
+              : l->mType == aiLightSource_DIRECTIONAL ? RP_LIGHT_DATA_DIRECTIONAL : RP_LIGHT_DATA_POINT;
+    if (d->type != RP_LIGHT_DATA_POINT && !xform_direction(t, &l->mDirection, d->direction))
+        return true; /* no direction: nothing to light */
+    if (d->type == RP_LIGHT_DATA_SPOT) {
+        /* assimp passes glTF's angles as they are, half-angles from the axis; its other readers give
+         * the cone's full angle, as its documentation says */
+        double inner = l->mAngleInnerCone, outer = l->mAngleOuterCone;
+        if (!gltf) inner *= 0.5, outer *= 0.5;
+        if (!(outer > 0.0) || !isfinite(outer)) return true;
+        if (!(inner >= 0.0 && inner <= outer)) inner = outer;
+        outer = fmin(outer, M_PI / 2), inner = fmin(inner, outer);
+        d->cos_inner = (float)cos(inner);
+        d->cos_outer = (float)cos(outer);
+    }
+    b->light_n++;
     const float p[3] = {l->mPosition.x, l->mPosition.y, l->mPosition.z};
     xform_point(t, p, d->position);
-    /* glTF: colour times intensity (candela), as assimp's importer multiplies them */
+    /* glTF: colour times intensity (candela; a directional light's lux), as assimp's importer
+     * multiplies them */
     d->color[0] = l->mColorDiffuse.r, d->color[1] = l->mColorDiffuse.g, d->color[2] = l->mColorDiffuse.b;
     return true;
 }
@@ -303,7 +334,7 @@ static bool visit(load_state *s, const struct aiNode *node, const mat4 *parent, 
     for (unsigned i = 0; i < s->scene->mNumLights; i++)
         if (!s->light_done[i] && strcmp(s->scene->mLights[i]->mName.data, node->mName.data) == 0) {
             s->light_done[i] = true;
-            if (!add_light(s, s->scene->mLights[i], &t)) return false;
+            if (!add_light(s, s->scene->mLights[i], &t, gltf)) return false;
         }
     for (unsigned i = 0; i < node->mNumChildren; i++)
         if (!visit(s, node->mChildren[i], &t, gltf, depth + 1)) return false;

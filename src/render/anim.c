@@ -257,12 +257,18 @@ void scene_hit_flat(const rp_render_scene *s, rp_hit *h) { scene_ids_flat(s, &h-
 static void update_lights(rp_render_scene *s) {
     const rp_scene_data *d = s->data;
     for (size_t i = 0; i < s->light_count && i < d->light_count; i++)
-        memcpy(s->lights[i].point.position, d->lights[i].position, sizeof d->lights[i].position);
+        if (s->lights[i].type == RP_LIGHT_SOURCE_POINT)
+            memcpy(s->lights[i].point.position, d->lights[i].position, sizeof d->lights[i].position);
+    /* the physically based lights: the data's in its order (light_from_data), among the triangles' */
     size_t point = 0;
     for (size_t k = 0; k < s->pb_light_count; k++) {
         rp_light_source *l = &s->pb_lights[k];
-        if (l->type == RP_LIGHT_SOURCE_POINT && point < d->light_count) {
-            memcpy(l->point.position, d->lights[point++].position, sizeof l->point.position);
+        bool from_data = l->type == RP_LIGHT_SOURCE_POINT || l->type == RP_LIGHT_SOURCE_SPOT ||
+                         l->type == RP_LIGHT_SOURCE_DIRECTIONAL;
+        if (from_data && point < d->light_count) {
+            const rp_light_data *ld = &d->lights[point++];
+            if (l->type == RP_LIGHT_SOURCE_POINT) memcpy(l->point.position, ld->position, sizeof l->point.position);
+            if (l->type == RP_LIGHT_SOURCE_SPOT) memcpy(l->spot.position, ld->position, sizeof l->spot.position);
         } else if (l->type == RP_LIGHT_SOURCE_TRIANGLE && l->triangle.prim < d->triangle_count) {
             for (int c = 0; c < 3; c++)
                 memcpy(l->triangle.p[c], d->positions + 3 * (size_t)d->indices[3 * (size_t)l->triangle.prim + (size_t)c],

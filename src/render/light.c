@@ -208,6 +208,31 @@ static v3 uniform_sphere(float u0, float u1) {
     return v3_make(r * cosf(phi), r * sinf(phi), z);
 }
 
+void light_from_data(const rp_light_data *d, rp_light_source *out) {
+    memset(out, 0, sizeof *out);
+    switch (d->type) {
+    case RP_LIGHT_DATA_POINT:
+        out->type = RP_LIGHT_SOURCE_POINT;
+        memcpy(out->point.position, d->position, sizeof d->position);
+        memcpy(out->point.intensity, d->color, sizeof d->color);
+        out->point.inverse_square = true;
+        break;
+    case RP_LIGHT_DATA_SPOT:
+        out->type = RP_LIGHT_SOURCE_SPOT;
+        memcpy(out->spot.position, d->position, sizeof d->position);
+        memcpy(out->spot.direction, d->direction, sizeof d->direction);
+        memcpy(out->spot.intensity, d->color, sizeof d->color);
+        out->spot.cos_inner = d->cos_inner;
+        out->spot.cos_outer = d->cos_outer;
+        break;
+    case RP_LIGHT_DATA_DIRECTIONAL:
+        out->type = RP_LIGHT_SOURCE_DIRECTIONAL;
+        memcpy(out->directional.direction, d->direction, sizeof d->direction);
+        memcpy(out->directional.irradiance, d->color, sizeof d->color);
+        break;
+    }
+}
+
 bool light_sample_li(const rp_render_scene *s, const rp_light_source *l, v3 p, float u0, float u1,
                      light_sample *out) {
     out->delta = false;
@@ -383,17 +408,7 @@ bool light_scene_init(rp_render_scene *s, const rp_render_scene_desc *desc, char
         s->tri_light[i] = (int32_t)k++;
     }
     for (size_t i = 0; i < n; i++) {
-        const rp_light_data *ld = &d->lights[i];
-        switch (ld->type) {
-        case RP_LIGHT_DATA_POINT: {
-            rp_light_source *l = &s->pb_lights[k++];
-            l->type = RP_LIGHT_SOURCE_POINT;
-            memcpy(l->point.position, ld->position, sizeof ld->position);
-            memcpy(l->point.intensity, ld->color, sizeof ld->color);
-            l->point.inverse_square = true;
-            break;
-        }
-        }
+        light_from_data(&d->lights[i], &s->pb_lights[k++]);
     }
     if (env) {
         rp_light_source *l = &s->pb_lights[k];

@@ -370,6 +370,9 @@ void light_scene_free(rp_render_scene *s);
 /* Picks a light index by power from u; *pmf is its probability. */
 uint32_t light_pick(const light_sampler *ls, float u, float *pmf);
 /* Samples light l as seen from p (u: 2 numbers); false when it sends nothing towards p. */
+/* A file's spot or directional light as a light source (its physically based units: intensity on the
+ * spot's axis, a directional light's irradiance); a point light with the inverse square law. */
+void light_from_data(const rp_light_data *d, rp_light_source *out);
 bool light_sample_li(const rp_render_scene *s, const rp_light_source *l, v3 p, float u0, float u1,
                      light_sample *out);
 /* Radiance of the environment along direction d (0 without one). */

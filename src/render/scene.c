@@ -181,6 +181,10 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
             memcpy(s->lights[i].point.intensity, l->color, sizeof l->color);
             s->lights[i].point.inverse_square = false;
             break;
+        case RP_LIGHT_DATA_SPOT:
+        case RP_LIGHT_DATA_DIRECTIONAL:
+            light_from_data(l, &s->lights[i]); /* Whitted passes them by (it sees point lights) */
+            break;
         }
     }
 

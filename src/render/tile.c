@@ -187,7 +187,7 @@ rp_render_desc render_desc_resolve(const rp_render_scene *scene, const rp_render
     return dd;
 }
 
-/* The frame's camera, lights (a headlight when the scene has none) and background, from f->s and
+/* The frame's camera, lights (a headlight when the scene has no point light) and background, from f->s and
  * f->desc. */
 void render_frame_view(render_frame *f) {
     rp_render_scene *scene = f->s;
@@ -195,9 +195,11 @@ void render_frame_view(render_frame *f) {
     camera_setup(&cam, f->desc.width, f->desc.height, &f->cam);
     f->lights = scene->lights;
     f->light_count = scene->light_count;
-    if (f->light_count == 0) {
-        /* A scene without lights is lit from just above the eye, so that Whitted still shows it
-         * with some shadows. */
+    bool any_point = false;
+    for (size_t i = 0; i < f->light_count; i++) any_point |= f->lights[i].type == RP_LIGHT_SOURCE_POINT;
+    if (!any_point) {
+        /* A scene without (point) lights is lit from just above the eye, so that Whitted still
+         * shows it with some shadows: Whitted sees no spot or directional light. */
         float dist = v3_length(v3_sub(v3_load(cam.pinhole.look), f->cam.eye));
         v3 pos = v3_madd(f->cam.eye, f->cam.u, 0.25f * dist);
         /* Inside a building the raised light could end up in a wall or on the floor above: then

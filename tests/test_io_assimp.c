@@ -410,6 +410,40 @@ static const char lights_gltf[] =
     "\"accessors\":[{\"bufferView\":0,\"componentType\":5123,\"count\":3,\"type\":\"SCALAR\"},\n"
     "  {\"bufferView\":1,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\",\"min\":[-1,0,-1],\"max\":[1,0,1]}]}\n";
 
+/* KHR_materials_transmission and _ior on a base colour, and a normal texture (a 2x2 PNG of the flat
+ * normal (128, 128, 255)): glass of index 1.33 tinted by the base colour, the normal map kept. */
+static const char glass_gltf[] =
+    "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_materials_transmission\",\"KHR_materials_ior\"],\n"
+    "\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],\n"
+    "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":1},\"indices\":0,\"material\":0}]}],\n"
+    "\"materials\":[{\"pbrMetallicRoughness\":{\"baseColorFactor\":[0.9,0.8,0.7,1],\"metallicFactor\":0},\n"
+    "  \"normalTexture\":{\"index\":0},\n"
+    "  \"extensions\":{\"KHR_materials_transmission\":{\"transmissionFactor\":1},\"KHR_materials_ior\":{\"ior\":1.33}}}],\n"
+    "\"textures\":[{\"source\":0}],\n"
+    "\"images\":[{\"uri\":\"data:image/png;base64,iVBORw0KGgoAAAANSUhEUgAAAAIAAAACCAIAAAD91JpzAAAAEElEQVR4nGNoaPgPRAwQCgA19gf9SShDzAAAAABJRU5ErkJggg==\"}],\n"
+    "\"buffers\":[{\"uri\":\"data:application/octet-stream;base64,AAABAAIAAAAAAIC/AAAAAAAAgL8AAAAAAAAAAAAAgD8AAIA/AAAAAAAAgL8=\",\"byteLength\":44}],\n"
+    "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":6},{\"buffer\":0,\"byteOffset\":8,\"byteLength\":36}],\n"
+    "\"accessors\":[{\"bufferView\":0,\"componentType\":5123,\"count\":3,\"type\":\"SCALAR\"},\n"
+    "  {\"bufferView\":1,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\",\"min\":[-1,0,-1],\"max\":[1,0,1]}]}\n";
+
+static void test_gltf_glass(void) {
+    write_text("glass.gltf", glass_gltf);
+    char path[1024], err[1024] = "";
+    rp_scene_data s;
+    bool ok = rp_scene_data_load(tmp_path("glass.gltf", path, sizeof path), &s, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (!ok) return;
+    const rp_material_data *m = &s.materials[s.tri_materials[0]];
+    CHECKF(!m->metal_rough && near(m->kt[0], 0.9f, 1e-6f) && near(m->kt[1], 0.8f, 1e-6f) && near(m->kt[2], 0.7f, 1e-6f) &&
+               near(m->ior, 1.33f, 1e-6f),
+           "glass: metal_rough %d kt %g %g %g ior %g", (int)m->metal_rough, (double)m->kt[0], (double)m->kt[1],
+           (double)m->kt[2], (double)m->ior);
+    CHECK(rp_material_from_data(m).type == RP_MATERIAL_DIELECTRIC);
+    CHECKF(m->map_normal == 1 && s.texture_count == 1 && s.textures[0].rgb && s.textures[0].rgb[2] == 255,
+           "normal map %d of %zu textures", (int)m->map_normal, s.texture_count);
+    rp_scene_data_free(&s);
+}
+
 /* The triangle's centre pixel, seen from straight above, direct lighting with the scene's lights. */
 static float lit_centre(rp_scene_data *s) {
     char err[512] = "";
@@ -483,6 +517,7 @@ int main(void) {
     test_stl();
     test_collada();
     test_gltf_lights();
+    test_gltf_glass();
     test_errors();
     test_shared();
     return RP_TEST_END();

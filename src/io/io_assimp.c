@@ -132,12 +132,13 @@ static int32_t material_texture(load_state *s, const struct aiMaterial *am, enum
     return idx == IO_NONE ? -2 : (int32_t)idx;
 }
 
-/* assimp's material -> rp_material_data, the one place the mapping lives (extend it here when
- * rp_material_data grows normal maps). glTF's metallic-roughness model is read as: base colour factor (and base colour texture,
- * which multiplies it, as in glTF) -> kd, the diffuse albedo; emissive factor -> ke (emitted
+/* assimp's material -> rp_material_data, the one place the mapping lives. glTF's
+ * metallic-roughness model is read as: base colour factor (and base colour texture, which
+ * multiplies it, as in glTF) -> kd, the base colour; emissive factor -> ke (emitted
  * radiance, DESIGN.md), times the emissive texture (map_ke); metallic and roughness factors and
- * the metallic-roughness texture -> metal_rough (the renderer's mapping: material.c); normal and
- * occlusion textures are not used.
+ * the metallic-roughness texture -> metal_rough (the renderer's mapping: material.c); transmission
+ * (KHR_materials_transmission, ior) -> a dielectric tinted by the base colour; the normal texture ->
+ * map_normal; occlusion textures are not used.
  * Formats without base colour give their diffuse colour and texture. Returns false after an error. */
 static bool material_from_assimp(load_state *s, const struct aiMaterial *am, rp_material_data *m) {
     struct aiString name;
@@ -176,7 +177,21 @@ static bool material_from_assimp(load_state *s, const struct aiMaterial *am, rp_
         if (mr == -1) mr = material_texture(s, am, aiTextureType_UNKNOWN, m->name);
         if (mr == -2) return false;
         m->map_metal_rough = mr + 1;
+        /* KHR_materials_transmission: glass of the base colour, index KHR_materials_ior's (glTF's
+         * 1.5 without it) */
+        float transmission = 0.0f, ior = 1.5f;
+        if (aiGetMaterialFloatArray(am, AI_MATKEY_TRANSMISSION_FACTOR, &transmission, NULL) == aiReturn_SUCCESS &&
+            transmission > 0.0f && isfinite(transmission)) {
+            aiGetMaterialFloatArray(am, AI_MATKEY_REFRACTI, &ior, NULL);
+            for (int k = 0; k < 3; k++) m->kt[k] = fminf(fmaxf(m->kd[k], 0.0f), 1.0f) * fminf(transmission, 1.0f);
+            m->ior = ior >= 1.0f && ior < 10.0f ? ior : 1.5f;
+            m->metal_rough = false;
+        }
     }
+    /* a tangent-space normal map (glTF's normalTexture: +y along v), as MTL's norm */
+    int32_t ntex = material_texture(s, am, aiTextureType_NORMALS, m->name);
+    if (ntex == -2) return false;
+    m->map_normal = ntex + 1;
     return true;
 }
 

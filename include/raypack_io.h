@@ -256,7 +256,14 @@ typedef struct rp_scene_load_desc {
     /* A .vdb file: the float grid to read; NULL or "": the one named "density", else the first
      * float grid of the file. */
     const char *volume_grid;
+    /* Receives each warning of the load, "file:line: warning: message" (a usemtl naming no material
+     * of the file's libraries, ...), on the thread that called the load; the scene still loads.
+     * NULL: warnings are dropped. At most RP_LOAD_MAX_WARNINGS are passed on, then one saying how
+     * many more there were. */
+    void (*warning)(void *user, const char *message);
+    void *warning_user;
 } rp_scene_load_desc;
+#define RP_LOAD_MAX_WARNINGS 20
 /* Fills desc with the defaults. */
 RP_API void rp_scene_load_desc_defaults(rp_scene_load_desc *desc);
 /* rp_scene_data_load with options (desc NULL: the defaults, what rp_scene_data_load uses). */

@@ -1174,7 +1174,7 @@ static bool load_scene(bench_ctx *ctx) {
         char err[512] = "";
         memset(&data, 0, sizeof data);
         double t0 = cli_now_ms();
-        if (!rp_scene_data_load_ex(o->scene_path, &(rp_scene_load_desc){.threads = o->threads}, &data, err, sizeof err)) {
+        if (!rp_scene_data_load_ex(o->scene_path, &(rp_scene_load_desc){.threads = o->threads, .warning = cli_load_warning}, &data, err, sizeof err)) {
             fprintf(stderr, "raypack bench: %s\n", err[0] ? err : "cannot load the scene");
             return false;
         }

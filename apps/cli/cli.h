@@ -135,6 +135,8 @@ bool cli_check_paths(const char *cmd, const cli_path *paths, int count);
 /* True when the scene file exists, is no folder and may be read; else prints why (errno's text). Never
  * opens it (a FIFO is read once, by the loader). */
 bool cli_scene_readable(const char *cmd, const char *path);
+/* rp_scene_load_desc.warning for the commands: the loader's warning, a line on stderr. */
+void cli_load_warning(void *user, const char *message);
 /* An output path that can be written (not a folder, its folder there and writable), checked before
  * the work so that a typo does not cost a whole render or benchmark; false after printing why. */
 bool cli_output_writable(const char *cmd, const char *path);

@@ -82,7 +82,7 @@ int cli_info(int argc, char **argv) {
         /* stat, not open: opening a FIFO here would block, and the loader reads it once as a stream */
         if (!cli_scene_readable("info", path)) return CLI_EXIT_FAILURE;
         char err[512] = "";
-        if (!rp_scene_data_load_ex(path, &(rp_scene_load_desc){.threads = threads}, &d, err, sizeof err)) {
+        if (!rp_scene_data_load_ex(path, &(rp_scene_load_desc){.threads = threads, .warning = cli_load_warning}, &d, err, sizeof err)) {
             fprintf(stderr, "%s\n", err[0] ? err : "raypack info: cannot load the scene");
             return CLI_EXIT_FAILURE;
         }

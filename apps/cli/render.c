@@ -608,7 +608,8 @@ int cli_render(int argc, char **argv) {
         if (!cli_scene_readable(CMD, o.scene)) return CLI_EXIT_FAILURE;
         char err[512] = "";
         if (!rp_scene_data_load_ex(o.scene, &(rp_scene_load_desc){.threads = o.threads, .point_radius = o.point_radius,
-                                                                  .volume_grid = o.vol.vdb_grid},
+                                                                  .volume_grid = o.vol.vdb_grid,
+                                                                  .warning = cli_load_warning},
                                    &data, err, sizeof err)) {
             fprintf(stderr, "%s\n", err[0] ? err : "raypack render: cannot load the scene");
             return CLI_EXIT_FAILURE;
@@ -955,7 +956,8 @@ bool cli_render_load(const char *cmd, const cli_render_setup *setup, rp_scene_da
     fclose(probe);
     char err[512] = "";
     if (rp_scene_data_load_ex(setup->scene, &(rp_scene_load_desc){.threads = setup->threads, .point_radius = setup->point_radius,
-                                                                  .volume_grid = setup->vol.vdb_grid},
+                                                                  .volume_grid = setup->vol.vdb_grid,
+                                                                  .warning = cli_load_warning},
                               data, err, sizeof err))
         return add_medium_box(cmd, setup, data);
     fprintf(stderr, "%s\n", err[0] ? err : "raypack: cannot load the scene");

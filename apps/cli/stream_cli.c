@@ -249,6 +249,7 @@ static bool load(const char *cmd, const stream_opts *o, int default_w, int defau
     rp_scene_load_desc ld;
     rp_scene_load_desc_defaults(&ld);
     ld.volume_grid = o->vol.vdb_grid;
+    ld.warning = cli_load_warning;
     if (!rp_scene_data_load_ex(o->scene, &ld, &l->data, err, sizeof err)) {
         fprintf(stderr, "%s\n", err[0] ? err : "cannot load the scene");
         return false;

@@ -239,6 +239,11 @@ bool cli_scene_readable(const char *cmd, const char *path) {
     return e == 0;
 }
 
+void cli_load_warning(void *user, const char *message) {
+    (void)user;
+    fprintf(stderr, "%s\n", message);
+}
+
 const char *cli_camera_problem(const float eye[3], const float look[3], const float up[3]) {
     /* in float, as the renderer forms the frame (DESIGN.md: f = normalize(look - eye), r = f x up) */
     float d[3] = {look[0] - eye[0], look[1] - eye[1], look[2] - eye[2]};

@@ -130,10 +130,17 @@ typedef struct io_ctx {
     rp_animation_data *anim; /* what the AFF loader parsed of an animation, finished by anim_finish */
     rp_volume_data *volume;  /* what vdb_load read, handed to rp_scene_data.volume */
     const char *volume_grid; /* rp_scene_load_desc.volume_grid */
+    void (*warning)(void *user, const char *message); /* rp_scene_load_desc.warning */
+    void *warning_user;
+    uint32_t warnings; /* written so far (io_warning) */
 } io_ctx;
 
 /* Records the first error as "file:line: error: message"; always returns false. */
 bool io_error(io_ctx *ctx, const char *file, uint32_t line, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+/* Passes "file:line: warning: message" to the load's warning callback, if any (the load goes on);
+ * past RP_LOAD_MAX_WARNINGS, only counted (their number is passed on when the load ends). */
+void io_warning(io_ctx *ctx, const char *file, uint32_t line, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
 /* Grows *p to hold at least `need` elements of `elem` bytes, geometrically; false when out of memory. */
 bool io_reserve(void **p, size_t *cap, size_t need, size_t elem);
@@ -262,6 +269,8 @@ typedef struct io_load_opts {
     size_t stream_block;  /* io_ctx.stream_block (the tests: a few bytes, so blocks cut every line) */
     size_t *blocks;       /* when not NULL: set to the number of blocks a streamed load parsed */
     const char *volume_grid; /* rp_scene_load_desc.volume_grid */
+    void (*warning)(void *user, const char *message); /* rp_scene_load_desc.warning */
+    void *warning_user;
 } io_load_opts;
 /* A scene of vertices alone (a point cloud) gets a sphere of that radius (0: automatic) at each
  * finite vertex (io_points.c); false when out of memory. */

@@ -290,6 +290,16 @@ static uint32_t obj_find_material(io_ctx *ctx, size_t first, const char *name) {
     return IO_NONE;
 }
 
+/* The material a usemtl line names; IO_NONE (the default material) with a warning when no
+ * library read so far defines it, as tinyobjloader does. */
+static uint32_t obj_use_material(obj_file *f, size_t first, const char *name, uint32_t line) {
+    uint32_t m = obj_find_material(f->ctx, first, name);
+    if (m == IO_NONE)
+        io_warning(f->ctx, f->shown, line, "usemtl '%s': no material library read so far defines it; the default material is used",
+                   name);
+    return m;
+}
+
 /* ---- parallel parsing ------------------------------------------------------------------------- */
 
 /* A large OBJ file is cut at line starts (every line is a statement) and the chunks are parsed on
@@ -306,6 +316,7 @@ static uint32_t obj_find_material(io_ctx *ctx, size_t first, const char *name) {
 
 typedef struct obj_usemtl {
     size_t face; /* the first face it applies to */
+    uint32_t line; /* its line, counted from the chunk's first */
     char name[256];
     uint32_t material; /* resolved by the serial pass */
 } obj_usemtl;
@@ -466,6 +477,7 @@ static void obj_chunk_task(void *user, uint32_t index) {
             if (ok) {
                 obj_usemtl *u = &c->mtls[c->mtl_n++];
                 u->face = c->face_n;
+                u->line = line;
                 rest_of_line(s + 6, u->name, sizeof u->name);
             } else {
                 c->oom = true;
@@ -557,7 +569,7 @@ static bool obj_par_take(obj_file *f, obj_par *par, const char **p, uint32_t *ma
             return *ok = io_error(ctx, f->shown, f->line, "out of memory"), true;
         if (i) c->mtls[i - 1].material = use;
         else c->first_material = use;
-        if (i < c->mtl_n) cur = obj_find_material(ctx, first_mtl, c->mtls[i].name);
+        if (i < c->mtl_n) cur = obj_use_material(f, first_mtl, c->mtls[i].name, f->line + c->mtls[i].line);
     }
     *material = cur;
     if (b->pos_n + c->pos_n >= UINT32_MAX || b->nrm_n + c->nrm_n >= UINT32_MAX || b->uv_n + c->uv_n >= UINT32_MAX ||
@@ -674,8 +686,7 @@ static bool obj_lines(obj_file *f, const char *p, const char *end, uint32_t *mat
         } else if (word_is(p, "usemtl")) {
             char name[256];
             rest_of_line(p + 6, name, sizeof name);
-            /* A name no library defines falls back to the default material, as most readers do. */
-            *material = obj_find_material(ctx, first_mtl, name);
+            *material = obj_use_material(f, first_mtl, name, f->line);
         } else if (word_is(p, "mtllib")) {
             /* One or more library names, each relative to the OBJ file. */
             const char *q = p + 6;

@@ -22,6 +22,19 @@ bool io_error(io_ctx *ctx, const char *file, uint32_t line, const char *fmt, ...
     return false;
 }
 
+void io_warning(io_ctx *ctx, const char *file, uint32_t line, const char *fmt, ...) {
+    if (!ctx->warning || ctx->warnings++ >= RP_LOAD_MAX_WARNINGS) return;
+    char msg[IO_PATH_MAX + 512];
+    int n = snprintf(msg, sizeof msg, "%s:%u: warning: ", file, line);
+    if (n >= 0 && (size_t)n < sizeof msg) {
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(msg + n, sizeof msg - (size_t)n, fmt, ap);
+        va_end(ap);
+    }
+    ctx->warning(ctx->warning_user, msg);
+}
+
 bool io_reserve(void **p, size_t *cap, size_t need, size_t elem) {
     if (need <= *cap) return true;
     size_t c = *cap ? *cap : 16;
@@ -402,6 +415,8 @@ static void ctx_init(io_ctx *ctx, const io_load_opts *opts, char *err, size_t er
     ctx->stream = opts ? opts->stream : 0;
     ctx->stream_block = opts ? opts->stream_block : 0;
     ctx->volume_grid = opts ? opts->volume_grid : NULL;
+    ctx->warning = opts ? opts->warning : NULL;
+    ctx->warning_user = opts ? opts->warning_user : NULL;
     ctx->limits.max_includes = env_limit("RP_MAX_INCLUDES", IO_DEFAULT_MAX_INCLUDES);
     ctx->limits.max_include_bytes = env_limit("RP_MAX_INCLUDE_BYTES", IO_DEFAULT_MAX_INCLUDE_BYTES);
     ctx->limits.max_file_bytes = env_limit("RP_MAX_FILE_BYTES", IO_DEFAULT_MAX_FILE_BYTES);
@@ -420,6 +435,12 @@ static bool load_archive_main(io_ctx *ctx, const char *path) {
 static bool ctx_finish(io_ctx *ctx, bool ok, const char *path, rp_scene_data *out, double t0, const io_load_opts *opts) {
     if (opts && opts->chunks_taken) *opts->chunks_taken = ctx->chunks_taken;
     if (opts && opts->blocks) *opts->blocks = ctx->blocks;
+    if (ctx->warning && ctx->warnings > RP_LOAD_MAX_WARNINGS) {
+        char msg[IO_PATH_MAX + 128];
+        snprintf(msg, sizeof msg, "%s: warning: %u more warnings not shown", path,
+                 ctx->warnings - RP_LOAD_MAX_WARNINGS);
+        ctx->warning(ctx->warning_user, msg);
+    }
     if (ok && ctx->b.material_n == 0) builder_default_material(ctx);
     if (ok && ctx->b.material_n == 0) ok = io_error(ctx, path, 0, "out of memory");
     if (ok && !builder_fill_missing(ctx)) ok = io_error(ctx, path, 0, "out of memory");
@@ -489,7 +510,9 @@ bool io_load_file_opts(const char *path, const io_load_opts *opts, rp_scene_data
 bool rp_scene_data_load_ex(const char *path, const rp_scene_load_desc *desc, rp_scene_data *out, char *err,
                            size_t err_size) {
     io_load_opts opts = {.threads = desc ? desc->threads : 0, .point_radius = desc ? desc->point_radius : 0.0f,
-                         .volume_grid = desc ? desc->volume_grid : NULL};
+                         .volume_grid = desc ? desc->volume_grid : NULL,
+                         .warning = desc ? desc->warning : NULL,
+                         .warning_user = desc ? desc->warning_user : NULL};
     return io_load_file_opts(path, &opts, out, err, err_size);
 }
 

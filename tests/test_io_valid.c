@@ -1,0 +1,140 @@
+// rp-test: labels=io timeout=300
+/* Valid but unusual scene files: what the formats' specs and other tools' common practice allow
+ * (tinyobjloader, Blender's and 3ds Max's exporters), loaded as they mean. Each case is also
+ * loaded in chunks of a few bytes on 1 and 3 threads (the parallel parsers), which must give the
+ * serial result and the same warnings. */
+#include <math.h>
+#include <stdint.h>
+#include <sys/stat.h>
+
+#include "io/io_internal.h"
+#include "raypack_io.h"
+#include "rp_test.h"
+#include "scene_same.h"
+
+static char tmp_dir[512];
+
+static const char *tmp_path(const char *name, char *buf, size_t size) {
+    snprintf(buf, size, "%s/%s", tmp_dir, name);
+    return buf;
+}
+
+static void write_bytes(const char *name, const void *data, size_t n) {
+    char path[1024];
+    tmp_path(name, path, sizeof path);
+    /* a name with a folder: make the folder */
+    char *slash = strrchr(path, '/');
+    if (slash && slash > path + strlen(tmp_dir)) {
+        *slash = '\0';
+        mkdir(path, 0755);
+        *slash = '/';
+    }
+    FILE *f = fopen(path, "wb");
+    if (!f) {
+        fprintf(stderr, "cannot write %s\n", path);
+        exit(1);
+    }
+    fwrite(data, 1, n, f);
+    fclose(f);
+}
+
+static void write_text(const char *name, const char *text) { write_bytes(name, text, strlen(text)); }
+
+/* Warnings of one load, one a line. */
+typedef struct warnings {
+    char text[4096];
+    int count;
+} warnings;
+
+static void collect(void *user, const char *message) {
+    warnings *w = user;
+    size_t n = strlen(w->text);
+    snprintf(w->text + n, sizeof w->text - n, "%s\n", message);
+    w->count++;
+}
+
+/* Loads name serially (warnings into w), then in chunks of 1 to 13 bytes on 1 and 3 threads:
+ * those must give the same scene and the same warnings. */
+static bool load(const char *name, rp_scene_data *s, warnings *w) {
+    char path[1024], err[1024] = "";
+    tmp_path(name, path, sizeof path);
+    memset(w, 0, sizeof *w);
+    io_load_opts serial = {.threads = 1, .warning = collect, .warning_user = w};
+    bool ok = io_load_file_opts(path, &serial, s, err, sizeof err);
+    CHECKF(ok, "%s: %s", name, err);
+    if (!ok) return false;
+    for (int threads = 1; threads <= 3; threads += 2)
+        for (size_t chunk = 1; chunk <= 13; chunk += 4) {
+            warnings w2;
+            memset(&w2, 0, sizeof w2);
+            io_load_opts par = {.threads = threads, .chunk_bytes = chunk, .warning = collect, .warning_user = &w2};
+            rp_scene_data p;
+            char err2[1024] = "";
+            bool ok2 = io_load_file_opts(path, &par, &p, err2, sizeof err2);
+            CHECKF(ok2, "%s in chunks of %zu: %s", name, chunk, err2);
+            if (!ok2) continue;
+            char why[256] = "";
+            CHECKF(same_scene(s, &p, why, sizeof why), "%s in chunks of %zu on %d threads: %s", name, chunk, threads, why);
+            CHECKF(strcmp(w->text, w2.text) == 0, "%s in chunks of %zu: warnings\n%s differ from the serial\n%s", name,
+                   chunk, w2.text, w->text);
+            rp_scene_data_free(&p);
+        }
+    return true;
+}
+
+static const rp_material_data *tri_material(const rp_scene_data *s, size_t tri) {
+    return &s->materials[s->tri_materials[tri]];
+}
+
+/* ---- OBJ: usemtl ------------------------------------------------------------------------------ */
+
+/* A usemtl naming a material that no library defines: the default material, and a warning naming
+ * the file and line (tinyobjloader warns too); the scene still loads. */
+static void test_usemtl_unknown(void) {
+    write_text("um.mtl", "newmtl red\nKd 0.8 0.1 0.1\n");
+    write_text("um.obj",
+               "mtllib um.mtl\n"
+               "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+               "usemtl red\n"
+               "f 1 2 3\n"
+               "usemtl nosuch\n"
+               "f 1 3 4\n"
+               "usemtl red\n"
+               "f 1 2 4\n"
+               "usemtl Red\n"
+               "f 2 3 4\n");
+    rp_scene_data s;
+    warnings w;
+    if (!load("um.obj", &s, &w)) return;
+    CHECK(s.triangle_count == 4);
+    CHECK(strcmp(tri_material(&s, 0)->name, "red") == 0 && strcmp(tri_material(&s, 2)->name, "red") == 0);
+    CHECK(strcmp(tri_material(&s, 1)->name, "default") == 0 && strcmp(tri_material(&s, 3)->name, "default") == 0);
+    CHECKF(w.count == 2, "%d warnings:\n%s", w.count, w.text);
+    CHECKF(strstr(w.text, "um.obj:8: warning: usemtl 'nosuch'") != NULL, "%s", w.text);
+    CHECKF(strstr(w.text, "um.obj:12: warning: usemtl 'Red'") != NULL, "%s", w.text); /* names are case sensitive */
+    rp_scene_data_free(&s);
+
+    /* Many of them: RP_LOAD_MAX_WARNINGS, then one line with the count of the rest. */
+    char text[8192] = "v 0 0 0\nv 1 0 0\nv 1 1 0\n";
+    for (int i = 0; i < RP_LOAD_MAX_WARNINGS + 5; i++)
+        snprintf(text + strlen(text), sizeof text - strlen(text), "usemtl m%d\nf 1 2 3\n", i);
+    write_text("um_many.obj", text);
+    if (!load("um_many.obj", &s, &w)) return;
+    CHECKF(w.count == RP_LOAD_MAX_WARNINGS + 1, "%d warnings", w.count);
+    CHECKF(strstr(w.text, "warning: 5 more warnings not shown") != NULL, "%s", w.text);
+    rp_scene_data_free(&s);
+
+    /* Without a callback the load is silent and the same. */
+    char path[1024], err[256];
+    CHECK(rp_scene_data_load(tmp_path("um.obj", path, sizeof path), &s, err, sizeof err));
+    rp_scene_data_free(&s);
+}
+
+int main(void) {
+    const char *t = getenv("RP_TEST_TMP");
+    snprintf(tmp_dir, sizeof tmp_dir, "%s", t ? t : "/tmp/rp_test_io_valid");
+    mkdir(tmp_dir, 0755);
+
+    test_usemtl_unknown();
+    return RP_TEST_END();
+}

@@ -130,11 +130,56 @@ static void test_usemtl_unknown(void) {
     rp_scene_data_free(&s);
 }
 
+/* ---- OBJ: names of materials and libraries ---------------------------------------------------- */
+
+static void test_obj_names(void) {
+    /* A comment after a name (tinyobjloader reads one word and so drops it), a name with blanks, a
+     * library whose name has a blank (Blender writes the file's name as it is), a library in a
+     * subfolder written with Windows' backslash, and a UTF-8 byte order mark before the first line
+     * of the OBJ and of the MTL file. */
+    write_text("nm.mtl", "\xEF\xBB\xBFnewmtl red   # walls\nKd 0.8 0.1 0.1\nnewmtl green paint\nKd 0.1 0.8 0.1\n");
+    write_text("my lib.mtl", "newmtl blue\nKd 0.1 0.1 0.8\n");
+    write_text("sub/nm2.mtl", "newmtl grey\nKd 0.5 0.5 0.5\n");
+    write_text("nm.obj",
+               "\xEF\xBB\xBFmtllib nm.mtl\n"
+               "mtllib my lib.mtl\n"
+               "mtllib sub\\nm2.mtl   # a comment\n"
+               "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+               "usemtl red # the walls\n"
+               "f 1 2 3\n"
+               "usemtl green paint\n"
+               "f 1 3 4\n"
+               "usemtl blue\t\n"
+               "f 1 2 4\n"
+               "usemtl grey\n"
+               "f 2 3 4\n");
+    rp_scene_data s;
+    warnings w;
+    if (!load("nm.obj", &s, &w)) return;
+    CHECKF(w.count == 0, "%s", w.text);
+    CHECK(s.triangle_count == 4 && s.material_count == 4);
+    if (s.triangle_count == 4) {
+        CHECKF(strcmp(tri_material(&s, 0)->name, "red") == 0, "'%s'", tri_material(&s, 0)->name);
+        CHECKF(strcmp(tri_material(&s, 1)->name, "green paint") == 0, "'%s'", tri_material(&s, 1)->name);
+        CHECKF(strcmp(tri_material(&s, 2)->name, "blue") == 0, "'%s'", tri_material(&s, 2)->name);
+        CHECKF(strcmp(tri_material(&s, 3)->name, "grey") == 0, "'%s'", tri_material(&s, 3)->name);
+    }
+    rp_scene_data_free(&s);
+
+    /* Several libraries on one line still work, and one missing is an error naming it. */
+    write_text("nm3.obj", "mtllib nm.mtl my_missing.mtl\nv 0 0 0\n");
+    char path[1024], err[1024] = "";
+    bool ok = rp_scene_data_load(tmp_path("nm3.obj", path, sizeof path), &s, err, sizeof err);
+    CHECKF(!ok && strstr(err, "nm3.obj:1: error: cannot open material library 'my_missing.mtl'"), "%s", err);
+    if (ok) rp_scene_data_free(&s);
+}
+
 int main(void) {
     const char *t = getenv("RP_TEST_TMP");
     snprintf(tmp_dir, sizeof tmp_dir, "%s", t ? t : "/tmp/rp_test_io_valid");
     mkdir(tmp_dir, 0755);
 
     test_usemtl_unknown();
+    test_obj_names();
     return RP_TEST_END();
 }

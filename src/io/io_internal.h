@@ -327,6 +327,10 @@ bool assimp_can_load(const char *ext);
 /* ---- numbers ---------------------------------------------------------------------------------- */
 
 static inline bool io_is_digit(char c) { return (unsigned)(c - '0') < 10u; }
+/* Past a UTF-8 byte order mark at a text file's start (Windows tools write one); p when none. */
+static inline const char *io_skip_bom(const char *p, const char *end) {
+    return end - p >= 3 && (unsigned char)p[0] == 0xEF && (unsigned char)p[1] == 0xBB && (unsigned char)p[2] == 0xBF ? p + 3 : p;
+}
 static inline bool io_is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
 
 /* Exact powers of ten for the fast path (Clinger 1990): 10^k is exact in a double for k <= 22. */

@@ -55,6 +55,18 @@ static const char *rest_of_line(const char *p, char *out, size_t size) {
     return p;
 }
 
+/* A material name (newmtl, usemtl): the rest of the line, blanks inside kept (3ds Max writes
+ * them), without a comment that follows it after a blank ("usemtl red  # walls"). */
+static void name_of_line(const char *p, char *out, size_t size) {
+    rest_of_line(p, out, size);
+    for (char *c = out; *c; c++)
+        if (*c == '#' && c > out && (c[-1] == ' ' || c[-1] == '\t')) {
+            while (c > out && (c[-1] == ' ' || c[-1] == '\t')) c--;
+            *c = '\0';
+            break;
+        }
+}
+
 static bool word_is(const char *p, const char *w) {
     size_t n = strlen(w);
     return strncmp(p, w, n) == 0 && is_delim(p[n]);
@@ -105,7 +117,7 @@ static bool mtl_color(obj_file *f, const char **pp, float c[3], const char *what
 static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io_buf *buf) {
     obj_file f = {.ctx = ctx, .path = path, .line = 1};
     snprintf(f.shown, sizeof f.shown, "%s", shown);
-    const char *p = buf->data, *end = buf->data + buf->size;
+    const char *end = buf->data + buf->size, *p = io_skip_bom(buf->data, end);
     mtl_pending pm;
     memset(&pm, 0, sizeof pm);
     for (; p < end; p = next_line(p, end), f.line++) {
@@ -114,7 +126,7 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
         if (word_is(p, "newmtl")) {
             if (!mtl_finish(ctx, &pm)) return io_error(ctx, f.shown, f.line, "out of memory");
             char name[256];
-            rest_of_line(p + 6, name, sizeof name);
+            name_of_line(p + 6, name, sizeof name);
             builder_material_defaults(&pm.m, name);
             pm.m.illum = 2;
             pm.d = 1.0f;
@@ -288,6 +300,47 @@ static uint32_t obj_find_material(io_ctx *ctx, size_t first, const char *name) {
         if (strncmp(ctx->b.materials[i].name, name, sizeof ctx->b.materials[i].name - 1) == 0)
             return (uint32_t)i;
     return IO_NONE;
+}
+
+/* Reads the material library named rel (relative to the OBJ file; Windows' backslashes taken
+ * for slashes, as in map_Kd). */
+static bool obj_read_mtl(obj_file *f, char *rel) {
+    io_ctx *ctx = f->ctx;
+    char full[IO_PATH_MAX], shown[IO_PATH_MAX + 256];
+    for (char *c = rel; *c; c++)
+        if (*c == '\\') *c = '/';
+    vfs_join(&ctx->vfs, f->path, rel, full, sizeof full);
+    vfs_display(&ctx->vfs, full, shown, sizeof shown);
+    io_buf mb;
+    if (!vfs_read(ctx, full, &mb))
+        return io_error(ctx, f->shown, f->line, "cannot open material library '%s' (%s): %s", rel, shown, ctx->why);
+    bool ok = mtl_parse(ctx, full, shown, &mb);
+    vfs_buf_free(&mb);
+    return ok;
+}
+
+/* `mtllib a.mtl b.mtl`: one or more library names. A name with blanks (Blender and 3ds Max write
+ * "mtllib my scene.mtl") is taken whole when the whole rest of the line names a file. */
+static bool obj_mtllib(obj_file *f, const char *p) {
+    io_ctx *ctx = f->ctx;
+    char rel[IO_PATH_MAX], full[IO_PATH_MAX];
+    name_of_line(p, rel, sizeof rel);
+    if (strpbrk(rel, " \t")) {
+        char tmp[IO_PATH_MAX];
+        snprintf(tmp, sizeof tmp, "%s", rel);
+        for (char *c = tmp; *c; c++)
+            if (*c == '\\') *c = '/';
+        vfs_join(&ctx->vfs, f->path, tmp, full, sizeof full);
+        if (vfs_exists(ctx, full)) return obj_read_mtl(f, rel);
+    }
+    for (const char *q = p;;) {
+        q = skip_blank(q);
+        if (at_eol(q)) return true;
+        const char *s = q;
+        while (!is_delim(*q)) q++;
+        snprintf(rel, sizeof rel, "%.*s", (int)(q - s), s);
+        if (!obj_read_mtl(f, rel)) return false;
+    }
 }
 
 /* The material a usemtl line names; IO_NONE (the default material) with a warning when no
@@ -478,7 +531,7 @@ static void obj_chunk_task(void *user, uint32_t index) {
                 obj_usemtl *u = &c->mtls[c->mtl_n++];
                 u->face = c->face_n;
                 u->line = line;
-                rest_of_line(s + 6, u->name, sizeof u->name);
+                name_of_line(s + 6, u->name, sizeof u->name);
             } else {
                 c->oom = true;
             }
@@ -685,29 +738,10 @@ static bool obj_lines(obj_file *f, const char *p, const char *end, uint32_t *mat
             b->uv_n++;
         } else if (word_is(p, "usemtl")) {
             char name[256];
-            rest_of_line(p + 6, name, sizeof name);
+            name_of_line(p + 6, name, sizeof name);
             *material = obj_use_material(f, first_mtl, name, f->line);
         } else if (word_is(p, "mtllib")) {
-            /* One or more library names, each relative to the OBJ file. */
-            const char *q = p + 6;
-            for (;;) {
-                q = skip_blank(q);
-                if (at_eol(q)) break;
-                const char *s = q;
-                while (!is_delim(*q)) q++;
-                char rel[IO_PATH_MAX], full[IO_PATH_MAX], shown[IO_PATH_MAX + 256];
-                snprintf(rel, sizeof rel, "%.*s", (int)(q - s), s);
-                vfs_join(&ctx->vfs, f->path, rel, full, sizeof full);
-                vfs_display(&ctx->vfs, full, shown, sizeof shown);
-                io_buf mb;
-                if (!vfs_read(ctx, full, &mb)) {
-                    ok = io_error(ctx, f->shown, f->line, "cannot open material library '%s' (%s): %s", rel, shown, ctx->why);
-                    break;
-                }
-                ok = mtl_parse(ctx, full, shown, &mb);
-                vfs_buf_free(&mb);
-                if (!ok) break;
-            }
+            ok = obj_mtllib(f, p + 6);
         } else if (!obj_skippable(p)) {
             int len = 0;
             while (len < 24 && !is_delim(p[len])) len++;
@@ -731,7 +765,8 @@ static bool obj_stream(obj_file *f, io_stream *s, uint32_t *material, size_t fir
             bad = true;
             break;
         }
-        ok = obj_lines(f, t.data, t.data + t.size, material, first_mtl, ctx->blocks++ ? 0 : io_stream_size_hint(s));
+        const char *from = ctx->blocks ? t.data : io_skip_bom(t.data, t.data + t.size);
+        ok = obj_lines(f, from, t.data + t.size, material, first_mtl, ctx->blocks++ ? 0 : io_stream_size_hint(s));
         io_stream_release(s);
         if (!ok || t.last) break;
     }
@@ -758,7 +793,7 @@ bool obj_load(io_ctx *ctx, const char *path) {
     io_buf buf;
     if (!vfs_read(ctx, path, &buf)) return io_error(ctx, f.shown, 0, "cannot open: %s", ctx->why);
     ctx->bytes += buf.size;
-    bool ok = obj_lines(&f, buf.data, buf.data + buf.size, &material, first_mtl, 0);
+    bool ok = obj_lines(&f, io_skip_bom(buf.data, buf.data + buf.size), buf.data + buf.size, &material, first_mtl, 0);
     vfs_buf_free(&buf);
     return ok;
 }

@@ -174,6 +174,39 @@ static void test_obj_names(void) {
     if (ok) rp_scene_data_free(&s);
 }
 
+/* ---- MTL: values -------------------------------------------------------------------------------- */
+
+static void test_mtl_values(void) {
+    write_text("mv.mtl",
+               "newmtl d_tr\nKd 1 1 1\nd 1\nTr 1\n"      /* 3ds Max: both, d counts: opaque */
+               "newmtl tr_d\nKd 1 1 1\nTr 1\nd 1\n"      /* the other order */
+               "newmtl tr\nKd 1 1 1\nTr 0.25\n"          /* Tr alone: 1 - d */
+               "newmtl halo\nKd 1 1 1\nd -halo 0.5\n"    /* the spec's halo form */
+               "newmtl xyz\nKd xyz 0.95047 1 1.08883\n"  /* CIE XYZ of D65 white: sRGB white */
+               "newmtl spec\nKd 0.5 0.5 0.5\nKs spectral steel.rfl 0.8\n");
+    write_text("mv.obj",
+               "mtllib mv.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\n"
+               "usemtl d_tr\nf 1 2 3\nusemtl tr_d\nf 1 2 3\nusemtl tr\nf 1 2 3\n"
+               "usemtl halo\nf 1 2 3\nusemtl xyz\nf 1 2 3\nusemtl spec\nf 1 2 3\n");
+    rp_scene_data s;
+    warnings w;
+    if (!load("mv.obj", &s, &w)) return;
+    CHECK(s.triangle_count == 6);
+    if (s.triangle_count == 6) {
+        CHECKF(tri_material(&s, 0)->kt[0] == 0.0f, "d 1, Tr 1: kt %g", (double)tri_material(&s, 0)->kt[0]);
+        CHECKF(tri_material(&s, 1)->kt[0] == 0.0f, "Tr 1, d 1: kt %g", (double)tri_material(&s, 1)->kt[0]);
+        CHECKF(tri_material(&s, 2)->kt[0] == 0.25f, "Tr 0.25: kt %g", (double)tri_material(&s, 2)->kt[0]);
+        CHECKF(tri_material(&s, 3)->kt[0] == 0.5f, "d -halo 0.5: kt %g", (double)tri_material(&s, 3)->kt[0]);
+        const float *kd = tri_material(&s, 4)->kd;
+        CHECKF(fabsf(kd[0] - 1.0f) < 1e-3f && fabsf(kd[1] - 1.0f) < 1e-3f && fabsf(kd[2] - 1.0f) < 1e-3f,
+               "Kd xyz of D65: %g %g %g", (double)kd[0], (double)kd[1], (double)kd[2]);
+        const rp_material_data *sp = tri_material(&s, 5);
+        CHECK(sp->kd[0] == 0.5f && sp->ks[0] == 0.0f);
+    }
+    CHECKF(w.count == 1 && strstr(w.text, "mv.mtl:19: warning: Ks spectral"), "%s", w.text);
+    rp_scene_data_free(&s);
+}
+
 int main(void) {
     const char *t = getenv("RP_TEST_TMP");
     snprintf(tmp_dir, sizeof tmp_dir, "%s", t ? t : "/tmp/rp_test_io_valid");
@@ -181,5 +214,6 @@ int main(void) {
 
     test_usemtl_unknown();
     test_obj_names();
+    test_mtl_values();
     return RP_TEST_END();
 }

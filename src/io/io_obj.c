@@ -77,7 +77,8 @@ static bool word_is(const char *p, const char *w) {
 typedef struct mtl_pending {
     bool active;
     rp_material_data m;
-    float d;
+    float d, tr;
+    bool has_d, has_tr; /* d wins over Tr, whichever comes first (tinyobjloader) */
     bool has_tf;
     float tf[3];
 } mtl_pending;
@@ -88,17 +89,28 @@ static bool mtl_finish(io_ctx *ctx, mtl_pending *pm) {
     rp_material_data *m = &pm->m;
     int il = m->illum;
     if (il == 3 || il == 5 || il == 7) memcpy(m->kr, m->ks, sizeof m->kr);
+    /* Tr is 1 - d (an extension, not in the spec); with both, d counts: 3ds Max's exporter wrote
+     * "d 1" beside "Tr 1" for opaque surfaces. */
+    float d = pm->has_d ? pm->d : pm->has_tr ? 1.0f - pm->tr : 1.0f;
     if (pm->has_tf && (il == 4 || il == 6 || il == 7 || il == 9)) {
         memcpy(m->kt, pm->tf, sizeof m->kt);
-    } else if (pm->d < 1.0f) {
-        m->kt[0] = m->kt[1] = m->kt[2] = 1.0f - pm->d;
+    } else if (d < 1.0f) {
+        m->kt[0] = m->kt[1] = m->kt[2] = 1.0f - d;
     }
     pm->active = false;
     return builder_add_material(ctx, m) != IO_NONE;
 }
 
 static bool mtl_color(obj_file *f, const char **pp, float c[3], const char *what) {
-    const char *p = *pp;
+    const char *p = skip_blank(*pp);
+    /* The spec's other two forms: "Kd spectral file.rfl [factor]" (a reflectance curve, not read:
+     * the colour stays as it was) and "Kd xyz x [y z]" (CIE XYZ, to linear sRGB, D65). */
+    if (word_is(p, "spectral")) {
+        io_warning(f->ctx, f->shown, f->line, "%s spectral: .rfl curves are not read; the colour is left as it was", what);
+        return true;
+    }
+    bool xyz = word_is(p, "xyz");
+    if (xyz) p += 3;
     if (!(p = obj_float(f, p, &c[0], what))) return false;
     /* "Kd r" alone means grey r. */
     const char *q = skip_blank(p);
@@ -106,6 +118,12 @@ static bool mtl_color(obj_file *f, const char **pp, float c[3], const char *what
         c[1] = c[2] = c[0];
     } else if (!(p = obj_float(f, p, &c[1], what)) || !(p = obj_float(f, p, &c[2], what))) {
         return false;
+    }
+    if (xyz) {
+        float x = c[0], y = c[1], z = c[2];
+        c[0] = fmaxf(0.0f, 3.2404542f * x - 1.5371385f * y - 0.4985314f * z);
+        c[1] = fmaxf(0.0f, -0.9692660f * x + 1.8760108f * y + 0.0415560f * z);
+        c[2] = fmaxf(0.0f, 0.0556434f * x - 0.2040259f * y + 1.0572252f * z);
     }
     /* a negative colour rendered negative radiance (Whitted's image had pixels below 0) */
     for (int k = 0; k < 3; k++)
@@ -130,6 +148,7 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
             builder_material_defaults(&pm.m, name);
             pm.m.illum = 2;
             pm.d = 1.0f;
+            pm.has_d = pm.has_tr = false;
             pm.has_tf = false;
             pm.active = true;
             continue;
@@ -139,7 +158,6 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
         while (!is_delim(*q)) q++;
         size_t kw = (size_t)(q - p);
         rp_material_data *m = &pm.m;
-        float tmp;
         if (kw == 2 && p[0] == 'K' && (p[1] == 'd' || p[1] == 's' || p[1] == 'e' || p[1] == 'a')) {
             float *dst = p[1] == 'd' ? m->kd : p[1] == 's' ? m->ks : p[1] == 'e' ? m->ke : m->ka;
             if (!mtl_color(&f, &q, dst, p[1] == 'd' ? "Kd" : p[1] == 's' ? "Ks" : p[1] == 'e' ? "Ke" : "Ka"))
@@ -152,10 +170,13 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
         } else if (kw == 2 && p[0] == 'N' && p[1] == 'i') {
             if (!obj_float(&f, q, &m->ior, "Ni")) return false;
         } else if (kw == 1 && p[0] == 'd') {
-            if (!obj_float(&f, q, &pm.d, "d")) return false;
+            const char *r = skip_blank(q);
+            if (word_is(r, "-halo")) r += 5; /* the spec's halo dissolve: taken as the plain one */
+            if (!obj_float(&f, r, &pm.d, "d")) return false;
+            pm.has_d = true;
         } else if (kw == 2 && p[0] == 'T' && p[1] == 'r') {
-            if (!obj_float(&f, q, &tmp, "Tr")) return false;
-            pm.d = 1.0f - tmp;
+            if (!obj_float(&f, q, &pm.tr, "Tr")) return false;
+            pm.has_tr = true;
         } else if (kw == 5 && strncmp(p, "illum", 5) == 0) {
             int64_t il;
             const char *r = io_parse_int(skip_blank(q), &il);

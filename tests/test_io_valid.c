@@ -207,6 +207,77 @@ static void test_mtl_values(void) {
     rp_scene_data_free(&s);
 }
 
+/* ---- textures ----------------------------------------------------------------------------------- */
+
+/* TGA (uncompressed and RLE, bottom-up and top-down) and BMP (24-bit, bottom-up, padded rows) as
+ * map_Kd: the texels a PPM of the same image gives. The image is 3x2: red green blue / white black
+ * grey. */
+static void test_tga_bmp(void) {
+    static const uint8_t rgb[2][3][3] = {{{255, 0, 0}, {0, 255, 0}, {0, 0, 255}}, {{255, 255, 255}, {0, 0, 0}, {128, 128, 128}}};
+    uint8_t tga[18 + 18], rle[18 + 64], bmp[54 + 2 * 12];
+    /* TGA type 2, 24 bits, origin at the bottom left: the bottom row first, BGR */
+    memset(tga, 0, 18);
+    tga[2] = 2, tga[12] = 3, tga[14] = 2, tga[16] = 24;
+    size_t at = 18;
+    for (int y = 1; y >= 0; y--)
+        for (int x = 0; x < 3; x++)
+            for (int c = 2; c >= 0; c--) tga[at++] = rgb[y][x][c];
+    write_bytes("tx.tga", tga, at);
+    /* TGA type 10 (RLE), 32 bits, origin at the top left (descriptor bit 5): one raw packet of the
+     * top row, then the bottom row: raw white, a run of black, raw grey */
+    memset(rle, 0, 18);
+    rle[2] = 10, rle[12] = 3, rle[14] = 2, rle[16] = 32, rle[17] = 0x28;
+    at = 18;
+    rle[at++] = 2; /* raw, 3 pixels */
+    for (int x = 0; x < 3; x++) {
+        for (int c = 2; c >= 0; c--) rle[at++] = rgb[0][x][c];
+        rle[at++] = 255;
+    }
+    rle[at++] = 0; /* raw, 1 pixel: white */
+    rle[at++] = 255, rle[at++] = 255, rle[at++] = 255, rle[at++] = 255;
+    rle[at++] = 0x80; /* run of 1: black */
+    rle[at++] = 0, rle[at++] = 0, rle[at++] = 0, rle[at++] = 255;
+    rle[at++] = 0; /* raw, 1 pixel: grey */
+    rle[at++] = 128, rle[at++] = 128, rle[at++] = 128, rle[at++] = 255;
+    write_bytes("tx_rle.tga", rle, at);
+    /* BMP: BITMAPINFOHEADER, 24 bits, rows bottom-up, each padded to 12 bytes */
+    memset(bmp, 0, sizeof bmp);
+    bmp[0] = 'B', bmp[1] = 'M';
+    uint32_t size = sizeof bmp, off = 54, hdr = 40, w = 3, h = 2, img = 24;
+    memcpy(bmp + 2, &size, 4), memcpy(bmp + 10, &off, 4), memcpy(bmp + 14, &hdr, 4);
+    memcpy(bmp + 18, &w, 4), memcpy(bmp + 22, &h, 4), memcpy(bmp + 34, &img, 4);
+    bmp[26] = 1, bmp[28] = 24;
+    at = 54;
+    for (int y = 1; y >= 0; y--) {
+        for (int x = 0; x < 3; x++)
+            for (int c = 2; c >= 0; c--) bmp[at++] = rgb[y][x][c];
+        at += 3; /* padding */
+    }
+    write_bytes("tx.bmp", bmp, at);
+    static const char *const names[] = {"tx.tga", "tx_rle.tga", "tx.bmp"};
+    for (int i = 0; i < 3; i++) {
+        char mtl[256], obj[256], text[512];
+        snprintf(mtl, sizeof mtl, "tx%d.mtl", i);
+        snprintf(obj, sizeof obj, "tx%d.obj", i);
+        snprintf(text, sizeof text, "newmtl t\nKd 1 1 1\nmap_Kd %s\n", names[i]);
+        write_text(mtl, text);
+        snprintf(text, sizeof text, "mtllib %s\nusemtl t\nv 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nf 1/1 2/2 3/3\n", mtl);
+        write_text(obj, text);
+        rp_scene_data s;
+        warnings wn;
+        if (!load(obj, &s, &wn)) continue;
+        CHECKF(s.texture_count == 1, "%s", names[i]);
+        if (s.texture_count == 1) {
+            const rp_texture_data *t = &s.textures[0];
+            CHECKF(t->width == 3 && t->height == 2, "%s: %dx%d", names[i], t->width, t->height);
+            if (t->width == 3 && t->height == 2)
+                CHECKF(memcmp(t->rgb, rgb, sizeof rgb) == 0, "%s: texels %d %d %d  %d %d %d ...", names[i], t->rgb[0],
+                       t->rgb[1], t->rgb[2], t->rgb[3], t->rgb[4], t->rgb[5]);
+        }
+        rp_scene_data_free(&s);
+    }
+}
+
 int main(void) {
     const char *t = getenv("RP_TEST_TMP");
     snprintf(tmp_dir, sizeof tmp_dir, "%s", t ? t : "/tmp/rp_test_io_valid");
@@ -215,5 +286,6 @@ int main(void) {
     test_usemtl_unknown();
     test_obj_names();
     test_mtl_values();
+    test_tga_bmp();
     return RP_TEST_END();
 }

@@ -1,9 +1,10 @@
-/* Texture images for materials: PPM (P3 and P6) decoded here, PNG and JPEG by stb_image. All end up
- * 8-bit RGB, top row first. stb_image trusts its input more than a loader may (fuzzing found a heap
- * overflow in its 16-bit PNM path, one in its JPEG Huffman tables and an int overflow in its JPEG DC
- * prediction): only its PNG and JPEG decoders are compiled, JPEG Huffman tables are checked here
- * first and a JPEG's DC coefficients by a dry run of stb's own parser, and the declared size is
- * capped before it allocates. */
+/* Texture images for materials: PPM (P3 and P6) decoded here, PNG, JPEG, TGA and BMP by stb_image.
+ * All end up 8-bit RGB, top row first. stb_image trusts its input more than a loader may (fuzzing
+ * found a heap overflow in its 16-bit PNM path, one in its JPEG Huffman tables and an int overflow
+ * in its JPEG DC prediction): only its PNG, JPEG, TGA and BMP decoders are compiled (TGA and BMP
+ * because OBJ models ship them: Crytek's Sponza, 3ds Max exports), JPEG Huffman tables are checked
+ * here first and a JPEG's DC coefficients by a dry run of stb's own parser, and the declared size
+ * is capped before it allocates. */
 #include <stdio.h>
 
 #include "io/io_internal.h"
@@ -27,6 +28,8 @@
 #define STBI_NO_LINEAR
 #define STBI_ONLY_PNG
 #define STBI_ONLY_JPEG
+#define STBI_ONLY_TGA
+#define STBI_ONLY_BMP
 /* stb's allocations are the loaders' (io_alloc.c), so a test can refuse them too */
 #define STBI_MALLOC(size) io_malloc(size)
 #define STBI_REALLOC(p, size) io_realloc(p, size)
@@ -459,7 +462,7 @@ static bool png_chunks_ok(const uint8_t *d, size_t n) {
     return i == n; /* no IEND: stb decides on what is there */
 }
 
-/* Decodes an image stb_image reads (PNG, JPEG) held in memory into 8-bit RGB (io_malloc'd), after
+/* Decodes an image stb_image reads (PNG, JPEG, TGA, BMP) held in memory into 8-bit RGB (io_malloc'd), after
  * the checks above and the pixel cap, whether it came from a file or from inside a glTF; NULL with
  * the reason in *why (which may point into ctx->why) otherwise. */
 static uint8_t *stb_decode(io_ctx *ctx, const void *data, size_t size, int32_t *w, int32_t *h, const char **why) {

@@ -82,7 +82,142 @@ typedef struct load_state {
     uint32_t *materials; /* aiMaterial index -> builder material */
     bool *light_done;    /* a light binds to the first node of its name only */
     bool have_camera;
+    float *strength;     /* glTF: each material's KHR_materials_emissive_strength (1 without), or NULL */
+    size_t strength_n, strength_cap;
 } load_state;
+
+/* ---- KHR_materials_emissive_strength ---------------------------------------------------------- */
+
+/* assimp 5.2 does not know KHR_materials_emissive_strength (5.3 reads it into
+ * AI_MATKEY_EMISSIVE_INTENSITY), so a Blender export's emission above 1 came out that many times
+ * too dim. The glTF's JSON is read here for it: a scanner that skips any value and walks
+ * materials[i].extensions.KHR_materials_emissive_strength.emissiveStrength. glTF's material i is
+ * assimp's material i. Anything it cannot follow leaves the strengths at 1 (assimp has already
+ * read and checked the file). */
+typedef struct json_scan {
+    const char *p, *end;
+} json_scan;
+
+static void js_blank(json_scan *j) {
+    while (j->p < j->end && (*j->p == ' ' || *j->p == '\t' || *j->p == '\n' || *j->p == '\r')) j->p++;
+}
+
+/* A string at j->p: its raw bytes (escapes left as they are) in [*s, *s + *n). */
+static bool js_string(json_scan *j, const char **s, size_t *n) {
+    js_blank(j);
+    if (j->p >= j->end || *j->p != '"') return false;
+    const char *q = ++j->p;
+    while (j->p < j->end && *j->p != '"') j->p += *j->p == '\\' ? 2 : 1;
+    if (j->p >= j->end) return false;
+    *s = q, *n = (size_t)(j->p++ - q);
+    return true;
+}
+
+static bool js_char(json_scan *j, char c) {
+    js_blank(j);
+    if (j->p >= j->end || *j->p != c) return false;
+    j->p++;
+    return true;
+}
+
+static bool js_skip(json_scan *j, int depth) {
+    js_blank(j);
+    if (j->p >= j->end || depth > 64) return false;
+    const char *s;
+    size_t n;
+    if (*j->p == '"') return js_string(j, &s, &n);
+    if (*j->p == '{' || *j->p == '[') {
+        char close = *j->p++ == '{' ? '}' : ']';
+        if (js_char(j, close)) return true;
+        do {
+            if (close == '}' && (!js_string(j, &s, &n) || !js_char(j, ':'))) return false;
+            if (!js_skip(j, depth + 1)) return false;
+        } while (js_char(j, ','));
+        return js_char(j, close);
+    }
+    while (j->p < j->end && !strchr(",]} \t\r\n", *j->p)) j->p++; /* number, true, false, null */
+    return true;
+}
+
+static bool js_key_is(const char *s, size_t n, const char *key) { return n == strlen(key) && memcmp(s, key, n) == 0; }
+
+/* At an object: calls field(j, key, user) for each key (which must consume the value). */
+typedef bool (*js_field_fn)(json_scan *j, const char *key, size_t n, void *user);
+static bool js_object(json_scan *j, js_field_fn field, void *user) {
+    if (!js_char(j, '{')) return false;
+    if (js_char(j, '}')) return true;
+    do {
+        const char *s;
+        size_t n;
+        if (!js_string(j, &s, &n) || !js_char(j, ':') || !field(j, s, n, user)) return false;
+    } while (js_char(j, ','));
+    return js_char(j, '}');
+}
+
+static bool js_strength(json_scan *j, const char *key, size_t n, void *user) {
+    if (!js_key_is(key, n, "emissiveStrength")) return js_skip(j, 0);
+    js_blank(j);
+    char num[64];
+    size_t k = 0;
+    while (j->p < j->end && k + 1 < sizeof num && !strchr(",]} \t\r\n", *j->p)) num[k++] = *j->p++;
+    num[k] = '\0';
+    char *e;
+    double v = strtod(num, &e);
+    if (k && !*e && v >= 0.0 && v < 1e30) *(float *)user = (float)v;
+    return true;
+}
+
+static bool js_extension(json_scan *j, const char *key, size_t n, void *user) {
+    if (!js_key_is(key, n, "KHR_materials_emissive_strength")) return js_skip(j, 0);
+    return js_object(j, js_strength, user);
+}
+
+static bool js_material(json_scan *j, const char *key, size_t n, void *user) {
+    if (!js_key_is(key, n, "extensions")) return js_skip(j, 0);
+    return js_object(j, js_extension, user);
+}
+
+static bool js_top(json_scan *j, const char *key, size_t n, void *user) {
+    load_state *s = user;
+    if (!js_key_is(key, n, "materials") || s->strength) return js_skip(j, 0);
+    if (!js_char(j, '[')) return false;
+    if (js_char(j, ']')) return true;
+    do {
+        if (!io_reserve((void **)&s->strength, &s->strength_cap, s->strength_n + 1, sizeof(float))) return false;
+        float *v = &s->strength[s->strength_n++];
+        *v = 1.0f;
+        if (!js_object(j, js_material, v)) return false;
+    } while (js_char(j, ','));
+    return js_char(j, ']');
+}
+
+/* Fills s->strength from the glTF's JSON (a .gltf file, or a .glb's JSON chunk); leaves it NULL
+ * when the file has no strength to give or cannot be scanned. */
+static void gltf_strengths(load_state *s) {
+    io_buf buf;
+    if (!vfs_read(s->ctx, s->path, &buf)) return;
+    const char *p = buf.data, *end = buf.data + buf.size;
+    if (buf.size >= 20 && memcmp(p, "glTF", 4) == 0) {
+        const unsigned char *h = (const unsigned char *)p;
+        uint32_t len = (uint32_t)h[12] | (uint32_t)h[13] << 8 | (uint32_t)h[14] << 16 | (uint32_t)h[15] << 24;
+        p += 20;
+        if (len < (size_t)(end - p)) end = p + len;
+    }
+    bool any = false;
+    const char *at = p;
+    while ((at = memchr(at, 'e', (size_t)(end - at))) && ((size_t)(end - at) < 16 || memcmp(at, "emissiveStrength", 16) != 0)) at++;
+    if (at) { /* most files name no strength: no scan at all */
+        json_scan j = {p, end};
+        if (js_object(&j, js_top, s))
+            for (size_t i = 0; i < s->strength_n; i++) any |= s->strength[i] != 1.0f;
+    }
+    if (!any) {
+        free(s->strength);
+        s->strength = NULL;
+        s->strength_n = s->strength_cap = 0;
+    }
+    vfs_buf_free(&buf);
+}
 
 /* ---- materials -------------------------------------------------------------------------------- */
 
@@ -140,7 +275,7 @@ static int32_t material_texture(load_state *s, const struct aiMaterial *am, enum
  * (KHR_materials_transmission, ior) -> a dielectric tinted by the base colour; the normal texture ->
  * map_normal; occlusion textures are not used.
  * Formats without base colour give their diffuse colour and texture. Returns false after an error. */
-static bool material_from_assimp(load_state *s, const struct aiMaterial *am, rp_material_data *m) {
+static bool material_from_assimp(load_state *s, unsigned index, const struct aiMaterial *am, rp_material_data *m) {
     struct aiString name;
     if (aiGetMaterialString(am, AI_MATKEY_NAME, &name) != aiReturn_SUCCESS) name.data[0] = '\0';
     builder_material_defaults(m, name.data[0] ? name.data : "assimp");
@@ -151,10 +286,12 @@ static bool material_from_assimp(load_state *s, const struct aiMaterial *am, rp_
     }
     if (aiGetMaterialColor(am, AI_MATKEY_COLOR_EMISSIVE, &c) == aiReturn_SUCCESS) {
         m->ke[0] = c.r, m->ke[1] = c.g, m->ke[2] = c.b;
-        float strength; /* KHR_materials_emissive_strength */
+        float strength; /* KHR_materials_emissive_strength: assimp 5.3's, else the file's (gltf_strengths) */
         if (aiGetMaterialFloatArray(am, AI_MATKEY_EMISSIVE_INTENSITY, &strength, NULL) == aiReturn_SUCCESS &&
             strength >= 0.0f)
             for (int i = 0; i < 3; i++) m->ke[i] *= strength;
+        else if (index < s->strength_n)
+            for (int i = 0; i < 3; i++) m->ke[i] *= s->strength[index];
     }
     int32_t tex = material_texture(s, am, aiTextureType_BASE_COLOR, m->name);
     if (tex == -1) tex = material_texture(s, am, aiTextureType_DIFFUSE, m->name);
@@ -403,12 +540,13 @@ bool assimp_load(io_ctx *ctx, const char *path) {
     if ((scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE) || !scene->mRootNode)
         ok = io_error(ctx, path, 0, "the file holds no complete scene (assimp: incomplete)");
     load_state s = {.ctx = ctx, .path = path, .scene = scene};
+    if (ok && gltf) gltf_strengths(&s);
     if (ok && scene->mNumMaterials) {
         s.materials = io_malloc(scene->mNumMaterials * sizeof *s.materials);
         if (!s.materials) ok = io_error(ctx, path, 0, "out of memory");
         for (unsigned i = 0; ok && i < scene->mNumMaterials; i++) {
             rp_material_data m;
-            if (!material_from_assimp(&s, scene->mMaterials[i], &m)) ok = false;
+            if (!material_from_assimp(&s, i, scene->mMaterials[i], &m)) ok = false;
             else if ((s.materials[i] = builder_add_material(ctx, &m)) == IO_NONE)
                 ok = io_error(ctx, path, 0, "out of memory");
         }
@@ -427,6 +565,7 @@ bool assimp_load(io_ctx *ctx, const char *path) {
         fclose(f);
     }
     free(s.materials);
+    free(s.strength);
     free(s.light_done);
     aiReleaseImport(scene);
     return ok;

@@ -174,6 +174,54 @@ static void test_obj_names(void) {
     if (ok) rp_scene_data_free(&s);
 }
 
+/* ---- OBJ: statements over several lines ------------------------------------------------------- */
+
+/* The OBJ spec's line continuation: a backslash ending a line joins the next one to it (Blender's
+ * importer does the same); a comment is not continued. An error names the statement's first line. */
+static void test_obj_continued(void) {
+    write_text("cont.obj",
+               "# a comment ending in a backslash \\\n"
+               "v 0 0 0\n"
+               "v 1 0 \\\n"
+               "  0\n"
+               "v 1 1 0\r\n"
+               "v 0 1 0 \\\r\n"
+               "   0.5 0.5 0.5\r\n"
+               "f 1 2 \\\n"
+               "  3 \\\n"
+               "  4\n"
+               "l 1 2 \\\n"
+               "  3\n"
+               "vt 0.5 \\\n"
+               "  0.25\n"
+               "f 1/1 2/1 3/1\n");
+    rp_scene_data s;
+    warnings w;
+    if (!load("cont.obj", &s, &w)) return;
+    CHECKF(s.vertex_count == 4 && s.triangle_count == 3, "%zu vertices %zu triangles", s.vertex_count, s.triangle_count);
+    if (s.vertex_count == 4) CHECK(s.positions[3] == 1.0f && s.positions[4] == 0.0f && s.positions[5] == 0.0f);
+    if (s.triangle_count == 3) {
+        static const uint32_t want[9] = {0, 1, 2, 0, 2, 3, 0, 1, 2};
+        CHECK(memcmp(s.indices, want, sizeof want) == 0);
+    }
+    if (s.triangle_count == 3 && s.texcoord_indices) {
+        const float *uv = s.texcoords + 2 * s.texcoord_indices[6];
+        CHECK(uv[0] == 0.5f && uv[1] == 0.25f);
+    }
+    rp_scene_data_free(&s);
+
+    write_text("cont_bad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 \\\n 3 x\nv 0 0 0\n");
+    char path[1024];
+    tmp_path("cont_bad.obj", path, sizeof path);
+    for (size_t chunk = 0; chunk <= 9; chunk += 3) {
+        char err[1024] = "";
+        io_load_opts o = {.threads = chunk ? 3 : 1, .chunk_bytes = chunk};
+        bool ok = io_load_file_opts(path, &o, &s, err, sizeof err);
+        CHECKF(!ok && strstr(err, "cont_bad.obj:4: error: bad face vertex 'x'"), "chunks of %zu: %s", chunk, err);
+        if (ok) rp_scene_data_free(&s);
+    }
+}
+
 /* ---- MTL: values -------------------------------------------------------------------------------- */
 
 static void test_mtl_values(void) {
@@ -285,6 +333,7 @@ int main(void) {
 
     test_usemtl_unknown();
     test_obj_names();
+    test_obj_continued();
     test_mtl_values();
     test_tga_bmp();
     return RP_TEST_END();

@@ -28,6 +28,16 @@ static const char *next_line(const char *p, const char *end) {
     return p < end ? p + 1 : end;
 }
 
+/* Where the line at p ends ('\n' or end), and whether its last character (before a '\r') is a
+ * backslash: the OBJ spec's line continuation. */
+static const char *line_end(const char *p, const char *end, bool *continued) {
+    const char *e = memchr(p, '\n', (size_t)(end - p));
+    if (!e) e = end;
+    const char *t = e > p && e[-1] == '\r' ? e - 1 : e;
+    *continued = t > p && t[-1] == '\\';
+    return e;
+}
+
 /* Reads one float after blanks; NULL (with the error written) when there is none. */
 static const char *obj_float(obj_file *f, const char *p, float *v, const char *what) {
     p = skip_blank(p);
@@ -524,12 +534,16 @@ static void obj_chunk_task(void *user, uint32_t index) {
     obj_chunk_presize(c);
     const char *p = c->start, *end = par->end;
     uint32_t line = 0;
+    bool backslash = memchr(c->start, '\\', (size_t)(c->limit - c->start)) != NULL;
     for (; p < c->limit; p = next_line(p, end), line++) {
         size_t undo[5] = {c->pos_n, c->nrm_n, c->uv_n, c->corner_n, c->mtl_n};
         const char *s = skip_blank(p);
-        bool ok = true;
+        bool ok = true, continued = false;
+        if (backslash && !at_eol(s)) line_end(s, end, &continued);
         if (at_eol(s)) {
             ok = !(*s == '\0' && s < end);
+        } else if (continued) {
+            ok = false; /* a statement over several lines: the serial pass joins them */
         } else if (s[0] == 'v' && (s[1] == ' ' || s[1] == '\t')) {
             float *v = obj_chunk_vec(&c->pos, &c->pos_n, &c->pos_cap, 3, &c->oom);
             ok = v && obj_chunk_floats(s + 1, v, 3);
@@ -707,13 +721,90 @@ static void obj_fill_task(void *user, uint32_t index) {
     }
 }
 
-/* Parses the lines [p, end): a whole file, or a window of one streamed (whole lines, the line
- * numbers going on from the window before). *material is the current material before and after;
- * total, when not 0, the file's size, for presizing the scene's arrays from this first window. */
-static bool obj_lines(obj_file *f, const char *p, const char *end, uint32_t *material, size_t first_mtl, uint64_t total) {
+/* One statement at p (blanks skipped, not a comment), up to its line's end or a NUL. */
+static bool obj_statement(obj_file *f, const char *p, uint32_t *material, size_t first_mtl) {
     io_ctx *ctx = f->ctx;
     io_builder *b = &ctx->b;
     bool ok = true;
+    if (p[0] == 'v' && (p[1] == ' ' || p[1] == '\t')) {
+        if (b->pos_n >= b->pos_cap && (b->pos_n >= UINT32_MAX || !builder_reserve_vertices(ctx, 1)))
+            return io_error(ctx, f->shown, f->line, "out of memory");
+        float *v = b->pos + 3 * b->pos_n;
+        const char *q = p + 1;
+        ok = (q = obj_float(f, q, &v[0], "v")) && (q = obj_float(f, q, &v[1], "v")) && (q = obj_float(f, q, &v[2], "v"));
+        b->pos_n++;
+    } else if (p[0] == 'f' && (p[1] == ' ' || p[1] == '\t')) {
+        ok = obj_face(f, p + 1, *material);
+    } else if (p[0] == 'v' && p[1] == 'n' && is_delim(p[2])) {
+        if (b->nrm_n >= b->nrm_cap && (b->nrm_n >= UINT32_MAX || !builder_reserve_normals(ctx, 1)))
+            return io_error(ctx, f->shown, f->line, "out of memory");
+        float *v = b->nrm + 3 * b->nrm_n;
+        const char *q = p + 2;
+        ok = (q = obj_float(f, q, &v[0], "vn")) && (q = obj_float(f, q, &v[1], "vn")) &&
+             (q = obj_float(f, q, &v[2], "vn"));
+        b->nrm_n++;
+    } else if (p[0] == 'v' && p[1] == 't' && is_delim(p[2])) {
+        if (b->uv_n >= b->uv_cap && (b->uv_n >= UINT32_MAX || !builder_reserve_texcoords(ctx, 1)))
+            return io_error(ctx, f->shown, f->line, "out of memory");
+        float *v = b->uv + 2 * b->uv_n;
+        const char *q = p + 2;
+        v[1] = 0.0f;
+        ok = (q = obj_float(f, q, &v[0], "vt")) != NULL;
+        if (ok && !at_eol(skip_blank(q))) ok = obj_float(f, q, &v[1], "vt") != NULL;
+        b->uv_n++;
+    } else if (word_is(p, "usemtl")) {
+        char name[256];
+        name_of_line(p + 6, name, sizeof name);
+        *material = obj_use_material(f, first_mtl, name, f->line);
+    } else if (word_is(p, "mtllib")) {
+        ok = obj_mtllib(f, p + 6);
+    } else if (!obj_skippable(p)) {
+        int len = 0;
+        while (len < 24 && !is_delim(p[len])) len++;
+        ok = io_error(ctx, f->shown, f->line, "unknown statement '%.*s'", len, p);
+    }
+    return ok;
+}
+
+/* A statement continued over lines (each ending in a backslash but the last) joined into one
+ * NUL-terminated io_malloc'd line, each backslash and line break a blank; *last is its last
+ * line's start, *more the lines after the first. NULL when out of memory. */
+static char *obj_join(const char *p, const char *end, const char **last, uint32_t *more) {
+    size_t n = 0, cap = 256;
+    char *out = io_malloc(cap);
+    *more = 0;
+    for (;;) {
+        bool continued;
+        const char *e = line_end(p, end, &continued);
+        size_t len = (size_t)(e - p);
+        if (!io_reserve((void **)&out, &cap, n + len + 2, 1)) {
+            free(out);
+            return NULL;
+        }
+        if (!out) return NULL;
+        memcpy(out + n, p, len);
+        n += len;
+        if (n && out[n - 1] == '\r') n--;
+        *last = p;
+        if (!continued || e >= end) break;
+        out[n - 1] = ' '; /* the backslash */
+        out[n++] = ' ';   /* the line break */
+        p = e + 1;
+        ++*more;
+    }
+    out[n] = '\0';
+    return out;
+}
+
+/* Parses the lines [p, end): a whole file, or a window of one streamed (whole lines, the line
+ * numbers going on from the window before). *material is the current material before and after;
+ * total, when not 0, the file's size, for presizing the scene's arrays from this first window.
+ * A statement continued over lines by backslashes is parsed here whole; the chunks leave it to
+ * this pass (a streamed file's statement continued past its window is not joined). */
+static bool obj_lines(obj_file *f, const char *p, const char *end, uint32_t *material, size_t first_mtl, uint64_t total) {
+    io_ctx *ctx = f->ctx;
+    bool ok = true;
+    bool backslash = memchr(p, '\\', (size_t)(end - p)) != NULL; /* else no line is continued */
     obj_par par;
     obj_par_start(ctx, &par, p, (size_t)(end - p), total);
     for (; ok && p < end; p = next_line(p, end), f->line++) {
@@ -724,50 +815,23 @@ static bool obj_lines(obj_file *f, const char *p, const char *end, uint32_t *mat
             if (*p == '\0' && p < end) ok = io_error(ctx, f->shown, f->line, "binary data in a text file");
             continue;
         }
-        if (p[0] == 'v' && (p[1] == ' ' || p[1] == '\t')) {
-            if (b->pos_n >= b->pos_cap && (b->pos_n >= UINT32_MAX || !builder_reserve_vertices(ctx, 1))) {
-                ok = io_error(ctx, f->shown, f->line, "out of memory");
-                break;
-            }
-            float *v = b->pos + 3 * b->pos_n;
-            const char *q = p + 1;
-            ok = (q = obj_float(f, q, &v[0], "v")) && (q = obj_float(f, q, &v[1], "v")) &&
-                 (q = obj_float(f, q, &v[2], "v"));
-            b->pos_n++;
-        } else if (p[0] == 'f' && (p[1] == ' ' || p[1] == '\t')) {
-            ok = obj_face(f, p + 1, *material);
-        } else if (p[0] == 'v' && p[1] == 'n' && is_delim(p[2])) {
-            if (b->nrm_n >= b->nrm_cap && (b->nrm_n >= UINT32_MAX || !builder_reserve_normals(ctx, 1))) {
-                ok = io_error(ctx, f->shown, f->line, "out of memory");
-                break;
-            }
-            float *v = b->nrm + 3 * b->nrm_n;
-            const char *q = p + 2;
-            ok = (q = obj_float(f, q, &v[0], "vn")) && (q = obj_float(f, q, &v[1], "vn")) &&
-                 (q = obj_float(f, q, &v[2], "vn"));
-            b->nrm_n++;
-        } else if (p[0] == 'v' && p[1] == 't' && is_delim(p[2])) {
-            if (b->uv_n >= b->uv_cap && (b->uv_n >= UINT32_MAX || !builder_reserve_texcoords(ctx, 1))) {
-                ok = io_error(ctx, f->shown, f->line, "out of memory");
-                break;
-            }
-            float *v = b->uv + 2 * b->uv_n;
-            const char *q = p + 2;
-            v[1] = 0.0f;
-            ok = (q = obj_float(f, q, &v[0], "vt")) != NULL;
-            if (ok && !at_eol(skip_blank(q))) ok = obj_float(f, q, &v[1], "vt") != NULL;
-            b->uv_n++;
-        } else if (word_is(p, "usemtl")) {
-            char name[256];
-            name_of_line(p + 6, name, sizeof name);
-            *material = obj_use_material(f, first_mtl, name, f->line);
-        } else if (word_is(p, "mtllib")) {
-            ok = obj_mtllib(f, p + 6);
-        } else if (!obj_skippable(p)) {
-            int len = 0;
-            while (len < 24 && !is_delim(p[len])) len++;
-            ok = io_error(ctx, f->shown, f->line, "unknown statement '%.*s'", len, p);
+        bool continued = false;
+        if (backslash) line_end(p, end, &continued);
+        if (!continued) {
+            ok = obj_statement(f, p, material, first_mtl);
+            continue;
         }
+        const char *last;
+        uint32_t more;
+        char *joined = obj_join(p, end, &last, &more);
+        if (!joined) {
+            ok = io_error(ctx, f->shown, f->line, "out of memory");
+            break;
+        }
+        ok = obj_statement(f, joined, material, first_mtl); /* errors name the statement's first line */
+        free(joined);
+        p = last;
+        f->line += more;
     }
     if (ok && par.n) io_parallel_for(ctx->threads, par.n, obj_fill_task, &par);
     obj_par_end(&par);

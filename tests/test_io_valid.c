@@ -255,6 +255,45 @@ static void test_mtl_values(void) {
     rp_scene_data_free(&s);
 }
 
+/* ---- PLY --------------------------------------------------------------------------------------- */
+
+/* A `tristrips` element (Stanford's scans, VCG): strips of vertex_indices, -1 restarting one, the
+ * odd triangles turned back; stitching triangles (a repeated corner) left out. Binary too. */
+static void test_ply_strips(void) {
+    static const char head[] = "element vertex 6\nproperty float x\nproperty float y\nproperty float z\n"
+                               "element tristrips 1\nproperty list int int vertex_indices\nend_header\n";
+    char text[1024];
+    snprintf(text, sizeof text, "ply\nformat ascii 1.0\n%s0 0 0\n1 0 0\n0 1 0\n1 1 0\n0 2 0\n1 2 0\n"
+             "9 0 1 2 3 -1 2 3 4 5\n", head);
+    write_text("strips.ply", text);
+    /* the same strips as little-endian binary, stitched (3 3 2 2: four degenerate triangles, which
+     * keep the parity) instead of restarted */
+    uint8_t bin[1024];
+    int n = snprintf((char *)bin, sizeof bin, "ply\nformat binary_little_endian 1.0\n%s", head);
+    size_t at = (size_t)n;
+    static const float pos[6][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {0, 2, 0}, {1, 2, 0}};
+    memcpy(bin + at, pos, sizeof pos);
+    at += sizeof pos;
+    static const int32_t strip[11] = {10, 0, 1, 2, 3, 3, 2, 2, 3, 4, 5}; /* count, then the indices */
+    memcpy(bin + at, strip, sizeof strip);
+    at += sizeof strip;
+    write_bytes("strips_bin.ply", bin, at);
+    static const uint32_t want[12] = {0, 1, 2, 2, 1, 3, 2, 3, 4, 4, 3, 5};
+    static const char *const names[] = {"strips.ply", "strips_bin.ply"};
+    for (int i = 0; i < 2; i++) {
+        rp_scene_data s;
+        warnings w;
+        if (!load(names[i], &s, &w)) continue;
+        CHECKF(s.triangle_count == 4 && s.sphere_count == 0, "%s: %zu triangles, %zu spheres", names[i], s.triangle_count,
+               s.sphere_count);
+        if (s.triangle_count == 4)
+            CHECKF(memcmp(s.indices, want, sizeof want) == 0, "%s: %u %u %u  %u %u %u  %u %u %u  %u %u %u", names[i],
+                   s.indices[0], s.indices[1], s.indices[2], s.indices[3], s.indices[4], s.indices[5], s.indices[6],
+                   s.indices[7], s.indices[8], s.indices[9], s.indices[10], s.indices[11]);
+        rp_scene_data_free(&s);
+    }
+}
+
 /* ---- textures ----------------------------------------------------------------------------------- */
 
 /* TGA (uncompressed and RLE, bottom-up and top-down) and BMP (24-bit, bottom-up, padded rows) as
@@ -335,6 +374,7 @@ int main(void) {
     test_obj_names();
     test_obj_continued();
     test_mtl_values();
+    test_ply_strips();
     test_tga_bmp();
     return RP_TEST_END();
 }

@@ -1,7 +1,7 @@
 /* PLY (ASCII, binary little and big endian). The header declares elements and their properties;
  * the vertex element gives positions (and normals, texture coordinates when present), the face
- * element a vertex index list per face. Every other element and property, lists included, is read
- * past by its declared type. */
+ * element a vertex index list per face (a `tristrips` element a triangle strip per list). Every
+ * other element and property, lists included, is read past by its declared type. */
 #include <math.h>
 #include <stdio.h>
 
@@ -163,7 +163,8 @@ static bool ply_read_header(ply_file *f) {
                 name = w[2];
             }
             if (strcmp(el->name, "vertex") == 0 && pr.count_type == PLY_NONE) pr.use = ply_use_named(name);
-            if (strcmp(el->name, "face") == 0 && pr.count_type != PLY_NONE && el->face_list < 0 &&
+            if ((strcmp(el->name, "face") == 0 || strcmp(el->name, "tristrips") == 0) && pr.count_type != PLY_NONE &&
+                el->face_list < 0 &&
                 (strcmp(name, "vertex_indices") == 0 || strcmp(name, "vertex_index") == 0))
                 el->face_list = (int)el->prop_n;
             if (!io_reserve((void **)&el->props, &el->prop_cap, el->prop_n + 1, sizeof(ply_prop)))
@@ -459,6 +460,56 @@ static bool ply_read_faces(ply_file *f, const ply_elem *el, bool vertices_seen) 
 }
 
 
+/* A `tristrips` element (Stanford's and VCG's scans): each list a triangle strip, -1 restarting it;
+ * triangle k of a strip is (s[k], s[k+1], s[k+2]), every odd one turned back to the strip's winding.
+ * Triangles with a repeated corner (strips stitched together) are left out. */
+static bool ply_read_strips(ply_file *f, const ply_elem *el, bool vertices_seen) {
+    io_ctx *ctx = f->ctx;
+    uint32_t material = builder_default_material(ctx);
+    if (material == IO_NONE) return io_error(ctx, f->shown, el->line, "out of memory");
+    if (!vertices_seen) return io_error(ctx, f->shown, el->line, "tristrips element before the vertex element");
+    for (uint64_t k = 0; k < el->count; k++) {
+        ply_sync_line(f);
+        uint32_t line = f->line;
+        for (size_t i = 0; i < el->prop_n; i++) {
+            const ply_prop *pr = &el->props[i];
+            double v;
+            if ((int)i != el->face_list) {
+                if (pr->count_type != PLY_NONE ? !ply_skip_list(f, pr) : !ply_value(f, pr->type, &v)) return false;
+                continue;
+            }
+            uint64_t n = 0;
+            if (!ply_read_list_count(f, pr, &n)) return false;
+            uint32_t s[3];
+            uint64_t run = 0; /* corners of the current strip so far */
+            for (uint64_t j = 0; j < n; j++) {
+                if (!ply_value(f, pr->type, &v)) return false;
+                if (v == -1.0) {
+                    run = 0;
+                    continue;
+                }
+                if (v < 0 || v >= (double)f->vertex_count || v != floor(v))
+                    return io_error(ctx, f->shown, line, "strip %llu: vertex index %.0f out of range (%llu vertices)",
+                                    (unsigned long long)k, v, (unsigned long long)f->vertex_count);
+                s[run % 3] = (uint32_t)(f->vertex_base + (size_t)v);
+                if (++run < 3) continue;
+                uint64_t t = run - 3; /* the triangle's number in its strip */
+                uint32_t a = s[t % 3], b = s[(t + 1) % 3], c = s[(t + 2) % 3];
+                if (t & 1) {
+                    uint32_t x = a;
+                    a = b, b = x;
+                }
+                if (a == b || b == c || a == c) continue;
+                uint32_t tri[3] = {a, b, c}, nn[3], tt[3];
+                ply_corner_indices(f, tri, nn, tt);
+                if (!builder_add_triangle(ctx, tri, f->has_normals ? nn : NULL, f->has_uv ? tt : NULL, material))
+                    return io_error(ctx, f->shown, line, "out of memory");
+            }
+        }
+    }
+    return true;
+}
+
 /* ---- parallel ASCII --------------------------------------------------------------------------- */
 
 /* A large ASCII file of a vertex element and then a face element (what scanners write: the bunny)
@@ -751,6 +802,8 @@ bool ply_load(io_ctx *ctx, const char *path) {
             vertices_seen = true;
         } else if (strcmp(el->name, "face") == 0 && el->face_list >= 0) {
             ok = ply_read_faces(&f, el, vertices_seen);
+        } else if (strcmp(el->name, "tristrips") == 0 && el->face_list >= 0) {
+            ok = ply_read_strips(&f, el, vertices_seen);
         } else {
             for (uint64_t k = 0; ok && k < el->count; k++)
                 for (size_t j = 0; ok && j < el->prop_n; j++) {

@@ -255,6 +255,29 @@ static void test_mtl_values(void) {
     rp_scene_data_free(&s);
 }
 
+/* Texture map options: skipped before the file name; those that would change the image (scale,
+ * offset, turbulence, clamping, -mm) are not applied and say so; defaults and the rest are quiet. A
+ * comment after the file name is not part of it. */
+static void test_mtl_map_options(void) {
+    write_text("mo.ppm", "P3\n1 1\n255\n10 20 30\n");
+    write_text("mo.mtl",
+               "newmtl quiet\nmap_Kd -s 1 1 1 -o 0 0 0 -clamp off -bm 1 -blendu off -blendv on -cc on -mm 0 1 -imfchan r "
+               "-texres 512 -type sphere mo.ppm   # the diffuse map\n"
+               "newmtl loud\nmap_Kd -s 2 2 1 -o 0.5 0 -clamp on -mm 0.1 0.9 -t 0 0 0 mo.ppm\n");
+    write_text("mo.obj", "mtllib mo.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl quiet\nf 1 2 3\nusemtl loud\nf 1 2 3\n");
+    rp_scene_data s;
+    warnings w;
+    if (!load("mo.obj", &s, &w)) return;
+    CHECK(s.texture_count == 1 && s.triangle_count == 2);
+    if (s.triangle_count == 2) CHECK(tri_material(&s, 0)->map_kd == 0 && tri_material(&s, 1)->map_kd == 0);
+    CHECKF(w.count == 4, "%d warnings:\n%s", w.count, w.text);
+    CHECKF(strstr(w.text, "mo.mtl:4: warning: map_Kd option '-s 2 2 1' is not applied") != NULL, "%s", w.text);
+    CHECKF(strstr(w.text, "option '-o 0.5 0'") != NULL && strstr(w.text, "option '-clamp on'") != NULL &&
+               strstr(w.text, "option '-mm 0.1 0.9'") != NULL,
+           "%s", w.text);
+    rp_scene_data_free(&s);
+}
+
 /* ---- PLY --------------------------------------------------------------------------------------- */
 
 /* A `tristrips` element (Stanford's scans, VCG): strips of vertex_indices, -1 restarting one, the
@@ -374,6 +397,7 @@ int main(void) {
     test_obj_names();
     test_obj_continued();
     test_mtl_values();
+    test_mtl_map_options();
     test_ply_strips();
     test_tga_bmp();
     return RP_TEST_END();

@@ -196,25 +196,36 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
         } else if ((kw == 6 && strncmp(p, "map_Kd", 6) == 0) || (kw == 6 && strncmp(p, "map_Pr", 6) == 0) ||
                    (kw == 6 && strncmp(p, "map_Ke", 6) == 0) ||
                    (kw == 4 && strncmp(p, "norm", 4) == 0)) {
-            /* Options (-s 1 1 1, -clamp on, ...) come before the file name; the name is the rest. */
+            /* Options (-s 1 1 1, -clamp on, ...) come before the file name; the name is the rest.
+             * Those that would change the image (a scaled, offset or clamped texture, -mm's range)
+             * are not applied: a warning says so, where they are not their defaults. */
             const char *r = skip_blank(q);
             while (*r == '-') {
                 const char *o = r;
                 while (!is_delim(*r)) r++;
-                int args = (strncmp(o, "-s ", 3) == 0 || strncmp(o, "-o ", 3) == 0 || strncmp(o, "-t ", 3) == 0) ? 3
-                           : strncmp(o, "-mm ", 4) == 0                                                        ? 2
-                                                                                                                : 1;
+                bool xyz = word_is(o, "-s") || word_is(o, "-o") || word_is(o, "-t"), mm = word_is(o, "-mm");
+                int args = xyz ? 3 : mm ? 2 : 1;
+                float def = word_is(o, "-s") ? 1.0f : 0.0f;
+                bool changes = false;
                 for (int k = 0; k < args; k++) {
                     r = skip_blank(r);
-                    float dummy;
-                    const char *e = io_parse_float(r, &dummy);
+                    float v;
+                    const char *e = io_parse_float(r, &v);
                     if (k > 0 && (!e || !is_delim(*e))) break; /* -s may give fewer than 3 */
+                    if (e && is_delim(*e) && (xyz || mm)) changes |= v != (mm ? (float)k : def);
+                    if (word_is(o, "-clamp")) changes = word_is(r, "on");
                     while (!is_delim(*r)) r++;
+                }
+                if (changes) {
+                    const char *e = r;
+                    while (e > o && (e[-1] == ' ' || e[-1] == '\t')) e--;
+                    io_warning(ctx, f.shown, f.line, "%.*s option '%.*s' is not applied (the texture is mapped without it)",
+                               (int)kw, p, (int)(e - o), o);
                 }
                 r = skip_blank(r);
             }
             char name[IO_PATH_MAX], full[IO_PATH_MAX];
-            rest_of_line(r, name, sizeof name);
+            name_of_line(r, name, sizeof name);
             if (!name[0]) return io_error(ctx, f.shown, f.line, "%.*s without a file name", (int)kw, p);
             for (char *c = name; *c; c++)
                 if (*c == '\\') *c = '/';

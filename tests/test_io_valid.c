@@ -317,6 +317,31 @@ static void test_ply_strips(void) {
     }
 }
 
+/* Elements in any order (the PLY spec's): faces and strips before the vertices, an element of
+ * another name between; the triangles the usual order gives. */
+static void test_ply_order(void) {
+    write_text("order.ply",
+               "ply\nformat ascii 1.0\n"
+               "element face 1\nproperty list uchar int vertex_indices\n"
+               "element junk 2\nproperty float a\n"
+               "element tristrips 1\nproperty list int int vertex_indices\n"
+               "element vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+               "end_header\n"
+               "4 0 1 2 3\n"
+               "7\n8\n"
+               "4 0 1 3 2\n"
+               "0 0 0\n1 0 0\n1 1 0\n0 1 0\n");
+    rp_scene_data s;
+    warnings w;
+    if (!load("order.ply", &s, &w)) return;
+    CHECKF(s.triangle_count == 4 && s.vertex_count == 4, "%zu triangles", s.triangle_count);
+    if (s.triangle_count == 4) {
+        static const uint32_t want[12] = {0, 1, 2, 0, 2, 3, 0, 1, 3, 3, 1, 2};
+        CHECK(memcmp(s.indices, want, sizeof want) == 0);
+    }
+    rp_scene_data_free(&s);
+}
+
 /* ---- textures ----------------------------------------------------------------------------------- */
 
 /* TGA (uncompressed and RLE, bottom-up and top-down) and BMP (24-bit, bottom-up, padded rows) as
@@ -399,6 +424,7 @@ int main(void) {
     test_mtl_values();
     test_mtl_map_options();
     test_ply_strips();
+    test_ply_order();
     test_tga_bmp();
     return RP_TEST_END();
 }

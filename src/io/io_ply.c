@@ -795,16 +795,37 @@ bool ply_load(io_ctx *ctx, const char *path) {
     }
     f.p = body, f.line = body_line, f.has_normals = f.has_uv = false;
     bool vertices_seen = false;
+    /* Elements may come in any order: faces (or strips) before the vertices are read past and
+     * come back once the vertices are in (where they start, and on which line). */
+    const char *early_p[2] = {NULL, NULL};
+    uint32_t early_line[2] = {0, 0};
+    size_t early_el[2] = {0, 0}, early_n = 0;
     for (size_t i = 0; ok && i < f.elem_n; i++) {
         const ply_elem *el = &f.elems[i];
+        bool faces = strcmp(el->name, "face") == 0 && el->face_list >= 0;
+        bool strips = strcmp(el->name, "tristrips") == 0 && el->face_list >= 0;
         if (strcmp(el->name, "vertex") == 0 && !vertices_seen) {
             ok = ply_read_vertices(&f, el);
             vertices_seen = true;
-        } else if (strcmp(el->name, "face") == 0 && el->face_list >= 0) {
+            for (size_t k = 0; ok && k < early_n; k++) {
+                const char *here = f.p;
+                uint32_t line = f.line;
+                const ply_elem *fe = &f.elems[early_el[k]];
+                f.p = early_p[k], f.line = early_line[k];
+                ok = strcmp(fe->name, "face") == 0 ? ply_read_faces(&f, fe, true) : ply_read_strips(&f, fe, true);
+                f.p = here, f.line = line;
+            }
+        } else if (faces && vertices_seen) {
             ok = ply_read_faces(&f, el, vertices_seen);
-        } else if (strcmp(el->name, "tristrips") == 0 && el->face_list >= 0) {
+        } else if (strips && vertices_seen) {
             ok = ply_read_strips(&f, el, vertices_seen);
         } else {
+            if ((faces || strips) && early_n < 2) {
+                early_p[early_n] = f.p, early_line[early_n] = f.line, early_el[early_n++] = i;
+            } else if (faces || strips) {
+                ok = io_error(ctx, f.shown, el->line, "more than two face elements before the vertex element");
+                break;
+            }
             for (uint64_t k = 0; ok && k < el->count; k++)
                 for (size_t j = 0; ok && j < el->prop_n; j++) {
                     double v;

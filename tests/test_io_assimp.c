@@ -287,6 +287,44 @@ static void expect_fail(const char *name, const char *needle) {
     CHECK(s.triangle_count == 0 && s.positions == NULL);
 }
 
+/* What a glTF holds that raypack has no kind for is left out with a warning: an orthographic camera
+ * (the scene is then framed); its point, spot and directional lights load without one. */
+static void collect_warning(void *user, const char *message) {
+    char *text = user;
+    size_t n = strlen(text);
+    snprintf(text + n, 2048 - n, "%s\n", message);
+}
+
+static void test_unsupported_warnings(void) {
+    write_text("unsupported.gltf",
+               "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_lights_punctual\"],\n"
+               "\"extensions\":{\"KHR_lights_punctual\":{\"lights\":[{\"type\":\"directional\",\"intensity\":3},\n"
+               "  {\"type\":\"spot\",\"intensity\":5,\"spot\":{}},{\"type\":\"point\",\"intensity\":2}]}},\n"
+               "\"scene\":0,\"scenes\":[{\"nodes\":[0,1,2,3,4]}],\n"
+               "\"nodes\":[{\"mesh\":0},{\"name\":\"ortho\",\"camera\":0,\"translation\":[0,0,5]},\n"
+               "  {\"name\":\"sun\",\"extensions\":{\"KHR_lights_punctual\":{\"light\":0}}},\n"
+               "  {\"name\":\"spot\",\"extensions\":{\"KHR_lights_punctual\":{\"light\":1}}},\n"
+               "  {\"name\":\"bulb\",\"translation\":[0,0,3],\"extensions\":{\"KHR_lights_punctual\":{\"light\":2}}}],\n"
+               "\"cameras\":[{\"type\":\"orthographic\",\"orthographic\":{\"xmag\":2,\"ymag\":2,\"znear\":0.1,\"zfar\":100}}],\n"
+               "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],\n"
+               "\"buffers\":[{\"uri\":\"data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA\",\"byteLength\":36}],\n"
+               "\"bufferViews\":[{\"buffer\":0,\"byteLength\":36}],\n"
+               "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\",\"min\":[0,0,0],\"max\":[1,1,0]}]}\n");
+    char path[1024], err[1024] = "", warnings[2048] = "";
+    rp_scene_data s;
+    rp_scene_load_desc d;
+    rp_scene_load_desc_defaults(&d);
+    d.warning = collect_warning;
+    d.warning_user = warnings;
+    bool ok = rp_scene_data_load_ex(tmp_path("unsupported.gltf", path, sizeof path), &d, &s, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (!ok) return;
+    CHECK(s.triangle_count == 1 && s.light_count == 3 && !s.camera.valid); /* spot and sun are read */
+    CHECKF(strstr(warnings, "unsupported.gltf:0: warning: camera 'ortho': orthographic") != NULL, "%s", warnings);
+    CHECKF(strstr(warnings, "light") == NULL, "%s", warnings);
+    rp_scene_data_free(&s);
+}
+
 static void test_errors(void) {
     expect_fail("absent.gltf", NULL);
     write_text("broken.gltf", "{ \"asset\": { \"version\": \"2.0\" }, \"meshes\": [ {");
@@ -522,6 +560,7 @@ int main(void) {
     test_collada();
     test_gltf_lights();
     test_gltf_glass();
+    test_unsupported_warnings();
     test_errors();
     test_shared();
     return RP_TEST_END();

@@ -3,10 +3,10 @@
  *
  * The node hierarchy is flattened: every mesh a node names is appended once per node, its
  * positions and normals taken through the node's world transform (raypack has no instancing to map
- * nodes onto yet). Cameras become the pinhole camera of DESIGN.md, point lights (glTF
- * KHR_lights_punctual, and other formats' point lights) rp_light_data points; spot and directional
- * lights have no rp_light_data kind and are skipped. Materials: see material_from_assimp. assimp
- * reads from the disk itself (external .bin buffers and images), so these formats load neither
+ * nodes onto yet). Cameras become the pinhole camera of DESIGN.md (an orthographic one is left out
+ * with a warning), point, spot and directional lights (glTF KHR_lights_punctual, and other formats'
+ * lights) rp_light_data's (area and ambient lights are left out with a warning). Materials: see
+ * material_from_assimp. assimp reads from the disk itself (external .bin buffers and images), so these formats load neither
  * gzip'd nor from inside a tar archive. */
 #include <inttypes.h>
 #include <math.h>
@@ -419,6 +419,9 @@ static void add_camera(load_state *s, const struct aiCamera *cam, const mat4 *t,
     c->fov_deg = (float)fov;
     c->valid = fov > 0.0 && fov < 180.0 && isfinite(fov);
     s->have_camera = c->valid;
+    if (!c->valid)
+        io_warning(s->ctx, s->path, 0, "camera '%s': %s; the camera is left out", cam->mName.data,
+                   cam->mOrthographicWidth > 0.0f ? "orthographic (raypack's cameras are pinhole)" : "no usable field of view");
 }
 
 /* A direction through the node's transform (its upper 3x3), unit; false when it has none left. */
@@ -436,8 +439,11 @@ static bool xform_direction(const mat4 *t, const struct aiVector3D *v, float out
 
 /* Point, spot and directional lights (glTF's KHR_lights_punctual); area and ambient lights are left out. */
 static bool add_light(load_state *s, const struct aiLight *l, const mat4 *t, bool gltf) {
-    if (l->mType != aiLightSource_POINT && l->mType != aiLightSource_SPOT && l->mType != aiLightSource_DIRECTIONAL)
+    if (l->mType != aiLightSource_POINT && l->mType != aiLightSource_SPOT && l->mType != aiLightSource_DIRECTIONAL) {
+        io_warning(s->ctx, s->path, 0, "light '%s': an area or ambient light, which raypack has no kind for; it is left out",
+                   l->mName.data);
         return true;
+    }
     io_builder *b = &s->ctx->b;
     if (!io_reserve((void **)&b->lights, &b->light_cap, b->light_n + 1, sizeof *b->lights))
         return io_error(s->ctx, s->path, 0, "out of memory");

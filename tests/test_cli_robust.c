@@ -223,6 +223,24 @@ static void test_negative_colours(void) {
     EXPECT("render --env-scale -1,1,1 --integrator path --quiet", 2, "--env-scale expects three numbers >= 0, got '-1,1,1'");
 }
 
+/* The loaders' warnings reach stderr: an OBJ usemtl naming a material no library defines renders
+ * (exit 0) with the default material and a warning naming the file and line, in render, info
+ * and bench alike. */
+static void test_load_warnings(void) {
+    char scene[1200], mtl[1200], args[8192];
+    snprintf(mtl, sizeof mtl, "%s/warn.mtl", tmp);
+    CHECK(write_text(mtl, "newmtl red\nKd 0.8 0.1 0.1\n"));
+    snprintf(scene, sizeof scene, "%s/warn.obj", tmp);
+    CHECK(write_text(scene, "mtllib warn.mtl\nv -1 -1 0\nv 1 -1 0\nv 0 1 0\nusemtl red\nf 1 2 3\nusemtl rde\nf 1 3 2\n"));
+    static const char *const want = "warn.obj:7: warning: usemtl 'rde': no material library read so far defines it";
+    snprintf(args, sizeof args, "render '%s' --width 8 --height 8 -o '%s/warn.png' --quiet", scene, tmp);
+    EXPECT(args, 0, want);
+    snprintf(args, sizeof args, "info '%s'", scene);
+    EXPECT(args, 0, want);
+    snprintf(args, sizeof args, "bench '%s' --width 8 --height 8 --repeats 1 --warmup 0 --threads 1", scene);
+    EXPECT(args, 0, want);
+}
+
 /* An environment map cut short (robust6): a 91-byte HDR header claiming 8000 x 8000 flat pixels
  * rendered, 1.5 GB later, with a black sky; refused. */
 static void test_env_cut_short(void) {
@@ -375,6 +393,7 @@ int main(void) {
     test_bad_env_maps();
     test_devices();
     test_negative_colours();
+    test_load_warnings();
     test_env_cut_short();
     test_env_overflow();
     test_huge_scenes();

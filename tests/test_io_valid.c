@@ -342,6 +342,57 @@ static void test_ply_order(void) {
     rp_scene_data_free(&s);
 }
 
+/* MeshLab's textured PLY: `comment TextureFile NAME` (a name with a blank) and texture coordinates
+ * per face corner (`property list uchar float texcoord`) or per vertex (`s t`); the texture is the
+ * faces' diffuse map. A TextureFile that is not there is a warning, the mesh untextured. */
+static void test_ply_texture(void) {
+    write_text("ply tex.ppm", "P3\n2 1\n255\n255 0 0  0 0 255\n");
+    write_text("wedge.ply",
+               "ply\nformat ascii 1.0\ncomment TextureFile ply tex.ppm\n"
+               "element vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+               "element face 2\nproperty list uchar int vertex_indices\nproperty list uchar float texcoord\nend_header\n"
+               "0 0 0\n1 0 0\n1 1 0\n0 1 0\n"
+               "3 0 1 2 6 0 0 1 0 1 1\n"
+               "4 0 1 2 3 8 0 0 0.5 0 0.5 0.5 0 0.5\n");
+    write_text("vuv.ply",
+               "ply\nformat ascii 1.0\ncomment TextureFile ply tex.ppm\n"
+               "element vertex 3\nproperty float x\nproperty float y\nproperty float z\nproperty float s\nproperty float t\n"
+               "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+               "0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 1\n3 0 1 2\n");
+    write_text("notex.ply",
+               "ply\nformat ascii 1.0\ncomment TextureFile absent.png\n"
+               "element vertex 3\nproperty float x\nproperty float y\nproperty float z\nproperty float s\nproperty float t\n"
+               "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+               "0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 1\n3 0 1 2\n");
+    rp_scene_data s;
+    warnings w;
+    if (load("wedge.ply", &s, &w)) {
+        CHECK(s.triangle_count == 3 && s.texture_count == 1 && s.material_count == 1 && s.texcoord_indices);
+        if (s.triangle_count == 3 && s.texcoord_indices && s.material_count == 1) {
+            CHECK(s.materials[0].map_kd == 0 && s.materials[0].kd[0] == 1.0f);
+            /* the quad's corner 2 (vertex 2) has its own (0.5, 0.5), not the triangle's (1, 1) */
+            for (size_t t = 1; t < 3; t++)
+                for (int j = 0; j < 3; j++)
+                    if (s.indices[3 * t + (size_t)j] == 2) {
+                        const float *uv = s.texcoords + 2 * s.texcoord_indices[3 * t + (size_t)j];
+                        CHECKF(uv[0] == 0.5f && uv[1] == 0.5f, "%g %g", (double)uv[0], (double)uv[1]);
+                    }
+            const float *uv = s.texcoords + 2 * s.texcoord_indices[2];
+            CHECK(uv[0] == 1.0f && uv[1] == 1.0f);
+        }
+        rp_scene_data_free(&s);
+    }
+    if (load("vuv.ply", &s, &w)) {
+        CHECK(s.texture_count == 1 && s.material_count == 1 && s.materials[0].map_kd == 0);
+        rp_scene_data_free(&s);
+    }
+    if (load("notex.ply", &s, &w)) {
+        CHECK(s.texture_count == 0 && s.material_count == 1 && s.materials[0].map_kd == -1);
+        CHECKF(w.count == 1 && strstr(w.text, "notex.ply:3: warning: TextureFile 'absent.png' not found"), "%s", w.text);
+        rp_scene_data_free(&s);
+    }
+}
+
 /* ---- textures ----------------------------------------------------------------------------------- */
 
 /* TGA (uncompressed and RLE, bottom-up and top-down) and BMP (24-bit, bottom-up, padded rows) as
@@ -425,6 +476,7 @@ int main(void) {
     test_mtl_map_options();
     test_ply_strips();
     test_ply_order();
+    test_ply_texture();
     test_tga_bmp();
     return RP_TEST_END();
 }

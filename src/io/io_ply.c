@@ -37,6 +37,7 @@ typedef struct ply_elem {
     ply_prop *props;
     size_t prop_n, prop_cap;
     int face_list; /* index of the vertex index list in a face element, -1 if none */
+    int face_uv;   /* index of a face's per-corner texture coordinates (MeshLab's texcoord list), -1 if none */
 } ply_elem;
 
 typedef struct ply_file {
@@ -48,8 +49,13 @@ typedef struct ply_file {
     const char *p, *end;
     uint32_t line;
     uint64_t vertex_count;
-    size_t vertex_base;
+    size_t vertex_base, nrm_base, uv_base; /* where the vertex element's first position, normal, uv went */
     bool has_normals, has_uv;
+    char texture[256]; /* MeshLab's `comment TextureFile NAME`, "" when none */
+    uint32_t texture_line;
+    uint32_t material; /* the faces': textured when the texture loaded, else the default */
+    float *wedge;      /* a face's corner texture coordinates (scratch) */
+    size_t wedge_cap;
 } ply_file;
 
 static size_t ply_size(ply_type t) {
@@ -119,9 +125,19 @@ static bool ply_read_header(ply_file *f) {
     bool have_format = false;
     for (f->line = 2;; f->line++) {
         if (f->p >= f->end) return io_error(ctx, f->shown, f->line, "header ends without end_header");
+        const char *line_start = f->p;
         int n = ply_header_words(f, w);
         if (n == 0) continue;
         if (strcmp(w[0], "end_header") == 0) break;
+        if (n >= 3 && strcmp(w[0], "comment") == 0 && strcmp(w[1], "TextureFile") == 0 && !f->texture[0]) {
+            /* MeshLab's texture for the texture coordinates: the rest of the line (blanks allowed) */
+            const char *a = strstr(line_start, "TextureFile") + 11, *e = f->p;
+            while (io_is_space(*a)) a++;
+            while (e > a && (io_is_space(e[-1]) || e[-1] == '\n')) e--;
+            snprintf(f->texture, sizeof f->texture, "%.*s", (int)(e - a), a);
+            f->texture_line = f->line;
+            continue;
+        }
         if (strcmp(w[0], "comment") == 0 || strcmp(w[0], "obj_info") == 0) continue;
         if (strcmp(w[0], "format") == 0) {
             if (n < 2) return io_error(ctx, f->shown, f->line, "format line without a format");
@@ -143,6 +159,7 @@ static bool ply_read_header(ply_file *f) {
             el->count = (uint64_t)count;
             el->line = f->line;
             el->face_list = -1;
+            el->face_uv = -1;
         } else if (strcmp(w[0], "property") == 0) {
             if (f->elem_n == 0) return io_error(ctx, f->shown, f->line, "property before any element");
             ply_elem *el = &f->elems[f->elem_n - 1];
@@ -167,6 +184,9 @@ static bool ply_read_header(ply_file *f) {
                 el->face_list < 0 &&
                 (strcmp(name, "vertex_indices") == 0 || strcmp(name, "vertex_index") == 0))
                 el->face_list = (int)el->prop_n;
+            if (strcmp(el->name, "face") == 0 && pr.count_type != PLY_NONE && el->face_uv < 0 &&
+                (pr.type == PLY_F32 || pr.type == PLY_F64) && strcmp(name, "texcoord") == 0)
+                el->face_uv = (int)el->prop_n;
             if (!io_reserve((void **)&el->props, &el->prop_cap, el->prop_n + 1, sizeof(ply_prop)))
                 return io_error(ctx, f->shown, f->line, "out of memory");
             el->props[el->prop_n++] = pr;
@@ -389,6 +409,8 @@ static bool ply_read_vertices(ply_file *f, const ply_elem *el) {
         if (f->has_uv) memcpy(b->uv + 2 * b->uv_n++, uv, sizeof uv);
     }
     f->vertex_count = el->count;
+    f->nrm_base = b->nrm_n - (f->has_normals ? (size_t)el->count : 0);
+    f->uv_base = b->uv_n - (f->has_uv ? (size_t)el->count : 0);
     return true;
 }
 
@@ -405,68 +427,91 @@ static void ply_triangulate(const float *pos, const uint32_t *s, uint32_t n, uin
 
 /* PLY normals and coordinates are per vertex: a corner's indices are its vertex's. */
 static void ply_corner_indices(const ply_file *f, const uint32_t v[3], uint32_t nn[3], uint32_t tt[3]) {
-    const io_builder *b = &f->ctx->b;
     for (int j = 0; j < 3; j++) {
-        nn[j] = (uint32_t)(v[j] - f->vertex_base + (b->nrm_n - f->vertex_count));
-        tt[j] = (uint32_t)(v[j] - f->vertex_base + (b->uv_n - f->vertex_count));
+        nn[j] = (uint32_t)(v[j] - f->vertex_base + f->nrm_base);
+        tt[j] = (uint32_t)(v[j] - f->vertex_base + f->uv_base);
     }
 }
 
+/* A face element: each face's vertex index list (and MeshLab's per-corner `texcoord` list, 2 floats a
+ * corner, which then replaces the vertices' coordinates) triangulated into the scene. */
 static bool ply_read_faces(ply_file *f, const ply_elem *el, bool vertices_seen) {
     io_ctx *ctx = f->ctx;
     io_builder *b = &ctx->b;
-    uint32_t material = builder_default_material(ctx);
-    if (material == IO_NONE) return io_error(ctx, f->shown, el->line, "out of memory");
+    uint32_t material = f->material;
     if (!vertices_seen) return io_error(ctx, f->shown, el->line, "face element before the vertex element");
     for (uint64_t k = 0; k < el->count; k++) {
         ply_sync_line(f);
         uint32_t line = f->line;
+        uint64_t n = 0, wedges = 0;
+        uint32_t *s = NULL;
         for (size_t i = 0; i < el->prop_n; i++) {
             const ply_prop *pr = &el->props[i];
+            double v;
+            if ((int)i == el->face_uv) {
+                if (!ply_read_list_count(f, pr, &wedges)) return false;
+                if (!io_reserve((void **)&f->wedge, &f->wedge_cap, (size_t)wedges + 1, sizeof(float)))
+                    return io_error(ctx, f->shown, line, "out of memory");
+                for (uint64_t j = 0; j < wedges; j++) {
+                    if (!ply_value(f, pr->type, &v)) return false;
+                    f->wedge[j] = (float)v;
+                    if (!isfinite(f->wedge[j]))
+                        return io_error(ctx, f->shown, line, "face %llu: texture coordinate %g is not finite", (unsigned long long)k, v);
+                }
+                continue;
+            }
             if ((int)i != el->face_list) {
-                double v;
                 if (pr->count_type != PLY_NONE ? !ply_skip_list(f, pr) : !ply_value(f, pr->type, &v)) return false;
                 continue;
             }
-            uint64_t n = 0;
             if (!ply_read_list_count(f, pr, &n)) return false;
             if (n < 3)
                 return io_error(ctx, f->shown, line, "face %llu has %llu vertices (at least 3 needed)",
                                 (unsigned long long)k, (unsigned long long)n);
-            uint32_t *s = io_scratch_u(ctx, 5 * n);
-            if (!s) return io_error(ctx, f->shown, line, "out of memory");
+            if (!(s = io_scratch_u(ctx, 5 * n))) return io_error(ctx, f->shown, line, "out of memory");
             for (uint64_t j = 0; j < n; j++) {
-                double v;
                 if (!ply_value(f, pr->type, &v)) return false;
                 if (v < 0 || v >= (double)f->vertex_count || v != floor(v))
                     return io_error(ctx, f->shown, line, "face %llu: vertex index %.0f out of range (%llu vertices)",
                                     (unsigned long long)k, v, (unsigned long long)f->vertex_count);
                 s[j] = (uint32_t)(f->vertex_base + (size_t)v);
             }
-            uint32_t *tris = s + n;
-            float *pts = n == 3 ? NULL : io_scratch_f(ctx, 3 * n);
-            if (n > 3 && !pts) return io_error(ctx, f->shown, line, "out of memory");
-            ply_triangulate(b->pos, s, (uint32_t)n, tris, tris + 3 * (n - 2), pts);
-            for (uint64_t t = 0; t < n - 2; t++) {
-                uint32_t v[3] = {s[tris[3 * t]], s[tris[3 * t + 1]], s[tris[3 * t + 2]]};
-                uint32_t nn[3], tt[3];
-                ply_corner_indices(f, v, nn, tt);
-                if (!builder_add_triangle(ctx, v, f->has_normals ? nn : NULL, f->has_uv ? tt : NULL, material))
-                    return io_error(ctx, f->shown, line, "out of memory");
-            }
+        }
+        if (!s) continue; /* no vertex list in this record */
+        if (el->face_uv >= 0 && wedges != 2 * n)
+            return io_error(ctx, f->shown, line, "face %llu: %llu texture coordinates for %llu corners (2 a corner expected)",
+                            (unsigned long long)k, (unsigned long long)wedges, (unsigned long long)n);
+        size_t uv0 = b->uv_n;
+        if (el->face_uv >= 0) {
+            if (b->uv_n + n >= UINT32_MAX || !builder_reserve_texcoords(ctx, (size_t)n))
+                return io_error(ctx, f->shown, line, "out of memory");
+            memcpy(b->uv + 2 * b->uv_n, f->wedge, 2 * sizeof(float) * (size_t)n);
+            b->uv_n += (size_t)n;
+        }
+        uint32_t *tris = s + n;
+        float *pts = n == 3 ? NULL : io_scratch_f(ctx, 3 * n);
+        if (n > 3 && !pts) return io_error(ctx, f->shown, line, "out of memory");
+        ply_triangulate(b->pos, s, (uint32_t)n, tris, tris + 3 * (n - 2), pts);
+        for (uint64_t t = 0; t < n - 2; t++) {
+            uint32_t v[3] = {s[tris[3 * t]], s[tris[3 * t + 1]], s[tris[3 * t + 2]]};
+            uint32_t nn[3], tt[3];
+            ply_corner_indices(f, v, nn, tt);
+            if (el->face_uv >= 0)
+                for (int j = 0; j < 3; j++) tt[j] = (uint32_t)(uv0 + tris[3 * t + (uint64_t)j]);
+            bool uv = f->has_uv || el->face_uv >= 0;
+            if (!builder_add_triangle(ctx, v, f->has_normals ? nn : NULL, uv ? tt : NULL, material))
+                return io_error(ctx, f->shown, line, "out of memory");
         }
     }
     return true;
 }
-
 
 /* A `tristrips` element (Stanford's and VCG's scans): each list a triangle strip, -1 restarting it;
  * triangle k of a strip is (s[k], s[k+1], s[k+2]), every odd one turned back to the strip's winding.
  * Triangles with a repeated corner (strips stitched together) are left out. */
 static bool ply_read_strips(ply_file *f, const ply_elem *el, bool vertices_seen) {
     io_ctx *ctx = f->ctx;
-    uint32_t material = builder_default_material(ctx);
-    if (material == IO_NONE) return io_error(ctx, f->shown, el->line, "out of memory");
+    uint32_t material = f->material;
     if (!vertices_seen) return io_error(ctx, f->shown, el->line, "tristrips element before the vertex element");
     for (uint64_t k = 0; k < el->count; k++) {
         ply_sync_line(f);
@@ -697,7 +742,7 @@ static bool ply_par_run(ply_par *par) {
         par->chunks[i].t0 = b->tri_n + tris;
         tris += par->chunks[i].tri_n;
     }
-    if (par->face && (par->material = builder_default_material(ctx)) == IO_NONE) return false;
+    par->material = f->material;
     /* from here on the serial reader's result: vertices counted, then the triangles */
     size_t nv = (size_t)par->vert->count;
     b->pos_n += nv;
@@ -724,7 +769,7 @@ static bool ply_par_load(ply_file *f) {
         if (par.vert->props[i].count_type != PLY_NONE) return false;
     if (f->elem_n == 2) {
         par.face = &f->elems[1];
-        if (strcmp(par.face->name, "face") != 0 || par.face->face_list < 0) return false;
+        if (strcmp(par.face->name, "face") != 0 || par.face->face_list < 0 || par.face->face_uv >= 0) return false;
     }
     if (!ply_vertex_uses(f, par.vert)) return false;
     par.n = io_chunk_count(ctx, (size_t)(f->end - f->p));
@@ -771,6 +816,43 @@ static bool ply_check_counts(ply_file *f) {
 static void ply_free(ply_file *f) {
     for (size_t i = 0; i < f->elem_n; i++) free(f->elems[i].props);
     free(f->elems);
+    free(f->wedge);
+}
+
+/* The faces' material: MeshLab's `comment TextureFile` as a diffuse texture (white, as MeshLab shows
+ * it) when the file has texture coordinates to map it with; a texture that is not there is a
+ * warning (it is a comment, not part of the format), one that cannot be decoded an error. */
+static bool ply_material(ply_file *f, const char *path) {
+    io_ctx *ctx = f->ctx;
+    bool uvs = false;
+    for (size_t i = 0; i < f->elem_n; i++) {
+        const ply_elem *el = &f->elems[i];
+        uvs |= el->face_uv >= 0;
+        for (size_t j = 0; strcmp(el->name, "vertex") == 0 && j < el->prop_n; j++)
+            uvs |= el->props[j].use == PLY_USE_U || el->props[j].use == PLY_USE_V;
+    }
+    f->material = IO_NONE;
+    if (f->texture[0] && uvs) {
+        char name[256], full[IO_PATH_MAX];
+        snprintf(name, sizeof name, "%s", f->texture);
+        for (char *c = name; *c; c++)
+            if (*c == '\\') *c = '/';
+        vfs_join(&ctx->vfs, path, name, full, sizeof full);
+        if (!vfs_exists(ctx, full)) {
+            io_warning(ctx, f->shown, f->texture_line, "TextureFile '%s' not found; the mesh is left untextured", f->texture);
+        } else {
+            uint32_t t = tex_load(ctx, full, name, f->shown, f->texture_line);
+            if (t == IO_NONE) return false;
+            rp_material_data m;
+            builder_material_defaults(&m, "TextureFile");
+            m.kd[0] = m.kd[1] = m.kd[2] = 1.0f;
+            m.map_kd = (int32_t)t;
+            if ((f->material = builder_add_material(ctx, &m)) == IO_NONE) return io_error(ctx, f->shown, 0, "out of memory");
+        }
+    }
+    if (f->material == IO_NONE && (f->material = builder_default_material(ctx)) == IO_NONE)
+        return io_error(ctx, f->shown, 0, "out of memory");
+    return true;
 }
 
 bool ply_load(io_ctx *ctx, const char *path) {
@@ -784,7 +866,7 @@ bool ply_load(io_ctx *ctx, const char *path) {
     ctx->bytes += buf.size;
     f.p = buf.data;
     f.end = buf.data + buf.size;
-    bool ok = ply_read_header(&f) && ply_check_counts(&f);
+    bool ok = ply_read_header(&f) && ply_check_counts(&f) && ply_material(&f, path);
     const char *body = f.p;
     uint32_t body_line = f.line;
     if (ok && ply_par_load(&f)) {

@@ -278,6 +278,33 @@ static void test_mtl_map_options(void) {
     rp_scene_data_free(&s);
 }
 
+/* A texture named by the exporter's absolute path (Windows or Unix) that is not there is found by
+ * its file name beside the MTL file (Blender's importer does so), with a warning; a path that is
+ * there is used as it is, quietly. */
+static void test_mtl_texture_paths(void) {
+    write_text("tp.ppm", "P3\n1 1\n255\n1 2 3\n");
+    write_text("maps/tp2.ppm", "P3\n1 1\n255\n4 5 6\n");
+    write_text("tp.mtl", "newmtl win\nmap_Kd C:\\Users\\me\\Textures\\tp.ppm\n"
+                         "newmtl unix\nmap_Kd /home/me/textures/tp.ppm\n"
+                         "newmtl here\nmap_Kd maps\\tp2.ppm\n");
+    write_text("tp.obj", "mtllib tp.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl win\nf 1 2 3\nusemtl unix\nf 1 2 3\nusemtl here\nf 1 2 3\n");
+    rp_scene_data s;
+    warnings w;
+    if (!load("tp.obj", &s, &w)) return;
+    CHECKF(s.texture_count == 2, "%zu textures", s.texture_count);
+    if (s.triangle_count == 3 && s.texture_count == 2) {
+        CHECK(tri_material(&s, 0)->map_kd == tri_material(&s, 1)->map_kd);
+        const rp_texture_data *t = &s.textures[tri_material(&s, 0)->map_kd];
+        CHECK(t->rgb[0] == 1 && t->rgb[2] == 3);
+        t = &s.textures[tri_material(&s, 2)->map_kd];
+        CHECK(t->rgb[0] == 4 && t->rgb[2] == 6);
+    }
+    CHECKF(w.count == 2 && strstr(w.text, "tp.mtl:2: warning: texture 'C:/Users/me/Textures/tp.ppm' not found there; using 'tp.ppm'") &&
+               strstr(w.text, "tp.mtl:4: warning: texture '/home/me/textures/tp.ppm'"),
+           "%s", w.text);
+    rp_scene_data_free(&s);
+}
+
 /* ---- PLY --------------------------------------------------------------------------------------- */
 
 /* A `tristrips` element (Stanford's scans, VCG): strips of vertex_indices, -1 restarting one, the
@@ -474,6 +501,7 @@ int main(void) {
     test_obj_continued();
     test_mtl_values();
     test_mtl_map_options();
+    test_mtl_texture_paths();
     test_ply_strips();
     test_ply_order();
     test_ply_texture();

@@ -142,6 +142,21 @@ static bool mtl_color(obj_file *f, const char **pp, float c[3], const char *what
     return true;
 }
 
+/* A texture named by a path that is not there, absolute ("C:/Users/me/wood.png", "/home/me/wood.png":
+ * the exporter's disk) or relative to another folder, is looked for by its file name beside the
+ * MTL file, as Blender's importer does; found there, full becomes that path and a warning says
+ * so. Otherwise full stays, and tex_load reports the path as written. */
+static void mtl_texture_fallback(obj_file *f, const char *mtl, const char *name, char *full, size_t size) {
+    io_ctx *ctx = f->ctx;
+    const char *base = strrchr(name, '/');
+    if (!base || vfs_exists(ctx, full)) return;
+    char near[IO_PATH_MAX];
+    vfs_join(&ctx->vfs, mtl, base + 1, near, sizeof near);
+    if (!vfs_exists(ctx, near)) return;
+    io_warning(ctx, f->shown, f->line, "texture '%s' not found there; using '%s' beside the material library", name, base + 1);
+    snprintf(full, size, "%s", near);
+}
+
 static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io_buf *buf) {
     obj_file f = {.ctx = ctx, .path = path, .line = 1};
     snprintf(f.shown, sizeof f.shown, "%s", shown);
@@ -230,6 +245,7 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
             for (char *c = name; *c; c++)
                 if (*c == '\\') *c = '/';
             vfs_join(&ctx->vfs, path, name, full, sizeof full);
+            mtl_texture_fallback(&f, path, name, full, sizeof full);
             uint32_t t = tex_load(ctx, full, name, f.shown, f.line);
             if (t == IO_NONE) return false;
             if (p[0] == 'n') m->map_normal = (int32_t)t + 1;           /* PBR extension: tangent-space normals */

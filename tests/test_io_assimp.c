@@ -288,7 +288,8 @@ static void expect_fail(const char *name, const char *needle) {
 }
 
 /* What a glTF holds that raypack has no kind for is left out with a warning: an orthographic camera
- * (the scene is then framed); its point, spot and directional lights load without one. */
+ * (the scene is then framed), a base colour texture's KHR_texture_transform; its point, spot and
+ * directional lights load without one. */
 static void collect_warning(void *user, const char *message) {
     char *text = user;
     size_t n = strlen(text);
@@ -296,8 +297,12 @@ static void collect_warning(void *user, const char *message) {
 }
 
 static void test_unsupported_warnings(void) {
-    write_text("unsupported.gltf",
-               "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_lights_punctual\"],\n"
+    char text[4096];
+    snprintf(text, sizeof text,
+               "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_lights_punctual\",\"KHR_texture_transform\"],\n"
+               "\"materials\":[{\"name\":\"tiled\",\"pbrMetallicRoughness\":{\"baseColorTexture\":{\"index\":0,\n"
+               "  \"extensions\":{\"KHR_texture_transform\":{\"scale\":[4,4]}}}}}],\n"
+               "\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"data:image/png;base64,%s\"}],\n"
                "\"extensions\":{\"KHR_lights_punctual\":{\"lights\":[{\"type\":\"directional\",\"intensity\":3},\n"
                "  {\"type\":\"spot\",\"intensity\":5,\"spot\":{}},{\"type\":\"point\",\"intensity\":2}]}},\n"
                "\"scene\":0,\"scenes\":[{\"nodes\":[0,1,2,3,4]}],\n"
@@ -306,10 +311,12 @@ static void test_unsupported_warnings(void) {
                "  {\"name\":\"spot\",\"extensions\":{\"KHR_lights_punctual\":{\"light\":1}}},\n"
                "  {\"name\":\"bulb\",\"translation\":[0,0,3],\"extensions\":{\"KHR_lights_punctual\":{\"light\":2}}}],\n"
                "\"cameras\":[{\"type\":\"orthographic\",\"orthographic\":{\"xmag\":2,\"ymag\":2,\"znear\":0.1,\"zfar\":100}}],\n"
-               "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],\n"
+               "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"material\":0}]}],\n"
                "\"buffers\":[{\"uri\":\"data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA\",\"byteLength\":36}],\n"
                "\"bufferViews\":[{\"buffer\":0,\"byteLength\":36}],\n"
-               "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\",\"min\":[0,0,0],\"max\":[1,1,0]}]}\n");
+               "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\",\"min\":[0,0,0],\"max\":[1,1,0]}]}\n",
+               png_2x2);
+    write_text("unsupported.gltf", text);
     char path[1024], err[1024] = "", warnings[2048] = "";
     rp_scene_data s;
     rp_scene_load_desc d;
@@ -322,6 +329,8 @@ static void test_unsupported_warnings(void) {
     CHECK(s.triangle_count == 1 && s.light_count == 3 && !s.camera.valid); /* spot and sun are read */
     CHECKF(strstr(warnings, "unsupported.gltf:0: warning: camera 'ortho': orthographic") != NULL, "%s", warnings);
     CHECKF(strstr(warnings, "light") == NULL, "%s", warnings);
+    CHECKF(strstr(warnings, "material 'tiled': texture '*0' has a texture transform (KHR_texture_transform)") != NULL, "%s",
+           warnings);
     rp_scene_data_free(&s);
 }
 

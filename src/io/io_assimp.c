@@ -232,6 +232,13 @@ static int32_t material_texture(load_state *s, const struct aiMaterial *am, enum
         return -1;
     io_ctx *ctx = s->ctx;
     const char *tex = name.data;
+    /* glTF's KHR_texture_transform (assimp's UV transform): not applied, so said */
+    float tr[5] = {0, 0, 1, 1, 0}; /* translation, scaling, rotation */
+    unsigned five = 5;
+    if (aiGetMaterialFloatArray(am, AI_MATKEY_UVTRANSFORM(type, 0), tr, &five) == aiReturn_SUCCESS && five == 5 &&
+        (tr[0] != 0.0f || tr[1] != 0.0f || tr[2] != 1.0f || tr[3] != 1.0f || tr[4] != 0.0f))
+        io_warning(ctx, s->path, 0, "material '%s': texture '%s' has a texture transform (KHR_texture_transform), which is not applied",
+                   mat_name, tex);
     if (tex[0] == '*') {
         char *end;
         unsigned long k = strtoul(tex + 1, &end, 10);

@@ -133,11 +133,13 @@ static void test_usemtl_unknown(void) {
 /* ---- OBJ: names of materials and libraries ---------------------------------------------------- */
 
 static void test_obj_names(void) {
-    /* A comment after a name (tinyobjloader reads one word and so drops it), a name with blanks, a
+    /* A comment after a name (tinyobjloader reads one word and so drops it; here the whole name is
+     * looked for first, then without the comment, on either side), a name with blanks, a
      * library whose name has a blank (Blender writes the file's name as it is), a library in a
      * subfolder written with Windows' backslash, and a UTF-8 byte order mark before the first line
      * of the OBJ and of the MTL file. */
-    write_text("nm.mtl", "\xEF\xBB\xBFnewmtl red   # walls\nKd 0.8 0.1 0.1\nnewmtl green paint\nKd 0.1 0.8 0.1\n");
+    write_text("nm.mtl", "\xEF\xBB\xBFnewmtl red   # walls\nKd 0.8 0.1 0.1\nnewmtl green paint\nKd 0.1 0.8 0.1\n"
+                         "newmtl Material #25\nKd 0.25 0 0\nnewmtl Material #26\nKd 0.26 0 0\n");
     write_text("my lib.mtl", "newmtl blue\nKd 0.1 0.1 0.8\n");
     write_text("sub/nm2.mtl", "newmtl grey\nKd 0.5 0.5 0.5\n");
     write_text("nm.obj",
@@ -152,14 +154,20 @@ static void test_obj_names(void) {
                "usemtl blue\t\n"
                "f 1 2 4\n"
                "usemtl grey\n"
-               "f 2 3 4\n");
+               "f 2 3 4\n"
+               "usemtl Material #26\n" /* 3ds Max's names hold " #": the whole name first */
+               "f 1 2 3\n"
+               "usemtl Material #25 # a comment\n"
+               "f 1 2 3\n");
     rp_scene_data s;
     warnings w;
     if (!load("nm.obj", &s, &w)) return;
     CHECKF(w.count == 0, "%s", w.text);
-    CHECK(s.triangle_count == 4 && s.material_count == 4);
-    if (s.triangle_count == 4) {
-        CHECKF(strcmp(tri_material(&s, 0)->name, "red") == 0, "'%s'", tri_material(&s, 0)->name);
+    CHECK(s.triangle_count == 6 && s.material_count == 6);
+    if (s.triangle_count == 6) {
+        CHECKF(strcmp(tri_material(&s, 0)->name, "red   # walls") == 0, "'%s'", tri_material(&s, 0)->name);
+        CHECKF(tri_material(&s, 4)->kd[0] == 0.26f, "Material #26: kd %g", (double)tri_material(&s, 4)->kd[0]);
+        CHECKF(tri_material(&s, 5)->kd[0] == 0.25f, "Material #25: kd %g", (double)tri_material(&s, 5)->kd[0]);
         CHECKF(strcmp(tri_material(&s, 1)->name, "green paint") == 0, "'%s'", tri_material(&s, 1)->name);
         CHECKF(strcmp(tri_material(&s, 2)->name, "blue") == 0, "'%s'", tri_material(&s, 2)->name);
         CHECKF(strcmp(tri_material(&s, 3)->name, "grey") == 0, "'%s'", tri_material(&s, 3)->name);

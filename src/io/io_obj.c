@@ -65,16 +65,17 @@ static const char *rest_of_line(const char *p, char *out, size_t size) {
     return p;
 }
 
-/* A material name (newmtl, usemtl): the rest of the line, blanks inside kept (3ds Max writes
- * them), without a comment that follows it after a blank ("usemtl red  # walls"). */
-static void name_of_line(const char *p, char *out, size_t size) {
-    rest_of_line(p, out, size);
-    for (char *c = out; *c; c++)
-        if (*c == '#' && c > out && (c[-1] == ' ' || c[-1] == '\t')) {
-            while (c > out && (c[-1] == ' ' || c[-1] == '\t')) c--;
+/* Cuts a comment that follows a name after a blank ("usemtl red  # walls", "map_Kd a.png # diffuse")
+ * off s; false when there is none. Names keep their blanks, and a name may hold " #" itself (3ds
+ * Max's "Material #25"), so callers try the whole name first and this one only when that fails. */
+static bool cut_comment(char *s) {
+    for (char *c = s; *c; c++)
+        if (*c == '#' && c > s && (c[-1] == ' ' || c[-1] == '\t')) {
+            while (c > s && (c[-1] == ' ' || c[-1] == '\t')) c--;
             *c = '\0';
-            break;
+            return true;
         }
+    return false;
 }
 
 static bool word_is(const char *p, const char *w) {
@@ -169,7 +170,7 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
         if (word_is(p, "newmtl")) {
             if (!mtl_finish(ctx, &pm)) return io_error(ctx, f.shown, f.line, "out of memory");
             char name[256];
-            name_of_line(p + 6, name, sizeof name);
+            rest_of_line(p + 6, name, sizeof name);
             builder_material_defaults(&pm.m, name);
             pm.m.illum = 2;
             pm.d = 1.0f;
@@ -240,11 +241,12 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
                 r = skip_blank(r);
             }
             char name[IO_PATH_MAX], full[IO_PATH_MAX];
-            name_of_line(r, name, sizeof name);
-            if (!name[0]) return io_error(ctx, f.shown, f.line, "%.*s without a file name", (int)kw, p);
+            rest_of_line(r, name, sizeof name);
             for (char *c = name; *c; c++)
                 if (*c == '\\') *c = '/';
             vfs_join(&ctx->vfs, path, name, full, sizeof full);
+            if (!vfs_exists(ctx, full) && cut_comment(name)) vfs_join(&ctx->vfs, path, name, full, sizeof full);
+            if (!name[0]) return io_error(ctx, f.shown, f.line, "%.*s without a file name", (int)kw, p);
             mtl_texture_fallback(&f, path, name, full, sizeof full);
             uint32_t t = tex_load(ctx, full, name, f.shown, f.line);
             if (t == IO_NONE) return false;
@@ -382,8 +384,9 @@ static bool obj_read_mtl(obj_file *f, char *rel) {
 static bool obj_mtllib(obj_file *f, const char *p) {
     io_ctx *ctx = f->ctx;
     char rel[IO_PATH_MAX], full[IO_PATH_MAX];
-    name_of_line(p, rel, sizeof rel);
-    if (strpbrk(rel, " \t")) {
+    rest_of_line(p, rel, sizeof rel);
+    for (int pass = 0; pass < 2 && strpbrk(rel, " \t"); pass++) { /* the whole line, then without a comment */
+        if (pass && !cut_comment(rel)) break;
         char tmp[IO_PATH_MAX];
         snprintf(tmp, sizeof tmp, "%s", rel);
         for (char *c = tmp; *c; c++)
@@ -404,7 +407,16 @@ static bool obj_mtllib(obj_file *f, const char *p) {
 /* The material a usemtl line names; IO_NONE (the default material) with a warning when no
  * library read so far defines it, as tinyobjloader does. */
 static uint32_t obj_use_material(obj_file *f, size_t first, const char *name, uint32_t line) {
-    uint32_t m = obj_find_material(f->ctx, first, name);
+    io_ctx *ctx = f->ctx;
+    uint32_t m = obj_find_material(ctx, first, name);
+    /* not found: the names without a comment after them ("usemtl red # walls", "newmtl red # paint") */
+    char cut[256], other[sizeof ctx->b.materials[0].name];
+    snprintf(cut, sizeof cut, "%s", name);
+    if (m == IO_NONE && cut_comment(cut)) m = obj_find_material(ctx, first, cut);
+    for (size_t i = first; m == IO_NONE && i < ctx->b.material_n; i++) {
+        snprintf(other, sizeof other, "%s", ctx->b.materials[i].name);
+        if (cut_comment(other) && strcmp(other, cut) == 0) m = (uint32_t)i;
+    }
     if (m == IO_NONE)
         io_warning(f->ctx, f->shown, line, "usemtl '%s': no material library read so far defines it; the default material is used",
                    name);
@@ -593,7 +605,7 @@ static void obj_chunk_task(void *user, uint32_t index) {
                 obj_usemtl *u = &c->mtls[c->mtl_n++];
                 u->face = c->face_n;
                 u->line = line;
-                name_of_line(s + 6, u->name, sizeof u->name);
+                rest_of_line(s + 6, u->name, sizeof u->name);
             } else {
                 c->oom = true;
             }
@@ -781,7 +793,7 @@ static bool obj_statement(obj_file *f, const char *p, uint32_t *material, size_t
         b->uv_n++;
     } else if (word_is(p, "usemtl")) {
         char name[256];
-        name_of_line(p + 6, name, sizeof name);
+        rest_of_line(p + 6, name, sizeof name);
         *material = obj_use_material(f, first_mtl, name, f->line);
     } else if (word_is(p, "mtllib")) {
         ok = obj_mtllib(f, p + 6);

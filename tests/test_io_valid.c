@@ -218,6 +218,13 @@ static void test_obj_continued(void) {
     }
     rp_scene_data_free(&s);
 
+    /* a line of a backslash alone continues into the next statement */
+    write_text("cont_lone.obj", "v 0 0 0\n  \\\nv 1 0 0\nv 1 1 0\nf 1 2 3\n");
+    if (load("cont_lone.obj", &s, &w)) {
+        CHECKF(s.vertex_count == 3 && s.triangle_count == 1, "%zu vertices", s.vertex_count);
+        rp_scene_data_free(&s);
+    }
+
     write_text("cont_bad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 \\\n 3 x\nv 0 0 0\n");
     char path[1024];
     tmp_path("cont_bad.obj", path, sizeof path);

@@ -867,7 +867,8 @@ static bool obj_lines(obj_file *f, const char *p, const char *end, uint32_t *mat
             ok = io_error(ctx, f->shown, f->line, "out of memory");
             break;
         }
-        ok = obj_statement(f, joined, material, first_mtl); /* errors name the statement's first line */
+        const char *js = skip_blank(joined);
+        if (!at_eol(js)) ok = obj_statement(f, js, material, first_mtl); /* errors name the statement's first line */
         free(joined);
         p = last;
         f->line += more;

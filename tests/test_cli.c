@@ -335,5 +335,38 @@ int main(void) {
             free(img[1]);
         }
     }
+    {
+        /* A telephoto view: a quad 2 across and a sphere of radius 1 seen from 36, 361 and 3612
+         * units away, lit by a point light at the eye, so every pixel is lit. The hit point was
+         * org + t dir, off the surface by the float spacing of the far eye, more than the ray
+         * offset: at 361 units 98 of the quad's 1024 pixels and 41 of the sphere's were in their own
+         * shadow (ambient only, 0.08 against 0.9). */
+        for (int k = 0; k < 6; k++) {
+            double dd = k % 3 == 0 ? 30.0 : k % 3 == 1 ? 300.0 : 3000.0;
+            double ex = 0.6 * dd, ey = 0.3 * dd, ez = dd;
+            double fov = 2.0 * atan(0.5 / sqrt(ex * ex + ey * ey + ez * ez)) * 180.0 / 3.14159265358979;
+            snprintf(path, sizeof path, "%s/tele.nff", tmp);
+            FILE *tf = fopen(path, "w");
+            CHECK(tf != NULL);
+            if (!tf) break;
+            fprintf(tf, "v\nfrom %g %g %g\nat 0 0 0\nup 0 1 0\nangle %.9g\nhither 0.001\nresolution 32 32\nb 0 0 0\n"
+                        "l %g %g %g\nf 1 1 1 1 0 0 0 0\n%s",
+                    ex, ey, ez, fov, ex, ey, ez, k < 3 ? "p 4\n-1 -1 0\n1 -1 0\n1 1 0\n-1 1 0\n" : "s 0 0 0 1\n");
+            fclose(tf);
+            snprintf(args, sizeof args, "render '%s' -o '%s/tele.pfm' --quiet", path, tmp);
+            EXPECT(args, 0, "");
+            char tpath[1200], terr[512] = "";
+            snprintf(tpath, sizeof tpath, "%s/tele.pfm", tmp);
+            int tw = 0, th = 0, tc = 0;
+            float *img = rp_image_read_pfm(tpath, &tw, &th, &tc, terr, sizeof terr);
+            CHECKF(img && tw == 32 && th == 32 && tc == 3, "%s", terr);
+            if (!img) continue;
+            int dark = 0;
+            for (int i = 0; i < 32 * 32; i++) dark += img[3 * i] < 0.5f;
+            CHECKF(dark == 0, "the %s seen from %g units away: %d of 1024 pixels in their own shadow",
+                   k < 3 ? "quad" : "sphere", dd * sqrt(1.45), dark);
+            free(img);
+        }
+    }
     return RP_TEST_END();
 }

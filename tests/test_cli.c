@@ -275,17 +275,19 @@ int main(void) {
          * light, on a ground 2 or 2e5 across. B's lit-side pixel is in A's shadow (ambient only) on
          * both grounds; with the scene's offset (2e-5 of 1e5: 2 units) its shadow ray started beyond
          * A on the large ground and the pixel was lit (0.65 against 0.08). */
-        float centre[2] = {0};
-        for (int g = 0; g < 2; g++) {
-            const char *half = g ? "100000" : "1";
+        float centre[3] = {0};
+        for (int g = 0; g < 3; g++) {
+            /* g 2: the small ground's scene moved 1e4 along each axis (below) */
+            double half = g == 1 ? 100000.0 : 1.0, o = g == 2 ? 10000.0 : 0.0;
             snprintf(path, sizeof path, "%s/two_spheres.nff", tmp);
             FILE *nf = fopen(path, "w");
             CHECK(nf != NULL);
             if (!nf) break;
-            fprintf(nf, "v\nfrom 1 0.28 0\nat 0 0.28 0\nup 0 1 0\nangle 10\nhither 0.001\nresolution 32 32\n"
-                        "l 0 5 0\nf 1 1 1 1 0 0 0 0\ns 0 0.5 0 0.1\ns 0 0.2 0 0.1\n"
-                        "p 4\n-%s 0 -%s\n-%s 0 %s\n%s 0 %s\n%s 0 -%s\n",
-                    half, half, half, half, half, half, half, half);
+            fprintf(nf, "v\nfrom %.9g %.9g %.9g\nat %.9g %.9g %.9g\nup 0 1 0\nangle 10\nhither 0.001\nresolution 32 32\n"
+                        "l %.9g %.9g %.9g\nf 1 1 1 1 0 0 0 0\ns %.9g %.9g %.9g 0.1\ns %.9g %.9g %.9g 0.1\n"
+                        "p 4\n%.9g %.9g %.9g\n%.9g %.9g %.9g\n%.9g %.9g %.9g\n%.9g %.9g %.9g\n",
+                    o + 1, o + 0.28, o, o, o + 0.28, o, o, o + 5, o, o, o + 0.5, o, o, o + 0.2, o, o - half, o, o - half,
+                    o - half, o, o + half, o + half, o, o + half, o + half, o, o - half);
             fclose(nf);
             snprintf(args, sizeof args, "render '%s' -o '%s/two.pfm' --quiet", path, tmp);
             EXPECT(args, 0, "");
@@ -300,6 +302,10 @@ int main(void) {
         CHECKF(centre[0] > 0.0f && centre[0] < 0.2f && centre[1] == centre[0],
                "sphere B's shadowed pixel: %g on the small ground, %g on the large one", (double)centre[0],
                (double)centre[1]);
+        /* Far from the origin the offset is the float spacing's (2e-6 of the coordinates), not 2e-5
+         * of them: moved 1e4, the rays started 0.2 off B, beyond A, and the pixel was lit (0.65). */
+        CHECKF(fabsf(centre[2] - centre[0]) < 0.01f, "sphere B's shadowed pixel: %g, moved 1e4 from the origin %g",
+               (double)centre[0], (double)centre[2]);
     }
     {
         /* A ground quad 2e5 across, its diagonal 0.19 under the camera: the packets' cone test made

@@ -221,6 +221,7 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
         if (isfinite(bv[k]) && fabsf(bv[k]) > m) m = fabsf(bv[k]);
     }
     s->scale = m;
+    s->extent = bounds_extent(b);
     if (data->animation) anim_scene_bounds(s); /* the same in the flat and the instanced build */
     if (!light_scene_init(s, &dd, err, err_size)) {
         char msg[600];
@@ -361,7 +362,7 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
     }
     size_t nm = d->material_count > 0 ? d->material_count : 1;
     if (out->material >= nm) out->material = 0;
-    out->eps = ray_offset_at(mag);
+    out->eps = ray_offset_at(s, mag);
 
     ng = v3_normalize(ng);
     if (!(v3_dot(ng, ng) > 0.5f)) ng = v3_neg(dir); /* zero-area or NaN normal */

@@ -275,7 +275,7 @@ int main(void) {
          * light, on a ground 2 or 2e5 across. B's lit-side pixel is in A's shadow (ambient only) on
          * both grounds; with the scene's offset (2e-5 of 1e5: 2 units) its shadow ray started beyond
          * A on the large ground and the pixel was lit (0.65 against 0.08). */
-        float centre[3] = {0};
+        float centre[3] = {0}, stream_centre[2] = {0};
         for (int g = 0; g < 3; g++) {
             /* g 2: the small ground's scene moved 1e4 along each axis (below) */
             double half = g == 1 ? 100000.0 : 1.0, o = g == 2 ? 10000.0 : 0.0;
@@ -298,7 +298,20 @@ int main(void) {
             CHECKF(two && tw == 32 && th == 32 && tc == 3, "%s", err2);
             if (two) centre[g] = two[(16 * 32 + 16) * 3];
             free(two);
+            if (g == 2) continue;
+            /* the stream tracer's shadow shading too (it took the scene's offset: 0.52, lit) */
+            snprintf(path, sizeof path, "%s/two_spheres.nff", tmp);
+            snprintf(args, sizeof args, "render '%s' --engine stream --shading shadow -o '%s/two.pfm' --quiet", path, tmp);
+            EXPECT(args, 0, "");
+            snprintf(path, sizeof path, "%s/two.pfm", tmp);
+            two = rp_image_read_pfm(path, &tw, &th, &tc, err2, sizeof err2);
+            CHECKF(two && tw == 32 && th == 32 && tc == 3, "%s", err2);
+            if (two) stream_centre[g] = two[(16 * 32 + 16) * 3];
+            free(two);
         }
+        CHECKF(stream_centre[0] > 0.0f && stream_centre[0] < 0.2f && stream_centre[1] == stream_centre[0],
+               "--engine stream --shading shadow: sphere B's shadowed pixel: %g on the small ground, %g on the large one",
+               (double)stream_centre[0], (double)stream_centre[1]);
         CHECKF(centre[0] > 0.0f && centre[0] < 0.2f && centre[1] == centre[0],
                "sphere B's shadowed pixel: %g on the small ground, %g on the large one", (double)centre[0],
                (double)centre[1]);

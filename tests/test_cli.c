@@ -275,17 +275,19 @@ int main(void) {
          * light, on a ground 2 or 2e5 across. B's lit-side pixel is in A's shadow (ambient only) on
          * both grounds; with the scene's offset (2e-5 of 1e5: 2 units) its shadow ray started beyond
          * A on the large ground and the pixel was lit (0.65 against 0.08). */
-        float centre[2] = {0};
-        for (int g = 0; g < 2; g++) {
-            const char *half = g ? "100000" : "1";
+        float centre[3] = {0}, stream_centre[2] = {0};
+        for (int g = 0; g < 3; g++) {
+            /* g 2: the small ground's scene moved 1e4 along each axis (below) */
+            double half = g == 1 ? 100000.0 : 1.0, o = g == 2 ? 10000.0 : 0.0;
             snprintf(path, sizeof path, "%s/two_spheres.nff", tmp);
             FILE *nf = fopen(path, "w");
             CHECK(nf != NULL);
             if (!nf) break;
-            fprintf(nf, "v\nfrom 1 0.28 0\nat 0 0.28 0\nup 0 1 0\nangle 10\nhither 0.001\nresolution 32 32\n"
-                        "l 0 5 0\nf 1 1 1 1 0 0 0 0\ns 0 0.5 0 0.1\ns 0 0.2 0 0.1\n"
-                        "p 4\n-%s 0 -%s\n-%s 0 %s\n%s 0 %s\n%s 0 -%s\n",
-                    half, half, half, half, half, half, half, half);
+            fprintf(nf, "v\nfrom %.9g %.9g %.9g\nat %.9g %.9g %.9g\nup 0 1 0\nangle 10\nhither 0.001\nresolution 32 32\n"
+                        "l %.9g %.9g %.9g\nf 1 1 1 1 0 0 0 0\ns %.9g %.9g %.9g 0.1\ns %.9g %.9g %.9g 0.1\n"
+                        "p 4\n%.9g %.9g %.9g\n%.9g %.9g %.9g\n%.9g %.9g %.9g\n%.9g %.9g %.9g\n",
+                    o + 1, o + 0.28, o, o, o + 0.28, o, o, o + 5, o, o, o + 0.5, o, o, o + 0.2, o, o - half, o, o - half,
+                    o - half, o, o + half, o + half, o, o + half, o + half, o, o - half);
             fclose(nf);
             snprintf(args, sizeof args, "render '%s' -o '%s/two.pfm' --quiet", path, tmp);
             EXPECT(args, 0, "");
@@ -296,10 +298,27 @@ int main(void) {
             CHECKF(two && tw == 32 && th == 32 && tc == 3, "%s", err2);
             if (two) centre[g] = two[(16 * 32 + 16) * 3];
             free(two);
+            if (g == 2) continue;
+            /* the stream tracer's shadow shading too (it took the scene's offset: 0.52, lit) */
+            snprintf(path, sizeof path, "%s/two_spheres.nff", tmp);
+            snprintf(args, sizeof args, "render '%s' --engine stream --shading shadow -o '%s/two.pfm' --quiet", path, tmp);
+            EXPECT(args, 0, "");
+            snprintf(path, sizeof path, "%s/two.pfm", tmp);
+            two = rp_image_read_pfm(path, &tw, &th, &tc, err2, sizeof err2);
+            CHECKF(two && tw == 32 && th == 32 && tc == 3, "%s", err2);
+            if (two) stream_centre[g] = two[(16 * 32 + 16) * 3];
+            free(two);
         }
+        CHECKF(stream_centre[0] > 0.0f && stream_centre[0] < 0.2f && stream_centre[1] == stream_centre[0],
+               "--engine stream --shading shadow: sphere B's shadowed pixel: %g on the small ground, %g on the large one",
+               (double)stream_centre[0], (double)stream_centre[1]);
         CHECKF(centre[0] > 0.0f && centre[0] < 0.2f && centre[1] == centre[0],
                "sphere B's shadowed pixel: %g on the small ground, %g on the large one", (double)centre[0],
                (double)centre[1]);
+        /* Far from the origin the offset is the float spacing's (2e-6 of the coordinates), not 2e-5
+         * of them: moved 1e4, the rays started 0.2 off B, beyond A, and the pixel was lit (0.65). */
+        CHECKF(fabsf(centre[2] - centre[0]) < 0.01f, "sphere B's shadowed pixel: %g, moved 1e4 from the origin %g",
+               (double)centre[0], (double)centre[2]);
     }
     {
         /* A ground quad 2e5 across, its diagonal 0.19 under the camera: the packets' cone test made
@@ -333,6 +352,39 @@ int main(void) {
             CHECKF(differ == 0, "a ground 2e5 across: packets and single rays differ in %zu values", differ);
             free(img[0]);
             free(img[1]);
+        }
+    }
+    {
+        /* A telephoto view: a quad 2 across and a sphere of radius 1 seen from 36, 361 and 3612
+         * units away, lit by a point light at the eye, so every pixel is lit. The hit point was
+         * org + t dir, off the surface by the float spacing of the far eye, more than the ray
+         * offset: at 361 units 98 of the quad's 1024 pixels and 41 of the sphere's were in their own
+         * shadow (ambient only, 0.08 against 0.9). */
+        for (int k = 0; k < 6; k++) {
+            double dd = k % 3 == 0 ? 30.0 : k % 3 == 1 ? 300.0 : 3000.0;
+            double ex = 0.6 * dd, ey = 0.3 * dd, ez = dd;
+            double fov = 2.0 * atan(0.5 / sqrt(ex * ex + ey * ey + ez * ez)) * 180.0 / 3.14159265358979;
+            snprintf(path, sizeof path, "%s/tele.nff", tmp);
+            FILE *tf = fopen(path, "w");
+            CHECK(tf != NULL);
+            if (!tf) break;
+            fprintf(tf, "v\nfrom %g %g %g\nat 0 0 0\nup 0 1 0\nangle %.9g\nhither 0.001\nresolution 32 32\nb 0 0 0\n"
+                        "l %g %g %g\nf 1 1 1 1 0 0 0 0\n%s",
+                    ex, ey, ez, fov, ex, ey, ez, k < 3 ? "p 4\n-1 -1 0\n1 -1 0\n1 1 0\n-1 1 0\n" : "s 0 0 0 1\n");
+            fclose(tf);
+            snprintf(args, sizeof args, "render '%s' -o '%s/tele.pfm' --quiet", path, tmp);
+            EXPECT(args, 0, "");
+            char tpath[1200], terr[512] = "";
+            snprintf(tpath, sizeof tpath, "%s/tele.pfm", tmp);
+            int tw = 0, th = 0, tc = 0;
+            float *img = rp_image_read_pfm(tpath, &tw, &th, &tc, terr, sizeof terr);
+            CHECKF(img && tw == 32 && th == 32 && tc == 3, "%s", terr);
+            if (!img) continue;
+            int dark = 0;
+            for (int i = 0; i < 32 * 32; i++) dark += img[3 * i] < 0.5f;
+            CHECKF(dark == 0, "the %s seen from %g units away: %d of 1024 pixels in their own shadow",
+                   k < 3 ? "quad" : "sphere", dd * sqrt(1.45), dark);
+            free(img);
         }
     }
     return RP_TEST_END();

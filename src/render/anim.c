@@ -83,6 +83,7 @@ void anim_scene_bounds(rp_render_scene *s) {
     for (int k = 0; k < 6; k++)
         if (isfinite(bv[k]) && fabsf(bv[k]) > m) m = fabsf(bv[k]);
     s->scale = m;
+    s->extent = bounds_extent(&s->bounds);
 }
 
 void anim_groups_free(rp_render_scene *s) {

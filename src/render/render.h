@@ -99,6 +99,7 @@ struct rp_render_scene {
     render_cone *cones;            /* data->cone_count */
     rp_bounds bounds;
     float scale;                   /* largest absolute coordinate of the bounds, > 0 */
+    float extent;                  /* largest side of the bounds, at least 1e-3 (bounds_extent) */
     float srgb_to_linear[256];
     /* physically based lights (light.c) */
     rp_light_source *pb_lights;
@@ -225,14 +226,30 @@ void camera_rays_n(const render_camera *c, int bx, int by, int s, uint32_t count
 rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b);
 
 
-/* Distance secondary rays start off the surface, along the geometric normal. */
-static inline float ray_offset(const rp_render_scene *s) { return 2e-5f * s->scale; }
+/* The largest side of a box, at least 1e-3 (1e-3 for an empty or non-finite box). */
+static inline float bounds_extent(const rp_bounds *b) {
+    float e = 1e-3f;
+    const float d[3] = {b->upper_x - b->lower_x, b->upper_y - b->lower_y, b->upper_z - b->lower_z};
+    for (int k = 0; k < 3; k++)
+        if (isfinite(d[k]) && d[k] > e) e = d[k];
+    return e;
+}
 /* The offset of rays leaving a surface point whose float spacing is that of coordinates of size
  * mag: the largest coordinate of the point, of the ray that found it and of its triangle's
  * vertices (scene_surface). It had been the scene's (ray_offset): a bunny on a ground 10^5 times
  * its size started its shadow and bounce rays 2 units off a 0.15-unit bunny, which lost its
- * shadows and grew black blotches. */
-static inline float ray_offset_at(float mag) { return 2e-5f * (mag > 1e-3f ? mag : 1e-3f); }
+ * shadows and grew black blotches. 2e-5 of mag (about 170 float spacings) while mag is within 4
+ * times the scene's extent (scenes around the origin or near it: as before); beyond, the float
+ * spacing and not the scene calls for it: 2e-5 of 4 extents, at least 2e-6 of mag (17-34
+ * spacings). With 2e-5 of mag a Cornell box 2 units tall moved 1e5 from the origin started its
+ * rays 2 units off the walls (a black image, path traced) and a bunny moved 1e4 lost its shadow. */
+static inline float ray_offset_at(const rp_render_scene *s, float mag) {
+    float m = mag > 1e-3f ? mag : 1e-3f, near = m < 4.0f * s->extent ? m : 4.0f * s->extent;
+    return fmaxf(2e-5f * near, 2e-6f * m);
+}
+/* Distance secondary rays start off the surface, along the geometric normal, where the surface is
+ * not known (a light's sampled point, a medium's shadow rays): the scene's largest coordinate's. */
+static inline float ray_offset(const rp_render_scene *s) { return ray_offset_at(s, s->scale); }
 
 /* Deterministic random number in [0,1) from (pixel x, pixel y, sample, dimension). */
 static inline uint32_t render_hash(uint32_t x) {

@@ -225,6 +225,7 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
         if (isfinite(bv[k]) && fabsf(bv[k]) > m) m = fabsf(bv[k]);
     }
     s->scale = m;
+    s->extent = bounds_extent(b);
     if (data->animation) anim_scene_bounds(s); /* the same in the flat and the instanced build */
     if (!light_scene_init(s, &dd, err, err_size)) {
         char msg[600];
@@ -271,28 +272,59 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
     uint32_t geom = hit_in->geom_id, prim = hit_in->prim_id, inst = hit_in->inst_id;
     scene_ids_flat(s, &geom, &prim, &inst);
     v3 dir = v3_make(ray->dir_x, ray->dir_y, ray->dir_z);
-    out->p = v3_madd(v3_make(ray->org_x, ray->org_y, ray->org_z), dir, ray->tfar);
+    v3 org = v3_make(ray->org_x, ray->org_y, ray->org_z);
+    out->p = v3_madd(org, dir, ray->tfar);
     v3 ng = v3_make(hit_in->Ng_x, hit_in->Ng_y, hit_in->Ng_z);
     v3 ns = v3_make(0, 0, 0);
     out->has_uv = false;
     out->uv[0] = out->uv[1] = 0.0f;
     out->dpdu = v3_make(0, 0, 0);
     out->material = 0;
+    const bool tri = geom == s->geom_ids[RENDER_GEOM_TRIANGLES] && prim < d->triangle_count;
+    const bool sphere = !tri && geom == s->geom_ids[RENDER_GEOM_SPHERES] && prim < d->sphere_count;
     /* The float spacing around the point: that of the point, of the ray's origin and of the
      * primitive's coordinates. Where the point or the origin is already within 1/16 of the scene's
      * largest coordinate, the scene's (the offset before session 28, no vertex loads); only hits
      * much nearer the origin than the scene's extent (a small object on a large ground) look at
      * their primitive. */
     float mag = v3_max_abs(out->p);
-    float om = v3_max_abs(v3_make(ray->org_x, ray->org_y, ray->org_z));
+    float om = v3_max_abs(org);
     if (om > mag) mag = om;
     const bool near = mag * 16.0f < s->scale;
     if (!near) mag = s->scale;
-    if (geom == s->geom_ids[RENDER_GEOM_TRIANGLES] && prim < d->triangle_count) {
-        for (int c = 0; near && c < 3; c++) {
+    if (tri && near) {
+        for (int c = 0; c < 3; c++) {
             float vm = v3_max_abs(corner3(d->positions, d->indices, prim, c));
             if (vm > mag) mag = vm;
         }
+    }
+    if (om > mag) {
+        /* A ray from beyond the scene's coordinates (a telephoto view from 100 times the scene's
+         * size away): org + t dir is off the surface by the origin's float spacing, more than an
+         * offset of mag, and shadow rays hit the surface they leave (acne over the whole image).
+         * A triangle's point is rebuilt from its barycentric coordinates and a sphere's put back
+         * on the sphere, so their error is the primitive's own (pbrt-v3 sec. 3.9; Waechter and
+         * Binder, Ray Tracing Gems ch. 6). Animated scenes keep org + t dir and take the origin's
+         * spacing: an instanced block's vertices are in its own frame, and the instanced and the
+         * flat build must give the same image. */
+        bool rebuilt = false;
+        if (!d->animation && tri) {
+            v3 c0 = corner3(d->positions, d->indices, prim, 0), c1 = corner3(d->positions, d->indices, prim, 1),
+               c2 = corner3(d->positions, d->indices, prim, 2);
+            float u = hit_in->u, v = hit_in->v;
+            out->p = v3_add(v3_add(v3_scale(c0, 1.0f - u - v), v3_scale(c1, u)), v3_scale(c2, v));
+            rebuilt = true;
+        } else if (!d->animation && sphere) {
+            const rp_sphere_data *sp = &d->spheres[prim];
+            v3 c = v3_load(sp->center), r = v3_sub(out->p, c);
+            float l = v3_length(r);
+            if (l > 0.0f && isfinite(l)) out->p = v3_madd(c, r, fabsf(sp->radius) / l), rebuilt = true;
+        }
+        float pm = v3_max_abs(out->p);
+        if (!rebuilt) mag = om;
+        else if (pm > mag) mag = pm;
+    }
+    if (tri) {
         float u = hit_in->u, v = hit_in->v;
         float b0 = 1.0f - u - v, b1 = u, b2 = v;
         if (d->normals && d->normal_indices) {
@@ -323,7 +355,7 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
             }
         }
         out->material = mat;
-    } else if (geom == s->geom_ids[RENDER_GEOM_SPHERES] && prim < d->sphere_count) {
+    } else if (sphere) {
         const rp_sphere_data *sp = &d->spheres[prim];
         ng = v3_sub(out->p, v3_load(sp->center));
         float cm = v3_max_abs(v3_load(sp->center)) + fabsf(sp->radius);
@@ -334,7 +366,7 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
     }
     size_t nm = d->material_count > 0 ? d->material_count : 1;
     if (out->material >= nm) out->material = 0;
-    out->eps = ray_offset_at(mag);
+    out->eps = ray_offset_at(s, mag);
 
     ng = v3_normalize(ng);
     if (!(v3_dot(ng, ng) > 0.5f)) ng = v3_neg(dir); /* zero-area or NaN normal */

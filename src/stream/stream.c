@@ -860,7 +860,6 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
         snprintf(err, err_size, "stream: out of memory");
         return false;
     }
-    float eps = 2e-5f * rs->scale;
     for (size_t i = 0; i < n; i++) {
         rp_rayhit rh;
         hit_of(g, &eye, i, &rh);
@@ -888,7 +887,10 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
         render_surface sf;
         scene_surface(rs, &rh.ray, &rh.hit, &sf);
         v3 kd = material_albedo(rs, &rs->materials[sf.material], &sf);
-        v3 org = v3_madd(sf.p, sf.ng, eps), to = v3_sub(light, org);
+        /* the surface's offset (render_surface.eps), as the renderer's shadow rays: the scene's
+         * (2e-5 of its largest coordinate) started a small object's shadow rays beyond its
+         * neighbours on a large ground */
+        v3 org = v3_madd(sf.p, sf.ng, sf.eps), to = v3_sub(light, org);
         float dist = v3_length(to);
         v3 l = dist > 0.0f ? v3_scale(to, 1.0f / dist) : sf.ng;
         float c = v3_dot(sf.ns, l);

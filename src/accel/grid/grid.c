@@ -177,13 +177,15 @@ static grid *build_lists(grid *g, const grid_desc *desc_in) {
     if (g->tri_count + g->prim_count == 0)
         for (int a = 0; a < 3; a++) lo[a] = 0.0, hi[a] = 1.0;
     /* margin: well above the rounding of a hit point's coordinates, so the voxel the DDA is in
-     * when a hit's distance is reached always lists the triangle */
+     * when a hit's distance is reached always lists the triangle: 2^-16 of the scene's extent plus
+     * 2^-20 (16 float spacings) of its largest coordinate. It was 2^-16 of the largest coordinate:
+     * the bunny moved 1e4 from the origin grew every triangle's box by 0.15, the bunny's size, and
+     * listed each in tens of thousands of voxels (a build that did not end in 10 minutes). */
     double big = 0.0, ext[3];
     for (int a = 0; a < 3; a++) big = fmax(big, fmax(fabs(lo[a]), fabs(hi[a])));
-    for (int a = 0; a < 3; a++) big = fmax(big, hi[a] - lo[a]);
-    double margin = big * 0x1p-16 + 1e-30;
     double emax = 0.0;
     for (int a = 0; a < 3; a++) emax = fmax(emax, hi[a] - lo[a]);
+    double margin = emax * 0x1p-16 + big * 0x1p-20 + 1e-30;
     for (int a = 0; a < 3; a++) {
         lo[a] -= margin, hi[a] += margin;
         ext[a] = hi[a] - lo[a];

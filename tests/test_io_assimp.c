@@ -273,6 +273,58 @@ static void test_collada(void) {
     rp_scene_data_free(&s);
 }
 
+/* COLLADA's Phong effect: diffuse, specular 0.3, shininess 40 (the specular colour and shininess
+ * were dropped: a Lambert surface). */
+static const char collada_phong[] =
+    "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n"
+    "<COLLADA xmlns=\"http://www.collada.org/2005/11/COLLADASchema\" version=\"1.4.1\">\n"
+    "  <asset><unit name=\"meter\" meter=\"1\"/><up_axis>Y_UP</up_axis></asset>\n"
+    "  <library_effects>\n"
+    "    <effect id=\"fx\"><profile_COMMON><technique sid=\"common\"><phong>\n"
+    "      <diffuse><color>0.5 0.2 0.1 1</color></diffuse>\n"
+    "      <specular><color>0.3 0.3 0.3 1</color></specular>\n"
+    "      <shininess><float>40</float></shininess>\n"
+    "    </phong></technique></profile_COMMON></effect>\n"
+    "  </library_effects>\n"
+    "  <library_materials><material id=\"mat\" name=\"shiny\"><instance_effect url=\"#fx\"/></material></library_materials>\n"
+    "  <library_geometries>\n"
+    "    <geometry id=\"tri\" name=\"tri\"><mesh>\n"
+    "      <source id=\"pos\"><float_array id=\"pos-a\" count=\"9\">0 0 0 1 0 0 0 1 0</float_array>\n"
+    "        <technique_common><accessor source=\"#pos-a\" count=\"3\" stride=\"3\"><param name=\"X\" type=\"float\"/><param name=\"Y\" type=\"float\"/><param name=\"Z\" type=\"float\"/></accessor></technique_common></source>\n"
+    "      <vertices id=\"verts\"><input semantic=\"POSITION\" source=\"#pos\"/></vertices>\n"
+    "      <triangles count=\"1\" material=\"m0\"><input semantic=\"VERTEX\" source=\"#verts\" offset=\"0\"/><p>0 1 2</p></triangles>\n"
+    "    </mesh></geometry>\n"
+    "  </library_geometries>\n"
+    "  <library_visual_scenes>\n"
+    "    <visual_scene id=\"s\">\n"
+    "      <node id=\"m\" name=\"m\"><instance_geometry url=\"#tri\"><bind_material><technique_common><instance_material symbol=\"m0\" target=\"#mat\"/></technique_common></bind_material></instance_geometry></node>\n"
+    "    </visual_scene>\n"
+    "  </library_visual_scenes>\n"
+    "  <scene><instance_visual_scene url=\"#s\"/></scene>\n"
+    "</COLLADA>\n";
+
+static void test_collada_phong(void) {
+    write_text("phong.dae", collada_phong);
+    char path[1024], err[1024] = "";
+    rp_scene_data s;
+    bool ok = rp_scene_data_load(tmp_path("phong.dae", path, sizeof path), &s, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (!ok) return;
+    const rp_material_data *m = &s.materials[s.tri_materials[0]];
+    CHECKF(near(m->kd[0], 0.5f, 1e-6f) && near(m->kd[1], 0.2f, 1e-6f) && near(m->ks[0], 0.3f, 1e-6f) &&
+               near(m->ks[2], 0.3f, 1e-6f) && near(m->ns, 40.0f, 1e-4f) && !m->metal_rough,
+           "phong: kd %g %g ks %g %g ns %g", (double)m->kd[0], (double)m->kd[1], (double)m->ks[0], (double)m->ks[2],
+           (double)m->ns);
+    CHECK(rp_material_from_data(m).type == RP_MATERIAL_PHONG);
+    rp_scene_data_free(&s);
+    /* assimp's own default material (an STL's) stays diffuse: it says specular white */
+    ok = rp_scene_data_load(tmp_path("tri.stl", path, sizeof path), &s, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (!ok) return;
+    CHECK(rp_material_from_data(&s.materials[s.tri_materials[0]]).type == RP_MATERIAL_DIFFUSE);
+    rp_scene_data_free(&s);
+}
+
 static void expect_fail(const char *name, const char *needle) {
     char path[1024], err[1024] = "";
     rp_scene_data s;
@@ -567,6 +619,7 @@ int main(void) {
     test_handwritten_gltf("scene.glb");
     test_stl();
     test_collada();
+    test_collada_phong();
     test_gltf_lights();
     test_gltf_glass();
     test_unsupported_warnings();

@@ -332,6 +332,23 @@ static bool material_from_assimp(load_state *s, unsigned index, const struct aiM
             m->metal_rough = false;
         }
     }
+    if (!m->metal_rough && strcmp(name.data, AI_DEFAULT_MATERIAL_NAME) != 0) {
+        /* the Phong formats (COLLADA, FBX, 3DS, ...): specular colour times its strength -> ks,
+         * shininess -> ns, as MTL's Ks and Ns (the plastic BSDF; Phong highlights in Whitted).
+         * Not assimp's own default material (STL's is specular white: a mirror-like plastic) */
+        struct aiColor4D sc;
+        float strength = 1.0f, shininess = 0.0f;
+        if (aiGetMaterialColor(am, AI_MATKEY_COLOR_SPECULAR, &sc) == aiReturn_SUCCESS) {
+            aiGetMaterialFloatArray(am, AI_MATKEY_SHININESS_STRENGTH, &strength, NULL);
+            if (!(strength >= 0.0f && isfinite(strength))) strength = 1.0f;
+            const float spec[3] = {sc.r, sc.g, sc.b};
+            for (int k = 0; k < 3; k++)
+                m->ks[k] = isfinite(spec[k] * strength) ? fminf(fmaxf(spec[k] * strength, 0.0f), 1.0f) : 0.0f;
+        }
+        if (aiGetMaterialFloatArray(am, AI_MATKEY_SHININESS, &shininess, NULL) == aiReturn_SUCCESS &&
+            shininess > 0.0f && isfinite(shininess))
+            m->ns = shininess;
+    }
     /* a tangent-space normal map (glTF's normalTexture: +y along v), as MTL's norm */
     int32_t ntex = material_texture(s, am, aiTextureType_NORMALS, m->name);
     if (ntex == -2) return false;

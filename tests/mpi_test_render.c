@@ -263,6 +263,20 @@ int main(void) {
     rc = run_mpi("", 1, "--mpi --anim-time 1 --width 16 --height 16 -o /dev/null.png");
     CHECKF(rc != 0 && rc != 124 && strstr(output, "--anim-time: the scene is not animated"),
            "--anim-time on a still scene: exit %d:\n%s", rc, output);
+    /* The loader's warnings reach stderr once, from rank 0 (they were dropped): a usemtl naming no
+     * material */
+    file_in_tmp(got, sizeof got, "usemtl.obj");
+    FILE *uf = fopen(got, "w");
+    CHECK(uf != NULL);
+    if (uf) {
+        fputs("v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl nosuch\nf 1 2 3\n", uf);
+        fclose(uf);
+        snprintf(args, sizeof args, "'%s' --mpi --width 16 --height 16 -o '%s/usemtl.png'", got, tmp);
+        rc = run_mpi("", 2, args);
+        const char *w1 = strstr(output, "usemtl.obj:4: warning: usemtl 'nosuch'");
+        CHECKF(rc == 0 && w1 && !strstr(w1 + 1, "usemtl.obj:4: warning"), "the loader's warning once: exit %d:\n%s", rc,
+               output);
+    }
     /* A camera with no frame is refused as `raypack render` refuses it, not rendered (it wrote an
      * image with exit 0): an up along the view, and a --to-eye path through the look-at point, whose
      * middle frame has no view direction. */

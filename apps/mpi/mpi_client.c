@@ -88,7 +88,7 @@ int mpir_client_run(const mpir_options *o, int rank, bool *no_finalize) {
         conn.in = NULL;
         conn.in_cap = 0;
     } else {
-        loaded = mpir_scene_load(&rs, o, ready.err, sizeof ready.err);
+        loaded = mpir_scene_load(&rs, o, false, ready.err, sizeof ready.err);
     }
     if (loaded && mpir_scene_build(&rs, o, o->threads, ready.err, sizeof ready.err)) {
         ready.threads = rp_device_thread_count(rs.device);

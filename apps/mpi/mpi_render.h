@@ -132,8 +132,8 @@ typedef struct mpir_tile_worker {
 } mpir_tile_worker;
 
 /* Loads o->scene (NULL: the built-in room) into s->data with o->vol's --vdb-grid and --medium-box;
- * false with a message in err. */
-bool mpir_scene_load(mpir_scene *s, const mpir_options *o, char *err, size_t err_size);
+ * warn: print the loader's warnings on stderr (rank 0 only); false with a message in err. */
+bool mpir_scene_load(mpir_scene *s, const mpir_options *o, bool warn, char *err, size_t err_size);
 /* Makes the device and commits the render scene of s->data; false with a message in err. */
 bool mpir_scene_build(mpir_scene *s, const mpir_options *o, int threads, char *err, size_t err_size);
 /* The per-frame scene update, on rank 0 and every client before a frame's tiles render (a client

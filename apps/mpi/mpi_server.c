@@ -565,7 +565,7 @@ int mpir_server_run(const mpir_options *o, int size) {
     MPI_Request *reqs = NULL;
     if (size > 1 && !server_listen(&s, &rv, &lfd, &reqs)) return CLI_EXIT_FAILURE;
     /* With clients rank 0 only hands out tiles: one thread, so it does not take their cores. */
-    if (!mpir_scene_load(&rs, o, err, sizeof err) || !mpir_scene_build(&rs, o, size > 1 ? 1 : o->threads, err, sizeof err)) {
+    if (!mpir_scene_load(&rs, o, true, err, sizeof err) || !mpir_scene_build(&rs, o, size > 1 ? 1 : o->threads, err, sizeof err)) {
         fprintf(stderr, "%s%s\n", strstr(err, "error:") ? "" : "raypack render: ", err);
         mpir_scene_free(&rs);
         free(reqs);

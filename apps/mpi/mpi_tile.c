@@ -48,7 +48,7 @@ static bool add_box(mpir_scene *rs, const mpir_options *o, char *err, size_t err
     return cli_apply_medium(&o->vol, &rs->data, err, err_size);
 }
 
-bool mpir_scene_load(mpir_scene *rs, const mpir_options *o, char *err, size_t err_size) {
+bool mpir_scene_load(mpir_scene *rs, const mpir_options *o, bool warn, char *err, size_t err_size) {
     const char *path = o->scene;
     if (!path) {
         rs->builtin = true;
@@ -65,6 +65,7 @@ bool mpir_scene_load(mpir_scene *rs, const mpir_options *o, char *err, size_t er
     rp_scene_load_desc ld;
     rp_scene_load_desc_defaults(&ld);
     ld.volume_grid = o->vol.vdb_grid;
+    if (warn) ld.warning = cli_load_warning; /* the loader's warnings (file:line), once: rank 0's */
     if (rp_scene_data_load_ex(path, &ld, &rs->data, err, err_size))
         return add_box(rs, o, err, err_size);
     if (!err[0]) snprintf(err, err_size, "cannot load the scene %s", path);

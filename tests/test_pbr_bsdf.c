@@ -118,26 +118,29 @@ static double albedo(const render_bsdf *b, v3 wo) {
 int main(void) {
     int samples = rp_test_sanitized() ? 20000 : 200000;
     render_bsdf lambert = {.type = BSDF_LAMBERT, .kd = {0.8f, 0.5f, 0.2f}};
-    render_bsdf cond[3], plas[3];
+    render_bsdf cond[3], plas[3], gltf[3];
     float alphas[3] = {0.15f, 0.35f, 0.7f};
     for (int k = 0; k < 3; k++) {
         cond[k] = (render_bsdf){.type = BSDF_CONDUCTOR, .eta = {0.2f, 0.9f, 1.1f}, .k = {3.9f, 2.4f, 2.2f},
                                 .ks = {1, 1, 1}, .alpha = alphas[k]};
         plas[k] = (render_bsdf){.type = BSDF_PLASTIC, .kd = {0.6f, 0.6f, 0.6f}, .ks = {0.3f, 0.3f, 0.3f},
                                 .alpha = alphas[k]};
+        gltf[k] = (render_bsdf){.type = BSDF_PLASTIC, .kd = {0.5f, 0.3f, 0.1f}, .ks = {0.3f, 0.2f, 0.1f},
+                                .alpha = alphas[k], .schlick = true};
     }
     render_bsdf glass[3] = {
         {.type = BSDF_DIELECTRIC, .kt = {1, 1, 1}, .ior = 1.5f, .alpha = 0.3f, .entering = true},
         {.type = BSDF_DIELECTRIC, .kt = {1, 1, 1}, .ior = 1.5f, .alpha = 0.6f, .entering = true},
         {.type = BSDF_DIELECTRIC, .kt = {1, 1, 1}, .ior = 1.33f, .alpha = 0.4f, .entering = false},
     };
-    const render_bsdf *all[10] = {&lambert, &cond[0], &cond[1], &cond[2], &plas[0], &plas[1], &plas[2],
-                                  &glass[0], &glass[1], &glass[2]};
-    const char *names[10] = {"lambert", "conductor a=0.15", "conductor a=0.35", "conductor a=0.7",
+    const render_bsdf *all[13] = {&lambert, &cond[0], &cond[1], &cond[2], &plas[0], &plas[1], &plas[2],
+                                  &glass[0], &glass[1], &glass[2], &gltf[0], &gltf[1], &gltf[2]};
+    const char *names[13] = {"lambert", "conductor a=0.15", "conductor a=0.35", "conductor a=0.7",
                              "plastic a=0.15", "plastic a=0.35", "plastic a=0.7",
-                             "rough glass a=0.3", "rough glass a=0.6", "rough glass, inside, a=0.4"};
+                             "rough glass a=0.3", "rough glass a=0.6", "rough glass, inside, a=0.4",
+                             "glTF plastic a=0.15", "glTF plastic a=0.35", "glTF plastic a=0.7"};
     float thetas[3] = {0.2f, 0.9f, 1.4f};
-    for (int i = 0; i < 10; i++)
+    for (int i = 0; i < 13; i++)
         for (int t = 0; t < 3; t++) {
             v3 wo = dir_of(thetas[t], 0.7);
             int mismatch = 0;
@@ -192,9 +195,9 @@ int main(void) {
                 float mt = metals[mi], r = roughs[ri];
                 CHECKF(b.type == BSDF_PLASTIC, "metallic %g: BSDF %d, not the plastic", mt, (int)b.type);
                 float want_ks[3] = {0.04f * (1 - mt) + 0.9f * mt, 0.04f * (1 - mt) + 0.6f * mt, 0.04f * (1 - mt) + 0.2f * mt};
-                float keep = 1.0f - want_ks[0];
-                /* the diffuse the plastic reflects: kd (1 - max ks) = base (1 - metallic) */
-                v3 diffuse = v3_scale(b.kd, keep);
+                /* the diffuse base, before the dielectric's Fresnel: base (1 - metallic) */
+                v3 diffuse = b.kd;
+                CHECKF(b.schlick, "metallic %g: not glTF's Fresnel", mt);
                 CHECKF(fabsf(b.ks.x - want_ks[0]) < 1e-6f && fabsf(b.ks.y - want_ks[1]) < 1e-6f &&
                            fabsf(b.ks.z - want_ks[2]) < 1e-6f,
                        "metallic %g: coat %g %g %g", mt, b.ks.x, b.ks.y, b.ks.z);
@@ -213,6 +216,28 @@ int main(void) {
                     }
                 }
             }
+    }
+    /* glTF's Fresnel: a smooth dielectric (metallic 0) reflects Schlick's 0.04 + 0.96 (1 - cos)^5,
+     * 4% head-on and far more at grazing angles; its diffuse base loses as much. */
+    {
+        rp_material_data d = {.kd = {0.5f, 0.5f, 0.5f}, .map_kd = -1, .illum = -1, .ior = 1.0f,
+                              .metal_rough = true, .metallic = 0.0f, .roughness = 0.0f};
+        rp_material m = rp_material_from_data(&d);
+        render_surface sf = {.ns = {0, 0, 1}, .ng = {0, 0, 1}, .entering = true};
+        render_bsdf b = material_bsdf(NULL, &m, &sf);
+        for (int t = 0; t < 3; t++) {
+            v3 wo = dir_of(thetas[t], 0.3);
+            float u[3] = {0.0f, 0.5f, 0.5f};
+            bsdf_sample bs;
+            CHECKF(bsdf_sample_dir(&b, wo, u, &bs) && bs.delta, "smooth glTF coat, theta_o %.1f: no mirror sample",
+                   thetas[t]);
+            double w = pow(1.0 - wo.z, 5.0), want = 0.04 + 0.96 * w;
+            CHECKF(fabs(bs.f.x * wo.z - want) < 1e-4, "smooth glTF coat, theta_o %.1f: reflects %.5f, Schlick %.5f",
+                   thetas[t], bs.f.x * wo.z, want);
+            v3 fd = bsdf_eval(&b, wo, dir_of(0.5, 2.0));
+            CHECKF(fabs(fd.x - 0.5 * (1.0 - want) / M_PI) < 1e-5, "smooth glTF base, theta_o %.1f: %.6f, want %.6f",
+                   thetas[t], fd.x, 0.5 * (1.0 - want) / M_PI);
+        }
     }
     /* Rough glass reflects and transmits at most what arrives (its radiance scaling 1/eta^2 undone). */
     for (int t = 0; t < 3; t++) {

@@ -126,10 +126,10 @@ float material_fresnel(float cos_i, float eta) {
 static float clamp01(float x) { return fminf(fmaxf(x, 0.0f), 1.0f); }
 static v3 clamp3(v3 c) { return v3_make(clamp01(c.x), clamp01(c.y), clamp01(c.z)); }
 
-/* glTF's metallic-roughness model on the plastic BSDF: a GGX coat (alpha = r^2; smooth under r^2 =
- * 1e-3) of reflectance lerp(0.04, base, metallic) (the dielectric's 4% at normal incidence, the
- * metal's base colour), over a diffuse base of base (1 - metallic), the plastic's kd (1 - max ks)
- * made so. glTF's Fresnel rise at grazing angles is left out (the coat's weight is constant). The
+/* glTF's metallic-roughness model on the plastic BSDF with the specification's Fresnel (glTF 2.0,
+ * appendix B: mix(dielectric, metal, metallic)): a GGX coat (alpha = r^2; smooth under r^2 = 1e-3)
+ * whose reflectance is Schlick's Fresnel of F0 = lerp(0.04, base, metallic), rising to 1 at grazing
+ * angles, over a diffuse base of base (1 - metallic) that loses the dielectric's F(0.04). The
  * texture's green channel scales roughness and its blue channel metallic (linear). */
 static void metal_rough_at(const rp_render_scene *s, const rp_material *m, const render_surface *surf,
                            float *metallic, float *r) {
@@ -147,9 +147,9 @@ static void metal_rough_bsdf(const rp_render_scene *s, const rp_material *m, con
     metal_rough_at(s, m, surf, &metallic, &r);
     v3 base = b->kd; /* the base colour (times its texture), clamped */
     b->type = BSDF_PLASTIC;
+    b->schlick = true;
     b->ks = v3_add(v3_scale(v3_make(0.04f, 0.04f, 0.04f), 1.0f - metallic), v3_scale(base, metallic));
-    float keep = 1.0f - fmaxf(b->ks.x, fmaxf(b->ks.y, b->ks.z)); /* at least 0.96 (1 - metallic) */
-    b->kd = keep > 0.0f ? clamp3(v3_scale(base, (1.0f - metallic) / keep)) : v3_make(0, 0, 0);
+    b->kd = v3_scale(base, 1.0f - metallic);
     b->alpha = r * r >= 1e-3f ? r * r : 0.0f;
 }
 

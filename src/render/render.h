@@ -314,7 +314,8 @@ typedef enum bsdf_type {
     BSDF_DIELECTRIC = 2, /* Fresnel reflection and refraction (ior, kt tints the transmission); GGX
                           * microfacets with alpha (reflection and transmission), smooth at alpha 0 */
     BSDF_PLASTIC = 3     /* diffuse kd (1 - max ks) / pi under a ks-weighted GGX coat (a mirror at
-                          * alpha 0) */
+                          * alpha 0); with schlick, glTF's BRDF: the coat's reflectance is Schlick's
+                          * Fresnel of F0 = ks and the base kd (1 - F(0.04)) / pi */
 } bsdf_type;
 
 typedef struct render_bsdf {
@@ -325,6 +326,7 @@ typedef struct render_bsdf {
     float ior;           /* dielectric: inside over outside */
     float alpha;         /* GGX roughness (pbrt's alpha), 0: smooth */
     bool entering;       /* dielectric: the ray comes from outside */
+    bool schlick;        /* plastic: glTF's metallic-roughness BRDF (see BSDF_PLASTIC) */
 } render_bsdf;
 
 typedef struct bsdf_sample {

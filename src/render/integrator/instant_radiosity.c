@@ -47,7 +47,8 @@ static float max3(v3 c) { return fmaxf(c.x, fmaxf(c.y, c.z)); }
 static v3 diffuse_albedo(const render_bsdf *b) {
     switch (b->type) {
     case BSDF_LAMBERT: return b->kd;
-    case BSDF_PLASTIC: return v3_scale(b->kd, 1.0f - fminf(1.0f, max3(b->ks)));
+    case BSDF_PLASTIC: /* glTF's (schlick) base loses F(0.04) = 4% at normal incidence */
+        return v3_scale(b->kd, b->schlick ? 0.96f : 1.0f - fminf(1.0f, max3(b->ks)));
     case BSDF_CONDUCTOR:
     case BSDF_DIELECTRIC: return v3_make(0, 0, 0);
     }

@@ -216,9 +216,16 @@ typedef struct rp_scene_data {
     uint32_t *normal_indices;   /* 3 * triangle_count, into normals, or NULL */
     uint32_t *texcoord_indices; /* 3 * triangle_count, into texcoords, or NULL */
     uint32_t *tri_materials;    /* triangle_count, into materials */
+    /* A colour per position (3 * vertex_count, linear RGB), multiplying the material's base colour
+     * (kd, glTF's base colour) across each triangle; NULL when the file gives none. From PLY's
+     * red/green/blue vertex properties and OBJ's `v x y z r g b` (sRGB-encoded values, decoded),
+     * and assimp's first colour set (glTF's COLOR_0: linear, taken as it is). Vertices a file
+     * leaves uncoloured are white. */
+    float *colors;
 
     size_t sphere_count;
     rp_sphere_data *spheres;
+    float *sphere_colors;       /* 3 * sphere_count or NULL: a coloured point cloud's colours */
     size_t cone_count;
     rp_cone_data *cones;
 

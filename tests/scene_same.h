@@ -41,6 +41,8 @@ static bool same_scene(const rp_scene_data *a, const rp_scene_data *b, char *why
     SAME_A(normal_indices, 3 * sizeof(uint32_t) * a->triangle_count);
     SAME_A(texcoord_indices, 3 * sizeof(uint32_t) * a->triangle_count);
     SAME_A(tri_materials, sizeof(uint32_t) * a->triangle_count);
+    SAME_A(colors, 3 * sizeof(float) * a->vertex_count);
+    SAME_A(sphere_colors, 3 * sizeof(float) * a->sphere_count);
     SAME_A(spheres, sizeof(rp_sphere_data) * a->sphere_count);
     SAME_A(cones, sizeof(rp_cone_data) * a->cone_count);
     SAME_A(materials, sizeof(rp_material_data) * a->material_count);

@@ -547,6 +547,55 @@ static void test_gltf_glass(void) {
     rp_scene_data_free(&s);
 }
 
+/* glTF's COLOR_0 (linear): the scene's vertex colours, and the albedo they multiply with the base
+ * colour factor, through the renderer (the albedo AOV at the triangle's centroid). */
+static void test_gltf_colors(void) {
+    unsigned char buf[80];
+    const uint16_t idx[4] = {0, 1, 2, 0};
+    const float pos[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    const float col[9] = {1, 0.5f, 0.25f, 1, 0.5f, 0.25f, 1, 0.5f, 0.25f};
+    memcpy(buf, idx, 8);
+    memcpy(buf + 8, pos, sizeof pos);
+    memcpy(buf + 44, col, sizeof col);
+    write_bytes("colors.bin", buf, sizeof buf);
+    write_text("colors.gltf",
+               "{\"asset\":{\"version\":\"2.0\"},\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],\n"
+               "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":1,\"COLOR_0\":2},\"indices\":0,\"material\":0}]}],\n"
+               "\"materials\":[{\"pbrMetallicRoughness\":{\"baseColorFactor\":[0.8,0.8,0.8,1],\"metallicFactor\":0}}],\n"
+               "\"buffers\":[{\"uri\":\"colors.bin\",\"byteLength\":80}],\n"
+               "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":6},{\"buffer\":0,\"byteOffset\":8,\"byteLength\":36},\n"
+               "  {\"buffer\":0,\"byteOffset\":44,\"byteLength\":36}],\n"
+               "\"accessors\":[{\"bufferView\":0,\"componentType\":5123,\"count\":3,\"type\":\"SCALAR\"},\n"
+               "  {\"bufferView\":1,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\",\"min\":[0,0,0],\"max\":[1,1,0]},\n"
+               "  {\"bufferView\":2,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"}]}\n");
+    char path[1024], err[1024] = "";
+    rp_scene_data s;
+    bool ok = rp_scene_data_load(tmp_path("colors.gltf", path, sizeof path), &s, err, sizeof err);
+    CHECKF(ok, "%s", err);
+    if (!ok) return;
+    CHECKF(s.colors && s.vertex_count == 3 && near(s.colors[0], 1, 1e-6f) && near(s.colors[4], 0.5f, 1e-6f) &&
+               near(s.colors[8], 0.25f, 1e-6f),
+           "COLOR_0: %p", (void *)s.colors);
+    rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 1});
+    rp_render_scene *rs = rp_render_scene_new(dev, &s, NULL, err, sizeof err);
+    CHECKF(rs != NULL, "%s", err);
+    if (rs) {
+        enum { W = 4, H = 4 };
+        float px[W * H * 3];
+        rp_camera cam = {.type = RP_CAMERA_PINHOLE,
+                         .pinhole = {.eye = {0.3f, 0.3f, 2}, .look = {0.3f, 0.3f, 0}, .up = {0, 1, 0}, .fov_deg = 5}};
+        rp_render_desc rd = {.width = W, .height = H, .spp = 1, .integrator = RP_INTEGRATOR_AOV, .aov = RP_AOV_ALBEDO,
+                             .camera = &cam};
+        CHECK(rp_render(rs, &rd, px, NULL));
+        const float *c = px + 3 * (H / 2 * W + W / 2);
+        CHECKF(near(c[0], 0.8f, 1e-4f) && near(c[1], 0.4f, 1e-4f) && near(c[2], 0.2f, 1e-4f),
+               "albedo %g %g %g, want 0.8 0.4 0.2", (double)c[0], (double)c[1], (double)c[2]);
+        rp_render_scene_release(rs);
+    }
+    rp_device_release(dev);
+    rp_scene_data_free(&s);
+}
+
 /* The triangle's centre pixel, seen from straight above, direct lighting with the scene's lights. */
 static float lit_centre(rp_scene_data *s) {
     char err[512] = "";
@@ -622,6 +671,7 @@ int main(void) {
     test_collada();
     test_collada_phong();
     test_gltf_lights();
+    test_gltf_colors();
     test_gltf_glass();
     test_unsupported_warnings();
     test_errors();

@@ -506,6 +506,87 @@ static void test_tga_bmp(void) {
     }
 }
 
+/* Vertex colours: OBJ's `v x y z r g b` (and `w r g b`), PLY's red/green/blue properties (uchar:
+ * /255; float: as they are), sRGB-decoded; uncoloured vertices of a coloured file white; a file
+ * without colours has none; a coloured point cloud's spheres take its colours. */
+static bool near_color(const float *c, float r, float g, float b) {
+    return fabsf(c[0] - r) < 1e-4f && fabsf(c[1] - g) < 1e-4f && fabsf(c[2] - b) < 1e-4f;
+}
+
+static void test_vertex_colors(void) {
+    const float half = io_srgb_to_linear(0.5f); /* 0.2140 */
+    CHECKF(fabsf(half - 0.21404f) < 1e-4f, "sRGB 0.5 decodes to %g", (double)half);
+    write_text("colors.obj", "v 0 0 0\n"            /* white: before any colour */
+                             "v 1 0 0 1 0 0\n"      /* red */
+                             "v 0 1 0 1 0 0.5 1\n"  /* w, then r g b */
+                             "v 1 1 0 1\n"          /* w alone: white */
+                             "f 1 2 3\nf 2 4 3\n");
+    rp_scene_data s;
+    warnings w;
+    if (load("colors.obj", &s, &w)) {
+        CHECK(s.colors != NULL && s.vertex_count == 4);
+        if (s.colors) {
+            CHECK(near_color(s.colors, 1, 1, 1));
+            CHECK(near_color(s.colors + 3, 1, 0, 0));
+            CHECKF(near_color(s.colors + 6, 0, half, 1), "w r g b: %g %g %g", (double)s.colors[6], (double)s.colors[7],
+                   (double)s.colors[8]);
+            CHECK(near_color(s.colors + 9, 1, 1, 1));
+        }
+        rp_scene_data_free(&s);
+    }
+    write_text("plain.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0 1\nf 1 2 3\n");
+    if (load("plain.obj", &s, &w)) {
+        CHECK(s.colors == NULL);
+        rp_scene_data_free(&s);
+    }
+    static const char ply_head[] = "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                                   "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha\n"
+                                   "element face 1\nproperty list uchar int vertex_indices\nend_header\n";
+    char text[1024];
+    snprintf(text, sizeof text, "ply\nformat ascii 1.0\n%s0 0 0 255 0 0 255\n1 0 0 0 255 0 255\n0 1 0 0 0 128 255\n"
+             "3 0 1 2\n", ply_head);
+    write_text("colors.ply", text);
+    uint8_t bin[1024];
+    size_t at = (size_t)snprintf((char *)bin, sizeof bin, "ply\nformat binary_little_endian 1.0\n%s", ply_head);
+    static const float pos[3][3] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+    static const uint8_t rgba[3][4] = {{255, 0, 0, 255}, {0, 255, 0, 255}, {0, 0, 128, 255}};
+    for (int v = 0; v < 3; v++) {
+        memcpy(bin + at, pos[v], sizeof pos[v]);
+        at += sizeof pos[v];
+        memcpy(bin + at, rgba[v], 4);
+        at += 4;
+    }
+    static const uint8_t face[13] = {3, 0, 0, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0};
+    memcpy(bin + at, face, sizeof face);
+    at += sizeof face;
+    write_bytes("colors_bin.ply", bin, at);
+    const float c128 = io_srgb_to_linear(128.0f / 255.0f);
+    static const char *const names[] = {"colors.ply", "colors_bin.ply"};
+    for (int i = 0; i < 2; i++) {
+        if (!load(names[i], &s, &w)) continue;
+        CHECKF(s.colors && s.triangle_count == 1, "%s: no colours", names[i]);
+        if (s.colors)
+            CHECKF(near_color(s.colors, 1, 0, 0) && near_color(s.colors + 3, 0, 1, 0) &&
+                       near_color(s.colors + 6, 0, 0, c128),
+                   "%s: colours %g %g %g, %g %g %g, %g %g %g", names[i], (double)s.colors[0], (double)s.colors[1],
+                   (double)s.colors[2], (double)s.colors[3], (double)s.colors[4], (double)s.colors[5],
+                   (double)s.colors[6], (double)s.colors[7], (double)s.colors[8]);
+        rp_scene_data_free(&s);
+    }
+    /* a coloured point cloud: float colours taken as they are (then decoded) */
+    write_text("cloud.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                            "property float z\nproperty float red\nproperty float green\nproperty float blue\n"
+                            "end_header\n0 0 0 1 0 0\n1 0 0 0 1 0\n0 1 0 0 0 0.5\n");
+    if (load("cloud.ply", &s, &w)) {
+        CHECKF(s.sphere_count == 3 && s.sphere_colors, "cloud: %zu spheres, colours %p", s.sphere_count,
+               (void *)s.sphere_colors);
+        if (s.sphere_colors)
+            CHECK(near_color(s.sphere_colors, 1, 0, 0) && near_color(s.sphere_colors + 3, 0, 1, 0) &&
+                  near_color(s.sphere_colors + 6, 0, 0, half));
+        rp_scene_data_free(&s);
+    }
+}
+
 int main(void) {
     const char *t = getenv("RP_TEST_TMP");
     snprintf(tmp_dir, sizeof tmp_dir, "%s", t ? t : "/tmp/rp_test_io_valid");
@@ -521,5 +602,6 @@ int main(void) {
     test_ply_order();
     test_ply_texture();
     test_tga_bmp();
+    test_vertex_colors();
     return RP_TEST_END();
 }

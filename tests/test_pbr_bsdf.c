@@ -190,7 +190,7 @@ int main(void) {
                 rp_material_data d = {.kd = {0.9f, 0.6f, 0.2f}, .map_kd = -1, .illum = -1, .ior = 1.0f,
                                       .metal_rough = true, .metallic = metals[mi], .roughness = roughs[ri]};
                 rp_material m = rp_material_from_data(&d);
-                render_surface sf = {.ns = {0, 0, 1}, .ng = {0, 0, 1}, .entering = true};
+                render_surface sf = {.ns = {0, 0, 1}, .ng = {0, 0, 1}, .entering = true, .color = {1, 1, 1}};
                 render_bsdf b = material_bsdf(NULL, &m, &sf);
                 float mt = metals[mi], r = roughs[ri];
                 CHECKF(b.type == BSDF_PLASTIC, "metallic %g: BSDF %d, not the plastic", mt, (int)b.type);
@@ -223,7 +223,7 @@ int main(void) {
         rp_material_data d = {.kd = {0.5f, 0.5f, 0.5f}, .map_kd = -1, .illum = -1, .ior = 1.0f,
                               .metal_rough = true, .metallic = 0.0f, .roughness = 0.0f};
         rp_material m = rp_material_from_data(&d);
-        render_surface sf = {.ns = {0, 0, 1}, .ng = {0, 0, 1}, .entering = true};
+        render_surface sf = {.ns = {0, 0, 1}, .ng = {0, 0, 1}, .entering = true, .color = {1, 1, 1}};
         render_bsdf b = material_bsdf(NULL, &m, &sf);
         for (int t = 0; t < 3; t++) {
             v3 wo = dir_of(thetas[t], 0.3);

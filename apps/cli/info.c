@@ -114,7 +114,8 @@ int cli_info(int argc, char **argv) {
     printf("primitives  %zu triangles (%llu valid, %llu rejected, %llu degenerate), %zu spheres, %zu cones\n",
            d.triangle_count, (unsigned long long)st.triangles, (unsigned long long)st.rejected_prims,
            (unsigned long long)st.degenerate_prims, d.sphere_count, d.cone_count);
-    printf("vertices    %zu positions, %zu normals, %zu texcoords\n", d.vertex_count, d.normal_count, d.texcoord_count);
+    printf("vertices    %zu positions, %zu normals, %zu texcoords%s\n", d.vertex_count, d.normal_count, d.texcoord_count,
+           d.colors || d.sphere_colors ? ", colours" : "");
     printf("bounds      (%g, %g, %g) - (%g, %g, %g)\n", b.lower_x, b.lower_y, b.lower_z, b.upper_x, b.upper_y,
            b.upper_z);
     printf("materials   %zu\n", d.material_count);

@@ -14,7 +14,7 @@
 /* 1: the flat arrays only; 2: and the animation (an animated scene sent as format 1 stood still at
  * its start on every client); 3: and the volume (a .vdb or --medium-box sent as format 2 was
  * missing on every client) */
-#define WIRE_VERSION 3u
+#define WIRE_VERSION 4u
 
 typedef struct writer {
     uint8_t *buf;
@@ -119,7 +119,9 @@ bool wire_scene_pack(const rp_scene_data *s, uint8_t **out, size_t *size) {
     put_array(&w, s->normal_indices, 3 * s->triangle_count, sizeof(uint32_t));
     put_array(&w, s->texcoord_indices, 3 * s->triangle_count, sizeof(uint32_t));
     put_array(&w, s->tri_materials, s->triangle_count, sizeof(uint32_t));
+    put_array(&w, s->colors, 3 * s->vertex_count, sizeof(float));
     put_array(&w, s->spheres, s->sphere_count, sizeof(rp_sphere_data));
+    put_array(&w, s->sphere_colors, 3 * s->sphere_count, sizeof(float));
     put_array(&w, s->cones, s->cone_count, sizeof(rp_cone_data));
     put_array(&w, s->materials, s->material_count, sizeof(rp_material_data));
     put_array(&w, s->lights, s->light_count, sizeof(rp_light_data));
@@ -390,8 +392,12 @@ bool wire_scene_unpack(const uint8_t *buf, size_t size, rp_scene_data *s, char *
     s->texcoord_indices = p;
     get_array(&r, &p, sizeof(uint32_t), tris / 3, NULL, "triangle materials");
     s->tri_materials = p;
+    get_array(&r, &p, sizeof(float), 3 * s->vertex_count, NULL, "vertex colours");
+    s->colors = p;
     get_array(&r, &p, sizeof(rp_sphere_data), SIZE_MAX, &s->sphere_count, "spheres");
     s->spheres = p;
+    get_array(&r, &p, sizeof(float), 3 * s->sphere_count, NULL, "sphere colours");
+    s->sphere_colors = p;
     get_array(&r, &p, sizeof(rp_cone_data), SIZE_MAX, &s->cone_count, "cones");
     s->cones = p;
     get_array(&r, &p, sizeof(rp_material_data), SIZE_MAX, &s->material_count, "materials");

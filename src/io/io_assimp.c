@@ -369,6 +369,18 @@ static bool add_mesh(load_state *s, const struct aiMesh *mesh, const mat4 *t) {
     if (!builder_reserve_vertices(ctx, nv) || (normals && !builder_reserve_normals(ctx, nv)) ||
         (uvs && !builder_reserve_texcoords(ctx, nv)) || !builder_reserve_triangles(ctx, mesh->mNumFaces))
         return io_error(ctx, s->path, 0, "out of memory");
+    /* the first colour set (glTF's COLOR_0, linear by its specification; alpha is not read) */
+    if (mesh->mColors[0]) {
+        static const float white[3] = {1, 1, 1};
+        if (!builder_set_colors(ctx, b->pos_n + nv - 1, white, 1)) return io_error(ctx, s->path, 0, "out of memory");
+        for (size_t i = 0; i < nv; i++) {
+            const struct aiColor4D *c = &mesh->mColors[0][i];
+            float *o = b->col + 3 * (b->pos_n + i);
+            o[0] = isfinite(c->r) ? fmaxf(c->r, 0.0f) : 0.0f;
+            o[1] = isfinite(c->g) ? fmaxf(c->g, 0.0f) : 0.0f;
+            o[2] = isfinite(c->b) ? fmaxf(c->b, 0.0f) : 0.0f;
+        }
+    }
     uint32_t v0 = (uint32_t)b->pos_n, n0 = (uint32_t)b->nrm_n, t0 = (uint32_t)b->uv_n;
     float nm[3][3], det;
     normal_matrix(t, nm, &det);

@@ -69,6 +69,8 @@ typedef struct io_builder {
     size_t nrm_n, nrm_cap;
     float *uv;
     size_t uv_n, uv_cap;
+    float *col;            /* colours of vertices [0, col_n) (linear RGB), or NULL: none yet */
+    size_t col_n, col_cap;
     uint32_t *idx, *nidx, *tidx, *mat; /* nidx/tidx allocated lazily, IO_NONE where absent */
     size_t tri_n, tri_cap;
     rp_sphere_data *spheres;
@@ -231,6 +233,11 @@ void builder_free(io_builder *b);
 void builder_init(io_builder *b);
 bool builder_reserve_normals(io_ctx *ctx, size_t extra);
 bool builder_reserve_texcoords(io_ctx *ctx, size_t extra);
+/* Colours vertices [first, first + n) (linear RGB, 3 n floats); vertices before first without one
+ * are white. */
+bool builder_set_colors(io_ctx *ctx, size_t first, const float *rgb, size_t n);
+/* The sRGB transfer function's inverse, for 8-bit (or normalized) colours written in files. */
+float io_srgb_to_linear(float c);
 bool builder_reserve_triangles(io_ctx *ctx, size_t extra);
 /* Material initialised to the defaults of every format (grey diffuse, ior 1, no texture). */
 void builder_material_defaults(rp_material_data *m, const char *name);

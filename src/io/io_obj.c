@@ -51,6 +51,22 @@ static const char *obj_float(obj_file *f, const char *p, float *v, const char *w
     return q;
 }
 
+/* A vertex colour after `v x y z` (q just past z): `r g b` or `w r g b` (MeshLab's and
+ * tinyobjloader's extension), sRGB-decoded into rgb; false when the line has no such colour (a bare
+ * w, or nothing: the rest is left to the caller as before). */
+static bool obj_vertex_color(const char *q, float rgb[3]) {
+    float e[4];
+    int n = 0;
+    for (; n < 4; n++) {
+        const char *r = io_parse_float(skip_blank(q), &e[n]);
+        if (!r || !is_delim(*r)) break;
+        q = r;
+    }
+    if (n < 3) return false;
+    for (int k = 0; k < 3; k++) rgb[k] = io_srgb_to_linear(e[n - 3 + k]);
+    return true;
+}
+
 /* The rest of the line without surrounding blanks, copied into out. */
 static const char *rest_of_line(const char *p, char *out, size_t size) {
     p = skip_blank(p);
@@ -449,6 +465,8 @@ typedef struct obj_chunk {
     uint32_t lines;                   /* lines from start to stop */
     float *pos, *nrm, *uv;            /* the chunk's v, vn, vt */
     size_t pos_n, nrm_n, uv_n, pos_cap, nrm_cap, uv_cap;
+    float *col;                       /* colours of pos (white where a v has none), once one has */
+    size_t col_cap;
     int64_t *corners;                 /* v, vt, vn per corner: absolute index >= 0, relative, or OBJ_NONE */
     size_t corner_n, corner_cap;
     uint32_t *faces;                  /* first corner of each face; one past the last at faces[face_n] */
@@ -484,6 +502,17 @@ static float *obj_chunk_vec(float **a, size_t *n, size_t *cap, int dim, bool *oo
         return NULL;
     }
     return *a + (size_t)dim * (*n)++;
+}
+
+/* The colour of the chunk's last vertex; the vertices before it without one are white. */
+static bool obj_chunk_color(obj_chunk *c, const float rgb[3]) {
+    size_t i = c->pos_n - 1, had = c->col ? c->col_cap : 0;
+    if (!io_reserve((void **)&c->col, &c->col_cap, c->pos_cap > c->pos_n ? c->pos_cap : c->pos_n, 3 * sizeof(float)))
+        return c->oom = true, false;
+    if (had == 0)
+        for (size_t k = 0; k < i; k++) c->col[3 * k] = c->col[3 * k + 1] = c->col[3 * k + 2] = 1.0f;
+    memcpy(c->col + 3 * i, rgb, 3 * sizeof(float));
+    return true;
 }
 
 /* One face line into the chunk, as obj_face would read it; false leaves it to the serial pass. */
@@ -585,7 +614,11 @@ static void obj_chunk_task(void *user, uint32_t index) {
             ok = false; /* a statement over several lines: the serial pass joins them */
         } else if (s[0] == 'v' && (s[1] == ' ' || s[1] == '\t')) {
             float *v = obj_chunk_vec(&c->pos, &c->pos_n, &c->pos_cap, 3, &c->oom);
-            ok = v && obj_chunk_floats(s + 1, v, 3);
+            const char *q = v ? obj_chunk_floats(s + 1, v, 3) : NULL;
+            ok = q != NULL;
+            float rgb[3] = {1, 1, 1};
+            bool colored = ok && obj_vertex_color(q, rgb);
+            if (ok && (colored || c->col)) ok = obj_chunk_color(c, rgb);
         } else if (s[0] == 'f' && (s[1] == ' ' || s[1] == '\t')) {
             ok = obj_chunk_face(c, s + 1);
         } else if (s[0] == 'v' && s[1] == 'n' && is_delim(s[2])) {
@@ -625,6 +658,7 @@ static void obj_chunk_free(obj_chunk *c) {
     free(c->pos);
     free(c->nrm);
     free(c->uv);
+    free(c->col);
     free(c->corners);
     free(c->faces);
     free(c->mtls);
@@ -706,6 +740,8 @@ static bool obj_par_take(obj_file *f, obj_par *par, const char **p, uint32_t *ma
     /* vertices now (serial faces after the chunk may triangulate with them), triangles at the end */
     c->base[0] = b->pos_n, c->base[1] = b->uv_n, c->base[2] = b->nrm_n;
     c->t0 = b->tri_n - c->tri_n;
+    if (c->col && c->pos_n && !builder_set_colors(ctx, b->pos_n, c->col, c->pos_n))
+        return *ok = io_error(ctx, f->shown, f->line, "out of memory"), true;
     if (c->pos_n) memcpy(b->pos + 3 * b->pos_n, c->pos, 3 * sizeof(float) * c->pos_n);
     if (c->nrm_n) memcpy(b->nrm + 3 * b->nrm_n, c->nrm, 3 * sizeof(float) * c->nrm_n);
     if (c->uv_n) memcpy(b->uv + 2 * b->uv_n, c->uv, 2 * sizeof(float) * c->uv_n);
@@ -771,6 +807,9 @@ static bool obj_statement(obj_file *f, const char *p, uint32_t *material, size_t
         float *v = b->pos + 3 * b->pos_n;
         const char *q = p + 1;
         ok = (q = obj_float(f, q, &v[0], "v")) && (q = obj_float(f, q, &v[1], "v")) && (q = obj_float(f, q, &v[2], "v"));
+        float rgb[3];
+        if (ok && obj_vertex_color(q, rgb) && !builder_set_colors(ctx, b->pos_n, rgb, 1))
+            return io_error(ctx, f->shown, f->line, "out of memory");
         b->pos_n++;
     } else if (p[0] == 'f' && (p[1] == ' ' || p[1] == '\t')) {
         ok = obj_face(f, p + 1, *material);

@@ -21,8 +21,21 @@ typedef enum ply_type {
 
 typedef enum ply_format { PLY_ASCII, PLY_BINARY_LE, PLY_BINARY_BE } ply_format;
 
-/* What a vertex property feeds: nothing, or one coordinate. */
-enum { PLY_USE_NONE = 0, PLY_USE_X, PLY_USE_Y, PLY_USE_Z, PLY_USE_NX, PLY_USE_NY, PLY_USE_NZ, PLY_USE_U, PLY_USE_V };
+/* What a vertex property feeds: nothing, or one coordinate, or one colour channel. */
+enum {
+    PLY_USE_NONE = 0,
+    PLY_USE_X,
+    PLY_USE_Y,
+    PLY_USE_Z,
+    PLY_USE_NX,
+    PLY_USE_NY,
+    PLY_USE_NZ,
+    PLY_USE_U,
+    PLY_USE_V,
+    PLY_USE_R,
+    PLY_USE_G,
+    PLY_USE_B
+};
 
 typedef struct ply_prop {
     ply_type type;
@@ -50,7 +63,7 @@ typedef struct ply_file {
     uint32_t line;
     uint64_t vertex_count;
     size_t vertex_base, nrm_base, uv_base; /* where the vertex element's first position, normal, uv went */
-    bool has_normals, has_uv;
+    bool has_normals, has_uv, has_color;
     char texture[256]; /* MeshLab's `comment TextureFile NAME`, "" when none */
     uint32_t texture_line;
     uint32_t material; /* the faces': textured when the texture loaded, else the default */
@@ -94,7 +107,10 @@ static int ply_use_named(const char *s) {
                  {"nx", PLY_USE_NX},       {"ny", PLY_USE_NY},       {"nz", PLY_USE_NZ},
                  {"u", PLY_USE_U},         {"v", PLY_USE_V},         {"s", PLY_USE_U},
                  {"t", PLY_USE_V},         {"texture_u", PLY_USE_U}, {"texture_v", PLY_USE_V},
-                 {"texture_s", PLY_USE_U}, {"texture_t", PLY_USE_V}};
+                 {"texture_s", PLY_USE_U}, {"texture_t", PLY_USE_V}, {"red", PLY_USE_R},
+                 {"green", PLY_USE_G},     {"blue", PLY_USE_B},      {"r", PLY_USE_R},
+                 {"g", PLY_USE_G},         {"b", PLY_USE_B},         {"diffuse_red", PLY_USE_R},
+                 {"diffuse_green", PLY_USE_G}, {"diffuse_blue", PLY_USE_B}};
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         if (strcmp(s, names[i].name) == 0) return names[i].use;
     return PLY_USE_NONE;
@@ -334,7 +350,8 @@ static bool ply_skip_list(ply_file *f, const ply_prop *pr) {
     return true;
 }
 
-/* Sets has_normals and has_uv from the vertex element's properties; false without x, y and z. */
+/* Sets has_normals, has_uv and has_color from the vertex element's properties; false without x, y
+ * and z. */
 static bool ply_vertex_uses(ply_file *f, const ply_elem *el) {
     bool has_xyz[3] = {false, false, false};
     for (size_t i = 0; i < el->prop_n; i++) {
@@ -342,6 +359,7 @@ static bool ply_vertex_uses(ply_file *f, const ply_elem *el) {
         if (u >= PLY_USE_X && u <= PLY_USE_Z) has_xyz[u - PLY_USE_X] = true;
         if (u >= PLY_USE_NX && u <= PLY_USE_NZ) f->has_normals = true;
         if (u == PLY_USE_U || u == PLY_USE_V) f->has_uv = true;
+        if (u >= PLY_USE_R && u <= PLY_USE_B) f->has_color = true;
     }
     return has_xyz[0] && has_xyz[1] && has_xyz[2];
 }
@@ -356,9 +374,24 @@ static bool ply_reserve_vertices(ply_file *f, const ply_elem *el) {
            (!f->has_uv || builder_reserve_texcoords(ctx, n));
 }
 
-/* Stores a vertex's values by what each property feeds (nothing, or one coordinate). */
-static void ply_vertex_value(int use, double v, float xyz[3], float nrm[3], float uv[2]) {
-    switch (use) {
+/* A vertex's values, by what each property feeds. */
+typedef struct ply_vertex {
+    float xyz[3], nrm[3], uv[2], rgb[3];
+} ply_vertex;
+
+static const ply_vertex ply_vertex_zero = {{0, 0, 0}, {0, 0, 0}, {0, 0}, {1, 1, 1}};
+
+/* A colour channel as written: an integer type's range maps to [0, 1] (uchar 255, ushort 65535),
+ * floats are taken as they are; then sRGB-decoded (colours in files are display colours). */
+static float ply_color(ply_type t, double v) {
+    double full = t == PLY_U8 || t == PLY_I8 ? 255.0 : t == PLY_U16 || t == PLY_I16 ? 65535.0 : 1.0;
+    return io_srgb_to_linear((float)(v / full));
+}
+
+/* Stores one property's value by what it feeds (nothing, one coordinate or one colour channel). */
+static void ply_vertex_value(const ply_prop *pr, double v, ply_vertex *out) {
+    float *xyz = out->xyz, *nrm = out->nrm, *uv = out->uv;
+    switch (pr->use) {
     case PLY_USE_X: xyz[0] = (float)v; break;
     case PLY_USE_Y: xyz[1] = (float)v; break;
     case PLY_USE_Z: xyz[2] = (float)v; break;
@@ -367,13 +400,17 @@ static void ply_vertex_value(int use, double v, float xyz[3], float nrm[3], floa
     case PLY_USE_NZ: nrm[2] = (float)v; break;
     case PLY_USE_U: uv[0] = (float)v; break;
     case PLY_USE_V: uv[1] = (float)v; break;
+    case PLY_USE_R: out->rgb[0] = ply_color(pr->type, v); break;
+    case PLY_USE_G: out->rgb[1] = ply_color(pr->type, v); break;
+    case PLY_USE_B: out->rgb[2] = ply_color(pr->type, v); break;
     default: break;
     }
 }
 
-static bool ply_vertex_finite(const float xyz[3], const float nrm[3], const float uv[2]) {
-    return isfinite(xyz[0]) && isfinite(xyz[1]) && isfinite(xyz[2]) && isfinite(nrm[0]) && isfinite(nrm[1]) &&
-           isfinite(nrm[2]) && isfinite(uv[0]) && isfinite(uv[1]);
+/* (Colours are finite: ply_color maps NaN to 0.) */
+static bool ply_vertex_finite(const ply_vertex *w) {
+    return isfinite(w->xyz[0]) && isfinite(w->xyz[1]) && isfinite(w->xyz[2]) && isfinite(w->nrm[0]) &&
+           isfinite(w->nrm[1]) && isfinite(w->nrm[2]) && isfinite(w->uv[0]) && isfinite(w->uv[1]);
 }
 
 static bool ply_read_vertices(ply_file *f, const ply_elem *el) {
@@ -389,7 +426,7 @@ static bool ply_read_vertices(ply_file *f, const ply_elem *el) {
             return io_error(ctx, f->shown, f->line, "out of memory");
         if (f->has_uv && b->uv_n >= b->uv_cap && !builder_reserve_texcoords(ctx, 1))
             return io_error(ctx, f->shown, f->line, "out of memory");
-        float xyz[3] = {0, 0, 0}, nrm[3] = {0, 0, 0}, uv[2] = {0, 0};
+        ply_vertex w = ply_vertex_zero;
         ply_sync_line(f);
         uint32_t line = f->line;
         for (size_t i = 0; i < el->prop_n; i++) {
@@ -400,13 +437,15 @@ static bool ply_read_vertices(ply_file *f, const ply_elem *el) {
             }
             double v;
             if (!ply_value(f, pr->type, &v)) return false;
-            ply_vertex_value(pr->use, v, xyz, nrm, uv);
+            ply_vertex_value(pr, v, &w);
         }
-        if (!ply_vertex_finite(xyz, nrm, uv))
+        if (!ply_vertex_finite(&w))
             return io_error(ctx, f->shown, line, "vertex %llu has a NaN or infinite value", (unsigned long long)k);
-        memcpy(b->pos + 3 * b->pos_n++, xyz, sizeof xyz);
-        if (f->has_normals) memcpy(b->nrm + 3 * b->nrm_n++, nrm, sizeof nrm);
-        if (f->has_uv) memcpy(b->uv + 2 * b->uv_n++, uv, sizeof uv);
+        if (f->has_color && !builder_set_colors(ctx, b->pos_n, w.rgb, 1))
+            return io_error(ctx, f->shown, f->line, "out of memory");
+        memcpy(b->pos + 3 * b->pos_n++, w.xyz, sizeof w.xyz);
+        if (f->has_normals) memcpy(b->nrm + 3 * b->nrm_n++, w.nrm, sizeof w.nrm);
+        if (f->has_uv) memcpy(b->uv + 2 * b->uv_n++, w.uv, sizeof w.uv);
     }
     f->vertex_count = el->count;
     f->nrm_base = b->nrm_n - (f->has_normals ? (size_t)el->count : 0);
@@ -609,17 +648,18 @@ static void ply_count_task(void *user, uint32_t index) {
 static const char *ply_chunk_vertex(const ply_par *par, const char *s, uint64_t k) {
     const ply_file *f = par->f;
     io_builder *b = &f->ctx->b;
-    float xyz[3] = {0, 0, 0}, nrm[3] = {0, 0, 0}, uv[2] = {0, 0};
+    ply_vertex w = ply_vertex_zero;
     for (size_t i = 0; i < par->vert->prop_n; i++) {
         const ply_prop *pr = &par->vert->props[i];
         double v;
         if (!(s = ply_ascii_token(ply_skip_blank(s), pr->type, &v))) return NULL;
-        ply_vertex_value(pr->use, v, xyz, nrm, uv);
+        ply_vertex_value(pr, v, &w);
     }
-    if (!ply_vertex_finite(xyz, nrm, uv)) return NULL;
-    memcpy(b->pos + 3 * (b->pos_n + k), xyz, sizeof xyz);
-    if (f->has_normals) memcpy(b->nrm + 3 * (b->nrm_n + k), nrm, sizeof nrm);
-    if (f->has_uv) memcpy(b->uv + 2 * (b->uv_n + k), uv, sizeof uv);
+    if (!ply_vertex_finite(&w)) return NULL;
+    memcpy(b->pos + 3 * (b->pos_n + k), w.xyz, sizeof w.xyz);
+    if (f->has_normals) memcpy(b->nrm + 3 * (b->nrm_n + k), w.nrm, sizeof w.nrm);
+    if (f->has_uv) memcpy(b->uv + 2 * (b->uv_n + k), w.uv, sizeof w.uv);
+    if (f->has_color) memcpy(b->col + 3 * (b->pos_n + k), w.rgb, sizeof w.rgb); /* room: ply_par_run */
     return s;
 }
 
@@ -732,6 +772,10 @@ static bool ply_par_run(ply_par *par) {
     if (records != par->vert->count + (par->face ? par->face->count : 0)) return false;
     if (par->vert->count > UINT32_MAX - b->pos_n || !ply_reserve_vertices(f, par->vert) ||
         b->pos_cap - b->pos_n < par->vert->count)
+        return false;
+    /* colours for every vertex of the element (the last one's set white here, the parse overwrites) */
+    static const float white[3] = {1, 1, 1};
+    if (f->has_color && par->vert->count && !builder_set_colors(ctx, b->pos_n + par->vert->count - 1, white, 1))
         return false;
     f->vertex_base = b->pos_n;
     f->vertex_count = par->vert->count;
@@ -875,7 +919,7 @@ bool ply_load(io_ctx *ctx, const char *path) {
         vfs_buf_free(&buf);
         return ok;
     }
-    f.p = body, f.line = body_line, f.has_normals = f.has_uv = false;
+    f.p = body, f.line = body_line, f.has_normals = f.has_uv = f.has_color = false;
     bool vertices_seen = false;
     /* Elements may come in any order: faces (or strips) before the vertices are read past and
      * come back once the vertices are in (where they start, and on which line). */

@@ -1,6 +1,6 @@
 /* Point clouds: a scene with vertices and nothing else (a PLY with a vertex element and no faces,
  * an OBJ of `v` lines alone) is a point cloud, and each finite vertex becomes a sphere of the
- * default material (RTfact's point-cloud rendering, here with the core's spheres, so every
+ * default material (of the vertex's colour, where the file gives colours) (RTfact's point-cloud rendering, here with the core's spheres, so every
  * structure, integrator and tool takes it as it is). The radius is the caller's, else half the
  * median distance from a vertex to its nearest neighbour, over up to POINT_SAMPLES vertices spread
  * through the file: the spheres of a regularly sampled surface then touch and close it. */
@@ -53,13 +53,20 @@ bool io_points_to_spheres(rp_scene_data *s, float radius) {
         radius = mag > 0.0f ? mag * 1e-3f : 1e-3f;
     }
     rp_sphere_data *sp = io_malloc(live * sizeof *sp);
-    if (!sp) return false;
+    float *col = s->colors ? io_malloc(3 * live * sizeof *col) : NULL;
+    if (!sp || (s->colors && !col)) {
+        free(sp);
+        free(col);
+        return false;
+    }
     size_t k = 0;
     for (size_t i = 0; i < n; i++) {
         const float *p = &s->positions[3 * i];
         if (!finite3(p)) continue;
+        if (col) memcpy(col + 3 * k, s->colors + 3 * i, 3 * sizeof(float));
         sp[k++] = (rp_sphere_data){{p[0], p[1], p[2]}, radius, 0};
     }
+    s->sphere_colors = col;
     s->spheres = sp;
     s->sphere_count = live;
     return true;

@@ -115,6 +115,23 @@ bool builder_reserve_texcoords(io_ctx *ctx, size_t extra) {
     return io_reserve((void **)&b->uv, &b->uv_cap, first_need(b->uv_cap, b->uv_n + extra, b->hint), 2 * sizeof(float));
 }
 
+bool builder_set_colors(io_ctx *ctx, size_t first, const float *rgb, size_t n) {
+    io_builder *b = &ctx->b;
+    size_t end = first + n;
+    if (end > b->col_cap && !io_reserve((void **)&b->col, &b->col_cap, end > b->pos_cap ? end : b->pos_cap, 3 * sizeof(float)))
+        return false;
+    for (size_t i = b->col_n; i < first; i++) b->col[3 * i] = b->col[3 * i + 1] = b->col[3 * i + 2] = 1.0f;
+    if (n) memcpy(b->col + 3 * first, rgb, 3 * sizeof(float) * n);
+    if (end > b->col_n) b->col_n = end;
+    return true;
+}
+
+float io_srgb_to_linear(float c) {
+    if (!(c > 0.0f)) return 0.0f;
+    if (c >= 1.0f) return c == 1.0f ? 1.0f : c; /* above 1: as written (an HDR colour) */
+    return c <= 0.04045f ? c / 12.92f : powf((c + 0.055f) / 1.055f, 2.4f);
+}
+
 bool builder_reserve_triangles(io_ctx *ctx, size_t extra) {
     io_builder *b = &ctx->b;
     size_t need = first_need(b->tri_cap, b->tri_n + extra, b->hint / 2), cap = b->tri_cap;
@@ -185,6 +202,7 @@ void builder_free(io_builder *b) {
     free(b->pos);
     free(b->nrm);
     free(b->uv);
+    free(b->col);
     free(b->idx);
     free(b->nidx);
     free(b->tidx);
@@ -207,6 +225,8 @@ void builder_free(io_builder *b) {
  * the per-corner arrays are either absent or complete. */
 static bool builder_fill_missing(io_ctx *ctx) {
     io_builder *b = &ctx->b;
+    if (b->col && b->col_n < b->pos_n && !builder_set_colors(ctx, b->pos_n, NULL, 0)) return false;
+    if (b->col && b->col_n > b->pos_n) b->col_n = b->pos_n; /* a colour parsed with a vertex undone */
     if (b->nidx) {
         for (size_t i = 0; i < b->tri_n; i++) {
             uint32_t *n = b->nidx + 3 * i;
@@ -375,6 +395,7 @@ static void move_out(io_builder *b, rp_scene_data *out) {
     out->normal_indices = b->nidx;
     out->texcoord_indices = b->tidx;
     out->tri_materials = b->mat;
+    out->colors = b->col; /* as many as positions: builder_fill_missing */
     out->sphere_count = b->sphere_n;
     out->spheres = b->spheres;
     out->cone_count = b->cone_n;
@@ -555,6 +576,8 @@ void rp_scene_data_free(rp_scene_data *scene) {
     free(scene->indices);
     free(scene->normal_indices);
     free(scene->texcoord_indices);
+    free(scene->colors);
+    free(scene->sphere_colors);
     free(scene->tri_materials);
     free(scene->spheres);
     free(scene->cones);

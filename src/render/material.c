@@ -86,7 +86,7 @@ v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]
 }
 
 v3 material_albedo(const rp_render_scene *s, const rp_material *m, const render_surface *surf) {
-    v3 kd = v3_load(m->kd);
+    v3 kd = v3_mul(v3_load(m->kd), surf->color);
     if (m->texture >= 0 && surf->has_uv) kd = v3_mul(kd, material_texture(s, m->texture, surf->uv));
     return kd;
 }

@@ -145,6 +145,8 @@ typedef struct render_surface {
     v3 dpdu;     /* triangles with texture coordinates whose material has a normal map: the position's
                   * derivative along u (for the tangent-space normal map), else 0 */
     float eps;   /* how far rays leaving the point start off it (ray_offset_at) */
+    v3 color;    /* the vertex colours interpolated (a point's sphere's colour), multiplying the base
+                  * colour (material_albedo); white where the scene has none */
 } render_surface;
 
 /* Cone user geometry callbacks (cone.c). */

@@ -279,6 +279,7 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
     out->has_uv = false;
     out->uv[0] = out->uv[1] = 0.0f;
     out->dpdu = v3_make(0, 0, 0);
+    out->color = v3_make(1, 1, 1);
     out->material = 0;
     const bool tri = geom == s->geom_ids[RENDER_GEOM_TRIANGLES] && prim < d->triangle_count;
     const bool sphere = !tri && geom == s->geom_ids[RENDER_GEOM_SPHERES] && prim < d->sphere_count;
@@ -332,6 +333,10 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
                                v3_scale(corner3(d->normals, d->normal_indices, prim, 1), b1)),
                         v3_scale(corner3(d->normals, d->normal_indices, prim, 2), b2));
         }
+        if (d->colors)
+            out->color = v3_add(v3_add(v3_scale(corner3(d->colors, d->indices, prim, 0), b0),
+                                       v3_scale(corner3(d->colors, d->indices, prim, 1), b1)),
+                                v3_scale(corner3(d->colors, d->indices, prim, 2), b2));
         uint32_t mat = d->tri_materials ? d->tri_materials[prim] : 0;
         const rp_material *m = &s->materials[mat < (d->material_count > 0 ? d->material_count : 1) ? mat : 0];
         /* texture coordinates only where the material reads a texture, and dp/du only where it has a
@@ -361,6 +366,7 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
         float cm = v3_max_abs(v3_load(sp->center)) + fabsf(sp->radius);
         if (near && cm > mag) mag = cm;
         out->material = sp->material;
+        if (d->sphere_colors) out->color = v3_load(d->sphere_colors + 3 * (size_t)prim);
     } else if (geom == s->geom_ids[RENDER_GEOM_CONES] && prim < d->cone_count) {
         out->material = d->cones[prim].material;
     }

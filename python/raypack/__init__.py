@@ -83,9 +83,10 @@ def _ptr(ctype, a):
 
 class Scene:
     """A committed scene: Scene(vertices, indices) from an (V, 3) float32 and an (T, 3) uint32
-    array (copied), or raypack.load(path) for a scene file."""
+    array (copied), or raypack.load(path) for a scene file. colors: an optional (V, 3) array of
+    linear RGB vertex colours (finite, >= 0) multiplying the grey (0.8) material's colour."""
 
-    def __init__(self, vertices=None, indices=None, device=None, _ptr_=None):
+    def __init__(self, vertices=None, indices=None, device=None, _ptr_=None, colors=None):
         self.device = device or default_device()
         if _ptr_ is not None:
             self._ptr = _ptr_
@@ -99,10 +100,18 @@ class Scene:
         if i.size and (i.min() < 0 or i.max() >= len(v)):
             raise ValueError("indices out of range of the vertices")
         i = np.ascontiguousarray(i, dtype=np.uint32)
+        c = ffi.NULL
+        if colors is not None:
+            c = np.ascontiguousarray(colors, dtype=np.float32)
+            if c.shape != v.shape:
+                raise ValueError(f"colors must be a (V, 3) array like the vertices, got shape {c.shape}")
+            if not (np.isfinite(c).all() and (c >= 0).all()):
+                raise ValueError("colors must be finite and not negative")
+            c = _ptr("float *", c)
         err = ffi.new("char[512]")
         with self.device._lock:
             p = lib.rpy_scene_from_arrays(self.device._ptr, _ptr("float *", v), len(v), _ptr("uint32_t *", i),
-                                          len(i), err, 512)
+                                          len(i), c, err, 512)
         if p == ffi.NULL:
             raise RuntimeError(ffi.string(err).decode(errors="replace") or "scene creation failed")
         self._ptr = p

@@ -15,7 +15,8 @@ rp_device *rpy_device_new(int threads);
 void rp_device_release(rp_device *device);
 int rp_device_thread_count(const rp_device *device);
 rpy_scene *rpy_scene_from_arrays(rp_device *dev, const float *vertices, size_t vertex_count,
-                                 const uint32_t *indices, size_t triangle_count, char *err, size_t err_size);
+                                 const uint32_t *indices, size_t triangle_count, const float *colors,
+                                 char *err, size_t err_size);
 rpy_scene *rpy_scene_load(rp_device *dev, const char *path, char *err, size_t err_size);
 void rpy_scene_free(rpy_scene *s);
 size_t rpy_scene_triangle_count(const rpy_scene *s);

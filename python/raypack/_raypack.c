@@ -37,8 +37,8 @@ static rpy_scene *finish(rp_device *dev, rpy_scene *s, char *err, size_t err_siz
 }
 
 static rpy_scene *rpy_scene_from_arrays(rp_device *dev, const float *vertices, size_t vertex_count,
-                                        const uint32_t *indices, size_t triangle_count, char *err,
-                                        size_t err_size) {
+                                        const uint32_t *indices, size_t triangle_count, const float *colors,
+                                        char *err, size_t err_size) {
     for (size_t i = 0; i < 3 * triangle_count; i++)
         if (indices[i] >= vertex_count) {
             snprintf(err, err_size, "index %u of triangle %zu is out of range (%zu vertices)", indices[i], i / 3,
@@ -52,7 +52,8 @@ static rpy_scene *rpy_scene_from_arrays(rp_device *dev, const float *vertices, s
     d->indices = malloc(3 * sizeof(uint32_t) * (triangle_count ? triangle_count : 1));
     d->tri_materials = calloc(triangle_count ? triangle_count : 1, sizeof(uint32_t));
     d->materials = calloc(1, sizeof(rp_material_data));
-    if (!d->positions || !d->indices || !d->tri_materials || !d->materials) {
+    if (colors) d->colors = malloc(3 * sizeof(float) * (vertex_count ? vertex_count : 1));
+    if (!d->positions || !d->indices || !d->tri_materials || !d->materials || (colors && !d->colors)) {
         rp_scene_data_free(d);
         free(s);
         snprintf(err, err_size, "out of memory");
@@ -60,6 +61,7 @@ static rpy_scene *rpy_scene_from_arrays(rp_device *dev, const float *vertices, s
     }
     memcpy(d->positions, vertices, 3 * sizeof(float) * vertex_count);
     memcpy(d->indices, indices, 3 * sizeof(uint32_t) * triangle_count);
+    if (colors) memcpy(d->colors, colors, 3 * sizeof(float) * vertex_count);
     d->vertex_count = vertex_count;
     d->triangle_count = triangle_count;
     d->material_count = 1;

@@ -185,6 +185,19 @@ def test_render():
     assert q[16, 16, 0] == pytest.approx(3.0, rel=1e-3) and np.isinf(q[0, 0, 0])
 
 
+def test_vertex_colors():
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32)
+    i = np.array([[0, 1, 2], [0, 2, 3]], np.uint32)
+    c = np.tile(np.float32([1.0, 0.5, 0.25]), (4, 1))
+    s = raypack.Scene(v, i, colors=c)
+    a = raypack.render(s, 16, 16, eye=(0, 0, 3), look=(0, 0, 0), aov="albedo")
+    assert a[8, 8] == pytest.approx([0.8, 0.4, 0.2], rel=1e-5)
+    with pytest.raises(ValueError):
+        raypack.Scene(v, i, colors=c[:3])
+    with pytest.raises(ValueError):
+        raypack.Scene(v, i, colors=-c)
+
+
 def test_gltf():
     s = raypack.load(scene_path("gltf_suzanne/Suzanne.gltf"))
     assert s.triangle_count == 3936

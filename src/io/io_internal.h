@@ -236,7 +236,8 @@ bool builder_reserve_texcoords(io_ctx *ctx, size_t extra);
 /* Colours vertices [first, first + n) (linear RGB, 3 n floats); vertices before first without one
  * are white. */
 bool builder_set_colors(io_ctx *ctx, size_t first, const float *rgb, size_t n);
-/* The sRGB transfer function's inverse, for 8-bit (or normalized) colours written in files. */
+/* The sRGB transfer function's inverse, for 8-bit (or normalized) colours written in files; clamped
+ * to [0, 1] (NaN to 0). */
 float io_srgb_to_linear(float c);
 bool builder_reserve_triangles(io_ctx *ctx, size_t extra);
 /* Material initialised to the defaults of every format (grey diffuse, ior 1, no texture). */

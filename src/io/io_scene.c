@@ -128,7 +128,7 @@ bool builder_set_colors(io_ctx *ctx, size_t first, const float *rgb, size_t n) {
 
 float io_srgb_to_linear(float c) {
     if (!(c > 0.0f)) return 0.0f;
-    if (c >= 1.0f) return c == 1.0f ? 1.0f : c; /* above 1: as written (an HDR colour) */
+    if (c >= 1.0f) return 1.0f; /* a colour of 0-255 values in a file of [0, 1] ones: white, not 255x */
     return c <= 0.04045f ? c / 12.92f : powf((c + 0.055f) / 1.055f, 2.4f);
 }
 

@@ -1,5 +1,5 @@
 // rp-test: labels=render timeout=300
-/* Alpha cutouts (src/render/alpha.c): an OBJ quad tilted 40 degrees in front of a checker wall,
+/* Alpha cutouts (src/render/alpha.c): an OBJ quad tilted 35 degrees in front of a checker wall,
  * whose MTL map_d is an RGBA PNG with a 4x4 checker of holes, lit by a point light beside the eye.
  * Every integrator (Whitted in packets and ray by ray, eye light, the AOVs, direct, path, instant
  * radiosity, AO) must show the wall exactly where the camera ray passes through a hole, and the
@@ -15,6 +15,7 @@
 #include "raypack_io.h"
 #include "raypack_render.h"
 #include "rp_test.h"
+#include "rp_test_tmp.h"
 
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wconversion"
@@ -27,25 +28,6 @@
 #include <stb/stb_image_write.h>
 #pragma GCC diagnostic pop
 
-static char tmp_dir[512];
-
-static const char *tmp_path(const char *name, char *buf, size_t size) {
-    snprintf(buf, size, "%s/%s", tmp_dir, name);
-    return buf;
-}
-
-static void write_bytes(const char *name, const void *data, size_t n) {
-    char path[1024];
-    FILE *f = fopen(tmp_path(name, path, sizeof path), "wb");
-    if (!f) {
-        fprintf(stderr, "cannot write %s\n", path);
-        exit(1);
-    }
-    fwrite(data, 1, n, f);
-    fclose(f);
-}
-
-static void write_text(const char *name, const char *text) { write_bytes(name, text, strlen(text)); }
 
 enum { TEX = 64, CELL = 16 };
 
@@ -173,10 +155,16 @@ typedef struct pixel_class {
     int seen, shadow;
 } pixel_class;
 
-static void classify(const quad *q, pixel_class *out) {
+/* The pixel centres' primary rays. */
+static const rp_ray *pixel_rays(void) {
     static rp_ray rays[W * H];
     rp_camera cam = scene_camera();
     rp_render_primary_rays(&cam, W, H, rays);
+    return rays;
+}
+
+static void classify(const quad *q, pixel_class *out) {
+    const rp_ray *rays = pixel_rays();
     for (int i = 0; i < W * H; i++) {
         vec o = {rays[i].org_x, rays[i].org_y, rays[i].org_z}, d = {rays[i].dir_x, rays[i].dir_y, rays[i].dir_z};
         out[i].seen = quad_cross(q, o, d, 1e30, NULL);
@@ -326,9 +314,7 @@ static void test_obj_integrators(rp_device *dev) {
     /* depth: the quad's or the wall's distance */
     px = render(rs, (rp_render_desc){.integrator = RP_INTEGRATOR_AOV, .aov = RP_AOV_DEPTH});
     if (px) {
-        static rp_ray rays[W * H];
-        rp_camera cam = scene_camera();
-        rp_render_primary_rays(&cam, W, H, rays);
+        const rp_ray *rays = pixel_rays();
         int wrong = 0;
         for (int i = 0; i < W * H; i++) {
             if (pc[i].seen == UNSURE) continue;
@@ -340,13 +326,11 @@ static void test_obj_integrators(rp_device *dev) {
         CHECKF(wrong == 0, "depth: %d pixels wrong", wrong);
         free(px);
     }
-    /* eye light: |cos| of the quad's normal (tilted 40 degrees) or the wall's */
+    /* eye light: |cos| of the quad's normal (tilted 35 degrees) or the wall's */
     for (int packet = 16; packet >= -1; packet -= 17) {
         px = render(rs, (rp_render_desc){.integrator = RP_INTEGRATOR_EYELIGHT, .packet = packet});
         if (!px) continue;
-        static rp_ray rays[W * H];
-        rp_camera cam = scene_camera();
-        rp_render_primary_rays(&cam, W, H, rays);
+        const rp_ray *rays = pixel_rays();
         int wrong = 0;
         for (int i = 0; i < W * H; i++) {
             if (pc[i].seen == UNSURE) continue;
@@ -596,9 +580,7 @@ static void test_gltf_mask(rp_device *dev) {
 }
 
 int main(void) {
-    const char *t = getenv("RP_TEST_TMP");
-    snprintf(tmp_dir, sizeof tmp_dir, "%s", t ? t : "/tmp/rp_test_alpha");
-    mkdir(tmp_dir, 0755);
+    tmp_init("/tmp/rp_test_alpha");
     rp_device *dev = rp_device_new(&(rp_device_desc){.threads = 2});
     test_obj_integrators(dev);
     test_same_bytes();

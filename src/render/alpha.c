@@ -113,36 +113,32 @@ void alpha_occluded1(const rp_render_scene *s, rp_ray *ray) {
     if (s->cutouts && ray->tfar < 0.0f && tfar >= 0.0f && !opaque_on(s, ray, tfar)) ray->tfar = tfar;
 }
 
-void alpha_intersect_array(const rp_render_scene *s, rp_rayhit *rayhits, size_t count, uint32_t flags) {
-    if (!s->cutouts) {
-        rp_intersect_array(s->scene, rayhits, count, flags);
-        return;
-    }
+/* An array of closest-hit (rh) or occlusion (r) queries, the other NULL, fixed up ALPHA_CHUNK at a
+ * time. */
+static void array_fixed(const rp_render_scene *s, rp_rayhit *rh, rp_ray *r, size_t count, uint32_t flags) {
     float tfar[ALPHA_CHUNK];
     for (size_t i0 = 0; i0 < count; i0 += ALPHA_CHUNK) {
         size_t n = count - i0 < ALPHA_CHUNK ? count - i0 : ALPHA_CHUNK;
-        rp_rayhit *rh = rayhits + i0;
-        for (size_t i = 0; i < n; i++) tfar[i] = rh[i].ray.tfar;
-        rp_intersect_array(s->scene, rh, n, flags);
-        for (size_t i = 0; i < n; i++)
-            if (rh[i].hit.geom_id != RP_INVALID_ID && rayhit_cut(s, &rh[i])) pass_through(s, &rh[i], tfar[i]);
+        for (size_t i = 0; i < n; i++) tfar[i] = rh ? rh[i0 + i].ray.tfar : r[i0 + i].tfar;
+        if (rh) rp_intersect_array(s->scene, rh + i0, n, flags);
+        else rp_occluded_array(s->scene, r + i0, n, flags);
+        for (size_t i = 0; i < n; i++) {
+            if (rh && rh[i0 + i].hit.geom_id != RP_INVALID_ID && rayhit_cut(s, &rh[i0 + i]))
+                pass_through(s, &rh[i0 + i], tfar[i]);
+            if (r && r[i0 + i].tfar < 0.0f && tfar[i] >= 0.0f && !opaque_on(s, &r[i0 + i], tfar[i]))
+                r[i0 + i].tfar = tfar[i];
+        }
     }
 }
 
+void alpha_intersect_array(const rp_render_scene *s, rp_rayhit *rayhits, size_t count, uint32_t flags) {
+    if (s->cutouts) array_fixed(s, rayhits, NULL, count, flags);
+    else rp_intersect_array(s->scene, rayhits, count, flags);
+}
+
 void alpha_occluded_array(const rp_render_scene *s, rp_ray *rays, size_t count, uint32_t flags) {
-    if (!s->cutouts) {
-        rp_occluded_array(s->scene, rays, count, flags);
-        return;
-    }
-    float tfar[ALPHA_CHUNK];
-    for (size_t i0 = 0; i0 < count; i0 += ALPHA_CHUNK) {
-        size_t n = count - i0 < ALPHA_CHUNK ? count - i0 : ALPHA_CHUNK;
-        rp_ray *r = rays + i0;
-        for (size_t i = 0; i < n; i++) tfar[i] = r[i].tfar;
-        rp_occluded_array(s->scene, r, n, flags);
-        for (size_t i = 0; i < n; i++)
-            if (r[i].tfar < 0.0f && tfar[i] >= 0.0f && !opaque_on(s, &r[i], tfar[i])) r[i].tfar = tfar[i];
-    }
+    if (s->cutouts) array_fixed(s, NULL, rays, count, flags);
+    else rp_occluded_array(s->scene, rays, count, flags);
 }
 
 /* Lane q of a large packet as a single ray. */
@@ -152,17 +148,22 @@ static rp_ray lane_ray(const rp_rayhit_n *p, uint32_t q, float tfar) {
                     .mask = p->mask ? p->mask[q] : 0xFFFFFFFFu};
 }
 
-void alpha_intersect_n(const rp_render_scene *s, const rp_query_n_desc *desc, rp_rayhit_n *p) {
-    if (!s->cutouts) {
-        rp_intersect_n(s->scene, desc, p);
-        return;
-    }
+/* A large packet's closest-hit or occlusion query, fixed up lane by lane. */
+static void packet_fixed(const rp_render_scene *s, const rp_query_n_desc *desc, rp_rayhit_n *p, bool occluded) {
     uint32_t nn = p->n * p->n;
     float tfar[RENDER_LANES_MAX];
     for (uint32_t q = 0; q < nn; q++) tfar[q] = p->tfar[q];
-    rp_intersect_n(s->scene, desc, p);
+    if (occluded) rp_occluded_n(s->scene, desc, p);
+    else rp_intersect_n(s->scene, desc, p);
     for (uint32_t q = 0; q < nn; q++) {
-        if ((p->valid && !p->valid[q]) || p->geom_id[q] == RP_INVALID_ID) continue;
+        if (p->valid && !p->valid[q]) continue;
+        if (occluded) {
+            if (!(p->tfar[q] < 0.0f && tfar[q] >= 0.0f)) continue;
+            rp_ray r = lane_ray(p, q, tfar[q]);
+            if (!opaque_on(s, &r, tfar[q])) p->tfar[q] = tfar[q];
+            continue;
+        }
+        if (p->geom_id[q] == RP_INVALID_ID) continue;
         const float org[3] = {p->org_x[q], p->org_y[q], p->org_z[q]}, dir[3] = {p->dir_x[q], p->dir_y[q], p->dir_z[q]};
         if (!hit_cut(s, org, dir, p->tfar[q], p->geom_id[q], p->prim_id[q], p->inst_id[q], p->u[q], p->v[q])) continue;
         rp_rayhit rh = {.ray = lane_ray(p, q, p->tfar[q])};
@@ -174,18 +175,12 @@ void alpha_intersect_n(const rp_render_scene *s, const rp_query_n_desc *desc, rp
     }
 }
 
+void alpha_intersect_n(const rp_render_scene *s, const rp_query_n_desc *desc, rp_rayhit_n *p) {
+    if (s->cutouts) packet_fixed(s, desc, p, false);
+    else rp_intersect_n(s->scene, desc, p);
+}
+
 void alpha_occluded_n(const rp_render_scene *s, const rp_query_n_desc *desc, rp_rayhit_n *p) {
-    if (!s->cutouts) {
-        rp_occluded_n(s->scene, desc, p);
-        return;
-    }
-    uint32_t nn = p->n * p->n;
-    float tfar[RENDER_LANES_MAX];
-    for (uint32_t q = 0; q < nn; q++) tfar[q] = p->tfar[q];
-    rp_occluded_n(s->scene, desc, p);
-    for (uint32_t q = 0; q < nn; q++) {
-        if ((p->valid && !p->valid[q]) || !(p->tfar[q] < 0.0f) || !(tfar[q] >= 0.0f)) continue;
-        rp_ray r = lane_ray(p, q, tfar[q]);
-        if (!opaque_on(s, &r, tfar[q])) p->tfar[q] = tfar[q];
-    }
+    if (s->cutouts) packet_fixed(s, desc, p, true);
+    else rp_occluded_n(s->scene, desc, p);
 }

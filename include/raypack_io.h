@@ -30,6 +30,12 @@ extern "C" {
 #endif
 #endif
 
+/* How a material's alpha (coverage) is used: alpha-tested geometry (leaves and fences as textured
+ * quads). OPAQUE ignores it; MASK cuts the surface out where alpha < alpha_cutoff (glTF's "MASK",
+ * MTL map_d); BLEND cuts it out with probability 1 - alpha, a stochastic alpha test (glTF's
+ * "BLEND"): the renderer compares alpha with a hash of the ray, so images stay deterministic. */
+typedef enum rp_alpha_mode { RP_ALPHA_OPAQUE = 0, RP_ALPHA_MASK = 1, RP_ALPHA_BLEND = 2 } rp_alpha_mode;
+
 /* Material as the scene file states it (MTL and NFF/AFF parameters); the renderer maps it to its
  * own BSDFs. Colours are linear RGB. */
 typedef struct rp_material_data {
@@ -55,13 +61,24 @@ typedef struct rp_material_data {
     float roughness;       /* perceptual roughness factor r in [0, 1] (GGX alpha = r^2) */
     int32_t map_metal_rough; /* 1 + index into textures whose green channel (roughness) and blue
                               * channel (metallic), linear, multiply the factors; 0 if none */
+    /* Alpha cutouts (rp_alpha_mode): a surface point's alpha is `alpha` times the alpha texture's
+     * alpha plane there (its red channel where the texture has none). MTL map_d: MASK, cutoff 0.5;
+     * glTF: alphaMode, alphaCutoff, baseColorFactor[3] and the base colour texture's alpha. MTL `d`
+     * is not this: it makes a dielectric (kt). */
+    rp_alpha_mode alpha_mode;
+    float alpha;           /* factor in [0, 1]; 1 after builder defaults */
+    float alpha_cutoff;    /* MASK: cut out below it; 0.5 after builder defaults */
+    int32_t map_alpha;     /* 1 + index into textures of the alpha texture, 0 if none */
 } rp_material_data;
 
-/* Image texture, decoded to 8-bit RGB (sRGB encoded, as stored in the file). */
+/* Image texture, decoded to 8-bit RGB (sRGB encoded, as stored in the file), and its alpha channel
+ * where the file has one (RGBA or grey-alpha PNG, TGA, BMP). */
 typedef struct rp_texture_data {
     char path[256];     /* the path the scene named, as written */
     int32_t width, height;
     uint8_t *rgb;       /* width * height * 3 bytes, top row first */
+    uint8_t *alpha;     /* width * height bytes (linear coverage, 255 opaque), top row first; NULL
+                         * when the file has no alpha channel. Owned like rgb */
 } rp_texture_data;
 
 /* Point lights (NFF/AFF, glTF); spot and directional lights come from glTF's KHR_lights_punctual

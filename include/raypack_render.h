@@ -77,6 +77,10 @@ typedef struct rp_material {
     bool metal_rough;
     float metallic, roughness;     /* factors, [0, 1] */
     int32_t metal_rough_texture;   /* green: roughness, blue: metallic (linear), times the factors; or -1 */
+    /* Alpha cutouts (rp_material_data's): rays pass through where the surface is cut out */
+    rp_alpha_mode alpha_mode;
+    float alpha, alpha_cutoff;     /* factor; MASK's threshold */
+    int32_t alpha_texture;         /* its alpha plane (else its red channel) times alpha, or -1 */
     union {
         rp_mirror_params mirror;
         rp_dielectric_params dielectric;

@@ -50,7 +50,8 @@ static bool same_scene(const rp_scene_data *a, const rp_scene_data *b, char *why
     for (size_t i = 0; i < a->texture_count; i++) {
         const rp_texture_data *x = &a->textures[i], *y = &b->textures[i];
         if (strcmp(x->path, y->path) != 0 || x->width != y->width || x->height != y->height ||
-            !same_bytes(x->rgb, y->rgb, 3 * (size_t)x->width * (size_t)x->height)) {
+            !same_bytes(x->rgb, y->rgb, 3 * (size_t)x->width * (size_t)x->height) || !x->alpha != !y->alpha ||
+            (x->alpha && !same_bytes(x->alpha, y->alpha, (size_t)x->width * (size_t)x->height))) {
             snprintf(why, size, "texture %zu differs", i);
             return false;
         }

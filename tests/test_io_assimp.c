@@ -12,26 +12,8 @@
 #include "raypack_io.h"
 #include "raypack_render.h"
 #include "rp_test.h"
+#include "rp_test_tmp.h"
 
-static char tmp_dir[512];
-
-static const char *tmp_path(const char *name, char *buf, size_t size) {
-    snprintf(buf, size, "%s/%s", tmp_dir, name);
-    return buf;
-}
-
-static void write_bytes(const char *name, const void *data, size_t n) {
-    char path[1024];
-    FILE *f = fopen(tmp_path(name, path, sizeof path), "wb");
-    if (!f) {
-        fprintf(stderr, "cannot write %s\n", path);
-        exit(1);
-    }
-    fwrite(data, 1, n, f);
-    fclose(f);
-}
-
-static void write_text(const char *name, const char *text) { write_bytes(name, text, strlen(text)); }
 
 static bool near(float a, float b, float tol) { return fabsf(a - b) <= tol; }
 
@@ -659,9 +641,7 @@ static void test_gltf_lights(void) {
 }
 
 int main(void) {
-    const char *t = getenv("RP_TEST_TMP");
-    snprintf(tmp_dir, sizeof tmp_dir, "%s", t ? t : "/tmp/rp_test_io_assimp");
-    mkdir(tmp_dir, 0755);
+    tmp_init("/tmp/rp_test_io_assimp");
     write_triangle_bin("tri.bin");
     write_gltf("scene.gltf", "tri.bin");
     test_handwritten_gltf("scene.gltf");

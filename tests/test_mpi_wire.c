@@ -132,6 +132,7 @@ static void check_scene(const char *name, rp_scene_data *s) {
         const rp_texture_data *a = &s->textures[i], *b = &u.textures[i];
         CHECK(a->width == b->width && a->height == b->height && strcmp(a->path, b->path) == 0);
         CHECK(same(a->rgb, b->rgb, (size_t)a->width * (size_t)a->height * 3));
+        CHECK(!a->alpha == !b->alpha && (!a->alpha || same(a->alpha, b->alpha, (size_t)a->width * (size_t)a->height)));
     }
     CHECK(u.camera.valid == s->camera.valid && same(u.camera.eye, s->camera.eye, sizeof u.camera.eye) &&
           u.camera.width == s->camera.width && u.has_background == s->has_background);
@@ -180,8 +181,9 @@ static void check_scene(const char *name, rp_scene_data *s) {
 
     if (s->material_count) { /* a texture index past the textures, in each of a material's maps */
         rp_material_data keep = s->materials[0];
-        int32_t *maps[3] = {&s->materials[0].map_roughness, &s->materials[0].map_normal, &s->materials[0].map_ke};
-        for (int k = 0; k < 3; k++) {
+        int32_t *maps[4] = {&s->materials[0].map_roughness, &s->materials[0].map_normal, &s->materials[0].map_ke,
+                            &s->materials[0].map_alpha};
+        for (int k = 0; k < 4; k++) {
             *maps[k] = (int32_t)s->texture_count + 1;
             check_bad_animation(name, s, "material textures");
             s->materials[0] = keep;
@@ -265,6 +267,15 @@ int main(void) {
     float *px = render(&room);
     if (px) check_tile(px, W * H * 3);
     free(px);
+    /* an alpha cutout: the texture's alpha plane and the material's mode travel */
+    rp_texture_data *tex = &room.textures[0];
+    tex->alpha = malloc((size_t)tex->width * (size_t)tex->height);
+    if (tex->alpha) {
+        for (size_t i = 0; i < (size_t)tex->width * (size_t)tex->height; i++) tex->alpha[i] = (uint8_t)(i * 37 % 256);
+        for (size_t i = 0; i < room.material_count; i++)
+            if (room.materials[i].map_kd == 0) room.materials[i].alpha_mode = RP_ALPHA_MASK, room.materials[i].map_alpha = 1;
+        check_scene("room with a cutout", &room);
+    }
     rp_default_scene_free(&room);
     static const char *const scenes[] = {"bart_kitchen.tar.gz", "bart_museum5.tar.gz", "spd_rings_s5.nff.gz",
                                          "cornell_box/cornell_box.obj", "stanford_bunny_bun_zipper.ply.gz"};

@@ -114,6 +114,7 @@ int cli_cuda_render(int argc, char **argv) {
     rp_scene_data data;
     if (!cli_render_load(CMD, &setup, &data)) return CLI_EXIT_FAILURE;
     rc = cli_render_scene_flags(CMD, &setup, &data);
+    if (rc == CLI_EXIT_OK) cli_cutouts_warning(CMD, "cuda", &data);
     rp_device *device = rc == CLI_EXIT_OK ? cli_device_new(CMD, setup.threads, setup.isa) : NULL;
     rp_render_scene *scene = NULL;
     rp_cuda_tracer *tracer = NULL;

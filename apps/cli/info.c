@@ -131,12 +131,17 @@ int cli_info(int argc, char **argv) {
         if (m->metal_rough)
             printf(" metallic %.2f roughness %.2f%s", m->metallic, m->roughness,
                    m->map_metal_rough ? " (times the metallic-roughness texture)" : "");
+        if (rm->alpha_mode != RP_ALPHA_OPAQUE)
+            printf(" alpha %s %.2f%s", rm->alpha_mode == RP_ALPHA_MASK ? "mask" : "blend", rm->alpha,
+                   rm->alpha_texture >= 0 ? " (times its texture)" : "");
+        if (rm->alpha_mode == RP_ALPHA_MASK) printf(" cutoff %.2f", rm->alpha_cutoff);
         printf("\n");
     }
     if (shown < d.material_count) printf("  ... %zu more (--materials lists all)\n", d.material_count - shown);
     printf("textures    %zu\n", d.texture_count);
     for (size_t i = 0; i < d.texture_count && i < 16; i++)
-        printf("  %-3zu %s (%dx%d)\n", i, d.textures[i].path, d.textures[i].width, d.textures[i].height);
+        printf("  %-3zu %s (%dx%d%s)\n", i, d.textures[i].path, d.textures[i].width, d.textures[i].height,
+               d.textures[i].alpha ? ", alpha" : "");
     printf("lights      %zu%s\n", d.light_count, d.light_count ? "" : " (renders light the scene from the eye)");
     for (size_t i = 0; i < d.light_count && i < 16; i++) {
         const rp_light_data *l = &d.lights[i];

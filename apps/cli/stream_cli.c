@@ -263,6 +263,7 @@ static bool load(const char *cmd, const stream_opts *o, int default_w, int defau
                         "(use --integrator eyelight, whitted, path, direct or ao)\n", cmd);
         return false;
     }
+    cli_cutouts_warning(cmd, "stream", &l->data);
     if (!(l->device = cli_device_new(cmd, o->threads, o->isa))) return false;
     /* flat: the grid holds one level of primitives, no instances */
     rp_render_scene_desc sdesc = {.flatten_animation = true, .medium = o->vol.medium};

@@ -128,10 +128,14 @@ bool wire_scene_pack(const rp_scene_data *s, uint8_t **out, size_t *size) {
     put_u64(&w, s->texture_count);
     for (size_t i = 0; i < s->texture_count; i++) {
         rp_texture_data t = s->textures[i];
-        const uint8_t *rgb = t.rgb;
+        const uint8_t *rgb = t.rgb, *alpha = t.alpha;
         t.rgb = NULL;
+        t.alpha = NULL;
         put(&w, &t, sizeof t);
         put_array(&w, rgb, (size_t)t.width * (size_t)t.height * 3, 1);
+        uint8_t has_alpha = alpha != NULL;
+        put(&w, &has_alpha, 1);
+        if (alpha) put_array(&w, alpha, (size_t)t.width * (size_t)t.height, 1);
     }
     put(&w, &s->camera, sizeof s->camera);
     put(&w, s->background, sizeof s->background);
@@ -422,8 +426,15 @@ bool wire_scene_unpack(const uint8_t *buf, size_t size, rp_scene_data *s, char *
             r.what = "texture size";
             break;
         }
+        t->alpha = NULL;
         get_array(&r, &p, 1, (size_t)t->width * (size_t)t->height * 3, NULL, "texture pixels");
         t->rgb = p;
+        uint8_t has_alpha = 0;
+        if (get(&r, &has_alpha, 1, "texture alpha flag") && has_alpha > 1) r.what = "texture alpha flag";
+        if (has_alpha == 1 && !r.what) {
+            get_array(&r, &p, 1, (size_t)t->width * (size_t)t->height, NULL, "texture alpha");
+            t->alpha = p;
+        }
         t->path[sizeof t->path - 1] = '\0';
     }
     get(&r, &s->camera, sizeof s->camera, "camera");
@@ -459,9 +470,10 @@ bool wire_scene_unpack(const uint8_t *buf, size_t size, rp_scene_data *s, char *
             if ((unsigned)s->lights[i].type > (unsigned)RP_LIGHT_DATA_DIRECTIONAL) r.what = "light types";
         for (size_t i = 0; !r.what && i < s->material_count; i++) {
             const rp_material_data *m = &s->materials[i];
-            int32_t t = m->map_kd, more[4] = {m->map_roughness, m->map_normal, m->map_ke, m->map_metal_rough}; /* 1 + index, 0: none */
+            int32_t t = m->map_kd, more[5] = {m->map_roughness, m->map_normal, m->map_ke, m->map_metal_rough, m->map_alpha}; /* 1 + index, 0: none */
             if (t < -1 || (t >= 0 && (size_t)t >= s->texture_count)) r.what = "material textures";
-            for (int k = 0; k < 4; k++)
+            if ((unsigned)m->alpha_mode > (unsigned)RP_ALPHA_BLEND) r.what = "material alpha mode";
+            for (int k = 0; k < 5; k++)
                 if (more[k] < 0 || (size_t)more[k] > s->texture_count) r.what = "material textures";
         }
         for (size_t i = 0; !r.what && i < s->texture_count; i++)

@@ -16,6 +16,7 @@
 #include "io/io_internal.h"
 
 #if defined(RP_IO_HAVE_ASSIMP)
+#include <assimp/GltfMaterial.h>
 #include <assimp/cimport.h>
 #include <assimp/material.h>
 #include <assimp/postprocess.h>
@@ -254,8 +255,12 @@ static int32_t material_texture(load_state *s, const struct aiMaterial *am, enum
             idx = tex_add_encoded(ctx, key, tex, t->pcData, t->mWidth, s->path, 0);
         } else {
             size_t n = (size_t)t->mWidth * t->mHeight;
+            bool opaque = true;
+            for (size_t i = 0; i < n && opaque; i++) opaque = t->pcData[i].a == 255;
             uint8_t *rgb = t->mWidth <= 65536 && t->mHeight <= 65536 ? io_malloc(n * 3) : NULL;
-            if (!rgb) {
+            uint8_t *alpha = rgb && !opaque ? io_malloc(n) : NULL;
+            if (!rgb || (!opaque && !alpha)) {
+                free(rgb);
                 io_error(ctx, s->path, 0, "material '%s': embedded texture '%s' too large", mat_name, tex);
                 return -2;
             }
@@ -263,8 +268,9 @@ static int32_t material_texture(load_state *s, const struct aiMaterial *am, enum
                 rgb[3 * i] = t->pcData[i].r;
                 rgb[3 * i + 1] = t->pcData[i].g;
                 rgb[3 * i + 2] = t->pcData[i].b;
+                if (alpha) alpha[i] = t->pcData[i].a;
             }
-            idx = tex_add_rgb(ctx, key, tex, (int32_t)t->mWidth, (int32_t)t->mHeight, rgb, s->path, 0);
+            idx = tex_add(ctx, key, tex, (int32_t)t->mWidth, (int32_t)t->mHeight, rgb, alpha, s->path, 0);
         }
         return idx == IO_NONE ? -2 : (int32_t)idx;
     }
@@ -272,6 +278,33 @@ static int32_t material_texture(load_state *s, const struct aiMaterial *am, enum
     vfs_join(&ctx->vfs, s->path, tex, full, sizeof full);
     uint32_t idx = tex_load(ctx, full, tex, s->path, 0);
     return idx == IO_NONE ? -2 : (int32_t)idx;
+}
+
+/* glTF's alphaMode and alphaCutoff (assimp's $mat.gltf.alphaMode, ...): "MASK" and "BLEND" cut the
+ * surface out where the base colour's alpha (factor times the base colour texture's alpha channel,
+ * where it has one) is below the cutoff, or stochastically; "OPAQUE" or none ignores alpha. An
+ * unknown mode warns and is taken as OPAQUE. False after an error. */
+static bool alpha_mode(load_state *s, const struct aiMaterial *am, rp_material_data *m) {
+    struct aiString mode;
+    if (aiGetMaterialString(am, AI_MATKEY_GLTF_ALPHAMODE, &mode) != aiReturn_SUCCESS || strcmp(mode.data, "OPAQUE") == 0) {
+        m->alpha = 1.0f;
+        return true;
+    }
+    if (strcmp(mode.data, "MASK") == 0) {
+        m->alpha_mode = RP_ALPHA_MASK;
+        float cutoff = 0.5f;
+        if (aiGetMaterialFloatArray(am, AI_MATKEY_GLTF_ALPHACUTOFF, &cutoff, NULL) == aiReturn_SUCCESS && isfinite(cutoff))
+            m->alpha_cutoff = cutoff;
+    } else if (strcmp(mode.data, "BLEND") == 0) {
+        m->alpha_mode = RP_ALPHA_BLEND;
+    } else {
+        io_warning(s->ctx, s->path, 0, "material '%s': alphaMode '%s' is not MASK, BLEND or OPAQUE; taken as OPAQUE",
+                   m->name, mode.data);
+        m->alpha = 1.0f;
+        return true;
+    }
+    if (m->map_kd >= 0 && s->ctx->b.textures[m->map_kd].alpha) m->map_alpha = m->map_kd + 1;
+    return true;
 }
 
 /* assimp's material -> rp_material_data, the one place the mapping lives. glTF's
@@ -290,6 +323,7 @@ static bool material_from_assimp(load_state *s, unsigned index, const struct aiM
     if (aiGetMaterialColor(am, AI_MATKEY_BASE_COLOR, &c) == aiReturn_SUCCESS ||
         aiGetMaterialColor(am, AI_MATKEY_COLOR_DIFFUSE, &c) == aiReturn_SUCCESS) {
         m->kd[0] = c.r, m->kd[1] = c.g, m->kd[2] = c.b;
+        m->alpha = isfinite(c.a) ? fminf(fmaxf(c.a, 0.0f), 1.0f) : 1.0f; /* glTF's baseColorFactor[3] */
     }
     if (aiGetMaterialColor(am, AI_MATKEY_COLOR_EMISSIVE, &c) == aiReturn_SUCCESS) {
         m->ke[0] = c.r, m->ke[1] = c.g, m->ke[2] = c.b;
@@ -304,6 +338,7 @@ static bool material_from_assimp(load_state *s, unsigned index, const struct aiM
     if (tex == -1) tex = material_texture(s, am, aiTextureType_DIFFUSE, m->name);
     if (tex == -2) return false;
     m->map_kd = tex;
+    if (!alpha_mode(s, am, m)) return false;
     int32_t etex = material_texture(s, am, aiTextureType_EMISSIVE, m->name); /* glTF: multiplies the factor */
     if (etex == -2) return false;
     m->map_ke = etex + 1;

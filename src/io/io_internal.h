@@ -253,9 +253,10 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
  * file), shared under `key`; returns its index or IO_NONE after an error at file:line. */
 uint32_t tex_add_encoded(io_ctx *ctx, const char *key, const char *as_written, const void *data,
                          size_t size, const char *file, uint32_t line);
-/* Adds decoded 8-bit RGB texels (malloc'ed; taken over, freed on failure) under `key`. */
-uint32_t tex_add_rgb(io_ctx *ctx, const char *key, const char *as_written, int32_t width,
-                     int32_t height, uint8_t *rgb, const char *file, uint32_t line);
+/* Adds decoded 8-bit RGB texels and their alpha plane (NULL: opaque) (malloc'ed; taken over, freed
+ * on failure) under `key`. */
+uint32_t tex_add(io_ctx *ctx, const char *key, const char *as_written, int32_t width, int32_t height,
+                 uint8_t *rgb, uint8_t *alpha, const char *file, uint32_t line);
 
 /* ---- loading from memory (io_scene.c; for the fuzzers and tests) ------------------------------- */
 

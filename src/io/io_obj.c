@@ -226,7 +226,7 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
                 return io_error(ctx, f.shown, f.line, "illum: expected an integer 0-10");
             m->illum = (int32_t)il;
         } else if ((kw == 6 && strncmp(p, "map_Kd", 6) == 0) || (kw == 6 && strncmp(p, "map_Pr", 6) == 0) ||
-                   (kw == 6 && strncmp(p, "map_Ke", 6) == 0) ||
+                   (kw == 6 && strncmp(p, "map_Ke", 6) == 0) || (kw == 5 && strncmp(p, "map_d", 5) == 0) ||
                    (kw == 4 && strncmp(p, "norm", 4) == 0)) {
             /* Options (-s 1 1 1, -clamp on, ...) come before the file name; the name is the rest.
              * Those that would change the image (a scaled, offset or clamped texture, -mm's range)
@@ -266,7 +266,12 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
             mtl_texture_fallback(&f, path, name, full, sizeof full);
             uint32_t t = tex_load(ctx, full, name, f.shown, f.line);
             if (t == IO_NONE) return false;
-            if (p[0] == 'n') m->map_normal = (int32_t)t + 1;           /* PBR extension: tangent-space normals */
+            if (kw == 5) {
+                /* alpha cutout (leaves, fences): the texture's alpha channel, or its red channel
+                 * where it has none, below 0.5 cuts the surface out */
+                m->map_alpha = (int32_t)t + 1;
+                m->alpha_mode = RP_ALPHA_MASK;
+            } else if (p[0] == 'n') m->map_normal = (int32_t)t + 1;    /* PBR extension: tangent-space normals */
             else if (p[5] == 'r') m->map_roughness = (int32_t)t + 1;   /* PBR extension: roughness */
             else if (p[5] == 'e') m->map_ke = (int32_t)t + 1;          /* emission texture */
             else m->map_kd = (int32_t)t;

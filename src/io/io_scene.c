@@ -77,6 +77,8 @@ void builder_material_defaults(rp_material_data *m, const char *name) {
     m->ior = 1.0f;
     m->illum = -1;
     m->map_kd = -1;
+    m->alpha = 1.0f;
+    m->alpha_cutoff = 0.5f;
 }
 
 uint32_t builder_add_material(io_ctx *ctx, const rp_material_data *m) {
@@ -212,6 +214,7 @@ void builder_free(io_builder *b) {
     free(b->materials);
     for (size_t i = 0; i < b->texture_n; i++) {
         free(b->textures[i].rgb);
+        free(b->textures[i].alpha);
         free(b->texture_keys[i]);
     }
     free(b->textures);
@@ -582,7 +585,10 @@ void rp_scene_data_free(rp_scene_data *scene) {
     free(scene->spheres);
     free(scene->cones);
     free(scene->materials);
-    for (size_t i = 0; i < scene->texture_count; i++) free(scene->textures[i].rgb);
+    for (size_t i = 0; i < scene->texture_count; i++) {
+        free(scene->textures[i].rgb);
+        free(scene->textures[i].alpha);
+    }
     free(scene->textures);
     free(scene->lights);
     anim_free(scene->animation);

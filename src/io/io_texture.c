@@ -464,8 +464,11 @@ static bool png_chunks_ok(const uint8_t *d, size_t n) {
 
 /* Decodes an image stb_image reads (PNG, JPEG, TGA, BMP) held in memory into 8-bit RGB (io_malloc'd), after
  * the checks above and the pixel cap, whether it came from a file or from inside a glTF; NULL with
- * the reason in *why (which may point into ctx->why) otherwise. */
-static uint8_t *stb_decode(io_ctx *ctx, const void *data, size_t size, int32_t *w, int32_t *h, const char **why) {
+ * the reason in *why (which may point into ctx->why) otherwise. *alpha: the file's alpha channel
+ * (io_malloc'd), NULL when it has none or it is 255 everywhere. */
+static uint8_t *stb_decode(io_ctx *ctx, const void *data, size_t size, int32_t *w, int32_t *h, uint8_t **alpha,
+                           const char **why) {
+    *alpha = NULL;
     if (size > INT32_MAX) {
         *why = "too large";
         return NULL;
@@ -489,17 +492,32 @@ static uint8_t *stb_decode(io_ctx *ctx, const void *data, size_t size, int32_t *
     } else if (jpeg && (bad = jpeg_entropy_problem(bytes, size)) != NULL) {
         *why = bad;
     } else {
-        px = stbi_load_from_memory(bytes, (int)size, &iw, &ih, &comp, 3);
+        /* grey-alpha and RGBA files (comp 2, 4) keep their alpha channel */
+        px = stbi_load_from_memory(bytes, (int)size, &iw, &ih, &comp, comp == 2 || comp == 4 ? 4 : 3);
         if (!px) *why = stbi_failure_reason();
     }
     if (!px) return NULL;
-    size_t n = (size_t)iw * (size_t)ih * 3;
-    uint8_t *rgb = io_malloc(n);
-    if (rgb) memcpy(rgb, px, n); /* stb's buffer goes back to stb's allocator */
+    size_t n = (size_t)iw * (size_t)ih, bpp = comp == 2 || comp == 4 ? 4 : 3;
+    uint8_t *rgb = io_malloc(n * 3), *a = NULL;
+    bool opaque = true;
+    for (size_t i = 0; bpp == 4 && i < n && opaque; i++) opaque = px[4 * i + 3] == 255;
+    if (!opaque) a = io_malloc(n);
+    if (rgb && (opaque || a)) { /* stb's buffer goes back to stb's allocator */
+        if (bpp == 3) memcpy(rgb, px, n * 3);
+        for (size_t i = 0; bpp == 4 && i < n; i++) {
+            memcpy(rgb + 3 * i, px + 4 * i, 3);
+            if (a) a[i] = px[4 * i + 3];
+        }
+    } else {
+        free(rgb);
+        free(a);
+        rgb = a = NULL;
+        *why = "out of memory";
+    }
     stbi_image_free(px);
-    if (!rgb) *why = "out of memory";
     *w = iw;
     *h = ih;
+    *alpha = a;
     return rgb;
 }
 
@@ -517,20 +535,20 @@ uint32_t tex_load(io_ctx *ctx, const char *path, const char *as_written, const c
         return IO_NONE;
     }
     int32_t w = 0, h = 0;
-    uint8_t *rgb = NULL;
+    uint8_t *rgb = NULL, *alpha = NULL;
     const char *why = "unsupported or corrupt image";
     unsigned long failures = io_alloc_failures();
     if (buf.size >= 3 && buf.data[0] == 'P' && (buf.data[1] == '3' || buf.data[1] == '6'))
         rgb = ppm_decode(buf.data, buf.size, &w, &h, &why);
     else
-        rgb = stb_decode(ctx, buf.data, buf.size, &w, &h, &why);
+        rgb = stb_decode(ctx, buf.data, buf.size, &w, &h, &alpha, &why);
     vfs_buf_free(&buf);
     if (!rgb) {
         if (io_alloc_failures() != failures) why = "out of memory"; /* stb then names another reason */
         io_error(ctx, file, line, "cannot decode texture '%s': %s", as_written, why);
         return IO_NONE;
     }
-    return tex_add_rgb(ctx, path, as_written, w, h, rgb, file, line);
+    return tex_add(ctx, path, as_written, w, h, rgb, alpha, file, line);
 }
 
 /* An image inside a glTF (data URI or buffer view) goes through the same checks as a file. */
@@ -542,36 +560,34 @@ uint32_t tex_add_encoded(io_ctx *ctx, const char *key, const char *as_written, c
     int32_t w = 0, h = 0;
     const char *why = "unsupported or corrupt image";
     unsigned long failures = io_alloc_failures();
-    uint8_t *rgb = stb_decode(ctx, data, size, &w, &h, &why);
+    uint8_t *alpha = NULL, *rgb = stb_decode(ctx, data, size, &w, &h, &alpha, &why);
     if (!rgb) {
         if (io_alloc_failures() != failures) why = "out of memory";
         io_error(ctx, file, line, "cannot decode texture '%s': %s", as_written, why);
         return IO_NONE;
     }
-    return tex_add_rgb(ctx, key, as_written, w, h, rgb, file, line);
+    return tex_add(ctx, key, as_written, w, h, rgb, alpha, file, line);
 }
 
-uint32_t tex_add_rgb(io_ctx *ctx, const char *path, const char *as_written, int32_t w, int32_t h,
-                     uint8_t *rgb, const char *file, uint32_t line) {
+uint32_t tex_add(io_ctx *ctx, const char *path, const char *as_written, int32_t w, int32_t h, uint8_t *rgb,
+                 uint8_t *alpha, const char *file, uint32_t line) {
     io_builder *b = &ctx->b;
     for (size_t i = 0; i < b->texture_n; i++)
         if (strcmp(b->texture_keys[i], path) == 0) {
             free(rgb);
+            free(alpha);
             return (uint32_t)i;
         }
     char *key = io_strdup(path);
-    if (!key || b->texture_n >= INT32_MAX ||
-        !io_reserve((void **)&b->textures, &b->texture_cap, b->texture_n + 1, sizeof(rp_texture_data))) {
-        free(key);
-        free(rgb);
-        io_error(ctx, file, line, "out of memory");
-        return IO_NONE;
-    }
     /* texture_keys grows with textures: same capacity. */
-    char **keys = io_realloc(b->texture_keys, b->texture_cap * sizeof(char *));
+    char **keys = key && b->texture_n < INT32_MAX &&
+                          io_reserve((void **)&b->textures, &b->texture_cap, b->texture_n + 1, sizeof(rp_texture_data))
+                      ? io_realloc(b->texture_keys, b->texture_cap * sizeof(char *))
+                      : NULL;
     if (!keys) {
         free(key);
         free(rgb);
+        free(alpha);
         io_error(ctx, file, line, "out of memory");
         return IO_NONE;
     }
@@ -582,6 +598,7 @@ uint32_t tex_add_rgb(io_ctx *ctx, const char *path, const char *as_written, int3
     t->width = w;
     t->height = h;
     t->rgb = rgb;
+    t->alpha = alpha;
     b->texture_keys[b->texture_n] = key;
     return (uint32_t)b->texture_n++;
 }

@@ -198,7 +198,10 @@ void rp_default_scene_free(rp_scene_data *scene) {
     free(scene->spheres);
     free(scene->cones);
     free(scene->materials);
-    for (size_t i = 0; scene->textures && i < scene->texture_count; i++) free(scene->textures[i].rgb);
+    for (size_t i = 0; scene->textures && i < scene->texture_count; i++) {
+        free(scene->textures[i].rgb);
+        free(scene->textures[i].alpha);
+    }
     free(scene->textures);
     free(scene->lights);
     if (scene->volume) { /* a medium given to the room (raypack render --medium-box) */

@@ -20,6 +20,11 @@ rp_material rp_material_from_data(const rp_material_data *d) {
     m.normal_texture = d->map_normal - 1;
     m.emission_texture = d->map_ke - 1;
     m.metal_rough_texture = -1;
+    /* alpha cutouts: a mode the renderer does not know is opaque */
+    m.alpha_mode = d->alpha_mode == RP_ALPHA_MASK || d->alpha_mode == RP_ALPHA_BLEND ? d->alpha_mode : RP_ALPHA_OPAQUE;
+    m.alpha = isfinite(d->alpha) ? fminf(fmaxf(d->alpha, 0.0f), 1.0f) : 1.0f;
+    m.alpha_cutoff = d->alpha_cutoff;
+    m.alpha_texture = d->map_alpha - 1;
     if (d->metal_rough) {
         /* glTF's metallic-roughness: the physically based integrators read it per hit
          * (metal_rough_bsdf), Whitted too (material_phong); ks and ns here are the factors' Phong
@@ -51,11 +56,10 @@ rp_material rp_material_from_data(const rp_material_data *d) {
     return m;
 }
 
-/* Bilinear lookup with repeat wrapping; srgb: the bytes are sRGB-encoded colours, else linear data. */
-static v3 texture_lookup(const rp_render_scene *s, int32_t texture, const float uv[2], bool srgb) {
-    if (texture < 0 || (size_t)texture >= s->data->texture_count) return v3_make(1, 1, 1);
-    const rp_texture_data *t = &s->data->textures[texture];
-    if (!t->rgb || t->width <= 0 || t->height <= 0) return v3_make(1, 1, 1);
+/* The four texels a bilinear lookup at uv reads (offsets of texel (x, y): y * width + x) and their
+ * weights, with repeat wrapping; false for a texture without texels. */
+static bool texture_taps(const rp_texture_data *t, const float uv[2], size_t at[4], float w[4]) {
+    if (!t->rgb || t->width <= 0 || t->height <= 0) return false;
     /* Repeat wrapping; v = 0 is the bottom row (OBJ), the data's first row is the top one. */
     float fu = uv[0] - floorf(uv[0]), fv = uv[1] - floorf(uv[1]);
     if (!(fu >= 0.0f && fu < 1.0f)) fu = 0.0f; /* NaN or a rounding of floor */
@@ -72,13 +76,35 @@ static v3 texture_lookup(const rp_render_scene *s, int32_t texture, const float 
         if (xs[i] < 0 || xs[i] >= t->width) xs[i] = ((xs[i] % t->width) + t->width) % t->width;
         if (ys[i] < 0 || ys[i] >= t->height) ys[i] = ((ys[i] % t->height) + t->height) % t->height;
     }
-    float w[4] = {(1 - ax) * (1 - ay), ax * (1 - ay), (1 - ax) * ay, ax * ay};
+    w[0] = (1 - ax) * (1 - ay), w[1] = ax * (1 - ay), w[2] = (1 - ax) * ay, w[3] = ax * ay;
+    for (int j = 0; j < 4; j++) at[j] = (size_t)ys[j >> 1] * (size_t)t->width + (size_t)xs[j & 1];
+    return true;
+}
+
+/* Bilinear lookup with repeat wrapping; srgb: the bytes are sRGB-encoded colours, else linear data. */
+static v3 texture_lookup(const rp_render_scene *s, int32_t texture, const float uv[2], bool srgb) {
+    if (texture < 0 || (size_t)texture >= s->data->texture_count) return v3_make(1, 1, 1);
+    const rp_texture_data *t = &s->data->textures[texture];
+    size_t at[4];
+    float w[4];
+    if (!texture_taps(t, uv, at, w)) return v3_make(1, 1, 1);
     float c[3] = {0, 0, 0};
     for (int j = 0; j < 4; j++) {
-        const uint8_t *px = t->rgb + ((size_t)ys[j >> 1] * (size_t)t->width + (size_t)xs[j & 1]) * 3;
+        const uint8_t *px = t->rgb + at[j] * 3;
         for (int k = 0; k < 3; k++) c[k] += w[j] * (srgb ? s->srgb_to_linear[px[k]] : (float)px[k] * (1.0f / 255.0f));
     }
     return v3_make(c[0], c[1], c[2]);
+}
+
+float material_texture_alpha(const rp_render_scene *s, int32_t texture, const float uv[2]) {
+    if (texture < 0 || (size_t)texture >= s->data->texture_count) return 1.0f;
+    const rp_texture_data *t = &s->data->textures[texture];
+    size_t at[4];
+    float w[4];
+    if (!texture_taps(t, uv, at, w)) return 1.0f;
+    float a = 0.0f;
+    for (int j = 0; j < 4; j++) a += w[j] * (float)(t->alpha ? t->alpha[at[j]] : t->rgb[3 * at[j]]) * (1.0f / 255.0f);
+    return a;
 }
 
 v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]) {

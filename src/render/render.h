@@ -118,6 +118,7 @@ struct rp_render_scene {
     uint32_t *anim_moving;         /* ... and the vertices that move */
     size_t anim_moving_n;
     struct render_medium *medium;  /* the participating medium (medium.h), NULL: none */
+    bool cutouts;                  /* a material is alpha-tested: queries go through alpha.c's fix-ups */
     /* A frame's large scratch, handed back for the next frame (render_scratch_take/give). Mutable
      * through a const scene, as frames see it; NULL: every frame allocates its own. */
     struct render_scratch *scratch;
@@ -183,6 +184,9 @@ void anim_scene_bounds(rp_render_scene *s);
 void anim_groups_free(rp_render_scene *s);
 /* Linear RGB of a texture at uv, bilinear (material.c). */
 v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]);
+/* Coverage of an alpha texture at uv, bilinear: its alpha plane, or its red channel where it has
+ * none (material.c). */
+float material_texture_alpha(const rp_render_scene *s, int32_t texture, const float uv[2]);
 /* Base colour of a material at a surface: kd times its texture (material.c). */
 v3 material_albedo(const rp_render_scene *s, const rp_material *m, const render_surface *surf);
 /* Whitted's Phong terms at a hit: the diffuse kd (textured), the highlight's ks and exponent ns (a
@@ -191,6 +195,17 @@ void material_phong(const rp_render_scene *s, const rp_material *m, const render
                     float *ns);
 /* Exact Fresnel reflectance of a dielectric interface; cos_i > 0, eta = n_incident / n_transmitted. */
 float material_fresnel(float cos_i, float eta);
+
+/* The rendering layer's queries (alpha.c): the core's, passing through the cut-out points of
+ * alpha-tested surfaces (rp_material.alpha_mode) where the scene has them (s->cutouts); the core's
+ * alone otherwise. The same arguments and results as rp_intersect1, rp_occluded1, ... */
+bool alpha_scene_has_cutouts(const rp_render_scene *s);
+void alpha_intersect1(const rp_render_scene *s, rp_rayhit *rayhit);
+void alpha_occluded1(const rp_render_scene *s, rp_ray *ray);
+void alpha_intersect_array(const rp_render_scene *s, rp_rayhit *rayhits, size_t count, uint32_t flags);
+void alpha_occluded_array(const rp_render_scene *s, rp_ray *rays, size_t count, uint32_t flags);
+void alpha_intersect_n(const rp_render_scene *s, const rp_query_n_desc *desc, rp_rayhit_n *packet);
+void alpha_occluded_n(const rp_render_scene *s, const rp_query_n_desc *desc, rp_rayhit_n *packet);
 
 /* Primary ray of a pixel position (x, y in pixels, (0,0) the top-left corner) (camera.c). */
 typedef struct render_camera {

@@ -164,8 +164,10 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
     if (data->material_count == 0) {
         s->materials[0] = (rp_material){.type = RP_MATERIAL_DIFFUSE, .kd = {0.8f, 0.8f, 0.8f}, .texture = -1,
                                         .roughness_texture = -1, .normal_texture = -1,
-                                        .emission_texture = -1};
+                                        .emission_texture = -1, .alpha = 1.0f, .alpha_texture = -1};
     }
+
+    s->cutouts = alpha_scene_has_cutouts(s);
 
     s->light_count = data->light_count;
     if (s->light_count) {

@@ -111,7 +111,7 @@ static void render_tile(void *user, uint32_t index, uint32_t thread) {
             rh->hit.prim_id = RP_INVALID_ID;
             rh->hit.inst_id = RP_INVALID_ID;
         }
-        rp_intersect_array(f->s->scene, th->rayhits, (size_t)n, RP_QUERY_COHERENT);
+        alpha_intersect_array(f->s, th->rayhits, (size_t)n, RP_QUERY_COHERENT);
         th->rays[RP_RAY_PRIMARY] += (uint64_t)n;
         for (int i = 0; i < n; i++) {
             v3 c = d->integrator == RP_INTEGRATOR_EYELIGHT ? eyelight_shade(&th->rayhits[i])
@@ -206,7 +206,7 @@ void render_frame_view(render_frame *f) {
          * it sits at the eye itself. */
         rp_ray probe;
         render_ray_init(&probe, f->cam.eye, f->cam.u, 0.25f * dist);
-        rp_occluded1(scene->scene, &probe);
+        alpha_occluded1(scene, &probe);
         if (probe.tfar < 0.0f) pos = f->cam.eye;
         f->headlight.type = RP_LIGHT_SOURCE_POINT;
         f->headlight.point = (rp_point_light){.intensity = {1, 1, 1}};

@@ -50,7 +50,7 @@ bool eyelight_block(const render_frame *f, render_thread *th, int bx, int by, in
     uint64_t live = whitted_primary_rays(f, lv, bx, by, x0, y0, tw, tile_h, s);
     lv->rh.valid = lv->valid;
     rp_query_n_desc qd = whitted_packet_query(f, th, lv, RP_RAY_PRIMARY);
-    rp_intersect_n(f->s->scene, &qd, &lv->rh);
+    alpha_intersect_n(f->s, &qd, &lv->rh);
     th->rays[RP_RAY_PRIMARY] += live;
     const rp_rayhit_n *p = &lv->rh;
     /* Lane by lane in the packet's order (vectorised: CMakeLists.txt compiles this file without

@@ -110,7 +110,7 @@ static void ir_set(const render_frame *f, uint32_t sample, uint32_t set, ir_vpl 
             rp_rayhit rh;
             render_ray_init(&rh.ray, org, dir, INFINITY);
             rh.hit.geom_id = rh.hit.prim_id = rh.hit.inst_id = RP_INVALID_ID;
-            rp_intersect1(s->scene, &rh);
+            alpha_intersect1(s, &rh);
             (*rays)++;
             if (rh.hit.geom_id == RP_INVALID_ID) break;
             render_surface sf;
@@ -328,7 +328,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                 }
             pt->prim.valid = pt->prim_valid;
             rp_query_n_desc qd = pbr_query(f, th, RP_RAY_PRIMARY);
-            rp_intersect_n(s->scene, &qd, &pt->prim);
+            alpha_intersect_n(s, &qd, &pt->prim);
             rp_rayhit_n *p = &pt->prim;
             for (int j = 0; j < P; j++)
                 for (int i = 0; i < P; i++) {
@@ -380,7 +380,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                         rp_rayhit rh;
                         render_ray_init(&rh.ray, v3_madd(sf.p, sf.ng, bs.wi.z < 0.0f ? -sf.eps : sf.eps), wi, INFINITY);
                         rh.hit.geom_id = rh.hit.prim_id = rh.hit.inst_id = RP_INVALID_ID;
-                        rp_intersect1(s->scene, &rh);
+                        alpha_intersect1(s, &rh);
                         th->rays[bs.wi.z < 0.0f ? RP_RAY_REFRACTION : RP_RAY_REFLECTION]++;
                         if (rh.hit.geom_id == RP_INVALID_ID) {
                             emit = v3_add(emit, v3_mul(beta, light_env_radiance(s, wi)));
@@ -543,7 +543,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                 rp_query_n_desc qd = pbr_query(f, th, RP_RAY_SHADOW);
                 qd.traversal = RP_TRAVERSAL_SIMD;
                 qd.frustum = RP_FRUSTUM_NONE;
-                rp_occluded_n(s->scene, &qd, rp);
+                alpha_occluded_n(s, &qd, rp);
                 for (uint32_t i = 0; i < m; i++)
                     if (pt->rr_valid[i] && rp->tfar[i] < 0.0f) c->live[pt->rr_from[i] / 64u][pt->rr_from[i] % 64u] = 0;
             } else {
@@ -566,7 +566,7 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                     qd.point[1] = vl->p.y;
                     qd.point[2] = vl->p.z;
                     vp->valid = c->live[k];
-                    rp_occluded_n(s->scene, &qd, vp);
+                    alpha_occluded_n(s, &qd, vp);
                     for (uint32_t q = 0; q < Q; q++)
                         if (vp->tfar[q] < 0.0f) c->live[k][q] = 0;
                 }

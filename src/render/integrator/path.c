@@ -147,7 +147,7 @@ static void path_block(const render_frame *f, render_thread *th, int bx, int by,
         }
     pt->prim.valid = pt->prim_valid;
     rp_query_n_desc qd = pbr_query(f, th, RP_RAY_PRIMARY);
-    rp_intersect_n(f->s->scene, &qd, &pt->prim);
+    alpha_intersect_n(f->s, &qd, &pt->prim);
     uint32_t count = 0;
     rp_rayhit_n *p = &pt->prim;
     for (uint32_t j = 0; j < n; j++)
@@ -183,13 +183,13 @@ static void path_block(const render_frame *f, render_thread *th, int bx, int by,
             pt->paths[next++] = st;
         }
         if (nshadow) {
-            rp_occluded_array(f->s->scene, pt->shadow, nshadow, RP_QUERY_INCOHERENT);
+            alpha_occluded_array(f->s, pt->shadow, nshadow, RP_QUERY_INCOHERENT);
             th->rays[RP_RAY_SHADOW] += nshadow;
             for (uint32_t k = 0; k < nshadow; k++)
                 if (!(pt->shadow[k].tfar < 0.0f)) path_add_px(th, pt->shadow_pixel[k], pt->shadow_L[k]);
         }
         if (next) {
-            rp_intersect_array(f->s->scene, pt->bounce, next, RP_QUERY_INCOHERENT);
+            alpha_intersect_array(f->s, pt->bounce, next, RP_QUERY_INCOHERENT);
             th->rays[RP_RAY_BOUNCE] += next;
         }
         count = next;

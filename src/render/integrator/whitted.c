@@ -159,7 +159,7 @@ v3 whitted_shade(const render_frame *f, render_thread *th, const rp_ray *ray, co
         whitted_light_term lt;
         if (!whitted_light(f, &o, &f->lights[i], &sr, &lt)) continue;
         th->rays[RP_RAY_SHADOW]++;
-        rp_occluded1(f->s->scene, &sr);
+        alpha_occluded1(f->s, &sr);
         if (sr.tfar < 0.0f) continue;
         o.direct = v3_add(o.direct, whitted_light_contrib(&o, &lt));
     }
@@ -179,7 +179,7 @@ static v3 whitted_trace(const render_frame *f, render_thread *th, v3 org, v3 dir
     rh.hit.prim_id = RP_INVALID_ID;
     rh.hit.inst_id = RP_INVALID_ID;
     th->rays[kind]++;
-    rp_intersect1(f->s->scene, &rh);
+    alpha_intersect1(f->s, &rh);
     return whitted_shade(f, th, &rh.ray, &rh.hit, depth, weight);
 }
 
@@ -300,7 +300,7 @@ static void packet_shadows(const render_frame *f, render_thread *th, whitted_lev
         rp_query_n_desc qd = whitted_packet_query(f, th, lv, RP_RAY_SHADOW);
         for (int k = 0; k < 3; k++) qd.point[k] = light->point.position[k];
         sp->valid = th->shadow_valid;
-        rp_occluded_n(f->s->scene, &qd, sp);
+        alpha_occluded_n(f->s, &qd, sp);
         for (uint32_t q = 0; q < nn; q++) {
             if (!th->shadow_valid[q] || sp->tfar[q] < 0.0f) continue;
             whitted_slot *o = &lv->slots[q];
@@ -356,7 +356,7 @@ static bool packet_trace(const render_frame *f, render_thread *th, int level, rp
     th->rays[kind] += live;
     p->valid = lv->valid;
     rp_query_n_desc qd = whitted_packet_query(f, th, lv, kind);
-    rp_intersect_n(f->s->scene, &qd, p);
+    alpha_intersect_n(f->s, &qd, p);
     for (uint32_t q = 0; q < nn; q++) {
         if (!lv->valid[q]) continue;
         rp_ray ray;

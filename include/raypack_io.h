@@ -55,6 +55,11 @@ typedef struct rp_material_data {
     float roughness;       /* perceptual roughness factor r in [0, 1] (GGX alpha = r^2) */
     int32_t map_metal_rough; /* 1 + index into textures whose green channel (roughness) and blue
                               * channel (metallic), linear, multiply the factors; 0 if none */
+    /* Where uv_transform is true, every texture of the material is read at the texture coordinates
+     * (u, v) mapped to (t[0] u + t[1] v + t[2], t[3] u + t[4] v + t[5]) (MTL -s and -o, glTF
+     * KHR_texture_transform; v up, as in OBJ); false: as they are (t is then ignored) */
+    bool uv_transform;
+    float uv_matrix[6];
 } rp_material_data;
 
 /* Image texture, decoded to 8-bit RGB (sRGB encoded, as stored in the file). */

@@ -77,6 +77,8 @@ typedef struct rp_material {
     bool metal_rough;
     float metallic, roughness;     /* factors, [0, 1] */
     int32_t metal_rough_texture;   /* green: roughness, blue: metallic (linear), times the factors; or -1 */
+    bool uv_transform;             /* the textures are read at uv mapped by uv_matrix (rp_material_data's) */
+    float uv_matrix[6];
     union {
         rp_mirror_params mirror;
         rp_dielectric_params dielectric;

@@ -20,6 +20,8 @@ rp_material rp_material_from_data(const rp_material_data *d) {
     m.normal_texture = d->map_normal - 1;
     m.emission_texture = d->map_ke - 1;
     m.metal_rough_texture = -1;
+    m.uv_transform = d->uv_transform;
+    memcpy(m.uv_matrix, d->uv_matrix, sizeof m.uv_matrix);
     if (d->metal_rough) {
         /* glTF's metallic-roughness: the physically based integrators read it per hit
          * (metal_rough_bsdf), Whitted too (material_phong); ks and ns here are the factors' Phong

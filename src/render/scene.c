@@ -341,6 +341,17 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
             const uint32_t *ti = d->texcoord_indices + 3 * (size_t)prim;
             const float *t0 = d->texcoords + 2 * (size_t)ti[0], *t1 = d->texcoords + 2 * (size_t)ti[1],
                         *t2 = d->texcoords + 2 * (size_t)ti[2];
+            float moved[3][2];
+            if (m->uv_transform) {
+                /* the material's texture transform (MTL -s/-o, glTF KHR_texture_transform) on the
+                 * corners: the point's uv and dp/du below then follow it */
+                const float *x = m->uv_matrix, *c[3] = {t0, t1, t2};
+                for (int k = 0; k < 3; k++) {
+                    moved[k][0] = x[0] * c[k][0] + x[1] * c[k][1] + x[2];
+                    moved[k][1] = x[3] * c[k][0] + x[4] * c[k][1] + x[5];
+                }
+                t0 = moved[0], t1 = moved[1], t2 = moved[2];
+            }
             out->uv[0] = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
             out->uv[1] = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
             out->has_uv = true;

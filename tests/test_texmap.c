@@ -273,6 +273,79 @@ static void test_mtl_transform(void) {
     free(plain), free(scaled), free(shifted), free(mixed);
 }
 
+/* glTF KHR_texture_transform: the quad with glTF's uv (x, 1 - y) so that the plain texture lands
+ * as in the OBJ; scale 2 repeats it, offset 0.5 shifts it, rotation pi/2 with offset (0, 1) turns
+ * it a quarter clockwise (the extension's own example: the top left corner shows the image's bottom
+ * left). */
+static void write_gltf(const char *name, const char *transform) {
+    /* positions (4 vec3), uvs (4 vec2), indices (6 u16) */
+    const float pos[12] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0}, uv[8] = {0, 1, 1, 1, 1, 0, 0, 0};
+    const uint16_t idx[6] = {0, 1, 2, 0, 2, 3};
+    FILE *f = fopen(at("quad.bin"), "wb");
+    if (f) {
+        fwrite(pos, sizeof pos, 1, f);
+        fwrite(uv, sizeof uv, 1, f);
+        fwrite(idx, sizeof idx, 1, f);
+        fclose(f);
+    }
+    char text[4096], ext[512] = "";
+    if (transform) snprintf(ext, sizeof ext, ",\"extensions\":{\"KHR_texture_transform\":{%s}}", transform);
+    snprintf(text, sizeof text,
+             "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_texture_transform\"],\n"
+             "\"materials\":[{\"name\":\"m\",\"pbrMetallicRoughness\":{\"metallicFactor\":0,\"baseColorTexture\":{\"index\":0%s}}}],\n"
+             "\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"quad.png\"}],\n"
+             "\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],\n"
+             "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1},\"indices\":2,\"material\":0}]}],\n"
+             "\"buffers\":[{\"uri\":\"quad.bin\",\"byteLength\":92}],\n"
+             "\"bufferViews\":[{\"buffer\":0,\"byteLength\":48},{\"buffer\":0,\"byteOffset\":48,\"byteLength\":32},{\"buffer\":0,\"byteOffset\":80,\"byteLength\":12}],\n"
+             "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\",\"min\":[0,0,0],\"max\":[1,1,0]},\n"
+             "  {\"bufferView\":1,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},\n"
+             "  {\"bufferView\":2,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}\n",
+             ext);
+    write_text(name, text);
+}
+
+static void test_gltf_transform(void) {
+    rp_scene_data probe;
+    char err[256];
+    write_gltf("plain.gltf", NULL);
+    if (!rp_scene_data_load(at("plain.gltf"), &probe, err, sizeof err) && strstr(err, "without assimp")) {
+        printf("built without assimp: glTF skipped\n");
+        return;
+    }
+    rp_scene_data_free(&probe);
+    float *obj = render("tex.obj", RP_INTEGRATOR_AOV, 1, false, NULL);
+    float *plain = render("plain.gltf", RP_INTEGRATOR_AOV, 1, false, NULL);
+    write_gltf("scaled.gltf", "\"scale\":[2,2]");
+    float *scaled = render("scaled.gltf", RP_INTEGRATOR_AOV, 1, false, NULL);
+    write_gltf("shifted.gltf", "\"offset\":[0.5,0]");
+    float *shifted = render("shifted.gltf", RP_INTEGRATOR_AOV, 1, false, NULL);
+    write_gltf("turned.gltf", "\"offset\":[0,1],\"rotation\":1.57079632679");
+    float *turned = render("turned.gltf", RP_INTEGRATOR_AOV, 1, false, NULL);
+    float *ref_s = render("tex_s.obj", RP_INTEGRATOR_AOV, 1, false, NULL);
+    float *ref_o = render("tex_o.obj", RP_INTEGRATOR_AOV, 1, false, NULL);
+    if (obj && plain && scaled && shifted && turned && ref_s && ref_o) {
+        static const float pts[] = {0.15f, 0.35f, 0.65f, 0.85f};
+        int bad_p = 0, bad_s = 0, bad_o = 0;
+        for (int i = 0; i < 4; i++)
+            for (int j = 0; j < 4; j++) {
+                float u = pts[i], v = pts[j];
+                bad_p += !same_colour(pixel_at(plain, u, v), pixel_at(obj, u, v));
+                bad_s += !same_colour(pixel_at(scaled, u, v), pixel_at(ref_s, u, v));
+                bad_o += !same_colour(pixel_at(shifted, u, v), pixel_at(ref_o, u, v));
+            }
+        CHECKF(bad_p == 0 && bad_s == 0 && bad_o == 0, "glTF against the OBJ: plain %d, scale 2: %d, offset 0.5: %d pixels differ",
+               bad_p, bad_s, bad_o);
+        /* a quarter turn clockwise: top left blue (the image's bottom left), top right red, bottom right green, bottom left white */
+        const float *tl = pixel_at(turned, 0.2f, 0.8f), *tr = pixel_at(turned, 0.8f, 0.8f), *br = pixel_at(turned, 0.8f, 0.2f),
+                    *bl = pixel_at(turned, 0.2f, 0.2f);
+        CHECKF(tl[2] > 0.99f && tl[0] < 0.01f && tr[0] > 0.99f && tr[1] < 0.01f && br[1] > 0.99f && br[0] < 0.01f && bl[0] > 0.99f && bl[1] > 0.99f,
+               "rotation: tl %g %g %g, tr %g %g %g, br %g %g %g, bl %g %g %g", tl[0], tl[1], tl[2], tr[0], tr[1], tr[2], br[0], br[1], br[2],
+               bl[0], bl[1], bl[2]);
+    }
+    free(obj), free(plain), free(scaled), free(shifted), free(turned), free(ref_s), free(ref_o);
+}
+
 int main(void) {
     const char *tmp = getenv("RP_TEST_TMP");
     snprintf(dir, sizeof dir, "%s", tmp ? tmp : "/tmp/rp_test_texmap");
@@ -283,7 +356,7 @@ int main(void) {
     test_bump();
     test_bump_normal_map();
     test_mtl_transform();
-
+    test_gltf_transform();
     rp_device_release(dev);
     return RP_TEST_END();
 }

@@ -251,8 +251,9 @@ uint32_t tex_add_rgb(io_ctx *ctx, const char *key, const char *as_written, int32
 /* Bump maps (MTL bump, map_bump): a grey height map h in [0, 1] (the mean of the channels)
  * becomes a tangent-space normal map at load time, normal (-s dh/du, -s dh/dv, 1) normalised, the
  * derivatives central differences in texels and s = scale (MTL -bm) x IO_BUMP_STRENGTH: with -bm 1
- * a height rising from 0 to 1 over 4 texels tilts the normal 45 degrees. Shared per (image, scale). */
-#define IO_BUMP_STRENGTH 4.0f
+ * the steepest step an 8-bit map holds, black to white between neighbouring texels (a central
+ * difference of 0.5), tilts the normal 45 degrees. Shared per (image, scale). */
+#define IO_BUMP_STRENGTH 2.0f
 enum { TEX_BUMP_HEIGHT, TEX_BUMP_FLAT, TEX_BUMP_NORMALS };
 /* What a bump map's image holds: heights, one height everywhere (no relief), or (bluish and far
  * from grey) a tangent-space normal map, as Blender's exporter writes under map_Bump. */

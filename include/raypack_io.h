@@ -60,6 +60,7 @@ typedef struct rp_material_data {
      * KHR_texture_transform; v up, as in OBJ); false: as they are (t is then ignored) */
     bool uv_transform;
     float uv_matrix[6];
+    int32_t map_ks;        /* 1 + index into textures multiplying ks (MTL map_Ks, sRGB decoded), 0 if none */
 } rp_material_data;
 
 /* Image texture, decoded to 8-bit RGB (sRGB encoded, as stored in the file). */

@@ -79,6 +79,7 @@ typedef struct rp_material {
     int32_t metal_rough_texture;   /* green: roughness, blue: metallic (linear), times the factors; or -1 */
     bool uv_transform;             /* the textures are read at uv mapped by uv_matrix (rp_material_data's) */
     float uv_matrix[6];
+    int32_t specular_texture;      /* texture multiplying ks (sRGB decoded: MTL map_Ks), or -1 */
     union {
         rp_mirror_params mirror;
         rp_dielectric_params dielectric;

@@ -346,6 +346,31 @@ static void test_gltf_transform(void) {
     free(obj), free(plain), free(scaled), free(shifted), free(turned), free(ref_s), free(ref_o);
 }
 
+/* MTL map_Ks multiplies Ks as map_Kd does Kd: a highlight-only quad (Kd 0, Ks 1, a broad Ns 1) lit
+ * from the eye shows the quadrants' colours, in Whitted and path tracing, where the untextured one
+ * is white. */
+static void test_map_ks(void) {
+    write_text("ks.mtl", "newmtl m\nKd 0 0 0\nKs 1 1 1\nNs 1\nmap_Ks quad.png\n");
+    write_text("ks_plain.mtl", "newmtl m\nKd 0 0 0\nKs 1 1 1\nNs 1\n");
+    write_quad_obj("ks.obj", "ks.mtl");
+    write_quad_obj("ks_plain.obj", "ks_plain.mtl");
+    rp_integrator_type kinds[2] = {RP_INTEGRATOR_WHITTED, RP_INTEGRATOR_PATH};
+    for (int k = 0; k < 2; k++) {
+        float *tex = render("ks.obj", kinds[k], 4, true, NULL), *plain = render("ks_plain.obj", kinds[k], 4, true, NULL);
+        if (tex && plain) {
+            static const float uv[4][2] = {{0.2f, 0.8f}, {0.8f, 0.8f}, {0.2f, 0.2f}, {0.8f, 0.2f}};
+            static const float want[4][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 1}};
+            for (int q = 0; q < 4; q++) {
+                const float *a = pixel_at(tex, uv[q][0], uv[q][1]), *b = pixel_at(plain, uv[q][0], uv[q][1]);
+                bool ok = b[0] > 0.01f;
+                for (int c = 0; c < 3; c++) ok &= fabsf(a[c] - want[q][c] * b[c]) <= 0.02f * b[c] + 1e-6f;
+                CHECKF(ok, "integrator %d, quadrant %d: %g %g %g, untextured %g %g %g", (int)kinds[k], q, a[0], a[1], a[2], b[0], b[1], b[2]);
+            }
+        }
+        free(tex), free(plain);
+    }
+}
+
 int main(void) {
     const char *tmp = getenv("RP_TEST_TMP");
     snprintf(dir, sizeof dir, "%s", tmp ? tmp : "/tmp/rp_test_texmap");
@@ -357,6 +382,7 @@ int main(void) {
     test_bump_normal_map();
     test_mtl_transform();
     test_gltf_transform();
+    test_map_ks();
     rp_device_release(dev);
     return RP_TEST_END();
 }

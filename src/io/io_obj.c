@@ -266,7 +266,8 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
                 return io_error(ctx, f.shown, f.line, "illum: expected an integer 0-10");
             m->illum = (int32_t)il;
         } else if ((kw == 6 && strncmp(p, "map_Kd", 6) == 0) || (kw == 6 && strncmp(p, "map_Pr", 6) == 0) ||
-                   (kw == 6 && strncmp(p, "map_Ke", 6) == 0) || (kw == 4 && strncmp(p, "norm", 4) == 0) ||
+                   (kw == 6 && strncmp(p, "map_Ke", 6) == 0) || (kw == 6 && strncmp(p, "map_Ks", 6) == 0) ||
+                   (kw == 4 && strncmp(p, "norm", 4) == 0) ||
                    (kw == 4 && strncmp(p, "bump", 4) == 0) ||
                    (kw == 8 && (strncmp(p, "map_bump", 8) == 0 || strncmp(p, "map_Bump", 8) == 0))) {
             /* Options (-s 1 1 1, -clamp on, ...) come before the file name; the name is the rest.
@@ -328,9 +329,10 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
                 pm.bump = t, pm.bump_scale = bm, pm.bump_line = f.line;
             } else if (p[5] == 'r') m->map_roughness = (int32_t)t + 1; /* PBR extension: roughness */
             else if (p[5] == 'e') m->map_ke = (int32_t)t + 1;          /* emission texture */
+            else if (p[5] == 's') m->map_ks = (int32_t)t + 1;          /* specular colour, times Ks */
             else m->map_kd = (int32_t)t;
         }
-        /* Everything else (map_Ks, PBR extensions...) has no field in rp_material_data. */
+        /* Everything else (map_Ns, map_Ka, PBR extensions...) has no field in rp_material_data. */
     }
     if (!mtl_finish(&f, &pm)) return false;
     ctx->bytes += buf->size;

@@ -164,7 +164,7 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
     if (data->material_count == 0) {
         s->materials[0] = (rp_material){.type = RP_MATERIAL_DIFFUSE, .kd = {0.8f, 0.8f, 0.8f}, .texture = -1,
                                         .roughness_texture = -1, .normal_texture = -1,
-                                        .emission_texture = -1};
+                                        .emission_texture = -1, .specular_texture = -1};
     }
 
     s->light_count = data->light_count;
@@ -337,7 +337,7 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
         /* texture coordinates only where the material reads a texture, and dp/du only where it has a
          * normal map (they are all that read them): the rest of the hits skip four more arrays */
         if (d->texcoords && d->texcoord_indices && (m->texture >= 0 || m->roughness_texture >= 0 || m->normal_texture >= 0 ||
-                                                       m->emission_texture >= 0)) {
+                                                       m->emission_texture >= 0 || m->specular_texture >= 0)) {
             const uint32_t *ti = d->texcoord_indices + 3 * (size_t)prim;
             const float *t0 = d->texcoords + 2 * (size_t)ti[0], *t1 = d->texcoords + 2 * (size_t)ti[1],
                         *t2 = d->texcoords + 2 * (size_t)ti[2];

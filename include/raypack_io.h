@@ -69,6 +69,12 @@ typedef struct rp_material_data {
     float alpha;           /* factor in [0, 1]; 1 after builder defaults */
     float alpha_cutoff;    /* MASK: cut out below it; 0.5 after builder defaults */
     int32_t map_alpha;     /* 1 + index into textures of the alpha texture, 0 if none */
+    /* Where uv_transform is true, every texture of the material is read at the texture coordinates
+     * (u, v) mapped to (t[0] u + t[1] v + t[2], t[3] u + t[4] v + t[5]) (MTL -s and -o, glTF
+     * KHR_texture_transform; v up, as in OBJ); false: as they are (t is then ignored) */
+    bool uv_transform;
+    float uv_matrix[6];
+    int32_t map_ks;        /* 1 + index into textures multiplying ks (MTL map_Ks, sRGB decoded), 0 if none */
 } rp_material_data;
 
 /* Image texture, decoded to 8-bit RGB (sRGB encoded, as stored in the file), and its alpha channel

@@ -81,6 +81,9 @@ typedef struct rp_material {
     rp_alpha_mode alpha_mode;
     float alpha, alpha_cutoff;     /* factor; MASK's threshold */
     int32_t alpha_texture;         /* its alpha plane (else its red channel) times alpha, or -1 */
+    bool uv_transform;             /* the textures are read at uv mapped by uv_matrix (rp_material_data's) */
+    float uv_matrix[6];
+    int32_t specular_texture;      /* texture multiplying ks (sRGB decoded: MTL map_Ks), or -1 */
     union {
         rp_mirror_params mirror;
         rp_dielectric_params dielectric;

@@ -500,6 +500,30 @@ static void test_grey_mask(rp_device *dev) {
     rp_scene_data_free(&s);
 }
 
+/* map_d with the material's texture transform (MTL -o): the inverted hole pattern moved by one cell
+ * (u + 0.25) cuts the same holes as the plain one (the cut-out test reads the uv shading reads). */
+static void test_mask_transform(rp_device *dev) {
+    write_mask_png("holes_inv.png", 4, 0, 255);
+    write_mtl("moved.mtl", "map_d -o 0.25 0 holes_inv.png");
+    write_obj("moved.obj", "moved.mtl");
+    rp_scene_data s;
+    if (!load_obj_scene("moved.obj", &s, 1.0f)) return;
+    char err[512] = "";
+    rp_render_scene *rs = rp_render_scene_new(dev, &s, NULL, err, sizeof err);
+    CHECKF(rs != NULL, "%s", err);
+    float *px = rs ? render(rs, (rp_render_desc){.integrator = RP_INTEGRATOR_AOV, .aov = RP_AOV_ALBEDO}) : NULL;
+    if (px) {
+        static pixel_class pc[W * H];
+        quad q = make_quad(tilt, quad_z);
+        classify(&q, pc);
+        int wrong = wrong_pixels(px, pc, false, "map_d -o 0.25 0");
+        CHECKF(wrong == 0, "map_d -o 0.25 0 of the inverted mask: %d pixels wrong", wrong);
+    }
+    free(px);
+    rp_render_scene_release(rs);
+    rp_scene_data_free(&s);
+}
+
 /* ---- glTF: alphaMode MASK, alphaCutoff 0.3, over an opaque wall ---- */
 
 /* The quad (z = 1.5, facing +z) and the wall (z = 0): 8 positions, 8 uvs, 12 indices. */
@@ -585,6 +609,7 @@ int main(void) {
     test_obj_integrators(dev);
     test_same_bytes();
     test_grey_mask(dev);
+    test_mask_transform(dev);
     test_gltf_mask(dev);
     rp_device_release(dev);
     return RP_TEST_END();

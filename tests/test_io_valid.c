@@ -270,9 +270,10 @@ static void test_mtl_values(void) {
     rp_scene_data_free(&s);
 }
 
-/* Texture map options: skipped before the file name; those that would change the image (scale,
- * offset, turbulence, clamping, -mm) are not applied and say so; defaults and the rest are quiet. A
- * comment after the file name is not part of it. */
+/* Texture map options: skipped before the file name; -s and -o (u and v) are the material's uv
+ * transform, quietly; those others that would change the image (turbulence, clamping, -mm) are not
+ * applied and say so; defaults and the rest are quiet. A comment after the file name is not part
+ * of it. */
 static void test_mtl_map_options(void) {
     write_text("mo.ppm", "P3\n1 1\n255\n10 20 30\n");
     write_text("mo.mtl",
@@ -285,11 +286,19 @@ static void test_mtl_map_options(void) {
     if (!load("mo.obj", &s, &w)) return;
     CHECK(s.texture_count == 1 && s.triangle_count == 2);
     if (s.triangle_count == 2) CHECK(tri_material(&s, 0)->map_kd == 0 && tri_material(&s, 1)->map_kd == 0);
-    CHECKF(w.count == 4, "%d warnings:\n%s", w.count, w.text);
-    CHECKF(strstr(w.text, "mo.mtl:4: warning: map_Kd option '-s 2 2 1' is not applied") != NULL, "%s", w.text);
-    CHECKF(strstr(w.text, "option '-o 0.5 0'") != NULL && strstr(w.text, "option '-clamp on'") != NULL &&
-               strstr(w.text, "option '-mm 0.1 0.9'") != NULL,
+    CHECKF(w.count == 2, "%d warnings:\n%s", w.count, w.text);
+    CHECKF(strstr(w.text, "mo.mtl:4: warning: map_Kd option '-clamp on' is not applied") != NULL &&
+               strstr(w.text, "option '-mm 0.1 0.9'") != NULL && strstr(w.text, "option '-s") == NULL &&
+               strstr(w.text, "option '-o") == NULL,
            "%s", w.text);
+    if (s.triangle_count == 2) {
+        const rp_material_data *quiet = tri_material(&s, 0), *loud = tri_material(&s, 1);
+        const float want[6] = {2, 0, 0.5f, 0, 2, 0}; /* u' = 2 u + 0.5, v' = 2 v */
+        CHECK(!quiet->uv_transform);
+        CHECKF(loud->uv_transform && memcmp(loud->uv_matrix, want, sizeof want) == 0, "-s 2 2 1 -o 0.5 0: %g %g %g %g %g %g",
+               (double)loud->uv_matrix[0], (double)loud->uv_matrix[1], (double)loud->uv_matrix[2], (double)loud->uv_matrix[3],
+               (double)loud->uv_matrix[4], (double)loud->uv_matrix[5]);
+    }
     rp_scene_data_free(&s);
 }
 

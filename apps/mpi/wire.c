@@ -470,10 +470,11 @@ bool wire_scene_unpack(const uint8_t *buf, size_t size, rp_scene_data *s, char *
             if ((unsigned)s->lights[i].type > (unsigned)RP_LIGHT_DATA_DIRECTIONAL) r.what = "light types";
         for (size_t i = 0; !r.what && i < s->material_count; i++) {
             const rp_material_data *m = &s->materials[i];
-            int32_t t = m->map_kd, more[5] = {m->map_roughness, m->map_normal, m->map_ke, m->map_metal_rough, m->map_alpha}; /* 1 + index, 0: none */
+            int32_t t = m->map_kd, more[6] = {m->map_roughness, m->map_normal, m->map_ke, m->map_metal_rough, m->map_alpha,
+                                              m->map_ks}; /* 1 + index, 0: none */
             if (t < -1 || (t >= 0 && (size_t)t >= s->texture_count)) r.what = "material textures";
             if ((unsigned)m->alpha_mode > (unsigned)RP_ALPHA_BLEND) r.what = "material alpha mode";
-            for (int k = 0; k < 5; k++)
+            for (int k = 0; k < 6; k++)
                 if (more[k] < 0 || (size_t)more[k] > s->texture_count) r.what = "material textures";
         }
         for (size_t i = 0; !r.what && i < s->texture_count; i++)

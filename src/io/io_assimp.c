@@ -83,18 +83,32 @@ typedef struct load_state {
     uint32_t *materials; /* aiMaterial index -> builder material */
     bool *light_done;    /* a light binds to the first node of its name only */
     bool have_camera;
-    float *strength;     /* glTF: each material's KHR_materials_emissive_strength (1 without), or NULL */
-    size_t strength_n, strength_cap;
+    bool gltf;
+    struct gltf_material *json; /* glTF: what its JSON says of each material that assimp 5.2 does not, or NULL */
+    size_t json_n, json_cap;
 } load_state;
 
-/* ---- KHR_materials_emissive_strength ---------------------------------------------------------- */
+/* ---- glTF extensions read from the JSON --------------------------------------------------------- */
+
+/* The texture slots of a glTF material that raypack reads. */
+enum { GLTF_BASE, GLTF_METAL_ROUGH, GLTF_NORMAL, GLTF_EMISSIVE, GLTF_SLOTS };
+
+typedef struct gltf_material {
+    float strength;                /* KHR_materials_emissive_strength, 1 without */
+    bool transform[GLTF_SLOTS];    /* the slot's textureInfo has a KHR_texture_transform: */
+    float offset[GLTF_SLOTS][2], scale[GLTF_SLOTS][2], rotation[GLTF_SLOTS];
+    int32_t tex_coord[GLTF_SLOTS]; /* its texCoord, -1 when it gives none */
+} gltf_material;
 
 /* assimp 5.2 does not know KHR_materials_emissive_strength (5.3 reads it into
  * AI_MATKEY_EMISSIVE_INTENSITY), so a Blender export's emission above 1 came out that many times
- * too dim. The glTF's JSON is read here for it: a scanner that skips any value and walks
- * materials[i].extensions.KHR_materials_emissive_strength.emissiveStrength. glTF's material i is
- * assimp's material i. Anything it cannot follow leaves the strengths at 1 (assimp has already
- * read and checked the file). */
+ * too dim; and it gives KHR_texture_transform as an aiUVTransform re-expressed for its own
+ * post-processing step (rotation negated, translation moved about the image centre), which is
+ * not the extension's. The glTF's JSON is read here for both: a scanner that skips any value and
+ * walks materials[i].extensions.KHR_materials_emissive_strength.emissiveStrength and the
+ * extensions.KHR_texture_transform of materials[i]'s textureInfos. glTF's material i is assimp's
+ * material i. Anything it cannot follow leaves the defaults (assimp has already read and checked
+ * the file). */
 typedef struct json_scan {
     const char *p, *end;
 } json_scan;
@@ -155,46 +169,113 @@ static bool js_object(json_scan *j, js_field_fn field, void *user) {
     return js_char(j, '}');
 }
 
-static bool js_strength(json_scan *j, const char *key, size_t n, void *user) {
-    if (!js_key_is(key, n, "emissiveStrength")) return js_skip(j, 0);
+/* A number at j->p; false (the value skipped) when it is none. */
+static bool js_number(json_scan *j, double *v) {
     js_blank(j);
     char num[64];
     size_t k = 0;
     while (j->p < j->end && k + 1 < sizeof num && !strchr(",]} \t\r\n", *j->p)) num[k++] = *j->p++;
     num[k] = '\0';
     char *e;
-    double v = strtod(num, &e);
-    if (k && !*e && v >= 0.0 && v < 1e30) *(float *)user = (float)v;
+    *v = strtod(num, &e);
+    if (k == sizeof num - 1) js_skip(j, 0);
+    return k && !*e && isfinite(*v);
+}
+
+/* An array of two numbers into v (left as they were where it is not one). */
+static bool js_pair(json_scan *j, float v[2]) {
+    double a, b;
+    if (!js_char(j, '[')) return js_skip(j, 0);
+    bool ok = js_number(j, &a) && js_char(j, ',') && js_number(j, &b) && js_char(j, ']');
+    if (ok) v[0] = (float)a, v[1] = (float)b;
+    return ok;
+}
+
+static bool js_strength(json_scan *j, const char *key, size_t n, void *user) {
+    if (!js_key_is(key, n, "emissiveStrength")) return js_skip(j, 0);
+    double v;
+    if (js_number(j, &v) && v >= 0.0 && v < 1e30) *(float *)user = (float)v;
     return true;
 }
 
 static bool js_extension(json_scan *j, const char *key, size_t n, void *user) {
     if (!js_key_is(key, n, "KHR_materials_emissive_strength")) return js_skip(j, 0);
-    return js_object(j, js_strength, user);
+    return js_object(j, js_strength, &((gltf_material *)user)->strength);
+}
+
+typedef struct js_slot {
+    gltf_material *m;
+    int slot;
+} js_slot;
+
+static bool js_transform(json_scan *j, const char *key, size_t n, void *user) {
+    const js_slot *t = user;
+    double v;
+    if (js_key_is(key, n, "offset")) return js_pair(j, t->m->offset[t->slot]);
+    if (js_key_is(key, n, "scale")) return js_pair(j, t->m->scale[t->slot]);
+    if (js_key_is(key, n, "rotation")) {
+        if (js_number(j, &v)) t->m->rotation[t->slot] = (float)v;
+        return true;
+    }
+    if (js_key_is(key, n, "texCoord")) {
+        if (js_number(j, &v) && v >= 0.0 && v < 1e6) t->m->tex_coord[t->slot] = (int32_t)v;
+        return true;
+    }
+    return js_skip(j, 0);
+}
+
+static bool js_texture_extension(json_scan *j, const char *key, size_t n, void *user) {
+    if (!js_key_is(key, n, "KHR_texture_transform")) return js_skip(j, 0);
+    const js_slot *t = user;
+    t->m->transform[t->slot] = true;
+    return js_object(j, js_transform, user);
+}
+
+static bool js_texture_info(json_scan *j, const char *key, size_t n, void *user) {
+    if (!js_key_is(key, n, "extensions")) return js_skip(j, 0);
+    return js_object(j, js_texture_extension, user);
+}
+
+static bool js_pbr(json_scan *j, const char *key, size_t n, void *user) {
+    js_slot t = {user, js_key_is(key, n, "baseColorTexture") ? GLTF_BASE : GLTF_METAL_ROUGH};
+    if (!js_key_is(key, n, "baseColorTexture") && !js_key_is(key, n, "metallicRoughnessTexture")) return js_skip(j, 0);
+    return js_object(j, js_texture_info, &t);
 }
 
 static bool js_material(json_scan *j, const char *key, size_t n, void *user) {
-    if (!js_key_is(key, n, "extensions")) return js_skip(j, 0);
-    return js_object(j, js_extension, user);
+    if (js_key_is(key, n, "extensions")) return js_object(j, js_extension, user);
+    if (js_key_is(key, n, "pbrMetallicRoughness")) return js_object(j, js_pbr, user);
+    js_slot t = {user, js_key_is(key, n, "normalTexture") ? GLTF_NORMAL : GLTF_EMISSIVE};
+    if (js_key_is(key, n, "normalTexture") || js_key_is(key, n, "emissiveTexture")) return js_object(j, js_texture_info, &t);
+    return js_skip(j, 0);
 }
 
 static bool js_top(json_scan *j, const char *key, size_t n, void *user) {
     load_state *s = user;
-    if (!js_key_is(key, n, "materials") || s->strength) return js_skip(j, 0);
+    if (!js_key_is(key, n, "materials") || s->json) return js_skip(j, 0);
     if (!js_char(j, '[')) return false;
     if (js_char(j, ']')) return true;
     do {
-        if (!io_reserve((void **)&s->strength, &s->strength_cap, s->strength_n + 1, sizeof(float))) return false;
-        float *v = &s->strength[s->strength_n++];
-        *v = 1.0f;
-        if (!js_object(j, js_material, v)) return false;
+        if (!io_reserve((void **)&s->json, &s->json_cap, s->json_n + 1, sizeof *s->json)) return false;
+        gltf_material *m = &s->json[s->json_n++];
+        memset(m, 0, sizeof *m);
+        m->strength = 1.0f;
+        for (int k = 0; k < GLTF_SLOTS; k++) m->scale[k][0] = m->scale[k][1] = 1.0f, m->tex_coord[k] = -1;
+        if (!js_object(j, js_material, m)) return false;
     } while (js_char(j, ','));
     return js_char(j, ']');
 }
 
-/* Fills s->strength from the glTF's JSON (a .gltf file, or a .glb's JSON chunk); leaves it NULL
- * when the file has no strength to give or cannot be scanned. */
-static void gltf_strengths(load_state *s) {
+static bool mem_has(const char *p, const char *end, const char *word) {
+    size_t n = strlen(word);
+    for (const char *at = p; (at = memchr(at, word[0], (size_t)(end - at))); at++)
+        if ((size_t)(end - at) >= n && memcmp(at, word, n) == 0) return true;
+    return false;
+}
+
+/* Fills s->json from the glTF's JSON (a .gltf file, or a .glb's JSON chunk); leaves it NULL when
+ * the file names neither extension or cannot be scanned. */
+static void gltf_json_materials(load_state *s) {
     io_buf buf;
     if (!vfs_read(s->ctx, s->path, &buf)) return;
     const char *p = buf.data, *end = buf.data + buf.size;
@@ -204,20 +285,52 @@ static void gltf_strengths(load_state *s) {
         p += 20;
         if (len < (size_t)(end - p)) end = p + len;
     }
-    bool any = false;
-    const char *at = p;
-    while ((at = memchr(at, 'e', (size_t)(end - at))) && ((size_t)(end - at) < 16 || memcmp(at, "emissiveStrength", 16) != 0)) at++;
-    if (at) { /* most files name no strength: no scan at all */
+    /* most files name neither: no scan at all */
+    if (mem_has(p, end, "emissiveStrength") || mem_has(p, end, "KHR_texture_transform")) {
         json_scan j = {p, end};
-        if (js_object(&j, js_top, s))
-            for (size_t i = 0; i < s->strength_n; i++) any |= s->strength[i] != 1.0f;
-    }
-    if (!any) {
-        free(s->strength);
-        s->strength = NULL;
-        s->strength_n = s->strength_cap = 0;
+        if (!js_object(&j, js_top, s)) {
+            free(s->json);
+            s->json = NULL;
+            s->json_n = s->json_cap = 0;
+        }
     }
     vfs_buf_free(&buf);
+}
+
+/* The material's texture transform: its base colour texture's KHR_texture_transform (else that of
+ * the first texture it has), for all its textures; a texture whose transform differs warns, once. */
+static void gltf_uv_transform(load_state *s, unsigned index, rp_material_data *m) {
+    if (index >= s->json_n) return;
+    const gltf_material *g = &s->json[index];
+    const bool has[GLTF_SLOTS] = {m->map_kd >= 0, m->map_metal_rough > 0, m->map_normal > 0, m->map_ke > 0};
+    int pick = -1;
+    for (int k = 0; k < GLTF_SLOTS && pick < 0; k++)
+        if (has[k]) pick = k;
+    if (pick < 0) return;
+    for (int k = 0; k < GLTF_SLOTS; k++)
+        if (has[k] && (g->offset[k][0] != g->offset[pick][0] || g->offset[k][1] != g->offset[pick][1] ||
+                       g->scale[k][0] != g->scale[pick][0] || g->scale[k][1] != g->scale[pick][1] ||
+                       g->rotation[k] != g->rotation[pick])) {
+            static const char *const names[GLTF_SLOTS] = {"base colour", "metallic-roughness", "normal", "emissive"};
+            io_warning(s->ctx, s->path, 0,
+                       "material '%s': its %s texture's KHR_texture_transform differs from its %s texture's; one transform a material: the %s one's is used",
+                       m->name, names[k], names[pick], names[pick]);
+            break;
+        }
+    if (!g->transform[pick]) return;
+    if (g->tex_coord[pick] > 0)
+        io_warning(s->ctx, s->path, 0, "material '%s': KHR_texture_transform names texture coordinate set %d; raypack reads set 0",
+                   m->name, g->tex_coord[pick]);
+    /* glTF's uv' = T(offset) R(rotation) S(scale) uv, R = (c s; -s c) (the extension's example:
+     * offset (0, 1), rotation pi/2, scale 0.5 shows the lower left quadrant turned clockwise), in
+     * glTF's texture space, v down; raypack's v is 1 - v (assimp flips it) */
+    float c = cosf(g->rotation[pick]), sn = sinf(g->rotation[pick]);
+    const float *sc = g->scale[pick], *o = g->offset[pick];
+    float a = sc[0] * c, b = sc[1] * sn, d = -sc[0] * sn, e = sc[1] * c;
+    const float t[6] = {a, -b, b + o[0], -d, e, 1.0f - e - o[1]};
+    if (t[0] == 1.0f && t[1] == 0.0f && t[2] == 0.0f && t[3] == 0.0f && t[4] == 1.0f && t[5] == 0.0f) return;
+    m->uv_transform = true;
+    memcpy(m->uv_matrix, t, sizeof t);
 }
 
 /* ---- materials -------------------------------------------------------------------------------- */
@@ -233,12 +346,13 @@ static int32_t material_texture(load_state *s, const struct aiMaterial *am, enum
         return -1;
     io_ctx *ctx = s->ctx;
     const char *tex = name.data;
-    /* glTF's KHR_texture_transform (assimp's UV transform): not applied, so said */
+    /* other formats' UV transforms (assimp's aiUVTransform): not applied, so said; glTF's
+     * KHR_texture_transform is read from its JSON (gltf_uv_transform) */
     float tr[5] = {0, 0, 1, 1, 0}; /* translation, scaling, rotation */
     unsigned five = 5;
-    if (aiGetMaterialFloatArray(am, AI_MATKEY_UVTRANSFORM(type, 0), tr, &five) == aiReturn_SUCCESS && five == 5 &&
+    if (!s->gltf && aiGetMaterialFloatArray(am, AI_MATKEY_UVTRANSFORM(type, 0), tr, &five) == aiReturn_SUCCESS && five == 5 &&
         (tr[0] != 0.0f || tr[1] != 0.0f || tr[2] != 1.0f || tr[3] != 1.0f || tr[4] != 0.0f))
-        io_warning(ctx, s->path, 0, "material '%s': texture '%s' has a texture transform (KHR_texture_transform), which is not applied",
+        io_warning(ctx, s->path, 0, "material '%s': texture '%s' has a texture transform, which is not applied",
                    mat_name, tex);
     if (tex[0] == '*') {
         char *end;
@@ -331,8 +445,8 @@ static bool material_from_assimp(load_state *s, unsigned index, const struct aiM
         if (aiGetMaterialFloatArray(am, AI_MATKEY_EMISSIVE_INTENSITY, &strength, NULL) == aiReturn_SUCCESS &&
             strength >= 0.0f)
             for (int i = 0; i < 3; i++) m->ke[i] *= strength;
-        else if (index < s->strength_n)
-            for (int i = 0; i < 3; i++) m->ke[i] *= s->strength[index];
+        else if (index < s->json_n)
+            for (int i = 0; i < 3; i++) m->ke[i] *= s->json[index].strength;
     }
     int32_t tex = material_texture(s, am, aiTextureType_BASE_COLOR, m->name);
     if (tex == -1) tex = material_texture(s, am, aiTextureType_DIFFUSE, m->name);
@@ -388,6 +502,7 @@ static bool material_from_assimp(load_state *s, unsigned index, const struct aiM
     int32_t ntex = material_texture(s, am, aiTextureType_NORMALS, m->name);
     if (ntex == -2) return false;
     m->map_normal = ntex + 1;
+    gltf_uv_transform(s, index, m);
     return true;
 }
 
@@ -616,8 +731,8 @@ bool assimp_load(io_ctx *ctx, const char *path) {
     bool ok = true;
     if ((scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE) || !scene->mRootNode)
         ok = io_error(ctx, path, 0, "the file holds no complete scene (assimp: incomplete)");
-    load_state s = {.ctx = ctx, .path = path, .scene = scene};
-    if (ok && gltf) gltf_strengths(&s);
+    load_state s = {.ctx = ctx, .path = path, .scene = scene, .gltf = gltf};
+    if (ok && gltf) gltf_json_materials(&s);
     if (ok && scene->mNumMaterials) {
         s.materials = io_malloc(scene->mNumMaterials * sizeof *s.materials);
         if (!s.materials) ok = io_error(ctx, path, 0, "out of memory");
@@ -642,7 +757,7 @@ bool assimp_load(io_ctx *ctx, const char *path) {
         fclose(f);
     }
     free(s.materials);
-    free(s.strength);
+    free(s.json);
     free(s.light_done);
     aiReleaseImport(scene);
     return ok;

@@ -257,6 +257,18 @@ uint32_t tex_add_encoded(io_ctx *ctx, const char *key, const char *as_written, c
  * on failure) under `key`. */
 uint32_t tex_add(io_ctx *ctx, const char *key, const char *as_written, int32_t width, int32_t height,
                  uint8_t *rgb, uint8_t *alpha, const char *file, uint32_t line);
+/* Bump maps (MTL bump, map_bump): a grey height map h in [0, 1] (the mean of the channels)
+ * becomes a tangent-space normal map at load time, normal (-s dh/du, -s dh/dv, 1) normalised, the
+ * derivatives central differences in texels and s = scale (MTL -bm) x IO_BUMP_STRENGTH: with -bm 1
+ * the steepest step an 8-bit map holds, black to white between neighbouring texels (a central
+ * difference of 0.5), tilts the normal 45 degrees. Shared per (image, scale). */
+#define IO_BUMP_STRENGTH 2.0f
+enum { TEX_BUMP_HEIGHT, TEX_BUMP_FLAT, TEX_BUMP_NORMALS };
+/* What a bump map's image holds: heights, one height everywhere (no relief), or (bluish and far
+ * from grey) a tangent-space normal map, as Blender's exporter writes under map_Bump. */
+int tex_bump_kind(io_ctx *ctx, uint32_t height);
+/* The normal map of height map `height` (a texture index); IO_NONE after an error at file:line. */
+uint32_t tex_bump_to_normal(io_ctx *ctx, uint32_t height, float scale, const char *file, uint32_t line);
 
 /* ---- loading from memory (io_scene.c; for the fuzzers and tests) ------------------------------- */
 

@@ -108,12 +108,65 @@ typedef struct mtl_pending {
     bool has_d, has_tr; /* d wins over Tr, whichever comes first (tinyobjloader) */
     bool has_tf;
     float tf[3];
+    /* the texture statements' -s and -o (scale u v, offset u v), for the material's one transform */
+    struct {
+        float so[4];
+        uint32_t line;
+        bool kd;
+    } maps[8];
+    uint32_t map_n;
+    uint32_t bump;        /* the bump map's height texture, IO_NONE: none */
+    float bump_scale;     /* its -bm */
+    uint32_t bump_line;
 } mtl_pending;
 
-/* Derives kr and kt from illum, d and Tf as the MTL spec's illumination models use them. */
-static bool mtl_finish(io_ctx *ctx, mtl_pending *pm) {
+/* The material's texture transform: map_Kd's -s and -o, else those of its first texture; a texture
+ * whose options differ is read with these too, and a warning says so (once a material). */
+static void mtl_uv_transform(obj_file *f, mtl_pending *pm) {
+    uint32_t pick = 0;
+    for (uint32_t i = 0; i < pm->map_n; i++)
+        if (pm->maps[i].kd) {
+            pick = i;
+            break;
+        }
+    if (pm->map_n == 0) return;
+    const float *so = pm->maps[pick].so;
+    for (uint32_t i = 0; i < pm->map_n; i++)
+        if (memcmp(pm->maps[i].so, so, sizeof pm->maps[i].so) != 0) {
+            io_warning(f->ctx, f->shown, pm->maps[i].line,
+                       "material '%s': this texture's -s/-o differ from those of line %u; one transform a material: that one's is used",
+                       pm->m.name, pm->maps[pick].line);
+            break;
+        }
+    if (so[0] == 1.0f && so[1] == 1.0f && so[2] == 0.0f && so[3] == 0.0f) return;
+    /* (u, v) -> (s_u u + o_u, s_v v + o_v), as Blender's importer maps them */
+    const float t[6] = {so[0], 0.0f, so[2], 0.0f, so[1], so[3]};
+    pm->m.uv_transform = true;
+    memcpy(pm->m.uv_matrix, t, sizeof t);
+}
+
+/* Derives kr and kt from illum, d and Tf as the MTL spec's illumination models use them; the bump
+ * map becomes the normal map (norm wins over it); the texture transform. */
+static bool mtl_finish(obj_file *f, mtl_pending *pm) {
     if (!pm->active) return true;
+    io_ctx *ctx = f->ctx;
     rp_material_data *m = &pm->m;
+    if (pm->bump != IO_NONE) {
+        int kind = m->map_normal ? TEX_BUMP_HEIGHT : tex_bump_kind(ctx, pm->bump);
+        if (m->map_normal) {
+            io_warning(ctx, f->shown, pm->bump_line, "material '%s' has both norm and a bump map; the bump map is not used", m->name);
+        } else if (kind == TEX_BUMP_NORMALS) {
+            io_warning(ctx, f->shown, pm->bump_line,
+                       "material '%s': the bump map is coloured like a tangent-space normal map (as Blender writes them); read as one",
+                       m->name);
+            m->map_normal = (int32_t)pm->bump + 1;
+        } else if (kind == TEX_BUMP_HEIGHT && pm->bump_scale != 0.0f) { /* a flat one has no normal to give */
+            uint32_t t = tex_bump_to_normal(ctx, pm->bump, pm->bump_scale, f->shown, pm->bump_line);
+            if (t == IO_NONE) return false;
+            m->map_normal = (int32_t)t + 1;
+        }
+    }
+    mtl_uv_transform(f, pm);
     int il = m->illum;
     if (il == 3 || il == 5 || il == 7) memcpy(m->kr, m->ks, sizeof m->kr);
     /* Tr is 1 - d (an extension, not in the spec); with both, d counts: 3ds Max's exporter wrote
@@ -125,7 +178,8 @@ static bool mtl_finish(io_ctx *ctx, mtl_pending *pm) {
         m->kt[0] = m->kt[1] = m->kt[2] = 1.0f - d;
     }
     pm->active = false;
-    return builder_add_material(ctx, m) != IO_NONE;
+    if (builder_add_material(ctx, m) == IO_NONE) return io_error(ctx, f->shown, f->line, "out of memory");
+    return true;
 }
 
 static bool mtl_color(obj_file *f, const char **pp, float c[3], const char *what) {
@@ -184,7 +238,7 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
         p = skip_blank(p);
         if (at_eol(p)) continue;
         if (word_is(p, "newmtl")) {
-            if (!mtl_finish(ctx, &pm)) return io_error(ctx, f.shown, f.line, "out of memory");
+            if (!mtl_finish(&f, &pm)) return false;
             char name[256];
             rest_of_line(p + 6, name, sizeof name);
             builder_material_defaults(&pm.m, name);
@@ -192,6 +246,8 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
             pm.d = 1.0f;
             pm.has_d = pm.has_tr = false;
             pm.has_tf = false;
+            pm.map_n = 0;
+            pm.bump = IO_NONE;
             pm.active = true;
             continue;
         }
@@ -227,15 +283,21 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
             m->illum = (int32_t)il;
         } else if ((kw == 6 && strncmp(p, "map_Kd", 6) == 0) || (kw == 6 && strncmp(p, "map_Pr", 6) == 0) ||
                    (kw == 6 && strncmp(p, "map_Ke", 6) == 0) || (kw == 5 && strncmp(p, "map_d", 5) == 0) ||
-                   (kw == 4 && strncmp(p, "norm", 4) == 0)) {
+                   (kw == 6 && strncmp(p, "map_Ks", 6) == 0) || (kw == 4 && strncmp(p, "norm", 4) == 0) ||
+                   (kw == 4 && strncmp(p, "bump", 4) == 0) ||
+                   (kw == 8 && (strncmp(p, "map_bump", 8) == 0 || strncmp(p, "map_Bump", 8) == 0))) {
             /* Options (-s 1 1 1, -clamp on, ...) come before the file name; the name is the rest.
-             * Those that would change the image (a scaled, offset or clamped texture, -mm's range)
-             * are not applied: a warning says so, where they are not their defaults. */
+             * -s and -o (u and v; w has no use on a surface) give the material's texture
+             * transform, -bm a bump map's scale; the others that would change the image (-t,
+             * -clamp on, -mm's range) are not applied: a warning says so, where they are not their
+             * defaults. */
             const char *r = skip_blank(q);
+            float so[4] = {1.0f, 1.0f, 0.0f, 0.0f}, bm = 1.0f;
             while (*r == '-') {
                 const char *o = r;
                 while (!is_delim(*r)) r++;
-                bool xyz = word_is(o, "-s") || word_is(o, "-o") || word_is(o, "-t"), mm = word_is(o, "-mm");
+                bool uv = word_is(o, "-s") || word_is(o, "-o");
+                bool xyz = uv || word_is(o, "-t"), mm = word_is(o, "-mm");
                 int args = xyz ? 3 : mm ? 2 : 1;
                 float def = word_is(o, "-s") ? 1.0f : 0.0f;
                 bool changes = false;
@@ -243,8 +305,15 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
                     r = skip_blank(r);
                     float v;
                     const char *e = io_parse_float(r, &v);
-                    if (k > 0 && (!e || !is_delim(*e))) break; /* -s may give fewer than 3 */
-                    if (e && is_delim(*e) && (xyz || mm)) changes |= v != (mm ? (float)k : def);
+                    bool num = e && is_delim(*e);
+                    if (k > 0 && !num) break; /* -s may give fewer than 3 */
+                    if (num && uv) {
+                        if (k < 2) so[(o[1] == 'o' ? 2 : 0) + k] = v;
+                    } else if (num && word_is(o, "-bm")) {
+                        bm = v;
+                    } else if (num && (xyz || mm)) {
+                        changes |= v != (mm ? (float)k : def);
+                    }
                     if (word_is(o, "-clamp")) changes = word_is(r, "on");
                     while (!is_delim(*r)) r++;
                 }
@@ -266,19 +335,27 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
             mtl_texture_fallback(&f, path, name, full, sizeof full);
             uint32_t t = tex_load(ctx, full, name, f.shown, f.line);
             if (t == IO_NONE) return false;
+            if (pm.map_n < sizeof pm.maps / sizeof pm.maps[0]) {
+                memcpy(pm.maps[pm.map_n].so, so, sizeof so);
+                pm.maps[pm.map_n].line = f.line;
+                pm.maps[pm.map_n++].kd = p[4] == 'K' && p[5] == 'd';
+            }
             if (kw == 5) {
                 /* alpha cutout (leaves, fences): the texture's alpha channel, or its red channel
                  * where it has none, below 0.5 cuts the surface out */
                 m->map_alpha = (int32_t)t + 1;
                 m->alpha_mode = RP_ALPHA_MASK;
             } else if (p[0] == 'n') m->map_normal = (int32_t)t + 1;    /* PBR extension: tangent-space normals */
-            else if (p[5] == 'r') m->map_roughness = (int32_t)t + 1;   /* PBR extension: roughness */
+            else if (p[0] == 'b' || p[4] == 'b' || p[4] == 'B') {      /* a height map, made a normal map at the end */
+                pm.bump = t, pm.bump_scale = bm, pm.bump_line = f.line;
+            } else if (p[5] == 'r') m->map_roughness = (int32_t)t + 1; /* PBR extension: roughness */
             else if (p[5] == 'e') m->map_ke = (int32_t)t + 1;          /* emission texture */
+            else if (p[5] == 's') m->map_ks = (int32_t)t + 1;          /* specular colour, times Ks */
             else m->map_kd = (int32_t)t;
         }
-        /* Everything else (map_Ks, bump, PBR extensions...) has no field in rp_material_data. */
+        /* Everything else (map_Ns, map_Ka, PBR extensions...) has no field in rp_material_data. */
     }
-    if (!mtl_finish(ctx, &pm)) return io_error(ctx, f.shown, f.line, "out of memory");
+    if (!mtl_finish(&f, &pm)) return false;
     ctx->bytes += buf->size;
     return true;
 }

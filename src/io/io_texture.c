@@ -5,6 +5,7 @@
  * because OBJ models ship them: Crytek's Sponza, 3ds Max exports), JPEG Huffman tables are checked
  * here first and a JPEG's DC coefficients by a dry run of stb's own parser, and the declared size
  * is capped before it allocates. */
+#include <math.h>
 #include <stdio.h>
 
 #include "io/io_internal.h"
@@ -601,4 +602,65 @@ uint32_t tex_add(io_ctx *ctx, const char *path, const char *as_written, int32_t 
     t->alpha = alpha;
     b->texture_keys[b->texture_n] = key;
     return (uint32_t)b->texture_n++;
+}
+
+/* ---- bump maps -------------------------------------------------------------------------------- */
+
+/* The height of texel (x, y) of a bump map, in [0, 1]: the mean of its channels (grey images have
+ * three equal ones), wrapping around the edges as the renderer's lookups do. */
+static float bump_height(const rp_texture_data *t, int32_t x, int32_t y) {
+    x = (x % t->width + t->width) % t->width;
+    y = (y % t->height + t->height) % t->height;
+    const uint8_t *p = t->rgb + ((size_t)y * (size_t)t->width + (size_t)x) * 3;
+    return (float)(p[0] + p[1] + p[2]) * (1.0f / 765.0f);
+}
+
+int tex_bump_kind(io_ctx *ctx, uint32_t height) {
+    const rp_texture_data *t = &ctx->b.textures[height];
+    size_t n = (size_t)t->width * (size_t)t->height, coloured = 0;
+    double blue = 0.0;
+    bool flat = true;
+    for (size_t i = 0; i < n; i++) {
+        const uint8_t *p = t->rgb + 3 * i;
+        int lo = p[0] < p[1] ? p[0] : p[1], hi = p[0] < p[1] ? p[1] : p[0];
+        if (p[2] < lo) lo = p[2];
+        if (p[2] > hi) hi = p[2];
+        coloured += hi - lo > 24;
+        blue += p[2];
+        flat &= p[0] + p[1] + p[2] == t->rgb[0] + t->rgb[1] + t->rgb[2];
+    }
+    /* a tangent-space normal map is bluish (z up) and far from grey over most of it */
+    if (2 * coloured > n && blue > 0.6 * 255.0 * (double)n) return TEX_BUMP_NORMALS;
+    return flat ? TEX_BUMP_FLAT : TEX_BUMP_HEIGHT;
+}
+
+uint32_t tex_bump_to_normal(io_ctx *ctx, uint32_t height, float scale, const char *file, uint32_t line) {
+    io_builder *b = &ctx->b;
+    char key[IO_PATH_MAX + 64];
+    snprintf(key, sizeof key, "%s#bump %.9g", b->texture_keys[height], (double)scale);
+    for (size_t i = 0; i < b->texture_n; i++)
+        if (strcmp(b->texture_keys[i], key) == 0) return (uint32_t)i;
+    const rp_texture_data *t = &b->textures[height];
+    size_t n = (size_t)t->width * (size_t)t->height;
+    uint8_t *rgb = io_malloc(3 * n);
+    if (!rgb) {
+        io_error(ctx, file, line, "out of memory");
+        return IO_NONE;
+    }
+    /* Central differences in texel units; +u is +x, +v is up (the image's rows run down). The
+     * normal of the height field s h(u, v) is (-s dh/du, -s dh/dv, 1). */
+    float k = scale * IO_BUMP_STRENGTH;
+    for (int32_t y = 0; y < t->height; y++)
+        for (int32_t x = 0; x < t->width; x++) {
+            float du = 0.5f * (bump_height(t, x + 1, y) - bump_height(t, x - 1, y));
+            float dv = 0.5f * (bump_height(t, x, y - 1) - bump_height(t, x, y + 1));
+            float nx = -k * du, ny = -k * dv, nz = 1.0f;
+            float inv = 1.0f / sqrtf(nx * nx + ny * ny + nz * nz);
+            const float c[3] = {nx * inv, ny * inv, nz * inv};
+            uint8_t *p = rgb + ((size_t)y * (size_t)t->width + (size_t)x) * 3;
+            for (int j = 0; j < 3; j++) p[j] = (uint8_t)lrintf((c[j] * 0.5f + 0.5f) * 255.0f);
+        }
+    char shown[sizeof t->path + 16];
+    snprintf(shown, sizeof shown, "%s (bump normals)", t->path);
+    return tex_add(ctx, key, shown, t->width, t->height, rgb, NULL, file, line);
 }

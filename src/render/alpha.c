@@ -50,7 +50,12 @@ static bool hit_cut(const rp_render_scene *s, const float org[3], const float di
         const float *t0 = d->texcoords + 2 * (size_t)ti[0], *t1 = d->texcoords + 2 * (size_t)ti[1],
                     *t2 = d->texcoords + 2 * (size_t)ti[2];
         float b0 = 1.0f - u - v;
-        const float uv[2] = {b0 * t0[0] + u * t1[0] + v * t2[0], b0 * t0[1] + u * t1[1] + v * t2[1]};
+        float uv[2] = {b0 * t0[0] + u * t1[0] + v * t2[0], b0 * t0[1] + u * t1[1] + v * t2[1]};
+        if (m->uv_transform) { /* the material's texture transform, as scene_surface applies it */
+            const float *x = m->uv_matrix, u0 = uv[0], v0 = uv[1];
+            uv[0] = x[0] * u0 + x[1] * v0 + x[2];
+            uv[1] = x[3] * u0 + x[4] * v0 + x[5];
+        }
         a *= material_texture_alpha(s, m->alpha_texture, uv);
     }
     if (m->alpha_mode == RP_ALPHA_MASK) return a < m->alpha_cutoff;

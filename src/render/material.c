@@ -25,6 +25,9 @@ rp_material rp_material_from_data(const rp_material_data *d) {
     m.alpha = isfinite(d->alpha) ? fminf(fmaxf(d->alpha, 0.0f), 1.0f) : 1.0f;
     m.alpha_cutoff = d->alpha_cutoff;
     m.alpha_texture = d->map_alpha - 1;
+    m.uv_transform = d->uv_transform;
+    m.specular_texture = d->map_ks - 1;
+    memcpy(m.uv_matrix, d->uv_matrix, sizeof m.uv_matrix);
     if (d->metal_rough) {
         /* glTF's metallic-roughness: the physically based integrators read it per hit
          * (metal_rough_bsdf), Whitted too (material_phong); ks and ns here are the factors' Phong
@@ -117,6 +120,13 @@ v3 material_albedo(const rp_render_scene *s, const rp_material *m, const render_
     return kd;
 }
 
+/* The highlight's colour: ks times its texture (MTL map_Ks), as map_Kd multiplies kd. */
+static v3 material_specular(const rp_render_scene *s, const rp_material *m, const render_surface *surf) {
+    v3 ks = v3_load(m->ks);
+    if (m->specular_texture >= 0 && surf->has_uv) ks = v3_mul(ks, material_texture(s, m->specular_texture, surf->uv));
+    return ks;
+}
+
 float material_fresnel(float cos_i, float eta) {
     float sin2_t = eta * eta * (1.0f - cos_i * cos_i);
     if (sin2_t >= 1.0f) return 1.0f; /* total internal reflection */
@@ -183,7 +193,7 @@ void material_phong(const rp_render_scene *s, const rp_material *m, const render
                     float *ns) {
     *kd = material_albedo(s, m, surf);
     if (!m->metal_rough) {
-        *ks = v3_load(m->ks);
+        *ks = material_specular(s, m, surf);
         *ns = m->ns;
         return;
     }
@@ -213,7 +223,7 @@ render_bsdf material_bsdf(const rp_render_scene *s, const rp_material *m, const 
             break;
         }
         b.type = BSDF_PLASTIC;
-        b.ks = clamp3(v3_load(m->ks));
+        b.ks = clamp3(material_specular(s, m, surf));
         b.alpha = sqrtf(2.0f / (fmaxf(m->ns, 0.0f) + 2.0f));
         if (m->roughness_texture >= 0 && surf->has_uv) {
             /* a roughness map holds perceptual roughness r (linear); alpha = r^2, at least 1e-3 */

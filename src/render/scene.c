@@ -164,7 +164,8 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
     if (data->material_count == 0) {
         s->materials[0] = (rp_material){.type = RP_MATERIAL_DIFFUSE, .kd = {0.8f, 0.8f, 0.8f}, .texture = -1,
                                         .roughness_texture = -1, .normal_texture = -1,
-                                        .emission_texture = -1, .alpha = 1.0f, .alpha_texture = -1};
+                                        .emission_texture = -1, .alpha = 1.0f, .alpha_texture = -1,
+                                        .specular_texture = -1};
     }
 
     s->cutouts = alpha_scene_has_cutouts(s);
@@ -344,10 +345,21 @@ void scene_surface(const rp_render_scene *s, const rp_ray *ray, const rp_hit *hi
         /* texture coordinates only where the material reads a texture, and dp/du only where it has a
          * normal map (they are all that read them): the rest of the hits skip four more arrays */
         if (d->texcoords && d->texcoord_indices && (m->texture >= 0 || m->roughness_texture >= 0 || m->normal_texture >= 0 ||
-                                                       m->emission_texture >= 0)) {
+                                                       m->emission_texture >= 0 || m->specular_texture >= 0)) {
             const uint32_t *ti = d->texcoord_indices + 3 * (size_t)prim;
             const float *t0 = d->texcoords + 2 * (size_t)ti[0], *t1 = d->texcoords + 2 * (size_t)ti[1],
                         *t2 = d->texcoords + 2 * (size_t)ti[2];
+            float moved[3][2];
+            if (m->uv_transform) {
+                /* the material's texture transform (MTL -s/-o, glTF KHR_texture_transform) on the
+                 * corners: the point's uv and dp/du below then follow it */
+                const float *x = m->uv_matrix, *c[3] = {t0, t1, t2};
+                for (int k = 0; k < 3; k++) {
+                    moved[k][0] = x[0] * c[k][0] + x[1] * c[k][1] + x[2];
+                    moved[k][1] = x[3] * c[k][0] + x[4] * c[k][1] + x[5];
+                }
+                t0 = moved[0], t1 = moved[1], t2 = moved[2];
+            }
             out->uv[0] = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
             out->uv[1] = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
             out->has_uv = true;

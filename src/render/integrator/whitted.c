@@ -30,6 +30,7 @@ void whitted_surface(const render_frame *f, const rp_ray *ray, const rp_hit *hit
     render_surface sf;
     scene_surface(s, ray, hit, &sf);
     const rp_material *m = &s->materials[sf.material];
+    material_normal_map(s, m, &sf); /* MTL norm and bump, glTF normal textures */
     v3 dir = v3_make(ray->dir_x, ray->dir_y, ray->dir_z);
     v3 kd;
     material_phong(s, m, &sf, &kd, &o->ks, &o->shininess);

@@ -444,6 +444,17 @@ static void test_errors(void) {
     write_text("e_badtex.mtl", "newmtl a\nmap_Kd e_badtex.ppm\n");
     write_text("e_badtex.obj", "mtllib e_badtex.mtl\n");
     expect_error("e_badtex.obj", "e_badtex.mtl", 2, "truncated");
+    /* a numeric texture option without its number, and a bump strength whose normals would be NaN */
+    write_text("e_optnum.mtl", "newmtl a\nbump -bm nan e_optnum.ppm\n");
+    write_text("e_optnum.obj", "mtllib e_optnum.mtl\n");
+    expect_error("e_optnum.obj", "e_optnum.mtl", 2, "-bm: expected a finite number, got 'nan'");
+    write_text("e_opts.mtl", "newmtl a\nKd 1 1 1\nmap_Kd -s x 1 e_opts.ppm\n");
+    write_text("e_opts.obj", "mtllib e_opts.mtl\n");
+    expect_error("e_opts.obj", "e_opts.mtl", 3, "-s: expected a finite number, got 'x'");
+    write_text("e_bumpbig.ppm", "P6\n2 2\n255\n\001\002\003\004\005\006\007\010\011\012\013\014");
+    write_text("e_bumpbig.mtl", "newmtl a\n\nbump -bm 3e38 e_bumpbig.ppm\n");
+    write_text("e_bumpbig.obj", "mtllib e_bumpbig.mtl\n");
+    expect_error("e_bumpbig.obj", "e_bumpbig.mtl", 3, "too large");
     write_text("e_face.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n");
     expect_error("e_face.obj", "e_face.obj", 3, NULL);
     static const uint8_t junk[] = {0x7f, 'E', 'L', 'F', 2, 1, 1, 0, 0, 0, 0, 0, 0xff, 0xfe, '\n', 0x00, 0x13};

@@ -298,6 +298,9 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
                 while (!is_delim(*r)) r++;
                 bool uv = word_is(o, "-s") || word_is(o, "-o");
                 bool xyz = uv || word_is(o, "-t"), mm = word_is(o, "-mm");
+                /* options whose first argument is a number (the spec's; -clamp, -imfchan, -type
+                 * and the like take words) */
+                bool numeric = xyz || mm || word_is(o, "-bm") || word_is(o, "-boost") || word_is(o, "-texres");
                 int args = xyz ? 3 : mm ? 2 : 1;
                 float def = word_is(o, "-s") ? 1.0f : 0.0f;
                 bool changes = false;
@@ -306,6 +309,13 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
                     float v;
                     const char *e = io_parse_float(r, &v);
                     bool num = e && is_delim(*e);
+                    if (k == 0 && !num && numeric) {
+                        int len = 0, olen = 0;
+                        while (len < 24 && !is_delim(r[len])) len++;
+                        while (!is_delim(o[olen])) olen++;
+                        return io_error(ctx, f.shown, f.line, "%.*s option %.*s: expected a finite number, got '%.*s'",
+                                        (int)kw, p, olen, o, len, r);
+                    }
                     if (k > 0 && !num) break; /* -s may give fewer than 3 */
                     if (num && uv) {
                         if (k < 2) so[(o[1] == 'o' ? 2 : 0) + k] = v;

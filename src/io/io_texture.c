@@ -641,6 +641,10 @@ uint32_t tex_bump_to_normal(io_ctx *ctx, uint32_t height, float scale, const cha
     for (size_t i = 0; i < b->texture_n; i++)
         if (strcmp(b->texture_keys[i], key) == 0) return (uint32_t)i;
     const rp_texture_data *t = &b->textures[height];
+    if (!isfinite(scale * IO_BUMP_STRENGTH)) { /* -bm 3e38: the normals would be NaN */
+        io_error(ctx, file, line, "bump map %s: -bm %g is too large", t->path, (double)scale);
+        return IO_NONE;
+    }
     size_t n = (size_t)t->width * (size_t)t->height;
     uint8_t *rgb = io_malloc(3 * n);
     if (!rgb) {

@@ -475,6 +475,25 @@ static void test_same_bytes(void) {
     rp_scene_data_free(&s);
 }
 
+/* The albedo of the loaded OBJ scene s must show the quad's holes exactly where the plain mask
+ * cuts them (label names the case); s is freed. */
+static void check_albedo_holes(rp_device *dev, rp_scene_data *s, const char *label) {
+    char err[512] = "";
+    rp_render_scene *rs = rp_render_scene_new(dev, s, NULL, err, sizeof err);
+    CHECKF(rs != NULL, "%s", err);
+    float *px = rs ? render(rs, (rp_render_desc){.integrator = RP_INTEGRATOR_AOV, .aov = RP_AOV_ALBEDO}) : NULL;
+    if (px) {
+        static pixel_class pc[W * H];
+        quad q = make_quad(tilt, quad_z);
+        classify(&q, pc);
+        int wrong = wrong_pixels(px, pc, false, label);
+        CHECKF(wrong == 0, "%s: %d pixels wrong", label, wrong);
+    }
+    free(px);
+    rp_render_scene_release(rs);
+    rp_scene_data_free(s);
+}
+
 /* map_d of a grey PNG without an alpha channel: its grey value is the mask. */
 static void test_grey_mask(rp_device *dev) {
     write_mask_png("holes_grey.png", 1, 255, 0);
@@ -484,20 +503,7 @@ static void test_grey_mask(rp_device *dev) {
     if (!load_obj_scene("grey.obj", &s, 1.0f)) return;
     const rp_material_data *leaf = &s.materials[s.tri_materials[2]];
     CHECK(leaf->map_alpha > 0 && s.textures[leaf->map_alpha - 1].alpha == NULL);
-    char err[512] = "";
-    rp_render_scene *rs = rp_render_scene_new(dev, &s, NULL, err, sizeof err);
-    CHECKF(rs != NULL, "%s", err);
-    float *px = rs ? render(rs, (rp_render_desc){.integrator = RP_INTEGRATOR_AOV, .aov = RP_AOV_ALBEDO}) : NULL;
-    if (px) {
-        static pixel_class pc[W * H];
-        quad q = make_quad(tilt, quad_z);
-        classify(&q, pc);
-        int wrong = wrong_pixels(px, pc, false, "grey map_d");
-        CHECKF(wrong == 0, "grey map_d: %d pixels wrong", wrong);
-    }
-    free(px);
-    rp_render_scene_release(rs);
-    rp_scene_data_free(&s);
+    check_albedo_holes(dev, &s, "grey map_d");
 }
 
 /* map_d with the material's texture transform (MTL -o): the inverted hole pattern moved by one cell
@@ -508,20 +514,7 @@ static void test_mask_transform(rp_device *dev) {
     write_obj("moved.obj", "moved.mtl");
     rp_scene_data s;
     if (!load_obj_scene("moved.obj", &s, 1.0f)) return;
-    char err[512] = "";
-    rp_render_scene *rs = rp_render_scene_new(dev, &s, NULL, err, sizeof err);
-    CHECKF(rs != NULL, "%s", err);
-    float *px = rs ? render(rs, (rp_render_desc){.integrator = RP_INTEGRATOR_AOV, .aov = RP_AOV_ALBEDO}) : NULL;
-    if (px) {
-        static pixel_class pc[W * H];
-        quad q = make_quad(tilt, quad_z);
-        classify(&q, pc);
-        int wrong = wrong_pixels(px, pc, false, "map_d -o 0.25 0");
-        CHECKF(wrong == 0, "map_d -o 0.25 0 of the inverted mask: %d pixels wrong", wrong);
-    }
-    free(px);
-    rp_render_scene_release(rs);
-    rp_scene_data_free(&s);
+    check_albedo_holes(dev, &s, "map_d -o 0.25 0 of the inverted mask");
 }
 
 /* ---- glTF: alphaMode MASK, alphaCutoff 0.3, over an opaque wall ---- */

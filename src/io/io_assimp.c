@@ -113,8 +113,10 @@ typedef struct json_scan {
     const char *p, *end;
 } json_scan;
 
+static bool js_is_blank(char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r'; }
+
 static void js_blank(json_scan *j) {
-    while (j->p < j->end && (*j->p == ' ' || *j->p == '\t' || *j->p == '\n' || *j->p == '\r')) j->p++;
+    while (j->p < j->end && js_is_blank(*j->p)) j->p++;
 }
 
 /* A string at j->p: its raw bytes (escapes left as they are) in [*s, *s + *n). */
@@ -707,6 +709,63 @@ static bool glb_header_ok(io_ctx *ctx, const char *path) {
     return true;
 }
 
+/* assimp 5.2 decodes a glTF buffer's or image's base64 data URI into a buffer it allocates first,
+ * then throws at the first byte outside the alphabet, and the buffer leaks (found by fuzz_gltf: a
+ * load of such a file lost the decoded size each time, and the message read "Invalid base64 char
+ * value: 18446744073709551615"). The "uri" strings of a .gltf (or a .glb's JSON chunk) that are
+ * data URIs are checked here first: the alphabet, '=' only as the last one or two characters, and a
+ * length that is a multiple of 4. A string with a JSON escape (a "\/" is legal JSON) is left to
+ * assimp. */
+static bool gltf_data_uris_ok(io_ctx *ctx, const char *path) {
+    io_buf buf;
+    if (!vfs_read(ctx, path, &buf)) return true; /* assimp says why */
+    const char *p = buf.data, *end = buf.data + buf.size;
+    if (buf.size >= 20 && memcmp(p, "glTF", 4) == 0) {
+        const unsigned char *h = (const unsigned char *)p;
+        uint32_t len = (uint32_t)h[12] | (uint32_t)h[13] << 8 | (uint32_t)h[14] << 16 | (uint32_t)h[15] << 24;
+        p += 20;
+        if (len < (size_t)(end - p)) end = p + len;
+    }
+    bool ok = true;
+    for (const char *at = p; ok && (at = memchr(at, 'd', (size_t)(end - at))); at++) {
+        if ((size_t)(end - at) < 6 || memcmp(at, "data:", 5) != 0 || at == p || at[-1] != '"') continue;
+        /* the value of a "uri" key: "uri" <blanks> : <blanks> "data:... */
+        const char *k = at - 1;
+        while (k > p && js_is_blank(k[-1])) k--;
+        if (k == p || k[-1] != ':') continue;
+        k--;
+        while (k > p && js_is_blank(k[-1])) k--;
+        if (k - p < 5 || memcmp(k - 5, "\"uri\"", 5) != 0) continue;
+        const char *close = memchr(at, '"', (size_t)(end - at));
+        if (!close) break; /* an unterminated string: assimp's JSON parser says so */
+        const char *b64 = NULL;
+        for (const char *c = at; c + 8 <= close; c++)
+            if (*c == ';' && memcmp(c, ";base64,", 8) == 0) {
+                b64 = c + 8;
+                break;
+            }
+        if (!b64 || memchr(at, '\\', (size_t)(close - at))) continue;
+        size_t n = (size_t)(close - b64), pad = 0;
+        const char *bad = NULL;
+        for (const char *c = b64; c < close && !bad; c++) {
+            unsigned char ch = (unsigned char)*c;
+            bool alpha = (ch >= 'A' && ch <= 'Z') || (ch >= 'a' && ch <= 'z') || (ch >= '0' && ch <= '9') || ch == '+' || ch == '/';
+            if (ch == '=' && close - c <= 2) pad++;
+            else if (!alpha || pad) bad = c;
+        }
+        int line = 1;
+        for (const char *c = p; c < at; c++) line += *c == '\n';
+        if (bad)
+            ok = io_error(ctx, path, line, "a data URI's base64 holds byte 0x%02x at its character %zu, outside base64's alphabet",
+                          (unsigned)(unsigned char)*bad, (size_t)(bad - b64));
+        else if (n % 4)
+            ok = io_error(ctx, path, line, "a data URI's base64 is %zu characters long, not a multiple of 4", n);
+        at = close;
+    }
+    vfs_buf_free(&buf);
+    return ok;
+}
+
 bool assimp_load(io_ctx *ctx, const char *path) {
     if (ctx->vfs.archive)
         return io_error(ctx, path, 0, "formats read through assimp cannot be loaded from inside an archive");
@@ -722,7 +781,7 @@ bool assimp_load(io_ctx *ctx, const char *path) {
      * more than the rest of the import (Suzanne: 16 ms against 1 ms). */
     unsigned flags = aiProcess_Triangulate | aiProcess_SortByPType | aiProcess_ValidateDataStructure;
     if (!gltf) flags |= aiProcess_JoinIdenticalVertices;
-    if (!glb_header_ok(ctx, path)) return false;
+    if (!glb_header_ok(ctx, path) || (gltf && !gltf_data_uris_ok(ctx, path))) return false;
     const struct aiScene *scene = aiImportFile(path, flags);
     if (!scene) {
         const char *why = aiGetErrorString();

@@ -146,9 +146,13 @@ static bool ply_read_header(ply_file *f) {
         if (n == 0) continue;
         if (strcmp(w[0], "end_header") == 0) break;
         if (n >= 3 && strcmp(w[0], "comment") == 0 && strcmp(w[1], "TextureFile") == 0 && !f->texture[0]) {
-            /* MeshLab's texture for the texture coordinates: the rest of the line (blanks allowed) */
-            const char *a = strstr(line_start, "TextureFile") + 11, *e = f->p;
-            while (io_is_space(*a)) a++;
+            /* MeshLab's texture for the texture coordinates: the rest of the line (blanks allowed).
+             * The word is looked for in the line's bytes, not by strstr: a NUL in the line (not a
+             * blank, so the words above go past it) ended strstr's search before it (UBSan: NULL + 11) */
+            const char *a = line_start, *e = f->p;
+            while (a + 11 < e && memcmp(a, "TextureFile", 11) != 0) a++;
+            a = a + 11 <= e ? a + 11 : e;
+            while (a < e && io_is_space(*a)) a++;
             while (e > a && (io_is_space(e[-1]) || e[-1] == '\n')) e--;
             snprintf(f->texture, sizeof f->texture, "%.*s", (int)(e - a), a);
             f->texture_line = f->line;

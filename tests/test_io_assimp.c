@@ -521,10 +521,15 @@ static void test_gltf_bad_base64(void) {
         {"b64_char.gltf", "base64,AAABAAIA", "base64,AAA!AAIA", "b64_char.gltf:9: error: a data URI's base64 holds byte 0x21 at its character 3"},
         {"b64_pad.gltf", "base64,AAABAAIA", "base64,AA=BAAIA", "b64_pad.gltf:9: error: a data URI's base64 holds byte 0x3d at its character 2"},
         {"b64_len.gltf", "base64,iVBORw0K", "base64,iVBORw0", "b64_len.gltf:8: error: a data URI's base64 is 99 characters long, not a multiple of 4"},
+        {"b64_escaped_char.gltf", "base64,AAABAAIA", "base64,AAA\\u0021AAIA", "b64_escaped_char.gltf:9: error: a data URI's base64 holds byte 0x21 at its character 3"},
+        /* 121 bytes of media type and ";base64" (the data at offset 127 of the URI) load; 122 do not */
+        {"b64_long_type.gltf", "data:application/octet-stream", "data:application/xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx", NULL},
+        {"b64_too_long_type.gltf", "data:application/octet-stream", "data:application/xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx",
+         "b64_too_long_type.gltf:9: error: a data URI's media type and parameters take 122 bytes before its ','; assimp reads at most 121"},
         {"b64_escape.gltf", "data:image/png", "data:image\\/png", NULL},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
-        char text[sizeof glass_gltf + 16];
+        char text[sizeof glass_gltf + 128];
         const char *at = strstr(glass_gltf, cases[i].from);
         CHECK(at != NULL);
         if (!at) continue;

@@ -709,13 +709,66 @@ static bool glb_header_ok(io_ctx *ctx, const char *path) {
     return true;
 }
 
+/* A JSON string's bytes [q, close) unescaped into out (room for close - q bytes: no escape grows),
+ * as assimp's JSON parser reads them; returns the length. */
+static size_t js_unescape(const char *q, const char *close, char *out) {
+    size_t n = 0;
+    while (q < close) {
+        if (*q != '\\' || q + 1 >= close) {
+            out[n++] = *q++;
+            continue;
+        }
+        char e = q[1];
+        q += 2;
+        if (e == 'u' && close - q >= 4) {
+            unsigned cp = 0;
+            for (int k = 0; k < 4; k++, q++) {
+                char h = *q;
+                cp = cp * 16 + (unsigned)(h >= '0' && h <= '9' ? h - '0' : h >= 'a' && h <= 'f' ? h - 'a' + 10 : h >= 'A' && h <= 'F' ? h - 'A' + 10 : 0);
+            }
+            if (cp < 0x80) out[n++] = (char)cp;
+            else if (cp < 0x800) out[n++] = (char)(0xc0 | cp >> 6), out[n++] = (char)(0x80 | (cp & 63));
+            else out[n++] = (char)(0xe0 | cp >> 12), out[n++] = (char)(0x80 | (cp >> 6 & 63)), out[n++] = (char)(0x80 | (cp & 63));
+        } else {
+            out[n++] = e == 'b' ? '\b' : e == 'f' ? '\f' : e == 'n' ? '\n' : e == 'r' ? '\r' : e == 't' ? '\t' : e;
+        }
+    }
+    return n;
+}
+
+/* One "uri" value, unescaped: a data URI must be one assimp 5.2 reads right. */
+static bool gltf_data_uri_ok(io_ctx *ctx, const char *path, int line, const char *u, size_t n) {
+    if (n < 5 || memcmp(u, "data:", 5) != 0) return true;
+    const char *comma = memchr(u, ',', n);
+    if (!comma) return true;
+    /* assimp keeps the data's offset in the URI in a char: past 127 it read from before the URI
+     * (fuzz_gltf: a 154-byte media type, and the leak below) */
+    if (comma - u > 126)
+        return io_error(ctx, path, line, "a data URI's media type and parameters take %zu bytes before its ','; assimp reads at most 121",
+                        (size_t)(comma - u) - 5);
+    if (comma - u < 12 || memcmp(comma - 7, ";base64", 7) != 0) return true;
+    const char *b64 = comma + 1, *close = u + n;
+    size_t pad = 0;
+    for (const char *c = b64; c < close; c++) {
+        unsigned char ch = (unsigned char)*c;
+        bool alpha = (ch >= 'A' && ch <= 'Z') || (ch >= 'a' && ch <= 'z') || (ch >= '0' && ch <= '9') || ch == '+' || ch == '/';
+        if (ch == '=' && close - c <= 2) pad++;
+        else if (!alpha || pad)
+            return io_error(ctx, path, line, "a data URI's base64 holds byte 0x%02x at its character %zu, outside base64's alphabet",
+                            (unsigned)ch, (size_t)(c - b64));
+    }
+    if ((close - b64) % 4)
+        return io_error(ctx, path, line, "a data URI's base64 is %zu characters long, not a multiple of 4", (size_t)(close - b64));
+    return true;
+}
+
 /* assimp 5.2 decodes a glTF buffer's or image's base64 data URI into a buffer it allocates first,
  * then throws at the first byte outside the alphabet, and the buffer leaks (found by fuzz_gltf: a
  * load of such a file lost the decoded size each time, and the message read "Invalid base64 char
- * value: 18446744073709551615"). The "uri" strings of a .gltf (or a .glb's JSON chunk) that are
- * data URIs are checked here first: the alphabet, '=' only as the last one or two characters, and a
- * length that is a multiple of 4. A string with a JSON escape (a "\/" is legal JSON) is left to
- * assimp. */
+ * value: 18446744073709551615"); a '!' it decoded into wrong bytes without a word. Every "uri"
+ * value of a .gltf (or a .glb's JSON chunk) that is a data URI is checked here first, as assimp
+ * will read it (JSON escapes undone): the alphabet, '=' only as the last one or two characters, a
+ * length that is a multiple of 4, and the media type's length. */
 static bool gltf_data_uris_ok(io_ctx *ctx, const char *path) {
     io_buf buf;
     if (!vfs_read(ctx, path, &buf)) return true; /* assimp says why */
@@ -727,41 +780,31 @@ static bool gltf_data_uris_ok(io_ctx *ctx, const char *path) {
         if (len < (size_t)(end - p)) end = p + len;
     }
     bool ok = true;
-    for (const char *at = p; ok && (at = memchr(at, 'd', (size_t)(end - at))); at++) {
-        if ((size_t)(end - at) < 6 || memcmp(at, "data:", 5) != 0 || at == p || at[-1] != '"') continue;
-        /* the value of a "uri" key: "uri" <blanks> : <blanks> "data:... */
-        const char *k = at - 1;
-        while (k > p && js_is_blank(k[-1])) k--;
-        if (k == p || k[-1] != ':') continue;
-        k--;
-        while (k > p && js_is_blank(k[-1])) k--;
-        if (k - p < 5 || memcmp(k - 5, "\"uri\"", 5) != 0) continue;
-        const char *close = memchr(at, '"', (size_t)(end - at));
-        if (!close) break; /* an unterminated string: assimp's JSON parser says so */
-        const char *b64 = NULL;
-        for (const char *c = at; c + 8 <= close; c++)
-            if (*c == ';' && memcmp(c, ";base64,", 8) == 0) {
-                b64 = c + 8;
+    char *scratch = NULL;
+    for (const char *at = p; ok && (at = memchr(at, '"', (size_t)(end - at))); at++) {
+        if ((size_t)(end - at) < 5 || memcmp(at, "\"uri\"", 5) != 0) continue;
+        json_scan j = {at + 5, end};
+        js_blank(&j);
+        if (j.p >= end || *j.p != ':') continue;
+        j.p++;
+        const char *q;
+        size_t n;
+        if (!js_string(&j, &q, &n)) continue;
+        int line = 1;
+        for (const char *c = p; c < q; c++) line += *c == '\n';
+        if (memchr(q, '\\', n)) { /* unescaped into scratch, as assimp's parser reads it */
+            free(scratch);
+            if (!(scratch = io_malloc(n + 1))) {
+                ok = io_error(ctx, path, line, "out of memory");
                 break;
             }
-        if (!b64 || memchr(at, '\\', (size_t)(close - at))) continue;
-        size_t n = (size_t)(close - b64), pad = 0;
-        const char *bad = NULL;
-        for (const char *c = b64; c < close && !bad; c++) {
-            unsigned char ch = (unsigned char)*c;
-            bool alpha = (ch >= 'A' && ch <= 'Z') || (ch >= 'a' && ch <= 'z') || (ch >= '0' && ch <= '9') || ch == '+' || ch == '/';
-            if (ch == '=' && close - c <= 2) pad++;
-            else if (!alpha || pad) bad = c;
+            ok = gltf_data_uri_ok(ctx, path, line, scratch, js_unescape(q, q + n, scratch));
+        } else {
+            ok = gltf_data_uri_ok(ctx, path, line, q, n);
         }
-        int line = 1;
-        for (const char *c = p; c < at; c++) line += *c == '\n';
-        if (bad)
-            ok = io_error(ctx, path, line, "a data URI's base64 holds byte 0x%02x at its character %zu, outside base64's alphabet",
-                          (unsigned)(unsigned char)*bad, (size_t)(bad - b64));
-        else if (n % 4)
-            ok = io_error(ctx, path, line, "a data URI's base64 is %zu characters long, not a multiple of 4", n);
-        at = close;
+        at = j.p - 1;
     }
+    free(scratch);
     vfs_buf_free(&buf);
     return ok;
 }

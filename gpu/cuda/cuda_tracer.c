@@ -18,6 +18,8 @@ struct rp_cuda_tracer {
     rp_cuda_bvh_hit *hits;
     size_t cap;
     rp_device *pool;         /* the scene's device: its threads convert the rays and hits */
+    rp_scene *rest;          /* the scene's spheres, cones and user primitives under their own geom
+                              * ids, traced on the CPU after the GPU's triangles; NULL if none */
     char device[256];
     rp_cuda_tracer_stats stats;
 };
@@ -50,11 +52,47 @@ static bool staging_grow(rp_cuda_tracer *t, size_t n) {
 
 void rp_cuda_tracer_free(rp_cuda_tracer *t) {
     if (!t) return;
+    if (t->rest) rp_scene_release(t->rest);
     rp_cuda_batch_free(t->batch);
     rp_cuda_bvh_free(t->gpu);
     rp_cuda_bvh_src_free(&t->src);
     staging_free(t);
     free(t);
+}
+
+/* The primitives the GPU does not trace (spheres; cones and other user geometry) go into a scene of
+ * their own on the CPU, each geometry under the geom_id it has in the scene (the slots of the
+ * others are filled in order, then freed), so a hit names the same geometry either way. Instances
+ * are refused: the GPU layout is one level (`raypack render --engine cuda` flattens animations). */
+static bool rest_scene(rp_cuda_tracer *t, const rp_scene *scene, char *err, size_t err_size) {
+    for (uint32_t id = 0; id < scene->geom_count; id++)
+        if (scene->geoms[id] && scene->geoms[id]->type == RP_GEOMETRY_INSTANCE) {
+            snprintf(err, err_size, "cuda: the scene has instances (geometry %u); the GPU traces one level of triangles, spheres and cones", id);
+            return false;
+        }
+    rp_scene_desc desc = scene->desc;
+    desc.accel = RP_ACCEL_BVH;
+    if (!(t->rest = rp_scene_new(scene->device, &desc))) goto oom;
+    rp_geometry *filler = rp_geometry_new(scene->device, RP_GEOMETRY_USER);
+    if (!filler) goto oom;
+    bool ok = true;
+    for (uint32_t id = 0; ok && id < scene->geom_count; id++) {
+        rp_geometry *g = scene->geoms[id];
+        bool rest = g && g->type != RP_GEOMETRY_TRIANGLE;
+        ok = rp_scene_attach(t->rest, rest ? g : filler) == id;
+    }
+    for (uint32_t id = 0; ok && id < scene->geom_count; id++)
+        if (!scene->geoms[id] || scene->geoms[id]->type == RP_GEOMETRY_TRIANGLE) rp_scene_detach(t->rest, id);
+    rp_geometry_release(filler);
+    if (!ok) goto oom;
+    if (rp_scene_commit(t->rest) != RP_ERROR_NONE) {
+        snprintf(err, err_size, "cuda: the scene's spheres, cones and user primitives could not be built on the CPU");
+        return false;
+    }
+    return true;
+oom:
+    snprintf(err, err_size, "cuda: out of memory");
+    return false;
 }
 
 rp_cuda_tracer *rp_cuda_tracer_new(const rp_scene *scene, rp_cuda_kernel kernel, bool emulate, char *err,
@@ -67,13 +105,7 @@ rp_cuda_tracer *rp_cuda_tracer_new(const rp_scene *scene, rp_cuda_kernel kernel,
     t->kernel = kernel;
     t->pool = scene->device;
     if (!rp_cuda_bvh_src_from_scene(scene, &t->src, err, err_size)) goto fail;
-    if (t->src.skipped) {
-        snprintf(err, err_size,
-                 "cuda: the scene has %zu spheres, cones, instances or user primitives; the GPU traces "
-                 "triangles only",
-                 t->src.skipped);
-        goto fail;
-    }
+    if (t->src.skipped && !rest_scene(t, scene, err, err_size)) goto fail;
     if (emulate) {
         snprintf(t->device, sizeof t->device, "CPU (the CUDA kernels' code, emulated)");
         return t;
@@ -153,6 +185,21 @@ static void hits_chunk(void *user, uint32_t k, uint32_t thread) {
     }
 }
 
+/* The spheres, cones and user primitives on the CPU, after the GPU: a closest hit among them nearer
+ * than the triangle's (tfar is its t now) replaces it; a ray the triangles do not block is tested
+ * against them. A sphere at exactly a triangle's t loses to it, where the CPU's one structure would
+ * take the lower (geom_id, prim_id). */
+static void rest_chunk(void *user, uint32_t k, uint32_t thread) {
+    (void)thread;
+    convert_job *j = user;
+    size_t a, b;
+    chunk_bounds(k, j->n, &a, &b);
+    for (size_t i = a; i < b; i++) {
+        if (!j->occlusion) rp_intersect1(j->t->rest, &j->rh[i]);
+        else if (j->rh[i].ray.tfar != -INFINITY) rp_occluded1(j->t->rest, &j->rh[i].ray);
+    }
+}
+
 bool rp_cuda_trace(void *user, rp_rayhit *rh, size_t n, bool occlusion, char *err, size_t err_size) {
     rp_cuda_tracer *t = user;
     if (n == 0) return true;
@@ -183,6 +230,7 @@ bool rp_cuda_trace(void *user, rp_rayhit *rh, size_t n, bool occlusion, char *er
         return false;
     }
     rp_device_parallel_for(t->pool, chunks, hits_chunk, &job);
+    if (t->rest) rp_device_parallel_for(t->pool, chunks, rest_chunk, &job);
     t->stats.rays += n, t->stats.batches++;
     t->stats.kernel_ms += ms;
     t->stats.total_ms += (sys_seconds() - t0) * 1e3;

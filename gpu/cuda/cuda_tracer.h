@@ -6,7 +6,9 @@
  *
  * With emulate, the kernels' own traversal code runs on the CPU over the GPU layout
  * (rp_cuda_bvh_trace_emulated): the same answers where no GPU is, for checking the backend in CI.
- * Triangles only: a scene with spheres, cones, instances or user primitives is refused. */
+ * The GPU traces the triangles; a scene's spheres, cones and user primitives are traced on the CPU
+ * after it (a structure of their own, the same geom_ids), the nearer hit kept. Instances are
+ * refused (one level: the CLI flattens animations). */
 #ifndef RP_CUDA_TRACER_H
 #define RP_CUDA_TRACER_H
 

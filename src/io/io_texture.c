@@ -648,8 +648,9 @@ uint32_t tex_sampled(io_ctx *ctx, uint32_t image, const tex_sampler *s, const ch
         for (size_t i = 0; i < 3 * n; i++) rgb[i] = map[rgb[i]];
         for (size_t i = 0; alpha && i < n; i++) alpha[i] = map[alpha[i]];
     }
-    char shown[sizeof t->path];
-    snprintf(shown, sizeof shown, "%s", t->path);
+    char shown[sizeof t->path + 48]; /* info shows the remap as it shows a bump map's normals */
+    if (remap) snprintf(shown, sizeof shown, "%s (-mm %g %g)", t->path, (double)s->mm_base, (double)s->mm_gain);
+    else snprintf(shown, sizeof shown, "%s", t->path);
     uint32_t k = tex_add(ctx, key, shown, t->width, t->height, rgb, alpha, file, line);
     if (k != IO_NONE) { /* t may have moved */
         rp_texture_data *v = &b->textures[k];

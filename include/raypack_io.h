@@ -77,14 +77,31 @@ typedef struct rp_material_data {
     int32_t map_ks;        /* 1 + index into textures multiplying ks (MTL map_Ks, sRGB decoded), 0 if none */
 } rp_material_data;
 
+/* How a texture lookup treats texture coordinates outside [0, 1], per axis (glTF's sampler wrapS
+ * and wrapT, MTL's -clamp): REPEAT tiles the image, CLAMP reads the edge texels beyond it
+ * (CLAMP_TO_EDGE), MIRROR tiles it flipped every other time (MIRRORED_REPEAT). */
+typedef enum rp_texture_wrap { RP_TEXTURE_REPEAT = 0, RP_TEXTURE_CLAMP = 1, RP_TEXTURE_MIRROR = 2 } rp_texture_wrap;
+/* How texels are filtered: LINEAR blends the four nearest (bilinear), NEAREST reads the one texel
+ * the point falls in (glTF's magFilter NEAREST: pixel art stays blocky). */
+typedef enum rp_texture_filter { RP_TEXTURE_LINEAR = 0, RP_TEXTURE_NEAREST = 1 } rp_texture_filter;
+
 /* Image texture, decoded to 8-bit RGB (sRGB encoded, as stored in the file), and its alpha channel
- * where the file has one (RGBA or grey-alpha PNG, TGA, BMP). */
+ * where the file has one (RGBA or grey-alpha PNG, TGA, BMP).
+ *
+ * A texture is an image together with the way it is sampled (wrap, filter): every lookup of it,
+ * in every material, integrator, engine and the alpha test, uses these. Loaders share an entry
+ * between the materials that read the same image the same way; where a scene reads one image
+ * under two samplers (or with MTL -mm's remap, baked into the texels), each gets an entry of its
+ * own with its own copy of the texels, so entries never share memory. All zero (repeat, bilinear)
+ * is the default, and what a texture built by hand gets from calloc. */
 typedef struct rp_texture_data {
     char path[256];     /* the path the scene named, as written */
     int32_t width, height;
     uint8_t *rgb;       /* width * height * 3 bytes, top row first */
     uint8_t *alpha;     /* width * height bytes (linear coverage, 255 opaque), top row first; NULL
                          * when the file has no alpha channel. Owned like rgb */
+    rp_texture_wrap wrap_u, wrap_v; /* outside [0, 1] along u and v (v up, as texture coordinates) */
+    rp_texture_filter filter;
 } rp_texture_data;
 
 /* Point lights (NFF/AFF, glTF); spot and directional lights come from glTF's KHR_lights_punctual

@@ -5,6 +5,7 @@
  * serial result and the same warnings. */
 #include <math.h>
 #include <stdint.h>
+#include <stdlib.h>
 #include <sys/stat.h>
 
 #include "io/io_internal.h"
@@ -271,25 +272,31 @@ static void test_mtl_values(void) {
 }
 
 /* Texture map options: skipped before the file name; -s and -o (u and v) are the material's uv
- * transform, quietly; those others that would change the image (turbulence, clamping, -mm) are not
- * applied and say so; defaults and the rest are quiet. A comment after the file name is not part
- * of it. */
+ * transform, quietly; -clamp on and -mm are applied (a texture entry of its own: clamped, its
+ * texels remapped), quietly; turbulence is not applied and says so; defaults and the rest are
+ * quiet. A comment after the file name is not part of it. */
 static void test_mtl_map_options(void) {
     write_text("mo.ppm", "P3\n1 1\n255\n10 20 30\n");
     write_text("mo.mtl",
                "newmtl quiet\nmap_Kd -s 1 1 1 -o 0 0 0 -clamp off -bm 1 -blendu off -blendv on -cc on -mm 0 1 -imfchan r "
                "-texres 512 -type sphere mo.ppm   # the diffuse map\n"
-               "newmtl loud\nmap_Kd -s 2 2 1 -o 0.5 0 -clamp on -mm 0.1 0.9 -t 0 0 0 mo.ppm\n");
+               "newmtl loud\nmap_Kd -s 2 2 1 -o 0.5 0 -clamp on -mm 0.1 0.9 -t 0.5 0 0 mo.ppm\n");
     write_text("mo.obj", "mtllib mo.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl quiet\nf 1 2 3\nusemtl loud\nf 1 2 3\n");
     rp_scene_data s;
     warnings w;
     if (!load("mo.obj", &s, &w)) return;
-    CHECK(s.texture_count == 1 && s.triangle_count == 2);
-    if (s.triangle_count == 2) CHECK(tri_material(&s, 0)->map_kd == 0 && tri_material(&s, 1)->map_kd == 0);
-    CHECKF(w.count == 2, "%d warnings:\n%s", w.count, w.text);
-    CHECKF(strstr(w.text, "mo.mtl:4: warning: map_Kd option '-clamp on' is not applied") != NULL &&
-               strstr(w.text, "option '-mm 0.1 0.9'") != NULL && strstr(w.text, "option '-s") == NULL &&
-               strstr(w.text, "option '-o") == NULL,
+    CHECK(s.texture_count == 2 && s.triangle_count == 2);
+    if (s.triangle_count == 2 && s.texture_count == 2) {
+        CHECK(tri_material(&s, 0)->map_kd == 0 && tri_material(&s, 1)->map_kd == 1);
+        const rp_texture_data *q = &s.textures[0], *l = &s.textures[1];
+        CHECK(q->wrap_u == RP_TEXTURE_REPEAT && q->wrap_v == RP_TEXTURE_REPEAT && q->rgb[0] == 10 && q->rgb[2] == 30);
+        /* 0.1 + 0.9 c: 10 -> 34.5, 30 -> 52.5 (rounded either way) */
+        CHECKF(l->wrap_u == RP_TEXTURE_CLAMP && l->wrap_v == RP_TEXTURE_CLAMP && abs(l->rgb[0] - 34) <= 1 && abs(l->rgb[2] - 52) <= 1,
+               "-clamp on -mm 0.1 0.9: wrap %d %d, texel %d %d %d", (int)l->wrap_u, (int)l->wrap_v, l->rgb[0], l->rgb[1], l->rgb[2]);
+    }
+    CHECKF(w.count == 1, "%d warnings:\n%s", w.count, w.text);
+    CHECKF(strstr(w.text, "mo.mtl:4: warning: map_Kd option '-t 0.5 0 0' is not applied") != NULL &&
+               strstr(w.text, "option '-s") == NULL && strstr(w.text, "option '-o") == NULL,
            "%s", w.text);
     if (s.triangle_count == 2) {
         const rp_material_data *quiet = tri_material(&s, 0), *loud = tri_material(&s, 1);

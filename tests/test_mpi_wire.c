@@ -131,6 +131,7 @@ static void check_scene(const char *name, rp_scene_data *s) {
     for (size_t i = 0; i < s->texture_count && i < u.texture_count; i++) {
         const rp_texture_data *a = &s->textures[i], *b = &u.textures[i];
         CHECK(a->width == b->width && a->height == b->height && strcmp(a->path, b->path) == 0);
+        CHECK(a->wrap_u == b->wrap_u && a->wrap_v == b->wrap_v && a->filter == b->filter);
         CHECK(same(a->rgb, b->rgb, (size_t)a->width * (size_t)a->height * 3));
         CHECK(!a->alpha == !b->alpha && (!a->alpha || same(a->alpha, b->alpha, (size_t)a->width * (size_t)a->height)));
     }
@@ -276,6 +277,12 @@ int main(void) {
             if (room.materials[i].map_kd == 0) room.materials[i].alpha_mode = RP_ALPHA_MASK, room.materials[i].map_alpha = 1;
         check_scene("room with a cutout", &room);
     }
+    /* a texture's sampler travels; an unknown wrap mode is refused */
+    tex->wrap_u = RP_TEXTURE_CLAMP, tex->wrap_v = RP_TEXTURE_MIRROR, tex->filter = RP_TEXTURE_NEAREST;
+    check_scene("room with a clamped, mirrored, nearest texture", &room);
+    tex->wrap_v = (rp_texture_wrap)7;
+    check_bad_animation("room", &room, "texture samplers");
+    tex->wrap_v = RP_TEXTURE_MIRROR;
     rp_default_scene_free(&room);
     static const char *const scenes[] = {"bart_kitchen.tar.gz", "bart_museum5.tar.gz", "spd_rings_s5.nff.gz",
                                          "cornell_box/cornell_box.obj", "stanford_bunny_bun_zipper.ply.gz"};

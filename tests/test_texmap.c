@@ -55,13 +55,16 @@ static void quadrants(int x, int y, float c[3]) {
     memcpy(c, q[(y >= 4) * 2 + (x >= 4)], 3 * sizeof(float));
 }
 
-static void write_quad_obj(const char *name, const char *mtl) {
+/* The quad with material m of `mtl`, its uv running from (lo, lo) to (hi, hi). */
+static void write_quad_obj_uv(const char *name, const char *mtl, int lo, int hi) {
     char text[512];
     snprintf(text, sizeof text,
-             "mtllib %s\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
-             "usemtl m\nf 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n", mtl);
+             "mtllib %s\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt %d %d\nvt %d %d\nvt %d %d\nvt %d %d\nvn 0 0 1\n"
+             "usemtl m\nf 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n", mtl, lo, lo, hi, lo, hi, hi, lo, hi);
     write_text(name, text);
 }
+
+static void write_quad_obj(const char *name, const char *mtl) { write_quad_obj_uv(name, mtl, 0, 1); }
 
 static void collect(void *user, const char *message) {
     char *text = user;
@@ -232,7 +235,7 @@ static void test_mtl_transform(void) {
     write_text("tex.mtl", "newmtl m\nKd 1 1 1\nmap_Kd quad.png\n");
     write_text("tex_s.mtl", "newmtl m\nKd 1 1 1\nmap_Kd -s 2 2 1 quad.png\n");
     write_text("tex_o.mtl", "newmtl m\nKd 1 1 1\nmap_Kd -o 0.5 0 quad.png\n");
-    write_text("tex_mixed.mtl", "newmtl m\nKd 1 1 1\nmap_Pr -s 3 3 quad.png\nmap_Kd -s 2 2 -clamp on quad.png\n");
+    write_text("tex_mixed.mtl", "newmtl m\nKd 1 1 1\nmap_Pr -s 3 3 quad.png\nmap_Kd -s 2 2 quad.png\n");
     write_quad_obj("tex.obj", "tex.mtl");
     write_quad_obj("tex_s.obj", "tex_s.mtl");
     write_quad_obj("tex_o.obj", "tex_o.mtl");
@@ -247,7 +250,7 @@ static void test_mtl_transform(void) {
     float *plain = render("tex.obj", RP_INTEGRATOR_AOV, 1, false, NULL);
     float *scaled = render("tex_s.obj", RP_INTEGRATOR_AOV, 1, false, NULL);
     float *shifted = render("tex_o.obj", RP_INTEGRATOR_AOV, 1, false, NULL);
-    /* the map_Pr's -s 3 3 loses to map_Kd's; -clamp still warns */
+    /* the map_Pr's -s 3 3 loses to map_Kd's */
     float *mixed = render("tex_mixed.obj", RP_INTEGRATOR_AOV, 1, false, "tex_mixed.mtl:3: warning: material 'm': this texture's -s/-o differ from those of line 4");
     if (plain && scaled && shifted && mixed) {
         static const float pts[] = {0.1f, 0.15f, 0.2f, 0.3f, 0.35f, 0.6f, 0.65f, 0.8f, 0.85f, 0.9f};
@@ -273,37 +276,48 @@ static void test_mtl_transform(void) {
     free(plain), free(scaled), free(shifted), free(mixed);
 }
 
-/* glTF KHR_texture_transform: the quad with glTF's uv (x, 1 - y) so that the plain texture lands
- * as in the OBJ; scale 2 repeats it, offset 0.5 shifts it, rotation pi/2 with offset (0, 1) turns
- * it a quarter clockwise (the extension's own example: the top left corner shows the image's bottom
- * left). */
-static void write_gltf(const char *name, const char *transform) {
+/* A glTF of the quad with texture `image`, its uv running from lo to hi as the OBJ's would (glTF's
+ * t is 1 - v: the texture lands as in the OBJ); transform: the members of a KHR_texture_transform,
+ * sampler: those of the texture's sampler (on line 5 of the file), NULL for none. Its buffer is
+ * name.bin. */
+static void write_gltf_quad(const char *name, const char *image, float lo, float hi, const char *transform,
+                            const char *sampler) {
     /* positions (4 vec3), uvs (4 vec2), indices (6 u16) */
-    const float pos[12] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0}, uv[8] = {0, 1, 1, 1, 1, 0, 0, 0};
+    const float pos[12] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0}, uv[8] = {lo, 1 - lo, hi, 1 - lo, hi, 1 - hi, lo, 1 - hi};
     const uint16_t idx[6] = {0, 1, 2, 0, 2, 3};
-    FILE *f = fopen(at("quad.bin"), "wb");
+    char bin[256];
+    snprintf(bin, sizeof bin, "%s.bin", name);
+    FILE *f = fopen(at(bin), "wb");
     if (f) {
         fwrite(pos, sizeof pos, 1, f);
         fwrite(uv, sizeof uv, 1, f);
         fwrite(idx, sizeof idx, 1, f);
         fclose(f);
     }
-    char text[4096], ext[512] = "";
+    char text[4096], ext[512] = "", smp[512] = "";
     if (transform) snprintf(ext, sizeof ext, ",\"extensions\":{\"KHR_texture_transform\":{%s}}", transform);
+    if (sampler) snprintf(smp, sizeof smp, ",\"sampler\":0}],\n\"samplers\":[{%s", sampler);
     snprintf(text, sizeof text,
              "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_texture_transform\"],\n"
              "\"materials\":[{\"name\":\"m\",\"pbrMetallicRoughness\":{\"metallicFactor\":0,\"baseColorTexture\":{\"index\":0%s}}}],\n"
-             "\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"quad.png\"}],\n"
+             "\"images\":[{\"uri\":\"%s\"}],\n"
+             "\"textures\":[{\"source\":0%s}],\n"
              "\"scene\":0,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],\n"
              "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1},\"indices\":2,\"material\":0}]}],\n"
-             "\"buffers\":[{\"uri\":\"quad.bin\",\"byteLength\":92}],\n"
+             "\"buffers\":[{\"uri\":\"%s\",\"byteLength\":92}],\n"
              "\"bufferViews\":[{\"buffer\":0,\"byteLength\":48},{\"buffer\":0,\"byteOffset\":48,\"byteLength\":32},{\"buffer\":0,\"byteOffset\":80,\"byteLength\":12}],\n"
              "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\",\"min\":[0,0,0],\"max\":[1,1,0]},\n"
              "  {\"bufferView\":1,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},\n"
              "  {\"bufferView\":2,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}\n",
-             ext);
+             ext, image, sampler ? smp : "", bin);
     write_text(name, text);
 }
+
+/* glTF KHR_texture_transform: the quad with glTF's uv (x, 1 - y) so that the plain texture lands
+ * as in the OBJ; scale 2 repeats it, offset 0.5 shifts it, rotation pi/2 with offset (0, 1) turns
+ * it a quarter clockwise (the extension's own example: the top left corner shows the image's bottom
+ * left). */
+static void write_gltf(const char *name, const char *transform) { write_gltf_quad(name, "quad.png", 0, 1, transform, NULL); }
 
 static void test_gltf_transform(void) {
     rp_scene_data probe;
@@ -371,6 +385,229 @@ static void test_map_ks(void) {
     }
 }
 
+/* ---- samplers: wrap modes and filters (glTF samplers, MTL -clamp), MTL -mm ---- */
+
+enum { WRAP_REPEAT, WRAP_CLAMP, WRAP_MIRROR };
+
+/* 4 x 4, every texel its own colour: red along x, green along y, blue a pattern */
+static void ramp(int x, int y, float c[3]) {
+    c[0] = (float)x / 3.0f, c[1] = (float)y / 3.0f, c[2] = (float)((x * 3 + y * 5) % 4) / 3.0f;
+}
+
+static float srgb_decode(uint8_t b) {
+    float c = (float)b / 255.0f;
+    return c <= 0.04045f ? c / 12.92f : powf((c + 0.055f) / 1.055f, 2.4f);
+}
+
+/* Texel index i wrapped into [0, n), as OpenGL's wrap modes define it for texel indices. */
+static int ref_wrap(int i, int n, int mode) {
+    if (mode == WRAP_CLAMP) return i < 0 ? 0 : i >= n ? n - 1 : i;
+    if (mode == WRAP_MIRROR) {
+        int m = ((i % (2 * n)) + 2 * n) % (2 * n);
+        return m < n ? m : 2 * n - 1 - m;
+    }
+    return ((i % n) + n) % n;
+}
+
+/* The reference lookup (linear RGB) of 8-bit sRGB texels at (u, v), v up: texel coordinates
+ * s = u w, t = (1 - v) h (rows run down), NEAREST the texel they fall in, else the bilinear blend
+ * of the four around s - 1/2, t - 1/2; texel indices wrapped by ref_wrap. */
+static void ref_lookup(const uint8_t *rgb, int w, int h, int wrap_u, int wrap_v, bool nearest, double u, double v,
+                       float out[3]) {
+    double s = u * w, t = (1.0 - v) * h;
+    int i0, j0;
+    double a = 0.0, b = 0.0;
+    if (nearest) {
+        i0 = (int)floor(s), j0 = (int)floor(t);
+    } else {
+        i0 = (int)floor(s - 0.5), j0 = (int)floor(t - 0.5);
+        a = s - 0.5 - i0, b = t - 0.5 - j0;
+    }
+    for (int c = 0; c < 3; c++) {
+        double sum = 0.0;
+        for (int k = 0; k < 4; k++) {
+            int i = ref_wrap(i0 + (k & 1), w, wrap_u), j = ref_wrap(j0 + (k >> 1), h, wrap_v);
+            double wt = ((k & 1) ? a : 1.0 - a) * ((k >> 1) ? b : 1.0 - b);
+            if (wt != 0.0) sum += wt * srgb_decode(rgb[3 * (j * w + i) + c]);
+        }
+        out[c] = (float)sum;
+    }
+}
+
+/* Pixels of a 64 x 64 albedo render of the quad (uv from -1 to 2) that are not the reference
+ * lookup's at the uv they see (within 1e-4; 1e-5 NEAREST, which reads texels as they are), away
+ * from the quad's edges and, NEAREST, texel edges (where the renderer's uv and this one's round to
+ * either side); *checked: how many were compared. */
+static int wide_mismatches(const float *px, const uint8_t *rgb, int w, int h, int wrap_u, int wrap_v, bool nearest,
+                           int *checked) {
+    int bad = 0;
+    *checked = 0;
+    for (int y = 0; y < IMG; y++)
+        for (int x = 0; x < IMG; x++) {
+            double qx = ((x + 0.5) / IMG - 0.5) * 1.2 + 0.5, qy = 0.5 - ((y + 0.5) / IMG - 0.5) * 1.2;
+            if (qx < 0.002 || qx > 0.998 || qy < 0.002 || qy > 0.998) continue;
+            double u = -1.0 + 3.0 * qx, v = -1.0 + 3.0 * qy, s = u * w, t = (1.0 - v) * h;
+            if (nearest && (fabs(s - floor(s + 0.5)) < 0.02 || fabs(t - floor(t + 0.5)) < 0.02)) continue;
+            float want[3];
+            ref_lookup(rgb, w, h, wrap_u, wrap_v, nearest, u, v, want);
+            const float *got = px + 3 * (y * IMG + x);
+            float tol = nearest ? 1e-5f : 1e-4f;
+            bool ok = fabsf(got[0] - want[0]) <= tol && fabsf(got[1] - want[1]) <= tol && fabsf(got[2] - want[2]) <= tol;
+            if (!ok && bad < 3)
+                printf("  pixel %d %d (uv %.4f %.4f): %g %g %g, want %g %g %g\n", x, y, u, v, got[0], got[1], got[2], want[0],
+                       want[1], want[2]);
+            bad += !ok;
+            ++*checked;
+        }
+    return bad;
+}
+
+/* The quad with uv from -1 to 2 over a 4 x 4 texture shows it as each sampler says: glTF's repeat
+ * (no sampler), CLAMP_TO_EDGE, MIRRORED_REPEAT, the two axes apart, magFilter NEAREST; MTL's
+ * -clamp on is glTF's CLAMP_TO_EDGE; -mm 0.5 0.5 maps every stored value c to 0.5 + 0.5 c (half the
+ * contrast), and alpha cut-outs read their texture under its sampler. */
+static void test_samplers(void) {
+    write_png("ramp.png", 4, 4, ramp);
+    write_text("ramp.mtl", "newmtl m\nKd 1 1 1\nmap_Kd ramp.png\n");
+    write_text("ramp_clamp.mtl", "newmtl m\nKd 1 1 1\nmap_Kd -clamp on ramp.png\n");
+    write_text("ramp_mm.mtl", "newmtl m\nKd 1 1 1\nmap_Kd -mm 0.5 0.5 ramp.png\n");
+    write_quad_obj_uv("ramp.obj", "ramp.mtl", -1, 2);
+    write_quad_obj_uv("ramp_clamp.obj", "ramp_clamp.mtl", -1, 2);
+    write_quad_obj_uv("ramp_mm.obj", "ramp_mm.mtl", -1, 2);
+    rp_scene_data d;
+    char warnings[4096];
+    uint8_t texels[48], mm[48];
+    if (!load("ramp.obj", &d, warnings)) return;
+    bool ok = d.texture_count == 1 && d.textures[0].width == 4 && d.textures[0].height == 4;
+    CHECK(ok);
+    if (ok) memcpy(texels, d.textures[0].rgb, sizeof texels);
+    rp_scene_data_free(&d);
+    if (!ok) return;
+    /* -mm 0.5 0.5: the texel bytes, remapped, in a texture of its own */
+    if (load("ramp_mm.obj", &d, warnings)) {
+        int32_t k = d.materials[0].map_kd;
+        ok = k >= 0 && (size_t)k < d.texture_count && d.textures[k].width == 4;
+        CHECKF(ok && warnings[0] == '\0', "-mm: texture %d, warnings %s", k, warnings);
+        int lo = 255, hi = 0, mlo = 255, mhi = 0, bad = 0;
+        for (int i = 0; ok && i < 48; i++) {
+            mm[i] = d.textures[k].rgb[i];
+            bad += abs(mm[i] - (int)lrint(127.5 + 0.5 * texels[i])) > 1;
+            lo = texels[i] < lo ? texels[i] : lo, hi = texels[i] > hi ? texels[i] : hi;
+            mlo = mm[i] < mlo ? mm[i] : mlo, mhi = mm[i] > mhi ? mm[i] : mhi;
+        }
+        CHECKF(ok && bad == 0 && abs(2 * (mhi - mlo) - (hi - lo)) <= 2, "-mm 0.5 0.5: %d texels off; range %d-%d, was %d-%d", bad,
+               mlo, mhi, lo, hi);
+        rp_scene_data_free(&d);
+        if (!ok) return;
+    }
+
+    struct {
+        const char *file, *sampler;
+        int wrap_u, wrap_v;
+        bool nearest;
+        const uint8_t *rgb;
+    } cases[] = {
+        {"wide.gltf", NULL, WRAP_REPEAT, WRAP_REPEAT, false, texels},
+        {"wide_clamp.gltf", "\"wrapS\":33071,\"wrapT\":33071", WRAP_CLAMP, WRAP_CLAMP, false, texels},
+        {"wide_mirror.gltf", "\"wrapS\":33648,\"wrapT\":33648,\"magFilter\":9729", WRAP_MIRROR, WRAP_MIRROR, false, texels},
+        {"wide_clamp_mirror.gltf", "\"wrapS\":33071,\"wrapT\":33648", WRAP_CLAMP, WRAP_MIRROR, false, texels},
+        {"wide_nearest.gltf", "\"magFilter\":9728,\"minFilter\":9728", WRAP_REPEAT, WRAP_REPEAT, true, texels},
+        {"wide_mirror_clamp_nearest.gltf", "\"wrapS\":33648,\"wrapT\":33071,\"magFilter\":9728", WRAP_MIRROR, WRAP_CLAMP, true, texels},
+        {"ramp.obj", NULL, WRAP_REPEAT, WRAP_REPEAT, false, texels},
+        {"ramp_clamp.obj", NULL, WRAP_CLAMP, WRAP_CLAMP, false, texels},
+        {"ramp_mm.obj", NULL, WRAP_REPEAT, WRAP_REPEAT, false, mm},
+    };
+    enum { NCASES = sizeof cases / sizeof cases[0] };
+    float *img[NCASES];
+    bool gltf = true;
+    for (int c = 0; c < NCASES; c++) {
+        img[c] = NULL;
+        bool is_gltf = strstr(cases[c].file, ".gltf") != NULL;
+        if (is_gltf) write_gltf_quad(cases[c].file, "ramp.png", -1, 2, NULL, cases[c].sampler);
+        if (c == 0) { /* built without assimp: the glTF cases are skipped */
+            char err[256];
+            gltf = rp_scene_data_load(at(cases[c].file), &d, err, sizeof err);
+            if (gltf) rp_scene_data_free(&d);
+            else printf("built without assimp? %s: glTF skipped\n", err);
+        }
+        if (is_gltf && !gltf) continue;
+        img[c] = render(cases[c].file, RP_INTEGRATOR_AOV, 1, false, NULL);
+        if (!img[c]) continue;
+        int checked, bad = wide_mismatches(img[c], cases[c].rgb, 4, 4, cases[c].wrap_u, cases[c].wrap_v, cases[c].nearest, &checked);
+        CHECKF(bad == 0 && checked > 1500, "%s: %d of %d pixels are not the reference lookup's", cases[c].file, bad, checked);
+        if (cases[c].nearest) { /* texel-exact blocks: every pixel of the quad is one texel's colour */
+            int blends = 0;
+            for (int y = 10; y < IMG - 10; y++)
+                for (int x = 10; x < IMG - 10; x++) {
+                    const float *p = img[c] + 3 * (y * IMG + x);
+                    bool texel = false;
+                    for (int i = 0; i < 16 && !texel; i++)
+                        texel = fabsf(p[0] - srgb_decode(texels[3 * i])) <= 1e-5f && fabsf(p[1] - srgb_decode(texels[3 * i + 1])) <= 1e-5f &&
+                                fabsf(p[2] - srgb_decode(texels[3 * i + 2])) <= 1e-5f;
+                    blends += !texel;
+                }
+            CHECKF(blends == 0, "%s: %d pixels are not a texel's colour", cases[c].file, blends);
+        }
+    }
+    /* MTL -clamp on is glTF's CLAMP_TO_EDGE */
+    if (img[1] && img[7]) {
+        int differ = 0;
+        for (int i = 0; i < IMG * IMG; i++) differ += !same_colour(img[1] + 3 * i, img[7] + 3 * i);
+        CHECKF(differ == 0, "-clamp on and CLAMP_TO_EDGE differ in %d pixels", differ);
+    }
+    for (int c = 0; c < NCASES; c++) free(img[c]);
+
+    /* alpha cut-outs read the mask under its sampler: -clamp on a mask cut on its left half cuts the
+     * quad's left half (u < 0.5), where repeating it would leave u in [-0.5, 0) standing */
+    write_text("cut.mtl", "newmtl m\nKd 1 1 1\nmap_d -clamp on stripes.png\n");
+    write_text("cut_repeat.mtl", "newmtl m\nKd 1 1 1\nmap_d stripes.png\n");
+    write_quad_obj_uv("cut.obj", "cut.mtl", -1, 2);
+    write_quad_obj_uv("cut_repeat.obj", "cut_repeat.mtl", -1, 2);
+    float *cut = render("cut.obj", RP_INTEGRATOR_AOV, 1, false, NULL), *rep = render("cut_repeat.obj", RP_INTEGRATOR_AOV, 1, false, NULL);
+    if (cut && rep) {
+        /* stripes.png: 16 texels, black (cut) for x in [0, 4) and [8, 12): u in [0, 0.25) and [0.5, 0.75) */
+        const float q_at = (-0.125f + 1.0f) / 3.0f; /* u = -0.125: clamped to texel 0 (cut); repeated, u 0.875 (white) */
+        const float *c = pixel_at(cut, q_at, 0.5f), *r = pixel_at(rep, q_at, 0.5f);
+        CHECKF(c[0] == 0.0f && r[0] > 0.9f, "map_d -clamp on at u -0.125: %g (want cut), repeated %g (want kept)", c[0], r[0]);
+        const float q_in = (0.875f + 1.0f) / 3.0f; /* u = 0.875 inside the image: kept either way */
+        CHECK(pixel_at(cut, q_in, 0.5f)[0] > 0.9f && pixel_at(rep, q_in, 0.5f)[0] > 0.9f);
+    }
+    free(cut), free(rep);
+}
+
+/* Malformed samplers and options: an unknown glTF wrap mode or filter warns naming the file and
+ * the line (read as REPEAT, LINEAR); -clamp with another word than on/off and -mm without a number
+ * are errors at their line. */
+static void test_sampler_errors(void) {
+    rp_scene_data d;
+    char warnings[4096], err[512];
+    write_gltf_quad("bad_wrap.gltf", "ramp.png", -1, 2, NULL, "\"wrapS\":12345,\"magFilter\":1");
+    if (rp_scene_data_load(at("bad_wrap.gltf"), &d, err, sizeof err)) {
+        rp_scene_data_free(&d);
+        if (load("bad_wrap.gltf", &d, warnings)) {
+            CHECKF(strstr(warnings, "bad_wrap.gltf:5: warning: sampler 0: wrapS is not a glTF wrap mode") != NULL &&
+                       strstr(warnings, "bad_wrap.gltf:5: warning: sampler 0: magFilter is not a glTF texture filter") != NULL,
+                   "%s", warnings);
+            CHECK(d.texture_count == 1 && d.textures[0].wrap_u == RP_TEXTURE_REPEAT && d.textures[0].filter == RP_TEXTURE_LINEAR);
+            rp_scene_data_free(&d);
+        }
+    }
+    static const char *const bad[][2] = {
+        {"map_Kd -clamp maybe ramp.png", "bad.mtl:3: error: map_Kd option -clamp: expected on or off, got 'maybe'"},
+        {"map_d -clamp ramp.png", "bad.mtl:3: error: map_d option -clamp: expected on or off, got 'ramp.png'"},
+        {"map_Kd -mm ramp.png", "bad.mtl:3: error: map_Kd option -mm: expected a finite number, got 'ramp.png'"},
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        char mtl[256];
+        snprintf(mtl, sizeof mtl, "newmtl m\nKd 1 1 1\n%s\n", bad[i][0]);
+        write_text("bad.mtl", mtl);
+        write_quad_obj("bad.obj", "bad.mtl");
+        bool loaded = rp_scene_data_load(at("bad.obj"), &d, err, sizeof err);
+        if (loaded) rp_scene_data_free(&d);
+        CHECKF(!loaded && strstr(err, bad[i][1]) != NULL, "'%s': %s", bad[i][0], loaded ? "loaded" : err);
+    }
+}
+
 int main(void) {
     const char *tmp = getenv("RP_TEST_TMP");
     snprintf(dir, sizeof dir, "%s", tmp ? tmp : "/tmp/rp_test_texmap");
@@ -383,6 +620,8 @@ int main(void) {
     test_mtl_transform();
     test_gltf_transform();
     test_map_ks();
+    test_samplers();
+    test_sampler_errors();
     rp_device_release(dev);
     return RP_TEST_END();
 }

@@ -139,9 +139,16 @@ int cli_info(int argc, char **argv) {
     }
     if (shown < d.material_count) printf("  ... %zu more (--materials lists all)\n", d.material_count - shown);
     printf("textures    %zu\n", d.texture_count);
-    for (size_t i = 0; i < d.texture_count && i < 16; i++)
-        printf("  %-3zu %s (%dx%d%s)\n", i, d.textures[i].path, d.textures[i].width, d.textures[i].height,
-               d.textures[i].alpha ? ", alpha" : "");
+    for (size_t i = 0; i < d.texture_count && i < 16; i++) {
+        const rp_texture_data *t = &d.textures[i];
+        static const char *const wraps[] = {"repeat", "clamp", "mirror"};
+        /* the sampler, where it is not the default (repeat, bilinear) */
+        char smp[64] = "";
+        if (t->wrap_u != RP_TEXTURE_REPEAT || t->wrap_v != RP_TEXTURE_REPEAT)
+            snprintf(smp, sizeof smp, ", %s %s", wraps[(unsigned)t->wrap_u % 3], wraps[(unsigned)t->wrap_v % 3]);
+        if (t->filter == RP_TEXTURE_NEAREST) snprintf(smp + strlen(smp), sizeof smp - strlen(smp), ", nearest");
+        printf("  %-3zu %s (%dx%d%s%s)\n", i, t->path, t->width, t->height, t->alpha ? ", alpha" : "", smp);
+    }
     printf("lights      %zu%s\n", d.light_count, d.light_count ? "" : " (renders light the scene from the eye)");
     for (size_t i = 0; i < d.light_count && i < 16; i++) {
         const rp_light_data *l = &d.lights[i];

@@ -13,8 +13,9 @@
 #define WIRE_MAGIC 0x43535052u /* "RPSC" */
 /* 1: the flat arrays only; 2: and the animation (an animated scene sent as format 1 stood still at
  * its start on every client); 3: and the volume (a .vdb or --medium-box sent as format 2 was
- * missing on every client) */
-#define WIRE_VERSION 4u
+ * missing on every client); 4: and vertex colours and textures' alpha planes; 5: and their samplers (wrap modes, filter:
+ * a format 4 rank reads rp_texture_data of another size) */
+#define WIRE_VERSION 5u
 
 typedef struct writer {
     uint8_t *buf;
@@ -477,8 +478,13 @@ bool wire_scene_unpack(const uint8_t *buf, size_t size, rp_scene_data *s, char *
             for (int k = 0; k < 6; k++)
                 if (more[k] < 0 || (size_t)more[k] > s->texture_count) r.what = "material textures";
         }
-        for (size_t i = 0; !r.what && i < s->texture_count; i++)
-            if (!s->textures[i].rgb && s->textures[i].width && s->textures[i].height) r.what = "texture pixels";
+        for (size_t i = 0; !r.what && i < s->texture_count; i++) {
+            const rp_texture_data *t = &s->textures[i];
+            if (!t->rgb && t->width && t->height) r.what = "texture pixels";
+            if ((unsigned)t->wrap_u > (unsigned)RP_TEXTURE_MIRROR || (unsigned)t->wrap_v > (unsigned)RP_TEXTURE_MIRROR ||
+                (unsigned)t->filter > (unsigned)RP_TEXTURE_NEAREST)
+                r.what = "texture samplers";
+        }
     }
     if (r.what) {
         snprintf(err, err_size, "bad scene message (%zu bytes): %s %s", size, r.what,

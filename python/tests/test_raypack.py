@@ -205,6 +205,26 @@ def test_gltf():
     assert img[16, 16].max() > 0
 
 
+def test_texture_sampler(tmp_path):
+    """MTL -clamp on reaches the Python renderer: a quad with uv from -1 to 2 over a red | blue
+    texture is red at its left edge and blue at its right, where repeating blends the two."""
+    (tmp_path / "rb.ppm").write_text("P3\n2 1\n255\n255 0 0 0 0 255\n")
+    edges = {}
+    for name, opt in (("clamp", "-clamp on "), ("repeat", "")):
+        (tmp_path / f"{name}.mtl").write_text(f"newmtl m\nKd 1 1 1\nmap_Kd {opt}rb.ppm\n")
+        (tmp_path / f"{name}.obj").write_text(
+            f"mtllib {name}.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt -1 -1\nvt 2 -1\nvt 2 2\nvt -1 2\n"
+            "usemtl m\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")
+        img = raypack.render(raypack.load(str(tmp_path / f"{name}.obj")), 32, 32, eye=(0, 0, 3), look=(0, 0, 0),
+                             aov="albedo")
+        row = img[16]
+        cols = np.nonzero(row.max(axis=1) > 0)[0]
+        edges[name] = (row[cols[0]], row[cols[-1]])
+    left, right = edges["clamp"]
+    assert left == pytest.approx([1, 0, 0], abs=1e-5) and right == pytest.approx([0, 0, 1], abs=1e-5)
+    assert edges["repeat"][0][2] > 0.05 and edges["repeat"][1][0] > 0.05
+
+
 def test_bad_input():
     s = quad()
     with pytest.raises(ValueError):

@@ -111,6 +111,7 @@ typedef struct gltf_material {
  * the file). */
 typedef struct json_scan {
     const char *p, *end;
+    const char *start; /* the JSON's first byte, for line numbers */
 } json_scan;
 
 static bool js_is_blank(char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r'; }
@@ -252,8 +253,53 @@ static bool js_material(json_scan *j, const char *key, size_t n, void *user) {
     return js_skip(j, 0);
 }
 
+/* The line of the JSON j is at. */
+static uint32_t js_line(const json_scan *j) {
+    uint32_t line = 1;
+    for (const char *q = j->start; q < j->p; q++) line += *q == '\n';
+    return line;
+}
+
+typedef struct js_sampler_at {
+    load_state *s;
+    int index;
+} js_sampler_at;
+
+/* A sampler's wrapS, wrapT, magFilter and minFilter: values that are not the specification's warn
+ * (assimp 5.2 reads an unknown wrap mode as REPEAT and an unknown filter as none, quietly). */
+static bool js_sampler(json_scan *j, const char *key, size_t n, void *user) {
+    const js_sampler_at *at = user;
+    bool wrap = js_key_is(key, n, "wrapS") || js_key_is(key, n, "wrapT");
+    bool mag = js_key_is(key, n, "magFilter"), min = js_key_is(key, n, "minFilter");
+    if (!wrap && !mag && !min) return js_skip(j, 0);
+    js_blank(j);
+    uint32_t line = js_line(j);
+    double v;
+    bool num = js_number(j, &v);
+    bool known = num && (wrap ? v == 10497 || v == 33071 || v == 33648
+                              : v == 9728 || v == 9729 || (min && v >= 9984 && v <= 9987 && v == floor(v)));
+    if (!known)
+        io_warning(at->s->ctx, at->s->path, line,
+                   wrap ? "sampler %d: %.*s is not a glTF wrap mode (10497 REPEAT, 33071 CLAMP_TO_EDGE, 33648 MIRRORED_REPEAT): read as REPEAT"
+                        : "sampler %d: %.*s is not a glTF texture filter (9728 NEAREST, 9729 LINEAR, 9984-9987 mipmapped): read as LINEAR",
+                   at->index, (int)n, key);
+    return true;
+}
+
+static bool js_samplers(json_scan *j, load_state *s) {
+    if (!js_char(j, '[')) return false;
+    if (js_char(j, ']')) return true;
+    js_sampler_at at = {s, 0};
+    do {
+        if (!js_object(j, js_sampler, &at)) return false;
+        at.index++;
+    } while (js_char(j, ','));
+    return js_char(j, ']');
+}
+
 static bool js_top(json_scan *j, const char *key, size_t n, void *user) {
     load_state *s = user;
+    if (js_key_is(key, n, "samplers")) return js_samplers(j, s);
     if (!js_key_is(key, n, "materials") || s->json) return js_skip(j, 0);
     if (!js_char(j, '[')) return false;
     if (js_char(j, ']')) return true;
@@ -275,8 +321,9 @@ static bool mem_has(const char *p, const char *end, const char *word) {
     return false;
 }
 
-/* Fills s->json from the glTF's JSON (a .gltf file, or a .glb's JSON chunk); leaves it NULL when
- * the file names neither extension or cannot be scanned. */
+/* Fills s->json from the glTF's JSON (a .gltf file, or a .glb's JSON chunk), and warns of its
+ * samplers' unknown values; leaves s->json NULL when the file names neither extension nor samplers
+ * or cannot be scanned. */
 static void gltf_json_materials(load_state *s) {
     io_buf buf;
     if (!vfs_read(s->ctx, s->path, &buf)) return;
@@ -288,8 +335,8 @@ static void gltf_json_materials(load_state *s) {
         if (len < (size_t)(end - p)) end = p + len;
     }
     /* most files name neither: no scan at all */
-    if (mem_has(p, end, "emissiveStrength") || mem_has(p, end, "KHR_texture_transform")) {
-        json_scan j = {p, end};
+    if (mem_has(p, end, "emissiveStrength") || mem_has(p, end, "KHR_texture_transform") || mem_has(p, end, "\"samplers\"")) {
+        json_scan j = {p, end, p};
         if (!js_object(&j, js_top, s)) {
             free(s->json);
             s->json = NULL;
@@ -337,6 +384,39 @@ static void gltf_uv_transform(load_state *s, unsigned index, rp_material_data *m
 
 /* ---- materials -------------------------------------------------------------------------------- */
 
+/* Texture `image` (IO_NONE: failed, -2) under the sampler assimp gives its slot: the wrap modes
+ * (glTF's wrapS and wrapT; other formats' too) and glTF's magFilter (raypack has no mipmaps: the
+ * magnification filter serves every lookup; minFilter is not read). */
+static int32_t texture_sampled(load_state *s, const struct aiMaterial *am, enum aiTextureType type,
+                               const enum aiTextureMapMode mode[2], uint32_t image, const char *mat_name) {
+    if (image == IO_NONE) return -2;
+    tex_sampler smp = TEX_SAMPLER_DEFAULT;
+    rp_texture_wrap *wrap[2] = {&smp.wrap_u, &smp.wrap_v};
+    for (int k = 0; k < 2; k++) switch (mode[k]) {
+        case aiTextureMapMode_Clamp:
+            *wrap[k] = RP_TEXTURE_CLAMP;
+            break;
+        case aiTextureMapMode_Mirror:
+            *wrap[k] = RP_TEXTURE_MIRROR;
+            break;
+        case aiTextureMapMode_Decal: /* nothing beyond the edge: the nearest that raypack has */
+            *wrap[k] = RP_TEXTURE_CLAMP;
+            io_warning(s->ctx, s->path, 0, "material '%s': decal texture wrapping is not supported: clamped to the edge",
+                       mat_name);
+            break;
+        case aiTextureMapMode_Wrap:
+        case _aiTextureMapMode_Force32Bit:
+        default:
+            break;
+        }
+    int mag = 0;
+    if (aiGetMaterialIntegerArray(am, AI_MATKEY_GLTF_MAPPINGFILTER_MAG(type, 0), &mag, NULL) == aiReturn_SUCCESS &&
+        mag == 9728 /* NEAREST */)
+        smp.filter = RP_TEXTURE_NEAREST;
+    uint32_t idx = tex_sampled(s->ctx, image, &smp, s->path, 0);
+    return idx == IO_NONE ? -2 : (int32_t)idx;
+}
+
 /* The texture of `type` (first slot) as a builder texture index, -1 when there is none. External
  * images resolve against the scene file's folder; "*N" names scene->mTextures[N] (glTF data URIs
  * and .glb buffer views), compressed (PNG, JPEG: mHeight 0) or raw BGRA texels. */
@@ -344,7 +424,8 @@ static int32_t material_texture(load_state *s, const struct aiMaterial *am, enum
                                 const char *mat_name) {
     if (aiGetMaterialTextureCount(am, type) == 0) return -1;
     struct aiString name;
-    if (aiGetMaterialTexture(am, type, 0, &name, NULL, NULL, NULL, NULL, NULL, NULL) != aiReturn_SUCCESS)
+    enum aiTextureMapMode mode[2] = {aiTextureMapMode_Wrap, aiTextureMapMode_Wrap};
+    if (aiGetMaterialTexture(am, type, 0, &name, NULL, NULL, NULL, NULL, mode, NULL) != aiReturn_SUCCESS)
         return -1;
     io_ctx *ctx = s->ctx;
     const char *tex = name.data;
@@ -388,12 +469,11 @@ static int32_t material_texture(load_state *s, const struct aiMaterial *am, enum
             }
             idx = tex_add(ctx, key, tex, (int32_t)t->mWidth, (int32_t)t->mHeight, rgb, alpha, s->path, 0);
         }
-        return idx == IO_NONE ? -2 : (int32_t)idx;
+        return texture_sampled(s, am, type, mode, idx, mat_name);
     }
     char full[IO_PATH_MAX];
     vfs_join(&ctx->vfs, s->path, tex, full, sizeof full);
-    uint32_t idx = tex_load(ctx, full, tex, s->path, 0);
-    return idx == IO_NONE ? -2 : (int32_t)idx;
+    return texture_sampled(s, am, type, mode, tex_load(ctx, full, tex, s->path, 0), mat_name);
 }
 
 /* glTF's alphaMode and alphaCutoff (assimp's $mat.gltf.alphaMode, ...): "MASK" and "BLEND" cut the

@@ -82,6 +82,7 @@ typedef struct io_builder {
     rp_texture_data *textures;
     size_t texture_n, texture_cap;
     char **texture_keys; /* resolved path of each texture, for sharing */
+    bool *texture_claimed; /* tex_sampled has given the entry's sampler to a use (see there) */
     rp_light_data *lights;
     size_t light_n, light_cap;
     rp_camera_data camera;
@@ -257,6 +258,20 @@ uint32_t tex_add_encoded(io_ctx *ctx, const char *key, const char *as_written, c
  * on failure) under `key`. */
 uint32_t tex_add(io_ctx *ctx, const char *key, const char *as_written, int32_t width, int32_t height,
                  uint8_t *rgb, uint8_t *alpha, const char *file, uint32_t line);
+/* How a scene reads a texture: rp_texture_data's wrap modes and filter, and MTL -mm's remap of
+ * every stored value v (colour channels as stored, sRGB-encoded, and the alpha plane) to
+ * mm_base + mm_gain v, clamped to [0, 1]. {0, 0, 0, 0, 1} (repeat, bilinear, identity) is the
+ * default. */
+typedef struct tex_sampler {
+    rp_texture_wrap wrap_u, wrap_v;
+    rp_texture_filter filter;
+    float mm_base, mm_gain;
+} tex_sampler;
+#define TEX_SAMPLER_DEFAULT ((tex_sampler){RP_TEXTURE_REPEAT, RP_TEXTURE_REPEAT, RP_TEXTURE_LINEAR, 0.0f, 1.0f})
+/* Texture `image` read under sampler *s: `image` itself when *s is what it already has (and no
+ * remap), else an entry of its own (a copy of the texels, remapped), shared per (image, sampler);
+ * IO_NONE after an error (out of memory) at file:line. */
+uint32_t tex_sampled(io_ctx *ctx, uint32_t image, const tex_sampler *s, const char *file, uint32_t line);
 /* Bump maps (MTL bump, map_bump): a grey height map h in [0, 1] (the mean of the channels)
  * becomes a tangent-space normal map at load time, normal (-s dh/du, -s dh/dv, 1) normalised, the
  * derivatives central differences in texels and s = scale (MTL -bm) x IO_BUMP_STRENGTH: with -bm 1

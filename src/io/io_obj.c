@@ -288,11 +288,12 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
                    (kw == 8 && (strncmp(p, "map_bump", 8) == 0 || strncmp(p, "map_Bump", 8) == 0))) {
             /* Options (-s 1 1 1, -clamp on, ...) come before the file name; the name is the rest.
              * -s and -o (u and v; w has no use on a surface) give the material's texture
-             * transform, -bm a bump map's scale; the others that would change the image (-t,
-             * -clamp on, -mm's range) are not applied: a warning says so, where they are not their
-             * defaults. */
+             * transform, -bm a bump map's scale, -clamp on this texture's clamp-to-edge wrapping
+             * and -mm base gain its values' remap (tex_sampler); -t (turbulence) is not applied:
+             * a warning says so, where it is not its default. */
             const char *r = skip_blank(q);
             float so[4] = {1.0f, 1.0f, 0.0f, 0.0f}, bm = 1.0f;
+            tex_sampler smp = TEX_SAMPLER_DEFAULT;
             while (*r == '-') {
                 const char *o = r;
                 while (!is_delim(*r)) r++;
@@ -302,29 +303,35 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
                  * and the like take words) */
                 bool numeric = xyz || mm || word_is(o, "-bm") || word_is(o, "-boost") || word_is(o, "-texres");
                 int args = xyz ? 3 : mm ? 2 : 1;
-                float def = word_is(o, "-s") ? 1.0f : 0.0f;
                 bool changes = false;
+                int olen = 0;
+                while (!is_delim(o[olen])) olen++;
                 for (int k = 0; k < args; k++) {
                     r = skip_blank(r);
+                    int len = 0;
+                    while (len < 24 && !is_delim(r[len])) len++;
                     float v;
                     const char *e = io_parse_float(r, &v);
                     bool num = e && is_delim(*e);
-                    if (k == 0 && !num && numeric) {
-                        int len = 0, olen = 0;
-                        while (len < 24 && !is_delim(r[len])) len++;
-                        while (!is_delim(o[olen])) olen++;
+                    if (k == 0 && !num && numeric)
                         return io_error(ctx, f.shown, f.line, "%.*s option %.*s: expected a finite number, got '%.*s'",
                                         (int)kw, p, olen, o, len, r);
-                    }
-                    if (k > 0 && !num) break; /* -s may give fewer than 3 */
+                    if (k > 0 && !num) break; /* -s may give fewer than 3, -mm its base alone */
                     if (num && uv) {
                         if (k < 2) so[(o[1] == 'o' ? 2 : 0) + k] = v;
                     } else if (num && word_is(o, "-bm")) {
                         bm = v;
-                    } else if (num && (xyz || mm)) {
-                        changes |= v != (mm ? (float)k : def);
+                    } else if (num && mm) {
+                        *(k == 0 ? &smp.mm_base : &smp.mm_gain) = v;
+                    } else if (num && xyz) {
+                        changes |= v != 0.0f; /* -t */
+                    } else if (word_is(o, "-clamp")) {
+                        bool on = word_is(r, "on"), off = word_is(r, "off");
+                        if (!on && !off)
+                            return io_error(ctx, f.shown, f.line, "%.*s option -clamp: expected on or off, got '%.*s'",
+                                            (int)kw, p, len, r);
+                        smp.wrap_u = smp.wrap_v = on ? RP_TEXTURE_CLAMP : RP_TEXTURE_REPEAT;
                     }
-                    if (word_is(o, "-clamp")) changes = word_is(r, "on");
                     while (!is_delim(*r)) r++;
                 }
                 if (changes) {
@@ -344,7 +351,7 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
             if (!name[0]) return io_error(ctx, f.shown, f.line, "%.*s without a file name", (int)kw, p);
             mtl_texture_fallback(&f, path, name, full, sizeof full);
             uint32_t t = tex_load(ctx, full, name, f.shown, f.line);
-            if (t == IO_NONE) return false;
+            if (t == IO_NONE || (t = tex_sampled(ctx, t, &smp, f.shown, f.line)) == IO_NONE) return false;
             if (pm.map_n < sizeof pm.maps / sizeof pm.maps[0]) {
                 memcpy(pm.maps[pm.map_n].so, so, sizeof so);
                 pm.maps[pm.map_n].line = f.line;

@@ -219,6 +219,7 @@ void builder_free(io_builder *b) {
     }
     free(b->textures);
     free(b->texture_keys);
+    free(b->texture_claimed);
     free(b->lights);
     memset(b, 0, sizeof *b);
 }
@@ -409,6 +410,7 @@ static void move_out(io_builder *b, rp_scene_data *out) {
     out->textures = b->textures;
     for (size_t i = 0; i < b->texture_n; i++) free(b->texture_keys[i]);
     free(b->texture_keys);
+    free(b->texture_claimed);
     out->light_count = b->light_n;
     out->lights = b->lights;
     out->camera = b->camera;

@@ -580,19 +580,21 @@ uint32_t tex_add(io_ctx *ctx, const char *path, const char *as_written, int32_t 
             return (uint32_t)i;
         }
     char *key = io_strdup(path);
-    /* texture_keys grows with textures: same capacity. */
+    /* texture_keys and texture_claimed grow with textures: same capacity. */
     char **keys = key && b->texture_n < INT32_MAX &&
                           io_reserve((void **)&b->textures, &b->texture_cap, b->texture_n + 1, sizeof(rp_texture_data))
                       ? io_realloc(b->texture_keys, b->texture_cap * sizeof(char *))
                       : NULL;
-    if (!keys) {
+    if (keys) b->texture_keys = keys;
+    bool *claimed = keys ? io_realloc(b->texture_claimed, b->texture_cap * sizeof(bool)) : NULL;
+    if (claimed) b->texture_claimed = claimed;
+    if (!claimed) {
         free(key);
         free(rgb);
         free(alpha);
         io_error(ctx, file, line, "out of memory");
         return IO_NONE;
     }
-    b->texture_keys = keys;
     rp_texture_data *t = &b->textures[b->texture_n];
     memset(t, 0, sizeof *t);
     snprintf(t->path, sizeof t->path, "%s", as_written);
@@ -601,16 +603,77 @@ uint32_t tex_add(io_ctx *ctx, const char *path, const char *as_written, int32_t 
     t->rgb = rgb;
     t->alpha = alpha;
     b->texture_keys[b->texture_n] = key;
+    b->texture_claimed[b->texture_n] = false;
     return (uint32_t)b->texture_n++;
+}
+
+static bool sampler_is(const rp_texture_data *t, const tex_sampler *s) {
+    return t->wrap_u == s->wrap_u && t->wrap_v == s->wrap_v && t->filter == s->filter;
+}
+
+/* The first use of an image claims its entry for its sampler (set in place: the texels are not
+ * touched); a use under another sampler, or with a remap, gets an entry of its own, keyed
+ * "key#sampler ...", with a copy of the texels, so no two entries share memory and an image read
+ * one way only is held once. */
+uint32_t tex_sampled(io_ctx *ctx, uint32_t image, const tex_sampler *s, const char *file, uint32_t line) {
+    io_builder *b = &ctx->b;
+    rp_texture_data *t = &b->textures[image];
+    bool remap = s->mm_base != 0.0f || s->mm_gain != 1.0f;
+    if (!remap && !b->texture_claimed[image]) {
+        t->wrap_u = s->wrap_u, t->wrap_v = s->wrap_v, t->filter = s->filter;
+        b->texture_claimed[image] = true;
+    }
+    if (!remap && sampler_is(t, s)) return image;
+    char key[IO_PATH_MAX + 96];
+    snprintf(key, sizeof key, "%s#sampler %d %d %d mm %.9g %.9g", b->texture_keys[image], (int)s->wrap_u,
+             (int)s->wrap_v, (int)s->filter, (double)s->mm_base, (double)s->mm_gain);
+    for (size_t i = 0; i < b->texture_n; i++)
+        if (strcmp(b->texture_keys[i], key) == 0) return (uint32_t)i;
+    size_t n = (size_t)t->width * (size_t)t->height;
+    uint8_t *rgb = io_malloc(3 * n), *alpha = t->alpha ? io_malloc(n) : NULL;
+    if (!rgb || (t->alpha && !alpha)) {
+        free(rgb);
+        io_error(ctx, file, line, "out of memory");
+        return IO_NONE;
+    }
+    memcpy(rgb, t->rgb, 3 * n);
+    if (alpha) memcpy(alpha, t->alpha, n);
+    if (remap) {
+        /* value = base + gain * texel, per stored value (the table serves every byte) */
+        uint8_t map[256];
+        for (int v = 0; v < 256; v++) {
+            float x = s->mm_base + s->mm_gain * ((float)v * (1.0f / 255.0f));
+            map[v] = (uint8_t)lrintf(255.0f * fminf(fmaxf(x, 0.0f), 1.0f));
+        }
+        for (size_t i = 0; i < 3 * n; i++) rgb[i] = map[rgb[i]];
+        for (size_t i = 0; alpha && i < n; i++) alpha[i] = map[alpha[i]];
+    }
+    char shown[sizeof t->path + 48]; /* info shows the remap as it shows a bump map's normals */
+    if (remap) snprintf(shown, sizeof shown, "%s (-mm %g %g)", t->path, (double)s->mm_base, (double)s->mm_gain);
+    else snprintf(shown, sizeof shown, "%s", t->path);
+    uint32_t k = tex_add(ctx, key, shown, t->width, t->height, rgb, alpha, file, line);
+    if (k != IO_NONE) { /* t may have moved */
+        rp_texture_data *v = &b->textures[k];
+        v->wrap_u = s->wrap_u, v->wrap_v = s->wrap_v, v->filter = s->filter;
+        b->texture_claimed[k] = true;
+    }
+    return k;
 }
 
 /* ---- bump maps -------------------------------------------------------------------------------- */
 
+/* Texel index i (one step outside [0, n) at most) as the renderer's lookups wrap it: repeat
+ * around, clamp and mirror to the edge texel (mirroring repeats the edge texel across it). */
+static int32_t bump_wrap(int32_t i, int32_t n, rp_texture_wrap wrap) {
+    if (wrap == RP_TEXTURE_CLAMP || wrap == RP_TEXTURE_MIRROR) return i < 0 ? 0 : i >= n ? n - 1 : i;
+    return (i % n + n) % n;
+}
+
 /* The height of texel (x, y) of a bump map, in [0, 1]: the mean of its channels (grey images have
- * three equal ones), wrapping around the edges as the renderer's lookups do. */
+ * three equal ones), across the edges as the renderer's lookups wrap. */
 static float bump_height(const rp_texture_data *t, int32_t x, int32_t y) {
-    x = (x % t->width + t->width) % t->width;
-    y = (y % t->height + t->height) % t->height;
+    x = bump_wrap(x, t->width, t->wrap_u);
+    y = bump_wrap(y, t->height, t->wrap_v);
     const uint8_t *p = t->rgb + ((size_t)y * (size_t)t->width + (size_t)x) * 3;
     return (float)(p[0] + p[1] + p[2]) * (1.0f / 765.0f);
 }
@@ -637,7 +700,7 @@ int tex_bump_kind(io_ctx *ctx, uint32_t height) {
 uint32_t tex_bump_to_normal(io_ctx *ctx, uint32_t height, float scale, const char *file, uint32_t line) {
     io_builder *b = &ctx->b;
     char key[IO_PATH_MAX + 64];
-    snprintf(key, sizeof key, "%s#bump %.9g", b->texture_keys[height], (double)scale);
+    snprintf(key, sizeof key, "%s#bump %.9g", b->texture_keys[height], (double)scale); /* the key names its sampler */
     for (size_t i = 0; i < b->texture_n; i++)
         if (strcmp(b->texture_keys[i], key) == 0) return (uint32_t)i;
     const rp_texture_data *t = &b->textures[height];
@@ -666,5 +729,8 @@ uint32_t tex_bump_to_normal(io_ctx *ctx, uint32_t height, float scale, const cha
         }
     char shown[sizeof t->path + 16];
     snprintf(shown, sizeof shown, "%s (bump normals)", t->path);
-    return tex_add(ctx, key, shown, t->width, t->height, rgb, NULL, file, line);
+    tex_sampler sampler = {t->wrap_u, t->wrap_v, t->filter, 0.0f, 1.0f};
+    uint32_t normals = tex_add(ctx, key, shown, t->width, t->height, rgb, NULL, file, line);
+    if (normals != IO_NONE) tex_sampled(ctx, normals, &sampler, file, line); /* read as its heights are */
+    return normals;
 }

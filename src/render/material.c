@@ -59,32 +59,63 @@ rp_material rp_material_from_data(const rp_material_data *d) {
     return m;
 }
 
-/* The four texels a bilinear lookup at uv reads (offsets of texel (x, y): y * width + x) and their
- * weights, with repeat wrapping; false for a texture without texels. */
+/* One axis of a lookup: the texel coordinate c in [0, 1] (u, or 1 - v: rows run down) after the
+ * wrap mode, then the two texels a bilinear lookup blends (i[0] weighted 1 - *a, i[1] weighted *a)
+ * or, NEAREST, the one texel c falls in (both i, *a = 0). flip: c is 1 - the wrapped coordinate.
+ * Repeat wraps f to [0, 1) first, as ever; clamp and mirror fold it into [0, 1] (mirror: a
+ * triangle wave of period 2, so MIRRORED_REPEAT's texel mirroring at each edge, as OpenGL's). */
+static void texture_axis(float f, int32_t n, rp_texture_wrap wrap, rp_texture_filter filter, bool flip, int32_t i[2],
+                         float *a) {
+    switch (wrap) {
+    case RP_TEXTURE_CLAMP:
+        f = fminf(fmaxf(f, 0.0f), 1.0f); /* NaN to 0 */
+        break;
+    case RP_TEXTURE_MIRROR:
+        f -= 2.0f * floorf(0.5f * f);
+        if (!(f >= 0.0f && f < 2.0f)) f = 0.0f; /* NaN, infinities */
+        if (f > 1.0f) f = 2.0f - f;
+        break;
+    case RP_TEXTURE_REPEAT:
+    default:
+        f -= floorf(f);
+        if (!(f >= 0.0f && f < 1.0f)) f = 0.0f; /* NaN or a rounding of floor */
+        break;
+    }
+    float c = flip ? 1.0f - f : f;
+    bool repeat = wrap != RP_TEXTURE_CLAMP && wrap != RP_TEXTURE_MIRROR;
+    if (filter == RP_TEXTURE_NEAREST) {
+        int32_t k = (int32_t)floorf(c * (float)n); /* in [0, n]: n at the far edge */
+        i[0] = i[1] = k < n ? k : repeat ? 0 : n - 1;
+        *a = 0.0f;
+        return;
+    }
+    float x = c * (float)n - 0.5f, x0f = floorf(x);
+    int32_t x0 = (int32_t)x0f;
+    *a = x - x0f;
+    /* x0 is in [-1, n - 1] (n where c n rounds up): repeat wraps one step either way (no
+     * division), the others read the edge texel (a folded coordinate's neighbour across the edge
+     * is the edge texel itself) */
+    for (int k = 0; k < 2; k++) {
+        int32_t xk = x0 + k;
+        i[k] = xk < 0 ? (repeat ? xk + n : 0) : xk >= n ? (repeat ? xk - n : n - 1) : xk;
+    }
+}
+
+/* The four texels a lookup at uv reads (offsets of texel (x, y): y * width + x) and their weights,
+ * under the texture's wrap modes and filter (NEAREST: one texel of weight 1, three of 0); false
+ * for a texture without texels. v = 0 is the bottom row (OBJ), the data's first row is the top one. */
 static bool texture_taps(const rp_texture_data *t, const float uv[2], size_t at[4], float w[4]) {
     if (!t->rgb || t->width <= 0 || t->height <= 0) return false;
-    /* Repeat wrapping; v = 0 is the bottom row (OBJ), the data's first row is the top one. */
-    float fu = uv[0] - floorf(uv[0]), fv = uv[1] - floorf(uv[1]);
-    if (!(fu >= 0.0f && fu < 1.0f)) fu = 0.0f; /* NaN or a rounding of floor */
-    if (!(fv >= 0.0f && fv < 1.0f)) fv = 0.0f;
-    float x = fu * (float)t->width - 0.5f, y = (1.0f - fv) * (float)t->height - 0.5f;
-    float x0f = floorf(x), y0f = floorf(y);
-    float ax = x - x0f, ay = y - y0f;
-    int x0 = (int)x0f, y0 = (int)y0f;
-    /* x0 is in [-1, width - 1] and y0 in [-1, height - 1] (fu, fv in [0, 1)): repeat wrapping is
-     * one step either way, no division (the same texels as the modulo wrap). */
-    int xs[2] = {x0 < 0 ? x0 + t->width : x0, x0 + 1 >= t->width ? x0 + 1 - t->width : x0 + 1};
-    int ys[2] = {y0 < 0 ? y0 + t->height : y0, y0 + 1 >= t->height ? y0 + 1 - t->height : y0 + 1};
-    for (int i = 0; i < 2; i++) {
-        if (xs[i] < 0 || xs[i] >= t->width) xs[i] = ((xs[i] % t->width) + t->width) % t->width;
-        if (ys[i] < 0 || ys[i] >= t->height) ys[i] = ((ys[i] % t->height) + t->height) % t->height;
-    }
+    int32_t xs[2], ys[2];
+    float ax, ay;
+    texture_axis(uv[0], t->width, t->wrap_u, t->filter, false, xs, &ax);
+    texture_axis(uv[1], t->height, t->wrap_v, t->filter, true, ys, &ay);
     w[0] = (1 - ax) * (1 - ay), w[1] = ax * (1 - ay), w[2] = (1 - ax) * ay, w[3] = ax * ay;
     for (int j = 0; j < 4; j++) at[j] = (size_t)ys[j >> 1] * (size_t)t->width + (size_t)xs[j & 1];
     return true;
 }
 
-/* Bilinear lookup with repeat wrapping; srgb: the bytes are sRGB-encoded colours, else linear data. */
+/* A lookup under the texture's sampler (texture_taps); srgb: the bytes are sRGB-encoded colours, else linear data. */
 static v3 texture_lookup(const rp_render_scene *s, int32_t texture, const float uv[2], bool srgb) {
     if (texture < 0 || (size_t)texture >= s->data->texture_count) return v3_make(1, 1, 1);
     const rp_texture_data *t = &s->data->textures[texture];

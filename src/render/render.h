@@ -182,10 +182,10 @@ static inline void scene_ids_flat(const rp_render_scene *s, uint32_t *geom, uint
 bool anim_build_geometry(rp_render_scene *s, const rp_scene_data *d, const rp_render_scene_desc *desc);
 void anim_scene_bounds(rp_render_scene *s);
 void anim_groups_free(rp_render_scene *s);
-/* Linear RGB of a texture at uv, bilinear (material.c). */
+/* Linear RGB of a texture at uv, under its wrap modes and filter (material.c). */
 v3 material_texture(const rp_render_scene *s, int32_t texture, const float uv[2]);
-/* Coverage of an alpha texture at uv, bilinear: its alpha plane, or its red channel where it has
- * none (material.c). */
+/* Coverage of an alpha texture at uv, sampled as material_texture: its alpha plane, or its red
+ * channel where it has none (material.c). */
 float material_texture_alpha(const rp_render_scene *s, int32_t texture, const float uv[2]);
 /* Base colour of a material at a surface: kd times its texture (material.c). */
 v3 material_albedo(const rp_render_scene *s, const rp_material *m, const render_surface *surf);

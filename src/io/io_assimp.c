@@ -321,19 +321,25 @@ static bool mem_has(const char *p, const char *end, const char *word) {
     return false;
 }
 
+/* The JSON of a glTF file's bytes: all of a .gltf, a .glb's first chunk. */
+static void gltf_json_bytes(const io_buf *buf, const char **p, const char **end) {
+    *p = buf->data, *end = buf->data + buf->size;
+    if (buf->size >= 20 && memcmp(*p, "glTF", 4) == 0) {
+        const unsigned char *h = (const unsigned char *)*p;
+        uint32_t len = (uint32_t)h[12] | (uint32_t)h[13] << 8 | (uint32_t)h[14] << 16 | (uint32_t)h[15] << 24;
+        *p += 20;
+        if (len < (size_t)(*end - *p)) *end = *p + len;
+    }
+}
+
 /* Fills s->json from the glTF's JSON (a .gltf file, or a .glb's JSON chunk), and warns of its
  * samplers' unknown values; leaves s->json NULL when the file names neither extension nor samplers
  * or cannot be scanned. */
 static void gltf_json_materials(load_state *s) {
     io_buf buf;
     if (!vfs_read(s->ctx, s->path, &buf)) return;
-    const char *p = buf.data, *end = buf.data + buf.size;
-    if (buf.size >= 20 && memcmp(p, "glTF", 4) == 0) {
-        const unsigned char *h = (const unsigned char *)p;
-        uint32_t len = (uint32_t)h[12] | (uint32_t)h[13] << 8 | (uint32_t)h[14] << 16 | (uint32_t)h[15] << 24;
-        p += 20;
-        if (len < (size_t)(end - p)) end = p + len;
-    }
+    const char *p, *end;
+    gltf_json_bytes(&buf, &p, &end);
     /* most files name neither: no scan at all */
     if (mem_has(p, end, "emissiveStrength") || mem_has(p, end, "KHR_texture_transform") || mem_has(p, end, "\"samplers\"")) {
         json_scan j = {p, end, p};
@@ -852,26 +858,20 @@ static bool gltf_data_uri_ok(io_ctx *ctx, const char *path, int line, const char
 static bool gltf_data_uris_ok(io_ctx *ctx, const char *path) {
     io_buf buf;
     if (!vfs_read(ctx, path, &buf)) return true; /* assimp says why */
-    const char *p = buf.data, *end = buf.data + buf.size;
-    if (buf.size >= 20 && memcmp(p, "glTF", 4) == 0) {
-        const unsigned char *h = (const unsigned char *)p;
-        uint32_t len = (uint32_t)h[12] | (uint32_t)h[13] << 8 | (uint32_t)h[14] << 16 | (uint32_t)h[15] << 24;
-        p += 20;
-        if (len < (size_t)(end - p)) end = p + len;
-    }
+    const char *p, *end;
+    gltf_json_bytes(&buf, &p, &end);
     bool ok = true;
     char *scratch = NULL;
     for (const char *at = p; ok && (at = memchr(at, '"', (size_t)(end - at))); at++) {
         if ((size_t)(end - at) < 5 || memcmp(at, "\"uri\"", 5) != 0) continue;
-        json_scan j = {at + 5, end};
+        json_scan j = {at + 5, end, p};
         js_blank(&j);
         if (j.p >= end || *j.p != ':') continue;
         j.p++;
         const char *q;
         size_t n;
         if (!js_string(&j, &q, &n)) continue;
-        int line = 1;
-        for (const char *c = p; c < q; c++) line += *c == '\n';
+        int line = (int)js_line(&j);
         if (memchr(q, '\\', n)) { /* unescaped into scratch, as assimp's parser reads it */
             free(scratch);
             if (!(scratch = io_malloc(n + 1))) {

@@ -240,6 +240,35 @@ static void test_obj_continued(void) {
 
 /* ---- MTL: values -------------------------------------------------------------------------------- */
 
+/* MTL keywords in any case (some exporters write "KD", "Map_Kd", "NEWMTL"; Blender's importer
+ * lowers them): the same materials as the usual spelling, quietly. */
+static void test_mtl_case(void) {
+    write_text("mc.ppm", "P3\n1 1\n255\n10 20 30\n");
+    const char *lower = "newmtl a\nKd 0.5 0.25 0.125\nKs 0.1 0.2 0.3\nNs 20\nNi 1.4\nd 0.5\nillum 4\nmap_Kd mc.ppm\n"
+                        "newmtl b\nKe 1 2 3\nTr 0.25\nTf 1 0.5 1\nmap_d -clamp on mc.ppm\nmap_Ks mc.ppm\n";
+    const char *upper = "NEWMTL a\nKD 0.5 0.25 0.125\nks 0.1 0.2 0.3\nNS 20\nni 1.4\nD 0.5\nILLUM 4\nMap_Kd mc.ppm\n"
+                        "NewMtl b\nKE 1 2 3\nTR 0.25\ntf 1 0.5 1\nMAP_D -clamp on mc.ppm\nmap_ks mc.ppm\n";
+    const char *obj = "v 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nusemtl a\nf 1/1 2/1 3/1\nusemtl b\nf 1/1 2/1 3/1\n";
+    char text[1024];
+    write_text("mc_lower.mtl", lower);
+    write_text("mc_upper.mtl", upper);
+    snprintf(text, sizeof text, "mtllib mc_lower.mtl\n%s", obj);
+    write_text("mc_lower.obj", text);
+    snprintf(text, sizeof text, "mtllib mc_upper.mtl\n%s", obj);
+    write_text("mc_upper.obj", text);
+    rp_scene_data a, b;
+    warnings wa, wb;
+    if (!load("mc_lower.obj", &a, &wa)) return;
+    if (load("mc_upper.obj", &b, &wb)) {
+        char why[256] = "";
+        CHECKF(same_scene(&a, &b, why, sizeof why), "MTL keywords in upper case: %s", why);
+        CHECKF(wb.count == 0, "%s", wb.text);
+        CHECK(a.triangle_count == 2 && tri_material(&a, 0)->kd[1] == 0.25f && tri_material(&a, 1)->map_alpha != 0);
+        rp_scene_data_free(&b);
+    }
+    rp_scene_data_free(&a);
+}
+
 static void test_mtl_values(void) {
     write_text("mv.mtl",
                "newmtl d_tr\nKd 1 1 1\nd 1\nTr 1\n"      /* 3ds Max: both, d counts: opaque */
@@ -612,6 +641,7 @@ int main(void) {
     test_obj_names();
     test_obj_continued();
     test_mtl_values();
+    test_mtl_case();
     test_mtl_map_options();
     test_mtl_texture_paths();
     test_ply_strips();

@@ -4,6 +4,7 @@
  * groups do not change the geometry and are skipped. */
 #include <math.h>
 #include <stdio.h>
+#include <strings.h>
 
 #include "io/io_internal.h"
 
@@ -228,6 +229,18 @@ static void mtl_texture_fallback(obj_file *f, const char *mtl, const char *name,
     snprintf(full, size, "%s", near);
 }
 
+/* A statement's keyword as the parser spells it: keywords are matched without regard to case, as
+ * Blender's importer does (some exporters write "KD", "Map_Kd", "NEWMTL"; tinyobjloader ignored
+ * them, and so did raypack: the material rendered default grey). p, kw: the keyword as written;
+ * returns it unchanged when it is no keyword the parser reads. */
+static const char *mtl_keyword(const char *p, size_t kw) {
+    static const char *const words[] = {"Kd", "Ks", "Ke", "Ka", "Tf", "Ns", "Ni", "d", "Tr", "illum", "map_Kd",
+                                        "map_Pr", "map_Ke", "map_d", "map_Ks", "norm", "bump", "map_bump"};
+    for (size_t i = 0; i < sizeof words / sizeof words[0]; i++)
+        if (strlen(words[i]) == kw && strncasecmp(p, words[i], kw) == 0) return words[i];
+    return p;
+}
+
 static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io_buf *buf) {
     obj_file f = {.ctx = ctx, .path = path, .line = 1};
     snprintf(f.shown, sizeof f.shown, "%s", shown);
@@ -237,7 +250,7 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
     for (; p < end; p = next_line(p, end), f.line++) {
         p = skip_blank(p);
         if (at_eol(p)) continue;
-        if (word_is(p, "newmtl")) {
+        if (is_delim(p[6]) && strncasecmp(p, "newmtl", 6) == 0) {
             if (!mtl_finish(&f, &pm)) return false;
             char name[256];
             rest_of_line(p + 6, name, sizeof name);
@@ -255,37 +268,38 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
         const char *q = p;
         while (!is_delim(*q)) q++;
         size_t kw = (size_t)(q - p);
+        const char *kp = mtl_keyword(p, kw);
         rp_material_data *m = &pm.m;
-        if (kw == 2 && p[0] == 'K' && (p[1] == 'd' || p[1] == 's' || p[1] == 'e' || p[1] == 'a')) {
-            float *dst = p[1] == 'd' ? m->kd : p[1] == 's' ? m->ks : p[1] == 'e' ? m->ke : m->ka;
-            if (!mtl_color(&f, &q, dst, p[1] == 'd' ? "Kd" : p[1] == 's' ? "Ks" : p[1] == 'e' ? "Ke" : "Ka"))
+        if (kw == 2 && kp[0] == 'K' && (kp[1] == 'd' || kp[1] == 's' || kp[1] == 'e' || kp[1] == 'a')) {
+            float *dst = kp[1] == 'd' ? m->kd : kp[1] == 's' ? m->ks : kp[1] == 'e' ? m->ke : m->ka;
+            if (!mtl_color(&f, &q, dst, kp[1] == 'd' ? "Kd" : kp[1] == 's' ? "Ks" : kp[1] == 'e' ? "Ke" : "Ka"))
                 return false;
-        } else if (kw == 2 && p[0] == 'T' && p[1] == 'f') {
+        } else if (kw == 2 && kp[0] == 'T' && kp[1] == 'f') {
             if (!mtl_color(&f, &q, pm.tf, "Tf")) return false;
             pm.has_tf = true;
-        } else if (kw == 2 && p[0] == 'N' && p[1] == 's') {
+        } else if (kw == 2 && kp[0] == 'N' && kp[1] == 's') {
             if (!obj_float(&f, q, &m->ns, "Ns")) return false;
-        } else if (kw == 2 && p[0] == 'N' && p[1] == 'i') {
+        } else if (kw == 2 && kp[0] == 'N' && kp[1] == 'i') {
             if (!obj_float(&f, q, &m->ior, "Ni")) return false;
-        } else if (kw == 1 && p[0] == 'd') {
+        } else if (kw == 1 && kp[0] == 'd') {
             const char *r = skip_blank(q);
             if (word_is(r, "-halo")) r += 5; /* the spec's halo dissolve: taken as the plain one */
             if (!obj_float(&f, r, &pm.d, "d")) return false;
             pm.has_d = true;
-        } else if (kw == 2 && p[0] == 'T' && p[1] == 'r') {
+        } else if (kw == 2 && kp[0] == 'T' && kp[1] == 'r') {
             if (!obj_float(&f, q, &pm.tr, "Tr")) return false;
             pm.has_tr = true;
-        } else if (kw == 5 && strncmp(p, "illum", 5) == 0) {
+        } else if (kw == 5 && strncmp(kp, "illum", 5) == 0) {
             int64_t il;
             const char *r = io_parse_int(skip_blank(q), &il);
             if (!r || !is_delim(*r) || il < 0 || il > 10)
                 return io_error(ctx, f.shown, f.line, "illum: expected an integer 0-10");
             m->illum = (int32_t)il;
-        } else if ((kw == 6 && strncmp(p, "map_Kd", 6) == 0) || (kw == 6 && strncmp(p, "map_Pr", 6) == 0) ||
-                   (kw == 6 && strncmp(p, "map_Ke", 6) == 0) || (kw == 5 && strncmp(p, "map_d", 5) == 0) ||
-                   (kw == 6 && strncmp(p, "map_Ks", 6) == 0) || (kw == 4 && strncmp(p, "norm", 4) == 0) ||
-                   (kw == 4 && strncmp(p, "bump", 4) == 0) ||
-                   (kw == 8 && (strncmp(p, "map_bump", 8) == 0 || strncmp(p, "map_Bump", 8) == 0))) {
+        } else if ((kw == 6 && strncmp(kp, "map_Kd", 6) == 0) || (kw == 6 && strncmp(kp, "map_Pr", 6) == 0) ||
+                   (kw == 6 && strncmp(kp, "map_Ke", 6) == 0) || (kw == 5 && strncmp(kp, "map_d", 5) == 0) ||
+                   (kw == 6 && strncmp(kp, "map_Ks", 6) == 0) || (kw == 4 && strncmp(kp, "norm", 4) == 0) ||
+                   (kw == 4 && strncmp(kp, "bump", 4) == 0) ||
+                   (kw == 8 && (strncmp(kp, "map_bump", 8) == 0 || strncmp(kp, "map_Bump", 8) == 0))) {
             /* Options (-s 1 1 1, -clamp on, ...) come before the file name; the name is the rest.
              * -s and -o (u and v; w has no use on a surface) give the material's texture
              * transform, -bm a bump map's scale, -clamp on this texture's clamp-to-edge wrapping
@@ -355,19 +369,19 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
             if (pm.map_n < sizeof pm.maps / sizeof pm.maps[0]) {
                 memcpy(pm.maps[pm.map_n].so, so, sizeof so);
                 pm.maps[pm.map_n].line = f.line;
-                pm.maps[pm.map_n++].kd = p[4] == 'K' && p[5] == 'd';
+                pm.maps[pm.map_n++].kd = kp[4] == 'K' && kp[5] == 'd';
             }
             if (kw == 5) {
                 /* alpha cutout (leaves, fences): the texture's alpha channel, or its red channel
                  * where it has none, below 0.5 cuts the surface out */
                 m->map_alpha = (int32_t)t + 1;
                 m->alpha_mode = RP_ALPHA_MASK;
-            } else if (p[0] == 'n') m->map_normal = (int32_t)t + 1;    /* PBR extension: tangent-space normals */
-            else if (p[0] == 'b' || p[4] == 'b' || p[4] == 'B') {      /* a height map, made a normal map at the end */
+            } else if (kp[0] == 'n') m->map_normal = (int32_t)t + 1;    /* PBR extension: tangent-space normals */
+            else if (kp[0] == 'b' || kp[4] == 'b' || kp[4] == 'B') {      /* a height map, made a normal map at the end */
                 pm.bump = t, pm.bump_scale = bm, pm.bump_line = f.line;
-            } else if (p[5] == 'r') m->map_roughness = (int32_t)t + 1; /* PBR extension: roughness */
-            else if (p[5] == 'e') m->map_ke = (int32_t)t + 1;          /* emission texture */
-            else if (p[5] == 's') m->map_ks = (int32_t)t + 1;          /* specular colour, times Ks */
+            } else if (kp[5] == 'r') m->map_roughness = (int32_t)t + 1; /* PBR extension: roughness */
+            else if (kp[5] == 'e') m->map_ke = (int32_t)t + 1;          /* emission texture */
+            else if (kp[5] == 's') m->map_ks = (int32_t)t + 1;          /* specular colour, times Ks */
             else m->map_kd = (int32_t)t;
         }
         /* Everything else (map_Ns, map_Ka, PBR extensions...) has no field in rp_material_data. */

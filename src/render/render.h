@@ -240,7 +240,7 @@ void camera_ray(const render_camera *c, float x, float y, rp_ray *ray);
 void camera_rays_n(const render_camera *c, int bx, int by, int s, uint32_t count, const uint8_t *li,
                    const uint8_t *lj, rp_rayhit_n *p);
 /* A camera framing the bounds of a committed scene (camera.c). */
-rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b);
+rp_camera camera_frame_bounds(const rp_render_scene *scene, const rp_bounds *b);
 
 
 /* The largest side of a box, at least 1e-3 (1e-3 for an empty or non-finite box). */

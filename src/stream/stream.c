@@ -902,8 +902,8 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
         }
         rp_ray *sr = &shadow.ray[i];
         render_ray_init(sr, rc.eye, v3_make(0, 0, 1), -1.0f); /* a miss: nothing to trace */
-        if (!hit) {
-            for (int k = 0; k < 3; k++) kd_cos[3 * i + k] = 0.0f;
+        if (!hit) { /* black, as eye light's misses */
+            for (int k = 0; k < 3; k++) kd_cos[3 * i + k] = pixels[3 * i + k] = 0.0f;
             continue;
         }
         render_surface sf;

@@ -16,18 +16,8 @@
 #include "raypack_io.h"
 #include "raypack_render.h"
 #include "rp_test.h"
+#include "rp_test_png.h"
 #include "rp_test_tmp.h"
-
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wconversion"
-#pragma GCC diagnostic ignored "-Wsign-conversion"
-#pragma GCC diagnostic ignored "-Wmissing-prototypes"
-#pragma GCC diagnostic ignored "-Wunused-function"
-#pragma GCC diagnostic ignored "-Wdouble-promotion"
-#define STB_IMAGE_WRITE_IMPLEMENTATION
-#define STB_IMAGE_WRITE_STATIC
-#include <stb/stb_image_write.h>
-#pragma GCC diagnostic pop
 
 
 enum { TEX = 64, CELL = 16 };
@@ -540,11 +530,9 @@ static void test_default_camera(rp_device *dev) {
             n += snprintf(text + n, sizeof text - (size_t)n, "f %d %d %d %d\n", a, a + 1, a + 8, a + 7);
         }
     write_text("frame.obj", text);
-    char path[1024], err[512] = "";
+    char err[512] = "";
     rp_scene_data s;
-    bool ok = rp_scene_data_load(tmp_path("frame.obj", path, sizeof path), &s, err, sizeof err);
-    CHECKF(ok, "%s", err);
-    if (!ok) return;
+    if (!load_obj_scene("frame.obj", &s, 1.0f)) return;
     rp_render_scene *rs = rp_render_scene_new(dev, &s, NULL, err, sizeof err);
     CHECKF(rs != NULL, "%s", err);
     if (rs) {

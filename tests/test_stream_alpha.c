@@ -14,19 +14,9 @@
 #include "raypack_io.h"
 #include "raypack_render.h"
 #include "rp_test.h"
+#include "rp_test_png.h"
 #include "rp_test_tmp.h"
 #include "stream/stream.h"
-
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wconversion"
-#pragma GCC diagnostic ignored "-Wsign-conversion"
-#pragma GCC diagnostic ignored "-Wmissing-prototypes"
-#pragma GCC diagnostic ignored "-Wunused-function"
-#pragma GCC diagnostic ignored "-Wdouble-promotion"
-#define STB_IMAGE_WRITE_IMPLEMENTATION
-#define STB_IMAGE_WRITE_STATIC
-#include <stb/stb_image_write.h>
-#pragma GCC diagnostic pop
 
 static uint64_t rng_state = 31;
 static float rng_f(void) {

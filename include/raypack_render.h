@@ -193,6 +193,10 @@ RP_API rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_da
 RP_API void rp_render_scene_release(rp_render_scene *scene);
 /* The committed core scene (not retained; valid while the render scene lives). */
 RP_API rp_scene *rp_render_scene_core(rp_render_scene *scene);
+/* The closest hit of one ray as the renderer sees it: rp_intersect1 on the core scene, passing
+ * through the cut-out points of alpha-tested surfaces (map_d, glTF alphaMode MASK/BLEND), as every
+ * integrator's rays do (a viewer's pick ray; the core alone stops at a leaf's holes). */
+RP_API void rp_render_scene_intersect1(rp_render_scene *scene, rp_rayhit *rayhit);
 /* The scene file's camera, or one that frames the scene's bounds when the file had none: y up, fov 45,
  * from +z (glTF's front) unless -z, +x or -x sees clearly more front faces (an eighth more of a 12 x 12
  * grid of rays); a room or building that shows back faces from every side is seen from inside. */

@@ -6,8 +6,9 @@
  * quad's shadow on the wall must have holes where the light's ray passes through one: each pixel
  * is classified by intersecting its ray with the quad and the wall here. A glTF with alphaMode MASK
  * and alphaCutoff 0.3 (a texture alpha of 0.2 cut, of 0.4 kept); BLEND (deterministic for any
- * thread count); map_d of a grey PNG without alpha (its grey value is the mask); and a MASK
- * material that cuts nothing renders byte for byte as the opaque one. */
+ * thread count); map_d of a grey PNG without alpha (its grey value is the mask); a MASK
+ * material that cuts nothing renders byte for byte as the opaque one; and the default camera's
+ * framing and rp_render_scene_intersect1 (the viewer's orbit pick) see through a cut-out quad. */
 #include <math.h>
 #include <stdint.h>
 #include <sys/stat.h>
@@ -15,18 +16,8 @@
 #include "raypack_io.h"
 #include "raypack_render.h"
 #include "rp_test.h"
+#include "rp_test_png.h"
 #include "rp_test_tmp.h"
-
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wconversion"
-#pragma GCC diagnostic ignored "-Wsign-conversion"
-#pragma GCC diagnostic ignored "-Wmissing-prototypes"
-#pragma GCC diagnostic ignored "-Wunused-function"
-#pragma GCC diagnostic ignored "-Wdouble-promotion"
-#define STB_IMAGE_WRITE_IMPLEMENTATION
-#define STB_IMAGE_WRITE_STATIC
-#include <stb/stb_image_write.h>
-#pragma GCC diagnostic pop
 
 
 enum { TEX = 64, CELL = 16 };
@@ -517,6 +508,52 @@ static void test_mask_transform(rp_device *dev) {
     check_albedo_holes(dev, &s, "map_d -o 0.25 0 of the inverted mask");
 }
 
+/* ---- the default camera's framing and the renderer's public closest hit ---- */
+
+/* A fully cut-out 4x4 quad facing +z (z = 0) and an opaque 3x3 wall of 72 triangles facing +x
+ * (x = 0) through its middle. Seen from +z, the quad would be all front faces; cut out, the view
+ * from +z shows the wall edge on: the default camera must look from +x. And a ray through the quad
+ * onto the wall: rp_render_scene_intersect1 passes the quad, rp_intersect1 stops on it. */
+static void test_default_camera(rp_device *dev) {
+    write_mask_png("clear.png", 4, 0, 0);
+    write_text("frame.mtl", "newmtl leaf\nKd 0.2 0.8 0.2\nmap_d clear.png\nnewmtl wall\nKd 0.8 0.8 0.8\n");
+    char text[16384];
+    int n = snprintf(text, sizeof text,
+                     "mtllib frame.mtl\nv -2 -2 0\nv 2 -2 0\nv 2 2 0\nv -2 2 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                     "usemtl leaf\nf 1/1 2/2 3/3 4/4\nusemtl wall\n");
+    for (int j = 0; j <= 6; j++) /* (y, z) on a 7x7 lattice, row j at y = -1.5 + 0.5 j */
+        for (int i = 0; i <= 6; i++)
+            n += snprintf(text + n, sizeof text - (size_t)n, "v 0 %g %g\n", -1.5 + 0.5 * j, 1.5 - 0.5 * i);
+    for (int j = 0; j < 6; j++) /* z falling along i, y rising along j: the normal is +x */
+        for (int i = 0; i < 6; i++) {
+            int a = 5 + j * 7 + i;
+            n += snprintf(text + n, sizeof text - (size_t)n, "f %d %d %d %d\n", a, a + 1, a + 8, a + 7);
+        }
+    write_text("frame.obj", text);
+    char err[512] = "";
+    rp_scene_data s;
+    if (!load_obj_scene("frame.obj", &s, 1.0f)) return;
+    rp_render_scene *rs = rp_render_scene_new(dev, &s, NULL, err, sizeof err);
+    CHECKF(rs != NULL, "%s", err);
+    if (rs) {
+        rp_camera cam = rp_render_scene_default_camera(rs);
+        const float *e = cam.pinhole.eye;
+        CHECKF(e[0] > 3.0f && fabsf(e[1]) < 1e-3f && fabsf(e[2]) < 1e-3f,
+               "default camera at %g %g %g: the cut-out quad framed the view (the wall faces +x)", e[0], e[1], e[2]);
+        rp_rayhit rh = {.ray = {.org_x = 2, .org_y = 0.2f, .org_z = 1, .dir_x = -1, .dir_z = -1, .tfar = INFINITY,
+                                .mask = 0xFFFFFFFFu},
+                        .hit = {.geom_id = RP_INVALID_ID, .prim_id = RP_INVALID_ID, .inst_id = RP_INVALID_ID}};
+        rp_rayhit core = rh;
+        rp_intersect1(rp_render_scene_core(rs), &core);
+        rp_render_scene_intersect1(rs, &rh);
+        CHECKF(core.ray.tfar == 1.0f, "the core's hit on the quad at t %g", core.ray.tfar);
+        CHECKF(rh.hit.geom_id != RP_INVALID_ID && rh.ray.tfar == 2.0f && rh.hit.Ng_x != 0.0f,
+               "rp_render_scene_intersect1: t %g (the wall behind the cut-out quad is at 2)", rh.ray.tfar);
+        rp_render_scene_release(rs);
+    }
+    rp_scene_data_free(&s);
+}
+
 /* ---- glTF: alphaMode MASK, alphaCutoff 0.3, over an opaque wall ---- */
 
 /* The quad (z = 1.5, facing +z) and the wall (z = 0): 8 positions, 8 uvs, 12 indices. */
@@ -604,6 +641,7 @@ int main(void) {
     test_grey_mask(dev);
     test_mask_transform(dev);
     test_gltf_mask(dev);
+    test_default_camera(dev);
     rp_device_release(dev);
     return RP_TEST_END();
 }

@@ -99,10 +99,19 @@ static void check_view(rp_render_scene *rs, const grid *g, const char *name, con
                st2.passes == st2.traversal_passes + st2.intersection_passes + st2.other_passes &&
                (st2.slots == 0 || st2.simd_efficiency == 1.0),
            "%s: wavefront: %zu values differ, efficiency %.3f", name, diff, st2.simd_efficiency);
-    /* shadow shading: a second stream of any-hit rays */
+    /* shadow shading: a second stream of any-hit rays; every pixel written, a miss black (the
+     * buffer was left as it came, garbage from malloc) */
     sd.shading = STREAM_SHADE_SHADOW;
+    for (size_t i = 0; i < n * 3; i++) px[i] = NAN;
     CHECK(stream_render(rs, g, &sd, px, NULL, &st2, err, sizeof err));
     CHECK(st2.shadow_rays > 0 && st2.rays == n + st2.shadow_rays && st2.other_passes == 5);
+    size_t unwritten = 0, lit_misses = 0;
+    for (size_t i = 0; i < n; i++) {
+        unwritten += isnan(px[3 * i]) || isnan(px[3 * i + 1]) || isnan(px[3 * i + 2]);
+        lit_misses += hits[i].hit.geom_id == RP_INVALID_ID && !(px[3 * i] == 0.0f && px[3 * i + 1] == 0.0f && px[3 * i + 2] == 0.0f);
+    }
+    CHECKF(unwritten == 0 && lit_misses == 0, "%s: shadow shading left %zu pixels unwritten, %zu misses not black", name,
+           unwritten, lit_misses);
     CHECK(st2.passes == st2.traversal_passes + st2.intersection_passes + st2.other_passes);
     free(px), free(ref), free(hits);
 }

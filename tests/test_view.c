@@ -3,9 +3,9 @@
  * moves as the keys and the mouse say (checked on the printed camera), a screenshot read back from
  * the window equals `raypack render` of the printed camera byte for byte (PPM, and the PNG decoded),
  * frames accumulate to what one N-spp render gives, the resolution drops while the camera moves too
- * fast for --fps and comes back when it stops, bad scripts are usage errors, and every shared scene
- * opens (release build; the sanitized build opens two). Skips, saying so, when raypack was built
- * without SDL2. Under ASan the viewer runs with apps/viewer/lsan.supp (leaks inside X11 and SDL). */
+ * fast for --fps and comes back when it stops, bad scripts are usage errors, the orbit pivot is
+ * picked through a cut-out quad, and every shared scene opens (release build; the sanitized build
+ * opens two). Skips, saying so, when raypack was built without SDL2. Under ASan the viewer runs with apps/viewer/lsan.supp (leaks inside X11 and SDL). */
 #include <math.h>
 #include <stdbool.h>
 #include <sys/stat.h>
@@ -214,6 +214,41 @@ static void test_camera(const char *scene) {
         cross(a, f, d);
         CHECKF(len(d) < 1e-2f * len(a), "pivot %g off the central ray", len(d));
     }
+}
+
+/* Orbit about a point seen through a cut-out: a fully cut-out quad (map_d of a black TGA) at z = 2
+ * in front of a wall at z = 0; the click at the image centre picks the wall, not the quad. */
+static void test_pick_cutout(void) {
+    char path[1200], args[8192];
+    snprintf(path, sizeof path, "%s/clear.tga", tmp);
+    FILE *f = fopen(path, "wb");
+    CHECK(f != NULL);
+    if (!f) return;
+    /* uncompressed grey, 2x2, 8 bits: all 0 (its grey value is the mask) */
+    const unsigned char tga[18 + 4] = {0, 0, 3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 2, 0, 2, 0, 8, 0};
+    fwrite(tga, 1, sizeof tga, f);
+    fclose(f);
+    snprintf(path, sizeof path, "%s/pick.mtl", tmp);
+    f = fopen(path, "w");
+    if (f) fputs("newmtl wall\nKd 0.8 0.8 0.8\nnewmtl leaf\nKd 0.2 0.8 0.2\nmap_d clear.tga\n", f), fclose(f);
+    snprintf(path, sizeof path, "%s/pick.obj", tmp);
+    f = fopen(path, "w");
+    if (f)
+        fputs("mtllib pick.mtl\nv -3 -3 0\nv 3 -3 0\nv 3 3 0\nv -3 3 0\nv -1 -1 2\nv 1 -1 2\nv 1 1 2\nv -1 1 2\n"
+              "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl wall\nf 1 2 3 4\nusemtl leaf\nf 5/1 6/2 7/3 8/4\n", f),
+            fclose(f);
+    snprintf(args, sizeof args,
+             "view '%s' --width 160 --height 120 --threads 2 --frames 4 --no-overlay --eye 0,0,6 --look 0,0,0 --up 0,1,0 "
+             "--script '1 press left 80 60; 2 move 90 60; 3 release left 90 60'",
+             path);
+    int rc = run(true, args);
+    const char *pv = strstr(output, "orbit: pivot ");
+    float p[3];
+    bool ok = rc == 0 && pv && sscanf(pv, "orbit: pivot %f,%f,%f", &p[0], &p[1], &p[2]) == 3;
+    CHECKF(ok, "orbit pivot expected:\n%s", output);
+    if (ok)
+        CHECKF(fabsf(p[2]) < 1e-3f && fabsf(p[0]) < 0.2f && fabsf(p[1]) < 0.2f,
+               "pivot %g %g %g: not on the wall behind the cut-out quad", p[0], p[1], p[2]);
 }
 
 /* Runs the viewer to a screenshot (PPM or PNG) and renders its printed camera with the samples it
@@ -574,6 +609,7 @@ int main(void) {
     if (!cornell) return RP_TEST_END();
     test_errors(cornell);
     test_camera(cornell);
+    test_pick_cutout();
     /* still from the start: N frames are N samples (Whitted, then eye light); after motion and a
      * look around, the samples since it stopped; a spp cap stops the accumulation */
     test_screenshot(cornell, "", "", 1, 1);

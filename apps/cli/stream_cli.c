@@ -212,6 +212,9 @@ static void print_stats(const stream_stats *s) {
            (unsigned long long)s->other_passes);
     printf("max/ray  traversals %u, intersections %u; SIMD efficiency %.3f\n", s->max_voxels, s->max_tests,
            s->simd_efficiency);
+    if (s->cutouts)
+        printf("cutouts  %llu hits on cut-out points passed over (%.2f per ray; in the tests, not the hits)\n",
+               (unsigned long long)s->cutouts, (double)s->cutouts / r);
     static const char *kinds[RP_RAY_KIND_COUNT] = {"primary", "shadow", "reflection", "refraction", "bounce"};
     for (int k = 0; k < RP_RAY_KIND_COUNT; k++) {
         const stream_kind_stats *ks = &s->kind[k];
@@ -263,7 +266,6 @@ static bool load(const char *cmd, const stream_opts *o, int default_w, int defau
                         "(use --integrator eyelight, whitted, path, direct or ao)\n", cmd);
         return false;
     }
-    cli_cutouts_warning(cmd, "stream", &l->data);
     if (!(l->device = cli_device_new(cmd, o->threads, o->isa))) return false;
     /* flat: the grid holds one level of primitives, no instances */
     rp_render_scene_desc sdesc = {.flatten_animation = true, .medium = o->vol.medium};

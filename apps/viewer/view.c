@@ -341,8 +341,9 @@ static bool save_screenshot(viewer *v, const char *path) {
     return ok;
 }
 
-/* The point under pixel (x, y) for orbiting, through one ray of the public API; the look-at point
- * when the ray hits nothing. */
+/* The point under pixel (x, y) for orbiting, through one ray of the public API that passes cut-out
+ * points as the image does (a leaf's holes are not a pivot); the look-at point when the ray hits
+ * nothing. */
 static void pick_pivot(viewer *v, int x, int y) {
     float dir[3];
     view_camera_ray(&v->cam, v->w, v->h, (float)x + 0.5f, (float)y + 0.5f, dir);
@@ -359,7 +360,7 @@ static void pick_pivot(viewer *v, int x, int y) {
     rh.hit.geom_id = RP_INVALID_ID;
     rh.hit.prim_id = RP_INVALID_ID;
     rh.hit.inst_id = RP_INVALID_ID;
-    rp_intersect1(rp_render_scene_core(v->scene), &rh);
+    rp_render_scene_intersect1(v->scene, &rh);
     if (rh.hit.geom_id != RP_INVALID_ID) {
         for (int k = 0; k < 3; k++) v->pivot[k] = v->cam.eye[k] + dir[k] * rh.ray.tfar;
     } else {

@@ -69,7 +69,7 @@ static bool hit_cut(const rp_render_scene *s, const float org[3], const float di
     return (float)(h >> 8) * (1.0f / 16777216.0f) >= a;
 }
 
-static bool rayhit_cut(const rp_render_scene *s, const rp_rayhit *rh) {
+bool alpha_rayhit_cut(const rp_render_scene *s, const rp_rayhit *rh) {
     const float org[3] = {rh->ray.org_x, rh->ray.org_y, rh->ray.org_z}, dir[3] = {rh->ray.dir_x, rh->ray.dir_y, rh->ray.dir_z};
     return hit_cut(s, org, dir, rh->ray.tfar, rh->hit.geom_id, rh->hit.prim_id, rh->hit.inst_id, rh->hit.u, rh->hit.v);
 }
@@ -85,7 +85,7 @@ static void pass_through(const rp_render_scene *s, rp_rayhit *rh, float tfar) {
         rh->hit.geom_id = rh->hit.prim_id = rh->hit.inst_id = RP_INVALID_ID;
         rp_intersect1(s->scene, rh);
         if (rh->hit.geom_id == RP_INVALID_ID) break;
-        if (!rayhit_cut(s, rh)) {
+        if (!alpha_rayhit_cut(s, rh)) {
             rh->ray.tnear = tnear;
             return;
         }
@@ -102,14 +102,14 @@ static bool opaque_on(const rp_render_scene *s, const rp_ray *ray, float tfar) {
     rh.ray.tfar = tfar;
     rh.hit.geom_id = rh.hit.prim_id = rh.hit.inst_id = RP_INVALID_ID;
     rp_intersect1(s->scene, &rh);
-    if (rh.hit.geom_id != RP_INVALID_ID && rayhit_cut(s, &rh)) pass_through(s, &rh, tfar);
+    if (rh.hit.geom_id != RP_INVALID_ID && alpha_rayhit_cut(s, &rh)) pass_through(s, &rh, tfar);
     return rh.hit.geom_id != RP_INVALID_ID;
 }
 
 void alpha_intersect1(const rp_render_scene *s, rp_rayhit *rh) {
     float tfar = rh->ray.tfar;
     rp_intersect1(s->scene, rh);
-    if (s->cutouts && rh->hit.geom_id != RP_INVALID_ID && rayhit_cut(s, rh)) pass_through(s, rh, tfar);
+    if (s->cutouts && rh->hit.geom_id != RP_INVALID_ID && alpha_rayhit_cut(s, rh)) pass_through(s, rh, tfar);
 }
 
 void alpha_occluded1(const rp_render_scene *s, rp_ray *ray) {
@@ -128,7 +128,7 @@ static void array_fixed(const rp_render_scene *s, rp_rayhit *rh, rp_ray *r, size
         if (rh) rp_intersect_array(s->scene, rh + i0, n, flags);
         else rp_occluded_array(s->scene, r + i0, n, flags);
         for (size_t i = 0; i < n; i++) {
-            if (rh && rh[i0 + i].hit.geom_id != RP_INVALID_ID && rayhit_cut(s, &rh[i0 + i]))
+            if (rh && rh[i0 + i].hit.geom_id != RP_INVALID_ID && alpha_rayhit_cut(s, &rh[i0 + i]))
                 pass_through(s, &rh[i0 + i], tfar[i]);
             if (r && r[i0 + i].tfar < 0.0f && tfar[i] >= 0.0f && !opaque_on(s, &r[i0 + i], tfar[i]))
                 r[i0 + i].tfar = tfar[i];

@@ -91,8 +91,9 @@ void camera_rays_n(const render_camera *c, int bx, int by, int s, uint32_t count
 
 /* Score of a view: primary hits on front faces minus hits on back faces, on a coarse grid, and the
  * number of distinct primitives hit (*distinct). Closed meshes score the same from every side; a room
- * open on one side (the Cornell box) is seen through its opening. */
-static int view_score(rp_scene *scene, const rp_camera *cam, int *distinct) {
+ * open on one side (the Cornell box) is seen through its opening. The rays pass through cut-out
+ * points (alpha.c), as the image's do: a leaf's holes neither frame the view nor hide it. */
+static int view_score(const rp_render_scene *scene, const rp_camera *cam, int *distinct) {
     enum { N = 12 };
     render_camera rc;
     camera_setup(cam, N, N, &rc);
@@ -106,7 +107,7 @@ static int view_score(rp_scene *scene, const rp_camera *cam, int *distinct) {
             h->hit.inst_id = RP_INVALID_ID;
         }
     }
-    rp_intersect_array(scene, rh, N * N, RP_QUERY_INCOHERENT);
+    alpha_intersect_array(scene, rh, N * N, RP_QUERY_INCOHERENT);
     int score = 0;
     *distinct = 0;
     for (int i = 0; i < N * N; i++) {
@@ -125,7 +126,7 @@ static int view_score(rp_scene *scene, const rp_camera *cam, int *distinct) {
 /* Fewer distinct primitives than this in the best outside view: a flat wall (sponza's outside). */
 #define VIEW_FEW_PRIMS 8
 
-rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b) {
+rp_camera camera_frame_bounds(const rp_render_scene *scene, const rp_bounds *b) {
     rp_camera cam = {.type = RP_CAMERA_PINHOLE};
     rp_pinhole_camera *p = &cam.pinhole;
     p->fov_deg = 45.0f;

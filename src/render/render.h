@@ -206,6 +206,10 @@ void alpha_intersect_array(const rp_render_scene *s, rp_rayhit *rayhits, size_t 
 void alpha_occluded_array(const rp_render_scene *s, rp_ray *rays, size_t count, uint32_t flags);
 void alpha_intersect_n(const rp_render_scene *s, const rp_query_n_desc *desc, rp_rayhit_n *packet);
 void alpha_occluded_n(const rp_render_scene *s, const rp_query_n_desc *desc, rp_rayhit_n *packet);
+/* Whether a hit (rayhit->hit, at rayhit->ray.tfar) is on a cut-out point of its surface: the test
+ * the queries above apply, for engines that trace on their own (the stream engine's intersection
+ * kernel). */
+bool alpha_rayhit_cut(const rp_render_scene *s, const rp_rayhit *rayhit);
 
 /* Primary ray of a pixel position (x, y in pixels, (0,0) the top-left corner) (camera.c). */
 typedef struct render_camera {
@@ -240,7 +244,7 @@ void camera_ray(const render_camera *c, float x, float y, rp_ray *ray);
 void camera_rays_n(const render_camera *c, int bx, int by, int s, uint32_t count, const uint8_t *li,
                    const uint8_t *lj, rp_rayhit_n *p);
 /* A camera framing the bounds of a committed scene (camera.c). */
-rp_camera camera_frame_bounds(rp_scene *scene, const rp_bounds *b);
+rp_camera camera_frame_bounds(const rp_render_scene *scene, const rp_bounds *b);
 
 
 /* The largest side of a box, at least 1e-3 (1e-3 for an empty or non-finite box). */

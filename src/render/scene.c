@@ -248,6 +248,10 @@ bool rp_render_scene_medium(const rp_render_scene *scene, rp_bounds *bounds) {
 
 rp_scene *rp_render_scene_core(rp_render_scene *scene) { return scene ? scene->scene : NULL; }
 
+void rp_render_scene_intersect1(rp_render_scene *scene, rp_rayhit *rayhit) {
+    if (scene && rayhit) alpha_intersect1(scene, rayhit);
+}
+
 const rp_material *rp_render_scene_material(const rp_render_scene *scene, size_t i) {
     size_t n = scene->data->material_count > 0 ? scene->data->material_count : 1;
     return i < n ? &scene->materials[i] : &scene->materials[0];
@@ -263,7 +267,7 @@ rp_camera rp_render_scene_default_camera(rp_render_scene *scene) {
         cam.pinhole.fov_deg = c->fov_deg;
         return cam;
     }
-    return camera_frame_bounds(scene->scene, &scene->bounds);
+    return camera_frame_bounds(scene, &scene->bounds);
 }
 
 static v3 corner3(const float *a, const uint32_t *idx, uint32_t prim, int corner) {

@@ -41,6 +41,9 @@ typedef struct ray_stream {
     uint32_t *mailbox;     /* GRID_MAILBOX per ray */
     uint8_t *state;
     uint32_t *voxels, *tests;
+    uint32_t *cuts;        /* hits on cut-out points passed over */
+    const rp_render_scene *cutouts; /* the scene, where it has alpha-tested materials: its cut-out
+                                     * points are no hits (set by trace_rays); else NULL */
     uint32_t *active;      /* rays traversing or intersecting, compacted after each pass */
     uint32_t *queue;       /* wavefront: the intersect queue, then the traverse queue (2 per ray) */
     size_t active_count;
@@ -49,7 +52,7 @@ typedef struct ray_stream {
 
 static void stream_free(ray_stream *s) {
     free(s->ray), free(s->walk), free(s->hit), free(s->cursor), free(s->end), free(s->mailbox);
-    free(s->state), free(s->voxels), free(s->tests), free(s->active), free(s->queue), free(s->xray);
+    free(s->state), free(s->voxels), free(s->tests), free(s->cuts), free(s->active), free(s->queue), free(s->xray);
     memset(s, 0, sizeof *s);
 }
 
@@ -63,7 +66,8 @@ static bool stream_alloc(ray_stream *s, size_t n, bool any, bool walk) {
     s->state = malloc(m);
     s->voxels = calloc(m, sizeof(uint32_t));
     s->tests = calloc(m, sizeof(uint32_t));
-    bool ok = s->ray && s->hit && s->state && s->voxels && s->tests;
+    s->cuts = calloc(m, sizeof(uint32_t));
+    bool ok = s->ray && s->hit && s->state && s->voxels && s->tests && s->cuts;
     if (ok && walk) {
         s->walk = malloc(m * sizeof(grid_walk));
         s->cursor = malloc(m * sizeof(uint32_t));
@@ -88,7 +92,7 @@ static void enter_voxel(const grid *g, ray_stream *s, uint32_t i) {
 /* Kernel: traversal setup of ray i (DDA setup and the first voxel); false when it misses the grid
  * (shaded as a miss). */
 static bool setup_ray(const grid *g, ray_stream *s, size_t i) {
-    s->voxels[i] = s->tests[i] = 0;
+    s->voxels[i] = s->tests[i] = s->cuts[i] = 0;
     s->hit[i] = (grid_hit){.t = s->ray[i].tfar, .tri = UINT32_MAX};
     for (int k = 0; k < GRID_MAILBOX; k++) s->mailbox[i * GRID_MAILBOX + k] = UINT32_MAX;
     if (!(s->ray[i].tnear <= s->ray[i].tfar) || !grid_walk_setup(g, &s->ray[i], &s->walk[i])) {
@@ -107,6 +111,22 @@ static void kernel_traverse(const grid *g, ray_stream *s, uint32_t i) {
         enter_voxel(g, s, i);
 }
 
+/* grid_test on ray i with alpha cutouts: a hit it takes on a cut-out point (alpha.c's test: the
+ * material's alpha at the hit's uv under the cutoff, BLEND's hash) is undone, the ray's closest hit
+ * so far restored, as an any-hit filter rejects it (Embree's filter functions): the ray goes on
+ * looking in this voxel and beyond. True when the triangle was hit and not cut out. */
+static bool test_cut(const grid *g, ray_stream *s, uint32_t i, uint32_t tri) {
+    grid_hit before = s->hit[i];
+    if (!grid_test(g, tri, &s->ray[i], &s->hit[i])) return false;
+    if (!s->cutouts || s->hit[i].tri != tri || before.tri == tri) return true; /* not taken (a tie lost) */
+    rp_rayhit rh = {.ray = s->ray[i]};
+    grid_hit_write(g, &s->hit[i], &rh);
+    if (!alpha_rayhit_cut(s->cutouts, &rh)) return true;
+    s->hit[i] = before;
+    s->cuts[i]++;
+    return false;
+}
+
 /* Kernel: one triangle of ray i's voxel list (triangles already in its mailbox are passed over).
  * At the end of the list the ray is done when its closest hit lies within the voxel. */
 static void kernel_intersect(const grid *g, ray_stream *s, uint32_t i) {
@@ -115,7 +135,7 @@ static void kernel_intersect(const grid *g, ray_stream *s, uint32_t i) {
         uint32_t tri = g->items[s->cursor[i]++];
         if (grid_mailbox_seen(mb, tri)) continue;
         s->tests[i]++;
-        if (grid_test(g, tri, &s->ray[i], &s->hit[i]) && s->any) {
+        if (test_cut(g, s, i, tri) && s->any) {
             s->state[i] = RAY_SHADING;
             return;
         }
@@ -251,7 +271,7 @@ static bool run_passes(rp_device *dev, const grid *g, ray_stream *s, size_t firs
         st->slots += count;
     }
     for (size_t i = first; i < first + count; i++) {
-        st->voxels += s->voxels[i], st->tests += s->tests[i];
+        st->voxels += s->voxels[i], st->tests += s->tests[i], st->cutouts += s->cuts[i];
         ks->voxels += s->voxels[i], ks->tests += s->tests[i];
         if (s->voxels[i] > st->max_voxels) st->max_voxels = s->voxels[i];
         if (s->tests[i] > st->max_tests) st->max_tests = s->tests[i];
@@ -333,9 +353,11 @@ static bool trace_external(rp_device *dev, const stream_desc *d, ray_stream *s, 
 
 /* Traces rays [first, first + count) of s: by the external tracer when the desc has one, else by
  * the grid's passes. false (with err) when the tracer failed. */
-static bool trace_rays(rp_device *dev, const grid *g, const stream_desc *d, ray_stream *s, size_t first, size_t count,
-                       rp_ray_kind kind, stream_stats *st, char *err, size_t err_size) {
+static bool trace_rays(const rp_render_scene *rs, const grid *g, const stream_desc *d, ray_stream *s, size_t first,
+                       size_t count, rp_ray_kind kind, stream_stats *st, char *err, size_t err_size) {
+    rp_device *dev = rs->device;
     if (d->trace) return trace_external(dev, d, s, first, count, kind, st, err, err_size);
+    s->cutouts = rs->cutouts ? rs : NULL;
     if (run_passes(dev, g, s, first, count, kind, d->oracle, d->wavefront, st)) return true;
     snprintf(err, err_size, "stream: out of memory for the passes over %zu rays", count);
     return false;
@@ -400,7 +422,7 @@ typedef struct stream_ctx {
 } stream_ctx;
 
 static bool trace(stream_ctx *c, ray_stream *s, size_t first, size_t count, rp_ray_kind kind) {
-    if (trace_rays(c->f->s->device, c->g, c->d, s, first, count, kind, c->st, c->err, c->err_size)) return true;
+    if (trace_rays(c->f->s, c->g, c->d, s, first, count, kind, c->st, c->err, c->err_size)) return true;
     c->failed = true;
     return false;
 }
@@ -837,7 +859,7 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
     for (size_t i = 0; i < n; i++)
         camera_ray(&rc, (float)(i % (size_t)d.width) + 0.5f, (float)(i / (size_t)d.width) + 0.5f, &eye.ray[i]);
     st.other_passes++;
-    if (!trace_rays(rs->device, g, &d, &eye, 0, n, RP_RAY_PRIMARY, &st, err, err_size)) {
+    if (!trace_rays(rs, g, &d, &eye, 0, n, RP_RAY_PRIMARY, &st, err, err_size)) {
         stream_free(&eye);
         return false;
     }
@@ -880,8 +902,8 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
         }
         rp_ray *sr = &shadow.ray[i];
         render_ray_init(sr, rc.eye, v3_make(0, 0, 1), -1.0f); /* a miss: nothing to trace */
-        if (!hit) {
-            for (int k = 0; k < 3; k++) kd_cos[3 * i + k] = 0.0f;
+        if (!hit) { /* black, as eye light's misses */
+            for (int k = 0; k < 3; k++) kd_cos[3 * i + k] = pixels[3 * i + k] = 0.0f;
             continue;
         }
         render_surface sf;
@@ -901,7 +923,7 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
     }
     st.other_passes++;
     if (shadows) {
-        if (!trace_rays(rs->device, g, &d, &shadow, 0, n, RP_RAY_SHADOW, &st, err, err_size)) {
+        if (!trace_rays(rs, g, &d, &shadow, 0, n, RP_RAY_SHADOW, &st, err, err_size)) {
             free(kd_cos);
             stream_free(&shadow), stream_free(&eye);
             return false;

@@ -11,7 +11,8 @@
  * renderer's integrators (Whitted, path, direct, AO) through the renderer's own shading functions:
  * each depth's shadow, reflection, refraction and bounce rays are streams of their own through the
  * same traversal and intersection passes, so the image is rp_render's bit for bit (the grid's hits
- * are the BVH's) and the statistics are kept per ray kind.
+ * are the BVH's) and the statistics are kept per ray kind. Alpha cutouts: the intersection kernel
+ * rejects a hit on a cut-out point (alpha.c's test) and the ray looks on, for every kind of ray.
  *
  * Each pass (traversal setup, traversal, intersection, and the integrators' shading kernels: eye-ray
  * generation, whitted_surface, path_vertex) runs over chunks of its stream on the device's threads,
@@ -80,6 +81,8 @@ typedef struct stream_stats {
     uint64_t slots;              /* rays of the stream (wavefront: of the pass's queue) summed over those passes */
     double simd_efficiency;      /* work / slots: the mean fraction of a pass's rays doing work */
     uint64_t eye_hits, shadow_blocked;
+    uint64_t cutouts;            /* hits on cut-out points of alpha-tested surfaces that the intersection
+                                  * kernel passed over (counted in tests, not in hits) */
     stream_kind_stats kind[RP_RAY_KIND_COUNT]; /* sums over kinds equal the totals above */
     double ms;
     double trace_ms;             /* of ms, the time in stream_desc.trace (0 over the grid) */

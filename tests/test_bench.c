@@ -590,6 +590,31 @@ static void cuda_render_case(const char *cli, const char *scene, const char *int
     CHECKF(same_bytes(gpu, cpu), "cuda render: %s (%s) differs from the CPU's %s", gpu, integ, cpu);
 }
 
+/* A scene with an alpha-tested quad (MTL map_d of a PPM checker: its red channel below 0.5 cuts)
+ * between a wall and an area light, for --engine cuda's cutouts; its path in out. */
+static bool write_cutout_scene(char *out, size_t size) {
+    char path[1024];
+    snprintf(path, sizeof path, "%s/cut_holes.ppm", tmp_dir());
+    FILE *f = fopen(path, "wb");
+    if (!f) return false;
+    fprintf(f, "P3\n4 4\n255\n");
+    for (int y = 0; y < 4; y++)
+        for (int x = 0; x < 4; x++) fprintf(f, "%d 0 0\n", (x + y) % 2 ? 255 : 0);
+    fclose(f);
+    snprintf(path, sizeof path, "%s/cut.mtl", tmp_dir());
+    if (!(f = fopen(path, "w"))) return false;
+    fprintf(f, "newmtl wall\nKd 0.8 0.8 0.8\nnewmtl leaf\nKd 0.8 0.1 0.1\nmap_d cut_holes.ppm\nnewmtl lamp\nKd 0 0 0\nKe 40 40 40\n");
+    fclose(f);
+    snprintf(out, size, "%s/cut.obj", tmp_dir());
+    if (!(f = fopen(out, "w"))) return false;
+    fprintf(f, "mtllib cut.mtl\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+               "v -3 -3 0\nv 3 -3 0\nv 3 3 0\nv -3 3 0\nusemtl wall\nf 1/1 2/2 3/3 4/4\n"
+               "v -0.82 -1 0.93\nv 0.82 -1 2.07\nv 0.82 1 2.07\nv -0.82 1 0.93\nusemtl leaf\nf 5/1 6/2 7/3 8/4\n"
+               "v -4.4 1.6 5\nv -3.6 1.6 5\nv -3.6 2.4 5\nv -4.4 2.4 5\nusemtl lamp\nf 12 11 10 9\n");
+    fclose(f);
+    return true;
+}
+
 int main(void) {
     char cli[PATH_MAX + 64];
     if (!find_cli(cli, sizeof cli)) {
@@ -627,6 +652,21 @@ int main(void) {
         cuda_render_case(cli, cornell, "path", "--spp 2 --max-depth 3", true, cs);
         cuda_render_case(cli, cornell, "direct", "", true, cs);
         cuda_render_case(cli, cornell, "ao", "", true, cs);
+    }
+    /* cut-out surfaces: the GPU's hits passed on the CPU by alpha.c's fix-up (stream tracer, eye
+     * light too), the CPU's image byte for byte */
+    char cut[1024];
+    if (write_cutout_scene(cut, sizeof cut)) {
+        int cs = small ? 24 : 48;
+        const char *view = "--eye 0,0,9 --look 0,0,0 --fov 45";
+        char extra[256];
+        cuda_render_case(cli, cut, "eyelight", view, true, cs);
+        snprintf(extra, sizeof extra, "%s --spp 2", view);
+        cuda_render_case(cli, cut, "whitted", extra, true, cs);
+        cuda_render_case(cli, cut, "path", extra, true, cs);
+        cuda_render_case(cli, cut, "ao", extra, true, cs);
+    } else {
+        CHECK(0);
     }
     /* the museum's spheres and cones (and its instances, flattened) are traced on the CPU beside
      * the GPU's triangles: still the CPU's image, byte for byte */

@@ -137,9 +137,8 @@ bool cli_check_paths(const char *cmd, const cli_path *paths, int count);
 bool cli_scene_readable(const char *cmd, const char *path);
 /* rp_scene_load_desc.warning for the commands: the loader's warning, a line on stderr. */
 void cli_load_warning(void *user, const char *message);
-/* One warning on stderr when the scene has an alpha-tested material, which `engine` (stream, cuda:
- * their own tracers) does not cut out. */
-void cli_cutouts_warning(const char *cmd, const char *engine, const rp_scene_data *data);
+/* Whether the scene has an alpha-tested material (map_d, glTF alphaMode). */
+bool cli_has_cutouts(const rp_scene_data *data);
 /* An output path that can be written (not a folder, its folder there and writable), checked before
  * the work so that a typo does not cost a whole render or benchmark; false after printing why. */
 bool cli_output_writable(const char *cmd, const char *path);

@@ -114,7 +114,6 @@ int cli_cuda_render(int argc, char **argv) {
     rp_scene_data data;
     if (!cli_render_load(CMD, &setup, &data)) return CLI_EXIT_FAILURE;
     rc = cli_render_scene_flags(CMD, &setup, &data);
-    if (rc == CLI_EXIT_OK) cli_cutouts_warning(CMD, "cuda", &data);
     rp_device *device = rc == CLI_EXIT_OK ? cli_device_new(CMD, setup.threads, setup.isa) : NULL;
     rp_render_scene *scene = NULL;
     rp_cuda_tracer *tracer = NULL;
@@ -142,7 +141,8 @@ int cli_cuda_render(int argc, char **argv) {
     }
     double t0 = cli_now_ms();
     stream_stats st = {0};
-    if (!(eyelight ? render_eyelight(tracer, &cam, w, h, pixels)
+    /* cut-out surfaces: the stream tracer, which passes them on the CPU (alpha.c), eye light too */
+    if (!(eyelight && !cli_has_cutouts(&data) ? render_eyelight(tracer, &cam, w, h, pixels)
                    : render_stream(scene, &setup, tracer, &cam, w, h, pixels, &st)))
         goto done;
     double frame_ms = cli_now_ms() - t0;

@@ -244,14 +244,10 @@ void cli_load_warning(void *user, const char *message) {
     fprintf(stderr, "%s\n", message);
 }
 
-void cli_cutouts_warning(const char *cmd, const char *engine, const rp_scene_data *data) {
+bool cli_has_cutouts(const rp_scene_data *data) {
     for (size_t i = 0; i < data->material_count; i++)
-        if (data->materials[i].alpha_mode != RP_ALPHA_OPAQUE) {
-            fprintf(stderr, "raypack %s: warning: material '%s' is alpha-tested (map_d, glTF alphaMode); --engine %s "
-                            "does not apply cutouts: its surfaces render opaque\n",
-                    cmd, data->materials[i].name, engine);
-            return;
-        }
+        if (data->materials[i].alpha_mode != RP_ALPHA_OPAQUE) return true;
+    return false;
 }
 
 const char *cli_camera_problem(const float eye[3], const float look[3], const float up[3]) {

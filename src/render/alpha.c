@@ -106,16 +106,31 @@ static bool opaque_on(const rp_render_scene *s, const rp_ray *ray, float tfar) {
     return rh.hit.geom_id != RP_INVALID_ID;
 }
 
+/* The fix-ups of one ray the core answered; tfar: its segment's end before the query. */
+static void fix_closest(const rp_render_scene *s, rp_rayhit *rh, float tfar) {
+    if (rh->hit.geom_id != RP_INVALID_ID && alpha_rayhit_cut(s, rh)) pass_through(s, rh, tfar);
+}
+
+static void fix_occluded(const rp_render_scene *s, rp_ray *ray, float tfar) {
+    if (ray->tfar < 0.0f && tfar >= 0.0f && !opaque_on(s, ray, tfar)) ray->tfar = tfar;
+}
+
+void alpha_fix_traced(const rp_render_scene *s, rp_rayhit *rayhit, float tfar, bool occlusion) {
+    if (!s->cutouts) return;
+    if (occlusion) fix_occluded(s, &rayhit->ray, tfar);
+    else fix_closest(s, rayhit, tfar);
+}
+
 void alpha_intersect1(const rp_render_scene *s, rp_rayhit *rh) {
     float tfar = rh->ray.tfar;
     rp_intersect1(s->scene, rh);
-    if (s->cutouts && rh->hit.geom_id != RP_INVALID_ID && alpha_rayhit_cut(s, rh)) pass_through(s, rh, tfar);
+    if (s->cutouts) fix_closest(s, rh, tfar);
 }
 
 void alpha_occluded1(const rp_render_scene *s, rp_ray *ray) {
     float tfar = ray->tfar;
     rp_occluded1(s->scene, ray);
-    if (s->cutouts && ray->tfar < 0.0f && tfar >= 0.0f && !opaque_on(s, ray, tfar)) ray->tfar = tfar;
+    if (s->cutouts) fix_occluded(s, ray, tfar);
 }
 
 /* An array of closest-hit (rh) or occlusion (r) queries, the other NULL, fixed up ALPHA_CHUNK at a
@@ -128,10 +143,8 @@ static void array_fixed(const rp_render_scene *s, rp_rayhit *rh, rp_ray *r, size
         if (rh) rp_intersect_array(s->scene, rh + i0, n, flags);
         else rp_occluded_array(s->scene, r + i0, n, flags);
         for (size_t i = 0; i < n; i++) {
-            if (rh && rh[i0 + i].hit.geom_id != RP_INVALID_ID && alpha_rayhit_cut(s, &rh[i0 + i]))
-                pass_through(s, &rh[i0 + i], tfar[i]);
-            if (r && r[i0 + i].tfar < 0.0f && tfar[i] >= 0.0f && !opaque_on(s, &r[i0 + i], tfar[i]))
-                r[i0 + i].tfar = tfar[i];
+            if (rh) fix_closest(s, &rh[i0 + i], tfar[i]);
+            else fix_occluded(s, &r[i0 + i], tfar[i]);
         }
     }
 }

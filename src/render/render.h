@@ -210,6 +210,11 @@ void alpha_occluded_n(const rp_render_scene *s, const rp_query_n_desc *desc, rp_
  * the queries above apply, for engines that trace on their own (the stream engine's intersection
  * kernel). */
 bool alpha_rayhit_cut(const rp_render_scene *s, const rp_rayhit *rayhit);
+/* The fix-up alpha_intersect1 (occlusion: alpha_occluded1) applies to the core's answer, applied to
+ * the answer of a tracer that gives the core's hits (the CUDA kernels): rayhit as the tracer left
+ * it, tfar its ray's segment end before it; the passes past cut-out points are traced by the core on
+ * the CPU. Nothing without cutouts. */
+void alpha_fix_traced(const rp_render_scene *s, rp_rayhit *rayhit, float tfar, bool occlusion);
 
 /* Primary ray of a pixel position (x, y in pixels, (0,0) the top-left corner) (camera.c). */
 typedef struct render_camera {

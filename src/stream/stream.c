@@ -295,6 +295,7 @@ typedef struct external_job {
     ray_stream *s;
     size_t first, count;
     uint32_t *hits; /* per chunk */
+    const rp_render_scene *cutouts; /* the scene, where it has alpha-tested surfaces */
 } external_job;
 
 static void external_in(void *user, uint32_t k, uint32_t thread) {
@@ -316,6 +317,8 @@ static void external_out(void *user, uint32_t k, uint32_t thread) {
     chunk_bounds(k, j->count, EXTERNAL_CHUNK, &a, &b);
     uint32_t hits = 0;
     for (size_t i = j->first + a; i < j->first + b; i++) {
+        /* the tracer's hits are the core's: alpha.c's fix-up, on the CPU, passes cut-out points */
+        if (j->cutouts) alpha_fix_traced(j->cutouts, &s->xray[i], s->ray[i].tfar, s->any);
         const rp_rayhit *x = &s->xray[i];
         bool hit = s->any ? x->ray.tfar == -INFINITY && s->ray[i].tfar != -INFINITY : x->hit.geom_id != RP_INVALID_ID;
         s->hit[i] = (grid_hit){.t = x->ray.tfar, .tri = hit ? 0 : UINT32_MAX};
@@ -326,11 +329,13 @@ static void external_out(void *user, uint32_t k, uint32_t thread) {
     j->hits[k] = hits;
 }
 
-static bool trace_external(rp_device *dev, const stream_desc *d, ray_stream *s, size_t first, size_t count,
+static bool trace_external(const rp_render_scene *rs, const stream_desc *d, ray_stream *s, size_t first, size_t count,
                            rp_ray_kind kind, stream_stats *st, char *err, size_t err_size) {
     if (count == 0) return true;
+    rp_device *dev = rs->device;
     uint32_t chunks = chunk_count(count, EXTERNAL_CHUNK);
-    external_job job = {.s = s, .first = first, .count = count, .hits = malloc(chunks * sizeof(uint32_t))};
+    external_job job = {.s = s, .first = first, .count = count, .hits = malloc(chunks * sizeof(uint32_t)),
+                        .cutouts = rs->cutouts ? rs : NULL};
     if (!job.hits || (!s->xray && !(s->xray = malloc(s->count * sizeof *s->xray)))) {
         free(job.hits);
         snprintf(err, err_size, "stream: out of memory for %zu rays", s->count);
@@ -356,7 +361,7 @@ static bool trace_external(rp_device *dev, const stream_desc *d, ray_stream *s, 
 static bool trace_rays(const rp_render_scene *rs, const grid *g, const stream_desc *d, ray_stream *s, size_t first,
                        size_t count, rp_ray_kind kind, stream_stats *st, char *err, size_t err_size) {
     rp_device *dev = rs->device;
-    if (d->trace) return trace_external(dev, d, s, first, count, kind, st, err, err_size);
+    if (d->trace) return trace_external(rs, d, s, first, count, kind, st, err, err_size);
     s->cutouts = rs->cutouts ? rs : NULL;
     if (run_passes(dev, g, s, first, count, kind, d->oracle, d->wavefront, st)) return true;
     snprintf(err, err_size, "stream: out of memory for the passes over %zu rays", count);

@@ -250,7 +250,7 @@ static bool mtl_parse(io_ctx *ctx, const char *path, const char *shown, const io
     for (; p < end; p = next_line(p, end), f.line++) {
         p = skip_blank(p);
         if (at_eol(p)) continue;
-        if (is_delim(p[6]) && strncasecmp(p, "newmtl", 6) == 0) {
+        if (strncasecmp(p, "newmtl", 6) == 0 && is_delim(p[6])) { /* p[6] read only when p[0..5] are not the NUL */
             if (!mtl_finish(&f, &pm)) return false;
             char name[256];
             rest_of_line(p + 6, name, sizeof name);

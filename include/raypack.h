@@ -79,7 +79,8 @@ typedef struct rp_device_desc {
     void *error_user;
     rp_log_fn log;          /* NULL: silent */
     void *log_user;
-    int isa;                /* 0: best the CPU has; 1: scalar, 4: SSE-width, 8: AVX2, 16: AVX-512 */
+    int isa;                /* 0: auto (the widest the CPU has, but AVX2 on Intel CPUs that clock down under
+                             * AVX-512: Skylake-SP to Ice Lake); 1: scalar, 4: SSE-width, 8: AVX2, 16: AVX-512 */
 } rp_device_desc;
 
 /* Fills in the defaults of every zero field of desc (NULL gives all defaults). */

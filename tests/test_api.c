@@ -9,6 +9,7 @@
 #include "mesh_gen.h"
 #include "raypack.h"
 #include "rp_test.h"
+#include "sys/sys.h"
 
 typedef struct counting {
     long live_blocks;
@@ -100,6 +101,14 @@ int main(void) {
     CHECK(dev != NULL);
     CHECK(rp_device_thread_count(dev) == 3);
     CHECK(rp_device_isa(dev) == 1 || rp_device_isa(dev) == 4 || rp_device_isa(dev) == 8 || rp_device_isa(dev) == 16);
+    /* isa 0 is sys_cpu_simd_auto: the widest the CPU has, or AVX2 in its place on a CPU whose AVX-512
+     * lowers the clock; the widest can still be asked for */
+    int widest = sys_cpu_simd_width(), auto_isa = sys_cpu_simd_auto();
+    CHECK(rp_device_isa(dev) == auto_isa);
+    CHECK(auto_isa == widest || (widest == 16 && auto_isa == 8));
+    rp_device *wide = rp_device_new(&(rp_device_desc){.threads = 1, .isa = widest});
+    CHECK(wide && rp_device_isa(wide) == widest);
+    rp_device_release(wide);
     CHECK(strcmp(rp_error_string(RP_ERROR_NOT_COMMITTED), "the scene was edited and not committed since") == 0);
     CHECK(strcmp(rp_error_string((rp_error)999), "invalid error code") == 0);
     CHECK(rp_device_new(&(rp_device_desc){.threads = -1}) == NULL);

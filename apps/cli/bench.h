@@ -39,7 +39,7 @@ typedef struct bench_opts {
     float grid_density;      /* --density: the grid's voxels per triangle (0: the default) */
     bool repeats_set;        /* --repeats was given (the grid's default differs) */
     int threads;             /* >= 1 */
-    int isa;                 /* --isa: rp_device_desc.isa, 0 the best the CPU has */
+    int isa;                 /* --isa: rp_device_desc.isa, 0 auto (sys_cpu_simd_auto) */
     int repeats;             /* timed repeats per mode */
     int warmup;              /* untimed passes per mode before timing */
     int width, height;

@@ -30,6 +30,7 @@ static void usage(FILE *out) {
             "  --spp N                samples per pixel a frame [1]\n"
             "  --frames N             timed frames per integrator, after one warm-up frame [5]\n"
             "  --threads N            worker threads; 0 for all hardware threads [0]\n"
+            "  --isa NAME             raypack's kernels: auto, scalar, sse, avx2 or avx512 [auto]\n"
             "  --ir-interleave N --ir-vpls N --ir-filter N --ir-rr X (0: off)\n"
             "                         instant radiosity's settings [5, 16, 3: the issue's goal]\n"
             "  --eye X,Y,Z --look X,Y,Z --fov DEG\n"
@@ -115,6 +116,7 @@ static int cmp_double(const void *a, const void *b) {
 int cli_bench_render(int argc, char **argv) {
     int w = 640, h = 480, spp = 1, frames = 5, threads = 0, inter = 0, vpls = 0, filter = 0;
     float rr = 0.0f;
+    int isa = 0; /* auto */
     bool kernels = false, anim_flat = false, has_eye = false, has_look = false, has_fov = false;
     float eye[3], look[3], fov = 0.0f;
     bool use[N_INTEGRATORS];
@@ -172,6 +174,9 @@ int cli_bench_render(int argc, char **argv) {
             VALUE();
             if (!cli_parse_float(CMD, a, v, 0.0, 16.0, false, &rr)) return CLI_EXIT_USAGE;
             if (rr == 0.0f) rr = -1.0f;
+        } else if (strcmp(a, "--isa") == 0) {
+            VALUE();
+            if (!cli_parse_isa(CMD, a, v, &isa)) return CLI_EXIT_USAGE;
         } else if (strcmp(a, "--kernels") == 0) {
             kernels = true;
         } else if (strcmp(a, "--anim-flat") == 0) {
@@ -199,7 +204,7 @@ int cli_bench_render(int argc, char **argv) {
     }
     int cam_status = cli_camera_flags_check(CMD, has_eye ? eye : NULL, has_look ? look : NULL, NULL);
     if (cam_status != CLI_EXIT_OK) return cam_status;
-    rp_device *dev = cli_device_new(CMD, threads, 0);
+    rp_device *dev = cli_device_new(CMD, threads, isa);
     if (!dev) return CLI_EXIT_FAILURE;
     float *px = malloc((size_t)w * (size_t)h * 3 * sizeof(float));
     int status = px ? CLI_EXIT_OK : CLI_EXIT_FAILURE;
@@ -301,9 +306,9 @@ int cli_bench_render(int argc, char **argv) {
         rp_render_scene_release(scene);
         rp_scene_data_free(&data);
     }
-    printf("(%d threads, %dx%d, %d spp a frame, %d frames; Mrays/s by kind: that kind's rays over the whole frame time;\n"
+    printf("(%d threads, %s kernels, %dx%d, %d spp a frame, %d frames; Mrays/s by kind: that kind's rays over the whole frame time;\n"
            " CPU ms: the process's CPU time a frame, all threads, which the machine's other load does not inflate)\n",
-           rp_device_thread_count(dev), w, h, spp, frames);
+           rp_device_thread_count(dev), cli_isa_name(rp_device_isa(dev)), w, h, spp, frames);
     free(px);
     rp_device_release(dev);
     return status;

@@ -1102,6 +1102,7 @@ static bool viewer_init(viewer *v) {
     }
     v->dev = cli_device_new(CMD, v->setup.threads, v->setup.isa);
     if (!v->dev) return false;
+    v->srgb = view_srgb_select(rp_device_isa(v->dev)); /* the kernels' width (auto: sys_cpu_simd_auto) */
     char err[512] = "";
     v->scene = rp_render_scene_new(v->dev, &v->data, &v->setup.scene_desc, err, sizeof err);
     if (!v->scene) {
@@ -1204,7 +1205,6 @@ int cli_view(int argc, char **argv) {
     v.spp_max = v.setup.spp > 0 ? v.setup.spp : 1024;
     v.deterministic = script != NULL || v.opt.frames > 0;
     view_srgb_init();
-    v.srgb = view_srgb_select(v.setup.isa);
 
     int status = CLI_EXIT_FAILURE;
     /* The window's surface is X11's own shared-memory image, not a texture of an OpenGL renderer:

@@ -85,7 +85,7 @@ struct rp_scene {
 void device_error(rp_device *device, rp_error code, const char *message);
 /* Sends a warning to the device's log callback, if any. */
 void device_log(rp_device *device, rp_log_level level, const char *message);
-/* Picks the kernel table for an ISA width (0: the best the CPU has). */
+/* Picks the kernel table for an ISA width (1, 4, 8 or 16). */
 const rp_kernels *device_pick_kernels(int isa);
 
 /* Builds the scene's acceleration structures (rp_scene_commit). */

@@ -18,7 +18,7 @@ rp_device_desc rp_device_desc_defaults(const rp_device_desc *desc) {
     rp_device_desc d = desc ? *desc : (rp_device_desc){0};
     if (d.threads <= 0) d.threads = sys_hardware_threads();
     if (!d.alloc) d.alloc = sys_default_alloc, d.alloc_user = NULL;
-    if (d.isa == 0) d.isa = sys_cpu_simd_width();
+    if (d.isa == 0) d.isa = sys_cpu_simd_auto();
     return d;
 }
 

@@ -5,6 +5,7 @@
 #include <time.h>
 #include <unistd.h>
 #if defined(__x86_64__) || defined(__i386__)
+#include <cpuid.h>
 #include <x86intrin.h>
 #endif
 
@@ -47,6 +48,29 @@ int sys_cpu_simd_width(void) {
     if (__builtin_cpu_supports("sse4.2")) return 4;
 #endif
     return 1;
+}
+
+/* The width a device gets when its desc leaves isa 0. The widest the CPU has, except on Intel CPUs
+ * whose cores lower their clock while they run 512-bit instructions (Skylake-SP to Ice Lake: the
+ * ones with AVX-512 and without AVX-VNNI, glibc's rule for Prefer_No_AVX512): there AVX2. The lower
+ * clock stays on the whole core, so the scalar shading between traversals slows with it: on an Ice
+ * Lake Xeon (model 106) scene_surface took 24% more samples in a frame with the AVX-512 kernels, and
+ * every integrator's frames ran 1-18% faster with AVX2 (docs/animation.md). --isa avx512 still
+ * picks them. */
+int sys_cpu_simd_auto(void) {
+    int width = sys_cpu_simd_width();
+#if (defined(__x86_64__) || defined(__i386__)) && (defined(__GNUC__) || defined(__clang__))
+    if (width == 16 && __builtin_cpu_is("intel")) {
+        unsigned a, b, c, d;
+        bool avx_vnni = false;
+        if (__get_cpuid_max(0, NULL) >= 7) {
+            __cpuid_count(7, 1, a, b, c, d);
+            avx_vnni = (a >> 4) & 1u; /* CPUID.(EAX=7,ECX=1):EAX[4] */
+        }
+        if (!avx_vnni) width = 8;
+    }
+#endif
+    return width;
 }
 
 struct sys_pool {

@@ -39,6 +39,9 @@ uint64_t sys_ticks(void);
 int sys_hardware_threads(void);
 /* Widest SIMD the CPU and OS support: 16 (AVX-512 F/VL/BW/DQ), 8 (AVX2+FMA), 4 (SSE4.2) or 1. */
 int sys_cpu_simd_width(void);
+/* The width isa 0 (auto) picks: sys_cpu_simd_width(), but 8 on Intel CPUs that lower their clock
+ * under AVX-512 (sys.c). */
+int sys_cpu_simd_auto(void);
 
 /* Thread pool: workers wait on a condition variable; parallel_for hands out indices with an
  * atomic counter, the calling thread working too. */

@@ -437,6 +437,17 @@ static void test_errors(void) {
     expect_error("e_inf.obj", "e_inf.obj", 2, NULL);
     write_text("e_nomtl.obj", "# comment\nmtllib missing.mtl\nv 0 0 0\n");
     expect_error("e_nomtl.obj", "e_nomtl.obj", 2, "missing.mtl");
+    /* a scene's folder given for its file, and a file without a suffix: each said as such (the
+     * message showed "unknown scene format '.'" for both) */
+    {
+        char dir[1024];
+        mkdir(tmp_path("e_scene_dir", dir, sizeof dir), 0755);
+        expect_error("e_scene_dir", "e_scene_dir", 0, "is a directory");
+        write_text("e_nosuffix", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+        expect_error("e_nosuffix", "e_nosuffix", 0, "no file name suffix");
+        write_text("e_suffix.rpq", "v 0 0 0\n");
+        expect_error("e_suffix.rpq", "e_suffix.rpq", 0, "unknown scene format '.rpq'");
+    }
     write_text("e_notex.mtl", "newmtl a\nKd 1 1 1\n\nmap_Kd missing_texture.png\n");
     write_text("e_notex.obj", "mtllib e_notex.mtl\nv 0 0 0\n");
     expect_error("e_notex.obj", "e_notex.mtl", 4, "missing_texture.png");

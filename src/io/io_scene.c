@@ -3,6 +3,7 @@
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
+#include <sys/stat.h>
 #include <time.h>
 
 #include "io/io_internal.h"
@@ -382,6 +383,13 @@ static bool load_scene_file(io_ctx *ctx, const char *path, const char *shown) {
     if (strcmp(ext, "nff") == 0 || strcmp(ext, "aff") == 0) return nff_load(ctx, path);
     if (strcmp(ext, "vdb") == 0) return vdb_load(ctx, path, shown);
     if (assimp_can_load(ext)) return assimp_load(ctx, path);
+    /* a directory (a scene's folder: "../shared/scenes/cornell_box") or a name without a suffix is
+     * told apart from an unknown suffix (whose '.' the message showed alone) */
+    struct stat st;
+    if (stat(path, &st) == 0 && S_ISDIR(st.st_mode))
+        return io_error(ctx, shown, 0, "is a directory: give the scene file in it");
+    if (!ext[0])
+        return io_error(ctx, shown, 0, "no file name suffix to tell the scene's format by (expected .obj, .ply, .nff, .aff, .tar, .vdb, .gltf, .glb or another format assimp reads)");
     return io_error(ctx, shown, 0, "unknown scene format '.%s' (expected .obj, .ply, .nff, .aff, .tar, .vdb, .gltf, .glb or another format assimp reads)", ext);
 }
 

@@ -335,11 +335,7 @@ static void gltf_json_bytes(const io_buf *buf, const char **p, const char **end)
 /* Fills s->json from the glTF's JSON (a .gltf file, or a .glb's JSON chunk), and warns of its
  * samplers' unknown values; leaves s->json NULL when the file names neither extension nor samplers
  * or cannot be scanned. */
-static void gltf_json_materials(load_state *s) {
-    io_buf buf;
-    if (!vfs_read(s->ctx, s->path, &buf)) return;
-    const char *p, *end;
-    gltf_json_bytes(&buf, &p, &end);
+static void gltf_json_materials(load_state *s, const char *p, const char *end) {
     /* most files name neither: no scan at all */
     if (mem_has(p, end, "emissiveStrength") || mem_has(p, end, "KHR_texture_transform") || mem_has(p, end, "\"samplers\"")) {
         json_scan j = {p, end, p};
@@ -349,7 +345,6 @@ static void gltf_json_materials(load_state *s) {
             s->json_n = s->json_cap = 0;
         }
     }
-    vfs_buf_free(&buf);
 }
 
 /* The material's texture transform: its base colour texture's KHR_texture_transform (else that of
@@ -855,11 +850,7 @@ static bool gltf_data_uri_ok(io_ctx *ctx, const char *path, int line, const char
  * value of a .gltf (or a .glb's JSON chunk) that is a data URI is checked here first, as assimp
  * will read it (JSON escapes undone): the alphabet, '=' only as the last one or two characters, a
  * length that is a multiple of 4, and the media type's length. */
-static bool gltf_data_uris_ok(io_ctx *ctx, const char *path) {
-    io_buf buf;
-    if (!vfs_read(ctx, path, &buf)) return true; /* assimp says why */
-    const char *p, *end;
-    gltf_json_bytes(&buf, &p, &end);
+static bool gltf_data_uris_ok(io_ctx *ctx, const char *path, const char *p, const char *end) {
     bool ok = true;
     char *scratch = NULL;
     for (const char *at = p; ok && (at = memchr(at, '"', (size_t)(end - at))); at++) {
@@ -885,8 +876,37 @@ static bool gltf_data_uris_ok(io_ctx *ctx, const char *path) {
         at = j.p - 1;
     }
     free(scratch);
-    vfs_buf_free(&buf);
     return ok;
+}
+
+/* The glTF's JSON, read once for the data-URI check before assimp and the material scan after it
+ * (each had read the whole file): a .glb's header and JSON chunk alone, its binary chunk (the bulk
+ * of such a file) left to assimp; anything else whole, through the vfs (a .gltf's data URIs are in
+ * its JSON). [*p, *end) are the JSON's bytes in buf; false when the file cannot be read (assimp then
+ * says why). glb_header_ok has checked the chunk's length against the file's. */
+static bool gltf_json_read(io_ctx *ctx, const char *path, io_buf *buf, const char **p, const char **end) {
+    memset(buf, 0, sizeof *buf);
+    FILE *f = fopen(path, "rb");
+    if (!f) return false;
+    unsigned char h[20];
+    if (fread(h, 1, sizeof h, f) == sizeof h && memcmp(h, "glTF", 4) == 0) {
+        uint32_t len = (uint32_t)h[12] | (uint32_t)h[13] << 8 | (uint32_t)h[14] << 16 | (uint32_t)h[15] << 24;
+        char *d = io_malloc((size_t)len + 1);
+        bool ok = d && fread(d, 1, len, f) == len;
+        fclose(f);
+        if (!ok) {
+            free(d);
+            return false;
+        }
+        d[len] = '\0';
+        *buf = (io_buf){.data = d, .size = len, .owned = true};
+        *p = d, *end = d + len;
+        return true;
+    }
+    fclose(f);
+    if (!vfs_read(ctx, path, buf)) return false;
+    gltf_json_bytes(buf, p, end);
+    return true;
 }
 
 bool assimp_load(io_ctx *ctx, const char *path) {
@@ -904,9 +924,17 @@ bool assimp_load(io_ctx *ctx, const char *path) {
      * more than the rest of the import (Suzanne: 16 ms against 1 ms). */
     unsigned flags = aiProcess_Triangulate | aiProcess_SortByPType | aiProcess_ValidateDataStructure;
     if (!gltf) flags |= aiProcess_JoinIdenticalVertices;
-    if (!glb_header_ok(ctx, path) || (gltf && !gltf_data_uris_ok(ctx, path))) return false;
+    if (!glb_header_ok(ctx, path)) return false;
+    io_buf json = {0};
+    const char *jp = NULL, *jend = NULL;
+    bool have_json = gltf && gltf_json_read(ctx, path, &json, &jp, &jend);
+    if (have_json && !gltf_data_uris_ok(ctx, path, jp, jend)) {
+        vfs_buf_free(&json);
+        return false;
+    }
     const struct aiScene *scene = aiImportFile(path, flags);
     if (!scene) {
+        vfs_buf_free(&json);
         const char *why = aiGetErrorString();
         return io_error(ctx, path, 0, "%s", why && why[0] ? why : "assimp could not read the file");
     }
@@ -914,7 +942,8 @@ bool assimp_load(io_ctx *ctx, const char *path) {
     if ((scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE) || !scene->mRootNode)
         ok = io_error(ctx, path, 0, "the file holds no complete scene (assimp: incomplete)");
     load_state s = {.ctx = ctx, .path = path, .scene = scene, .gltf = gltf};
-    if (ok && gltf) gltf_json_materials(&s);
+    if (ok && have_json) gltf_json_materials(&s, jp, jend);
+    vfs_buf_free(&json);
     if (ok && scene->mNumMaterials) {
         s.materials = io_malloc(scene->mNumMaterials * sizeof *s.materials);
         if (!s.materials) ok = io_error(ctx, path, 0, "out of memory");

@@ -392,6 +392,58 @@ static void test_errors(void) {
         fclose(f);
     }
     expect_fail("huge_json.glb", "binary glTF: its JSON chunk claims 1761869824 bytes, but the file holds");
+    /* a .gltf neither glTF importer opens went to every other importer assimp has: this one to the
+     * OpenGEX importer, which read past its buffer (fuzz_gltf, ASan; the file is
+     * tests/fuzz/crashes/gltf/opengex_fallback_overread); such files are refused first, each case
+     * here one of the rules of gltf_json_valid */
+    write_text("opengex_words.gltf", "geometrynode{a{sset\": {");
+    expect_fail("opengex_words.gltf", "the glTF's JSON is not valid here");
+    static const struct {
+        const char *name, *text, *needle;
+    } bad_json[] = {
+        {"no_asset.gltf", "{\"scenes\":[]}", "no asset.version of 1.x or 2.x"},
+        {"asset_v3.gltf", "{\"asset\":{\"version\":\"3.0\"}}", "no asset.version"},
+        {"asset_num.gltf", "{\"asset\":{\"version\":2}}", "no asset.version"},
+        {"root_array.gltf", "[{\"asset\":{\"version\":\"2.0\"}}]", "no asset.version"},
+        {"bare_word.gltf", "{\"asset\":{\"version\":\"2.0\"},\"x\":GeometryNode}", "not valid here"},
+        {"trailing_comma.gltf", "{\"asset\":{\"version\":\"2.0\"},}", "not valid here"},
+        {"two_roots.gltf", "{\"asset\":{\"version\":\"2.0\"}} {}", "not valid here"},
+        {"lone_surrogate.gltf", "{\"asset\":{\"version\":\"2.0\",\"x\":\"\\udc00\"}}", "not valid here"},
+        {"high_no_low.gltf", "{\"asset\":{\"version\":\"2.0\",\"x\":\"\\ud800x\"}}", "not valid here"},
+        {"bad_escape.gltf", "{\"asset\":{\"version\":\"2.0\",\"x\":\"\\q\"}}", "not valid here"},
+        {"tab_in_string.gltf", "{\"asset\":{\"version\":\"2.0\",\"x\":\"a\tb\"}}", "not valid here"},
+        {"huge_number.gltf", "{\"asset\":{\"version\":\"2.0\"},\"x\":1e400}", "not valid here"},
+        {"leading_zero.gltf", "{\"asset\":{\"version\":\"2.0\"},\"x\":01}", "not valid here"},
+        {"bare_point.gltf", "{\"asset\":{\"version\":\"2.0\"},\"x\":1.}", "not valid here"},
+        {"deep.gltf", "{\"asset\":{\"version\":\"2.0\"},\"x\":"
+                      "[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[["
+                      "]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]}", "not valid here"},
+    };
+    for (size_t i = 0; i < sizeof bad_json / sizeof bad_json[0]; i++) {
+        write_text(bad_json[i].name, bad_json[i].text);
+        expect_fail(bad_json[i].name, bad_json[i].needle);
+    }
+    /* the rules let through what is JSON: escapes, a surrogate pair, exponents, and the bytes after
+     * a NUL (where the importers' in-place parse ends) */
+    write_text("json_ok.gltf", "{\"asset\":{\"version\":\"2.0\",\"generator\":\"a\\\"\\\\\\/\\b\\f\\n\\r\\t\\u00e9\\ud83d\\ude00\"},"
+                               "\"extras\":{\"n\":[-0,0.5,-1.25e-7,3E+2,true,false,null,{}]},\"scenes\":[{\"nodes\":[]}],\"scene\":0}");
+    expect_fail("json_ok.gltf", "(assimp: incomplete)"); /* past the check: assimp reads it, and finds no mesh */
+    /* a .glb of another version or whose first chunk is not JSON: assimp's importer refuses both */
+    write_glb("v1.glb");
+    f = fopen(tmp_path("v1.glb", path, sizeof path), "r+b");
+    if (f) {
+        const unsigned char one[4] = {1, 0, 0, 0};
+        CHECK(fseek(f, 4, SEEK_SET) == 0 && fwrite(one, 1, 4, f) == 4);
+        fclose(f);
+    }
+    expect_fail("v1.glb", "binary glTF version 1: only version 2 is read");
+    write_glb("bin_first.glb");
+    f = fopen(tmp_path("bin_first.glb", path, sizeof path), "r+b");
+    if (f) {
+        CHECK(fseek(f, 16, SEEK_SET) == 0 && fwrite("BIN", 1, 4, f) == 4);
+        fclose(f);
+    }
+    expect_fail("bin_first.glb", "its first chunk is not the JSON chunk");
     /* an image inside the glTF (a data URI) gets the checks a texture file gets: this JPEG made
      * stb_image overflow an int (tests/fuzz/crashes/texture/stb_jpeg_dc_overflow_dqt16) */
     const char *src = getenv("RP_SOURCE_DIR");

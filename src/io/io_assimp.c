@@ -787,6 +787,160 @@ static bool glb_header_ok(io_ctx *ctx, const char *path) {
     if (json > left)
         return io_error(ctx, path, 0, "binary glTF: its JSON chunk claims %" PRIu32 " bytes, but the file holds %" PRIu64 " after the header",
                         json, left);
+    /* assimp's glTF 2 importer refuses any other (gltf_json_valid says what follows a refusal) */
+    uint32_t version = (uint32_t)h[4] | (uint32_t)h[5] << 8 | (uint32_t)h[6] << 16 | (uint32_t)h[7] << 24;
+    if (version != 2) return io_error(ctx, path, 0, "binary glTF version %" PRIu32 ": only version 2 is read", version);
+    if (memcmp(h + 16, "JSON", 4) != 0) return io_error(ctx, path, 0, "binary glTF: its first chunk is not the JSON chunk");
+    return true;
+}
+
+/* ---- the glTF importers must take the file (fuzz_gltf) ----
+ * assimp 5.2 gives a .gltf or .glb that neither of its glTF importers opens (JSON they cannot
+ * parse, no asset.version of 1.x or 2.x) to every other importer, each of which looks for its own
+ * words in it: a 23-byte .gltf holding "geometrynode{" went to the OpenGEX importer, which read past
+ * its buffer (ASan; tests/fuzz/crashes/gltf/opengex_fallback_overread). So a glTF's JSON is checked
+ * first against rules at least as strict as RapidJSON's, which those importers parse with in
+ * place: the bytes up to the first NUL (where an in-place parse ends) hold one value and blanks;
+ * strings without control characters, with only JSON's escapes and \u surrogates in pairs; numbers
+ * in JSON's form and under 1e300 in size; nesting at most 64 deep (RapidJSON recurses without a
+ * limit). Then the value must be an object whose asset.version is a string starting with 1 or 2. */
+static bool jv_value(json_scan *j, int depth);
+
+static bool jv_hex4(const char *p, const char *end, unsigned *cp) {
+    if (end - p < 4) return false;
+    unsigned v = 0;
+    for (int k = 0; k < 4; k++) {
+        char c = p[k], l = (char)(c | 32);
+        unsigned d = c >= '0' && c <= '9' ? (unsigned)(c - '0') : l >= 'a' && l <= 'f' ? (unsigned)(l - 'a' + 10) : 16u;
+        if (d > 15) return false;
+        v = v << 4 | d;
+    }
+    *cp = v;
+    return true;
+}
+
+static bool jv_string(json_scan *j) {
+    j->p++; /* the opening quote */
+    while (j->p < j->end) {
+        unsigned char c = (unsigned char)*j->p;
+        if (c == '"') {
+            j->p++;
+            return true;
+        }
+        if (c < 0x20) return false;
+        if (c != '\\') {
+            j->p++;
+            continue;
+        }
+        if (j->end - j->p < 2) return false;
+        char e = j->p[1];
+        if (e == '"' || e == '\\' || e == '/' || e == 'b' || e == 'f' || e == 'n' || e == 'r' || e == 't') {
+            j->p += 2;
+            continue;
+        }
+        unsigned cp, lo;
+        if (e != 'u' || !jv_hex4(j->p + 2, j->end, &cp) || (cp >= 0xDC00 && cp <= 0xDFFF)) return false;
+        j->p += 6;
+        if (cp >= 0xD800 && cp <= 0xDBFF) { /* a high surrogate: its low one must follow */
+            if (j->end - j->p < 6 || j->p[0] != '\\' || j->p[1] != 'u' || !jv_hex4(j->p + 2, j->end, &lo) || lo < 0xDC00 ||
+                lo > 0xDFFF)
+                return false;
+            j->p += 6;
+        }
+    }
+    return false;
+}
+
+static bool jv_digit(const json_scan *j) { return j->p < j->end && *j->p >= '0' && *j->p <= '9'; }
+
+static bool jv_number(json_scan *j) {
+    if (j->p < j->end && *j->p == '-') j->p++;
+    if (!jv_digit(j)) return false;
+    long digits = 0; /* before the point, leading zero excluded */
+    if (*j->p == '0') j->p++;
+    else
+        while (jv_digit(j)) j->p++, digits++;
+    if (j->p < j->end && *j->p == '.') {
+        j->p++;
+        if (!jv_digit(j)) return false;
+        while (jv_digit(j)) j->p++;
+    }
+    long exp = 0;
+    if (j->p < j->end && (*j->p == 'e' || *j->p == 'E')) {
+        j->p++;
+        bool neg = j->p < j->end && *j->p == '-';
+        if (j->p < j->end && (*j->p == '-' || *j->p == '+')) j->p++;
+        if (!jv_digit(j)) return false;
+        while (jv_digit(j)) {
+            if (exp < 100000) exp = exp * 10 + (*j->p - '0');
+            j->p++;
+        }
+        if (neg) exp = -exp;
+    }
+    return digits < 300 && exp > -300 && exp < 300 && digits + exp < 300;
+}
+
+static bool jv_word(json_scan *j, const char *w) {
+    size_t n = strlen(w);
+    if ((size_t)(j->end - j->p) < n || memcmp(j->p, w, n) != 0) return false;
+    j->p += n;
+    return true;
+}
+
+static bool jv_value(json_scan *j, int depth) {
+    js_blank(j);
+    if (j->p >= j->end || depth > 64) return false;
+    char c = *j->p;
+    if (c == '"') return jv_string(j);
+    if (c == '{' || c == '[') {
+        char close = c == '{' ? '}' : ']';
+        j->p++;
+        if (js_char(j, close)) return true;
+        do {
+            if (close == '}') {
+                js_blank(j);
+                if (j->p >= j->end || *j->p != '"' || !jv_string(j) || !js_char(j, ':')) return false;
+            }
+            if (!jv_value(j, depth + 1)) return false;
+        } while (js_char(j, ','));
+        return js_char(j, close);
+    }
+    if (c == 't') return jv_word(j, "true");
+    if (c == 'f') return jv_word(j, "false");
+    if (c == 'n') return jv_word(j, "null");
+    return jv_number(j);
+}
+
+static bool js_asset_field(json_scan *j, const char *key, size_t n, void *user) {
+    if (!js_key_is(key, n, "version")) return js_skip(j, 0);
+    js_blank(j);
+    const char *v;
+    size_t len;
+    if (j->p < j->end && *j->p == '"') {
+        if (!js_string(j, &v, &len)) return false;
+        *(char *)user = len ? v[0] : '\0';
+        return true;
+    }
+    return js_skip(j, 0);
+}
+
+static bool js_asset_top(json_scan *j, const char *key, size_t n, void *user) {
+    js_blank(j);
+    if (js_key_is(key, n, "asset") && j->p < j->end && *j->p == '{') return js_object(j, js_asset_field, user);
+    return js_skip(j, 0);
+}
+
+static bool gltf_json_valid(io_ctx *ctx, const char *path, const char *p, const char *end) {
+    const char *nul = memchr(p, '\0', (size_t)(end - p));
+    if (nul) end = nul;
+    json_scan j = {p, end, p};
+    if (!jv_value(&j, 0) || (js_blank(&j), j.p != end))
+        return io_error(ctx, path, (int)js_line(&j), "the glTF's JSON is not valid here (at byte %zu of it)", (size_t)(j.p - p));
+    char version = '\0';
+    json_scan k = {p, end, p};
+    js_blank(&k);
+    if (k.p >= end || *k.p != '{' || !js_object(&k, js_asset_top, &version) || (version != '1' && version != '2'))
+        return io_error(ctx, path, 0, "not a glTF assimp reads: no asset.version of 1.x or 2.x");
     return true;
 }
 
@@ -928,7 +1082,7 @@ bool assimp_load(io_ctx *ctx, const char *path) {
     io_buf json = {0};
     const char *jp = NULL, *jend = NULL;
     bool have_json = gltf && gltf_json_read(ctx, path, &json, &jp, &jend);
-    if (have_json && !gltf_data_uris_ok(ctx, path, jp, jend)) {
+    if (have_json && (!gltf_json_valid(ctx, path, jp, jend) || !gltf_data_uris_ok(ctx, path, jp, jend))) {
         vfs_buf_free(&json);
         return false;
     }

@@ -444,6 +444,11 @@ static void test_errors(void) {
         fclose(f);
     }
     expect_fail("bin_first.glb", "its first chunk is not the JSON chunk");
+    /* a directory or FIFO named .gltf: its bytes could not be checked before assimp read them */
+    mkdir(tmp_path("folder.gltf", path, sizeof path), 0755);
+    expect_fail("folder.gltf", "a glTF must be a regular file");
+    remove(tmp_path("pipe.gltf", path, sizeof path));
+    if (mkfifo(path, 0600) == 0) expect_fail("pipe.gltf", "a glTF must be a regular file"); /* refused unopened: no wait for a writer */
     /* an image inside the glTF (a data URI) gets the checks a texture file gets: this JPEG made
      * stb_image overflow an int (tests/fuzz/crashes/texture/stb_jpeg_dc_overflow_dqt16) */
     const char *src = getenv("RP_SOURCE_DIR");

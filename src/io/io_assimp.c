@@ -1037,14 +1037,20 @@ static bool gltf_data_uris_ok(io_ctx *ctx, const char *path, const char *p, cons
  * (each had read the whole file): a .glb's header and JSON chunk alone, its binary chunk (the bulk
  * of such a file) left to assimp; anything else whole, through the vfs (a .gltf's data URIs are in
  * its JSON). [*p, *end) are the JSON's bytes in buf; false when the file cannot be read (assimp then
- * says why). glb_header_ok has checked the chunk's length against the file's. */
+ * says why). */
 static bool gltf_json_read(io_ctx *ctx, const char *path, io_buf *buf, const char **p, const char **end) {
     memset(buf, 0, sizeof *buf);
+    struct stat st;
+    if (stat(path, &st) != 0 || !S_ISREG(st.st_mode)) return false; /* assimp_load refuses those */
     FILE *f = fopen(path, "rb");
     if (!f) return false;
     unsigned char h[20];
     if (fread(h, 1, sizeof h, f) == sizeof h && memcmp(h, "glTF", 4) == 0) {
         uint32_t len = (uint32_t)h[12] | (uint32_t)h[13] << 8 | (uint32_t)h[14] << 16 | (uint32_t)h[15] << 24;
+        if ((uint64_t)len > (uint64_t)st.st_size - sizeof h) { /* glb_header_ok refuses it first */
+            fclose(f);
+            return false;
+        }
         char *d = io_malloc((size_t)len + 1);
         bool ok = d && fread(d, 1, len, f) == len;
         fclose(f);
@@ -1079,6 +1085,9 @@ bool assimp_load(io_ctx *ctx, const char *path) {
     unsigned flags = aiProcess_Triangulate | aiProcess_SortByPType | aiProcess_ValidateDataStructure;
     if (!gltf) flags |= aiProcess_JoinIdenticalVertices;
     if (!glb_header_ok(ctx, path)) return false;
+    struct stat st;
+    if (gltf && stat(path, &st) == 0 && !S_ISREG(st.st_mode)) /* its JSON must be checked before assimp reads it */
+        return io_error(ctx, path, 0, "a glTF must be a regular file (not a directory, FIFO or device)");
     io_buf json = {0};
     const char *jp = NULL, *jend = NULL;
     bool have_json = gltf && gltf_json_read(ctx, path, &json, &jp, &jend);

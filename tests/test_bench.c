@@ -652,7 +652,15 @@ int main(void) {
         cuda_render_case(cli, cornell, "path", "--spp 2 --max-depth 3", true, cs);
         cuda_render_case(cli, cornell, "direct", "", true, cs);
         cuda_render_case(cli, cornell, "ao", "", true, cs);
+        /* eye light of 3 samples a pixel through the stream tracer (it was refused) */
+        cuda_render_case(cli, cornell, "eyelight", "--spp 3", true, cs);
+        cuda_render_case(cli, cornell, "eyelight", "--spp 3", false, cs);
     }
+    /* eye light through a medium: composited as the CPU does (the GPU's batch had shaded the bare
+     * surfaces behind the cloud, a different image) */
+    char cloud_buf[1024];
+    const char *cloud = rp_test_scene("volume_wdas_cloud/wdas_cloud_sixteenth.vdb", cloud_buf, sizeof cloud_buf);
+    if (cloud) cuda_render_case(cli, cloud, "eyelight", "", true, small ? 16 : 32);
     /* cut-out surfaces: the GPU's hits passed on the CPU by alpha.c's fix-up (stream tracer, eye
      * light too), the CPU's image byte for byte */
     char cut[1024];

@@ -99,6 +99,18 @@ static void check_view(rp_render_scene *rs, const grid *g, const char *name, con
                st2.passes == st2.traversal_passes + st2.intersection_passes + st2.other_passes &&
                (st2.slots == 0 || st2.simd_efficiency == 1.0),
            "%s: wavefront: %zu values differ, efficiency %.3f", name, diff, st2.simd_efficiency);
+    /* eye light of 3 samples from sample 1 (the renderer's desc: spp, sample_start), a stream each:
+     * rp_render's image value for value (the stream engine had traced the pixel centres alone) */
+    rp_render_desc rd3 = {.width = w, .height = h, .integrator = RP_INTEGRATOR_EYELIGHT, .camera = cam, .spp = 3,
+                          .sample_start = 1};
+    stream_desc sd3 = sd;
+    sd3.render = &rd3;
+    CHECK(rp_render(rs, &rd3, ref, NULL));
+    CHECK(stream_render(rs, g, &sd3, px, NULL, &st2, err, sizeof err));
+    diff = 0;
+    for (size_t i = 0; i < n * 3; i++) diff += !same_f(px[i], ref[i]);
+    CHECKF(diff == 0 && st2.eye_rays == 3 * n, "%s: eye light, 3 samples: %zu of %zu values differ from rp_render's",
+           name, diff, n * 3);
     /* shadow shading: a second stream of any-hit rays; every pixel written, a miss black (the
      * buffer was left as it came, garbage from malloc) */
     sd.shading = STREAM_SHADE_SHADOW;

@@ -106,10 +106,6 @@ int cli_cuda_render(int argc, char **argv) {
                 CMD, setup.integrator_name);
         return CLI_EXIT_USAGE;
     }
-    if (eyelight && setup.spp > 1) {
-        fprintf(stderr, "raypack %s: --engine cuda renders eye light at 1 spp\n", CMD);
-        return CLI_EXIT_USAGE;
-    }
     setup.scene_desc.flatten_animation = true; /* the GPU traces one level of triangles */
     rp_scene_data data;
     if (!cli_render_load(CMD, &setup, &data)) return CLI_EXIT_FAILURE;
@@ -141,8 +137,10 @@ int cli_cuda_render(int argc, char **argv) {
     }
     double t0 = cli_now_ms();
     stream_stats st = {0};
-    /* cut-out surfaces: the stream tracer, which passes them on the CPU (alpha.c), eye light too */
-    if (!(eyelight && !cli_has_cutouts(&data) ? render_eyelight(tracer, &cam, w, h, pixels)
+    /* cut-out surfaces: the stream tracer, which passes them on the CPU (alpha.c); eye light too, and
+     * eye light of more than one sample a pixel (the stream's eyelight_samples) or through a medium
+     * (composited there; the batch below shaded the bare surfaces: a different image) */
+    if (!(eyelight && !cli_has_cutouts(&data) && setup.spp <= 1 && !data.volume ? render_eyelight(tracer, &cam, w, h, pixels)
                    : render_stream(scene, &setup, tracer, &cam, w, h, pixels, &st)))
         goto done;
     double frame_ms = cli_now_ms() - t0;

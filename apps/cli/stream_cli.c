@@ -196,7 +196,16 @@ static int parse(const char *cmd, int argc, char **argv, stream_opts *o, bool be
     const int *in[3] = {&o->max_depth, &o->reflect_depth, &o->refract_depth};
     int *out[3] = {&o->rd.max_depth, &o->rd.reflect_depth, &o->rd.refract_depth};
     for (int k = 0; k < 3; k++) *out[k] = *in[k] < 0 ? 0 : (*in[k] == 0 ? -1 : *in[k]);
-    if (o->has_render) o->sd.render = &o->rd;
+    if (o->has_render) {
+        o->sd.render = &o->rd;
+    } else if (o->rd.spp > 1) { /* eye light's samples come with the renderer's desc */
+        if (o->sd.shading == STREAM_SHADE_SHADOW) {
+            fprintf(stderr, "raypack %s: --shading shadow traces one sample a pixel, not --spp %d\n", cmd, o->rd.spp);
+            return CLI_EXIT_USAGE;
+        }
+        o->rd.integrator = RP_INTEGRATOR_EYELIGHT;
+        o->sd.render = &o->rd;
+    }
     return CLI_EXIT_OK;
 }
 
@@ -326,6 +335,7 @@ int cli_stream_render(int argc, char **argv) {
     }
     if (!o.quiet) {
         static const char *names[] = {[RP_INTEGRATOR_WHITTED] = "whitted", [RP_INTEGRATOR_PATH] = "path",
+                                      [RP_INTEGRATOR_EYELIGHT] = "eyelight",
                                       [RP_INTEGRATOR_DIRECT] = "direct", [RP_INTEGRATOR_AO] = "ao"};
         if (o.sd.render)
             printf("image    %s: %dx%d, stream engine, %s integrator, %d spp\n", o.output, l.w, l.h,

@@ -833,6 +833,68 @@ oom:
     return ok;
 }
 
+/* Kernel: eye-ray generation, the renderer's camera at sample `sample`'s offsets (render_sample_offset:
+ * sample 0 the pixel centres). */
+static void eye_rays(const render_camera *rc, int width, size_t n, int sample, ray_stream *eye) {
+    for (size_t i = 0; i < n; i++) {
+        int x = (int)(i % (size_t)width), y = (int)(i / (size_t)width);
+        float ox, oy;
+        render_sample_offset(x, y, sample, &ox, &oy);
+        camera_ray(rc, (float)x + ox, (float)y + oy, &eye->ray[i]);
+    }
+}
+
+/* Eye light's colour of a traced eye ray, composited with the medium as the tile renderer does. */
+static v3 eyelight_color(rp_render_scene *rs, const rp_rayhit *rh) {
+    float c = eyelight(rh);
+    v3 col = v3_make(c, c, c);
+    if (rs->medium) {
+        render_frame ef = {.s = rs};
+        ef.desc.integrator = RP_INTEGRATOR_EYELIGHT;
+        col = volume_composite_opacity(&ef, volume_primary_opacity(&ef, &rh->ray), col);
+    }
+    return col;
+}
+
+/* Eye light of more than one sample a pixel, or from a sample past 0 (the renderer's desc: spp,
+ * sample_start): samples [first, first + spp) traced as a stream each, summed from 0 in order and
+ * scaled by 1 / spp, the tile renderer's arithmetic, so the image equals rp_render's bit for bit.
+ * hits (when not NULL) get the first sample's. */
+static bool eyelight_samples(rp_render_scene *rs, const grid *g, const stream_desc *d, const render_camera *rc, int first,
+                             int spp, float *pixels, rp_rayhit *hits, stream_stats *st, char *err, size_t err_size) {
+    size_t n = (size_t)d->width * (size_t)d->height;
+    memset(pixels, 0, n * 3 * sizeof(float));
+    for (int s = 0; s < spp; s++) {
+        ray_stream eye;
+        if (!stream_alloc(&eye, n, false, !d->trace)) {
+            snprintf(err, err_size, "stream: out of memory for %zu rays", n);
+            return false;
+        }
+        eye_rays(rc, d->width, n, first + s, &eye);
+        st->other_passes++;
+        if (!trace_rays(rs, g, d, &eye, 0, n, RP_RAY_PRIMARY, st, err, err_size)) {
+            stream_free(&eye);
+            return false;
+        }
+        st->eye_rays += n;
+        for (size_t i = 0; i < n; i++) {
+            rp_rayhit rh;
+            hit_of(g, &eye, i, &rh);
+            if (hits && s == 0) hits[i] = rh;
+            bool hit = rh.hit.geom_id != RP_INVALID_ID;
+            st->eye_hits += hit, st->shades += hit;
+            v3 col = eyelight_color(rs, &rh);
+            pixels[3 * i + 0] += col.x, pixels[3 * i + 1] += col.y, pixels[3 * i + 2] += col.z;
+        }
+        st->other_passes++;
+        stream_free(&eye);
+    }
+    float inv = 1.0f / (float)spp;
+    if (spp > 1)
+        for (size_t i = 0; i < 3 * n; i++) pixels[i] *= inv;
+    return true;
+}
+
 bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_in, float *pixels, rp_rayhit *hits,
                    stream_stats *stats, char *err, size_t err_size) {
     double t0 = sys_seconds();
@@ -853,16 +915,22 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
         if (!render_integrator(rs, g, &d, pixels, &st, err, err_size)) return false;
         goto done;
     }
+    render_camera rc;
+    camera_setup(&cam, d.width, d.height, &rc);
+    bool shadows = d.shading == STREAM_SHADE_SHADOW;
+    /* eye light through the renderer's desc: its samples (spp, sample_start) */
+    int spp = d.render && d.render->spp > 1 ? d.render->spp : 1;
+    int first = d.render && d.render->sample_start > 0 ? d.render->sample_start : 0;
+    if (!shadows && (spp > 1 || first > 0)) {
+        if (!eyelight_samples(rs, g, &d, &rc, first, spp, pixels, hits, &st, err, err_size)) return false;
+        goto done;
+    }
     ray_stream eye;
     if (!stream_alloc(&eye, n, false, !d.trace)) {
         snprintf(err, err_size, "stream: out of memory for %zu rays", n);
         return false;
     }
-    /* Kernel: eye-ray generation, the renderer's camera (pixel centres) */
-    render_camera rc;
-    camera_setup(&cam, d.width, d.height, &rc);
-    for (size_t i = 0; i < n; i++)
-        camera_ray(&rc, (float)(i % (size_t)d.width) + 0.5f, (float)(i / (size_t)d.width) + 0.5f, &eye.ray[i]);
+    eye_rays(&rc, d.width, n, 0, &eye); /* the pixel centres */
     st.other_passes++;
     if (!trace_rays(rs, g, &d, &eye, 0, n, RP_RAY_PRIMARY, &st, err, err_size)) {
         stream_free(&eye);
@@ -872,7 +940,6 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
 
     /* Kernel: shading (one pass); with shadows it emits the shadow stream */
     ray_stream shadow = {0};
-    bool shadows = d.shading == STREAM_SHADE_SHADOW;
     v3 light = rc.eye;
     if (shadows && rs->light_count > 0 && rs->lights[0].type == RP_LIGHT_SOURCE_POINT)
         light = v3_load(rs->lights[0].point.position);
@@ -894,14 +961,8 @@ bool stream_render(rp_render_scene *rs, const grid *g, const stream_desc *desc_i
         bool hit = rh.hit.geom_id != RP_INVALID_ID;
         st.eye_hits += hit, st.shades += hit;
         eye.state[i] = RAY_DONE;
-        if (!shadows) {
-            float c = eyelight(&rh);
-            v3 col = v3_make(c, c, c);
-            if (rs->medium) { /* composited as the tile renderer's eye light does */
-                render_frame ef = {.s = rs};
-                ef.desc.integrator = RP_INTEGRATOR_EYELIGHT;
-                col = volume_composite_opacity(&ef, volume_primary_opacity(&ef, &rh.ray), col);
-            }
+        if (!shadows) { /* composited as the tile renderer's eye light does */
+            v3 col = eyelight_color(rs, &rh);
             pixels[3 * i + 0] = col.x, pixels[3 * i + 1] = col.y, pixels[3 * i + 2] = col.z;
             continue;
         }

@@ -804,7 +804,9 @@ static bool glb_header_ok(io_ctx *ctx, const char *path) {
  * strings without control characters, with only JSON's escapes and \u surrogates in pairs; numbers
  * in JSON's form and under 1e300 in size; nesting at most 64 deep (RapidJSON recurses without a
  * limit). Then the value must be an object whose asset.version is a string starting with 1 or 2. */
-static bool jv_value(json_scan *j, int depth);
+/* Where a value lies, for asset.version: the root, the root's "asset", its "version", elsewhere. */
+typedef enum { JV_ROOT, JV_ASSET, JV_VERSION, JV_OTHER } jv_at;
+static bool jv_value(json_scan *j, int depth, jv_at at, char *version);
 
 static bool jv_hex4(const char *p, const char *end, unsigned *cp) {
     if (end - p < 4) return false;
@@ -887,21 +889,34 @@ static bool jv_word(json_scan *j, const char *w) {
     return true;
 }
 
-static bool jv_value(json_scan *j, int depth) {
+/* One value at j->p, checked, with the first character of asset.version's string put in *version
+ * on the way (at: where this value lies). */
+static bool jv_value(json_scan *j, int depth, jv_at at, char *version) {
     js_blank(j);
     if (j->p >= j->end || depth > 64) return false;
     char c = *j->p;
-    if (c == '"') return jv_string(j);
+    if (c == '"') {
+        const char *s = j->p + 1;
+        if (!jv_string(j)) return false;
+        if (at == JV_VERSION) *version = s < j->p - 1 ? *s : '\0';
+        return true;
+    }
     if (c == '{' || c == '[') {
         char close = c == '{' ? '}' : ']';
         j->p++;
         if (js_char(j, close)) return true;
         do {
+            jv_at next = JV_OTHER;
             if (close == '}') {
                 js_blank(j);
-                if (j->p >= j->end || *j->p != '"' || !jv_string(j) || !js_char(j, ':')) return false;
+                const char *key = j->p + 1;
+                if (j->p >= j->end || *j->p != '"' || !jv_string(j)) return false;
+                size_t n = (size_t)(j->p - 1 - key); /* up to the closing quote */
+                if (!js_char(j, ':')) return false;
+                if (at == JV_ROOT && js_key_is(key, n, "asset")) next = JV_ASSET;
+                else if (at == JV_ASSET && js_key_is(key, n, "version")) next = JV_VERSION;
             }
-            if (!jv_value(j, depth + 1)) return false;
+            if (!jv_value(j, depth + 1, next, version)) return false;
         } while (js_char(j, ','));
         return js_char(j, close);
     }
@@ -911,35 +926,14 @@ static bool jv_value(json_scan *j, int depth) {
     return jv_number(j);
 }
 
-static bool js_asset_field(json_scan *j, const char *key, size_t n, void *user) {
-    if (!js_key_is(key, n, "version")) return js_skip(j, 0);
-    js_blank(j);
-    const char *v;
-    size_t len;
-    if (j->p < j->end && *j->p == '"') {
-        if (!js_string(j, &v, &len)) return false;
-        *(char *)user = len ? v[0] : '\0';
-        return true;
-    }
-    return js_skip(j, 0);
-}
-
-static bool js_asset_top(json_scan *j, const char *key, size_t n, void *user) {
-    js_blank(j);
-    if (js_key_is(key, n, "asset") && j->p < j->end && *j->p == '{') return js_object(j, js_asset_field, user);
-    return js_skip(j, 0);
-}
-
 static bool gltf_json_valid(io_ctx *ctx, const char *path, const char *p, const char *end) {
     const char *nul = memchr(p, '\0', (size_t)(end - p));
     if (nul) end = nul;
     json_scan j = {p, end, p};
-    if (!jv_value(&j, 0) || (js_blank(&j), j.p != end))
-        return io_error(ctx, path, (int)js_line(&j), "the glTF's JSON is not valid here (at byte %zu of it)", (size_t)(j.p - p));
     char version = '\0';
-    json_scan k = {p, end, p};
-    js_blank(&k);
-    if (k.p >= end || *k.p != '{' || !js_object(&k, js_asset_top, &version) || (version != '1' && version != '2'))
+    if (!jv_value(&j, 0, JV_ROOT, &version) || (js_blank(&j), j.p != end))
+        return io_error(ctx, path, (int)js_line(&j), "the glTF's JSON is not valid here (at byte %zu of it)", (size_t)(j.p - p));
+    if (version != '1' && version != '2') /* a root that is no object never sets it */
         return io_error(ctx, path, 0, "not a glTF assimp reads: no asset.version of 1.x or 2.x");
     return true;
 }
@@ -1038,16 +1032,15 @@ static bool gltf_data_uris_ok(io_ctx *ctx, const char *path, const char *p, cons
  * of such a file) left to assimp; anything else whole, through the vfs (a .gltf's data URIs are in
  * its JSON). [*p, *end) are the JSON's bytes in buf; false when the file cannot be read (assimp then
  * says why). */
-static bool gltf_json_read(io_ctx *ctx, const char *path, io_buf *buf, const char **p, const char **end) {
+static bool gltf_json_read(io_ctx *ctx, const char *path, uint64_t size, io_buf *buf, const char **p,
+                           const char **end) {
     memset(buf, 0, sizeof *buf);
-    struct stat st;
-    if (stat(path, &st) != 0 || !S_ISREG(st.st_mode)) return false; /* assimp_load refuses those */
     FILE *f = fopen(path, "rb");
     if (!f) return false;
     unsigned char h[20];
     if (fread(h, 1, sizeof h, f) == sizeof h && memcmp(h, "glTF", 4) == 0) {
         uint32_t len = (uint32_t)h[12] | (uint32_t)h[13] << 8 | (uint32_t)h[14] << 16 | (uint32_t)h[15] << 24;
-        if ((uint64_t)len > (uint64_t)st.st_size - sizeof h) { /* glb_header_ok refuses it first */
+        if ((uint64_t)len > size - sizeof h) { /* glb_header_ok refuses it first */
             fclose(f);
             return false;
         }
@@ -1086,11 +1079,12 @@ bool assimp_load(io_ctx *ctx, const char *path) {
     if (!gltf) flags |= aiProcess_JoinIdenticalVertices;
     if (!glb_header_ok(ctx, path)) return false;
     struct stat st;
-    if (gltf && stat(path, &st) == 0 && !S_ISREG(st.st_mode)) /* its JSON must be checked before assimp reads it */
+    bool found = stat(path, &st) == 0;
+    if (gltf && found && !S_ISREG(st.st_mode)) /* its JSON must be checked before assimp reads it */
         return io_error(ctx, path, 0, "a glTF must be a regular file (not a directory, FIFO or device)");
     io_buf json = {0};
     const char *jp = NULL, *jend = NULL;
-    bool have_json = gltf && gltf_json_read(ctx, path, &json, &jp, &jend);
+    bool have_json = gltf && found && gltf_json_read(ctx, path, (uint64_t)st.st_size, &json, &jp, &jend);
     if (have_json && (!gltf_json_valid(ctx, path, jp, jend) || !gltf_data_uris_ok(ctx, path, jp, jend))) {
         vfs_buf_free(&json);
         return false;

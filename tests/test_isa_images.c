@@ -62,6 +62,11 @@ int main(void) {
     int nk = 0;
     kinds[nk++] = (frame_kind){"whitted", {.integrator = RP_INTEGRATOR_WHITTED}};
     kinds[nk++] = (frame_kind){"eyelight", {.integrator = RP_INTEGRATOR_EYELIGHT}};
+    /* jittered samples: the baseline copy of the packets' loops (scalar and SSE devices) against
+     * the AVX2 copy (render.h, RENDER_X86_AVX2) */
+    kinds[nk++] = (frame_kind){"eyelight 3 spp from sample 2",
+                               {.integrator = RP_INTEGRATOR_EYELIGHT, .spp = 3, .sample_start = 2}};
+    kinds[nk++] = (frame_kind){"whitted 2 spp", {.integrator = RP_INTEGRATOR_WHITTED, .spp = 2}};
     kinds[nk++] = (frame_kind){"direct", {.integrator = RP_INTEGRATOR_DIRECT, .spp = 2}};
     kinds[nk++] = (frame_kind){"path", {.integrator = RP_INTEGRATOR_PATH, .spp = 2}};
     kinds[nk++] = (frame_kind){"ao", {.integrator = RP_INTEGRATOR_AO, .spp = 2}};

@@ -55,11 +55,30 @@ void rp_render_primary_rays(const rp_camera *camera, int width, int height, rp_r
             camera_ray(&c, (float)x + 0.5f, (float)y + 0.5f, &out[(size_t)y * (size_t)width + (size_t)x]);
 }
 
-void camera_rays_n(const render_camera *c, int bx, int by, int s, uint32_t count, const uint8_t *li,
-                   const uint8_t *lj, rp_rayhit_n *p) {
+/* camera_rays_n's work, inlined into a baseline and an AVX2 copy of it (below): the per-lane loops
+ * vectorise 8 wide with AVX2 (its 32-bit multiplies hash the sample offsets), and no FMA is enabled,
+ * so both copies make the same IEEE operations in the same order and give the same rays. */
+RENDER_INLINE void camera_rays_body(const render_camera *c, int bx, int by, int s, uint32_t count, const uint8_t *li,
+                                const uint8_t *lj, rp_rayhit_n *p) {
     float ox[RENDER_LANES_MAX], oy[RENDER_LANES_MAX];
-    for (uint32_t q = 0; q < count; q++) ox[q] = oy[q] = 0.5f; /* render_sample_offset of sample 0 */
-    for (uint32_t q = 0; s && q < count; q++) render_sample_offset(bx + li[q], by + lj[q], s, &ox[q], &oy[q]);
+    if (s == 0) {
+        for (uint32_t q = 0; q < count; q++) ox[q] = oy[q] = 0.5f; /* render_sample_offset of sample 0 */
+    } else {
+        /* render_sample_offset's render_random(x, y, s, d) = hash(x ^ hash(y ^ hash(s ^ hash(d + k)))):
+         * the inner part once per row of the block (lj < 32), the outer per lane */
+        uint32_t k0 = render_hash((uint32_t)s ^ render_hash(0u + 0x9e3779b9u));
+        uint32_t k1 = render_hash((uint32_t)s ^ render_hash(1u + 0x9e3779b9u));
+        uint32_t row0[32], row1[32];
+        for (uint32_t j = 0; j < 32; j++) {
+            row0[j] = render_hash((uint32_t)(by + (int)j) ^ k0);
+            row1[j] = render_hash((uint32_t)(by + (int)j) ^ k1);
+        }
+        for (uint32_t q = 0; q < count; q++) {
+            uint32_t x = (uint32_t)(bx + li[q]);
+            ox[q] = (float)(render_hash(x ^ row0[lj[q] & 31u]) >> 8) * (1.0f / 16777216.0f);
+            oy[q] = (float)(render_hash(x ^ row1[lj[q] & 31u]) >> 8) * (1.0f / 16777216.0f);
+        }
+    }
     /* camera_ray's operations in its order, lane by lane, so that the loop vectorises (CMakeLists.txt
      * compiles this file without errno and FP traps for that) and every ray is camera_ray's */
     const float fx = c->f.x, fy = c->f.y, fz = c->f.z, rx = c->r.x, ry = c->r.y, rz = c->r.z;
@@ -87,6 +106,31 @@ void camera_rays_n(const render_camera *c, int bx, int by, int s, uint32_t count
     for (uint32_t q = 0; q < count; q++) tn[q] = 0.0f;
     for (uint32_t q = 0; q < count; q++) tf[q] = INFINITY;
     for (uint32_t q = 0; q < count; q++) g[q] = pr[q] = in[q] = RP_INVALID_ID;
+}
+
+static void camera_rays_base(const render_camera *c, int bx, int by, int s, uint32_t count, const uint8_t *li,
+                             const uint8_t *lj, rp_rayhit_n *p) {
+    camera_rays_body(c, bx, by, s, count, li, lj, p);
+}
+
+#if RENDER_X86_AVX2
+__attribute__((target("avx2"))) static void camera_rays_avx2(const render_camera *c, int bx, int by, int s,
+                                                             uint32_t count, const uint8_t *li, const uint8_t *lj,
+                                                             rp_rayhit_n *p) {
+    camera_rays_body(c, bx, by, s, count, li, lj, p);
+}
+#endif
+
+void camera_rays_n(const render_camera *c, int bx, int by, int s, uint32_t count, const uint8_t *li,
+                   const uint8_t *lj, bool avx2, rp_rayhit_n *p) {
+#if RENDER_X86_AVX2
+    if (avx2) {
+        camera_rays_avx2(c, bx, by, s, count, li, lj, p);
+        return;
+    }
+#endif
+    (void)avx2;
+    camera_rays_base(c, bx, by, s, count, li, lj, p);
 }
 
 /* Score of a view: primary hits on front faces minus hits on back faces, on a coarse grid, and the

@@ -242,12 +242,25 @@ static inline void render_ray_init(rp_ray *r, v3 org, v3 dir, float tfar) {
 }
 
 void camera_ray(const render_camera *c, float x, float y, rp_ray *ray);
+/* The per-lane loops of primary rays and eye light are compiled twice, for the baseline and for
+ * AVX2 (GCC's and Clang's target attribute), the copy picked per frame (render_frame.avx2). AVX2
+ * without FMA: no multiply-add is contracted, so both copies make the same IEEE operations in the
+ * same order and give the same values; AVX2's 8 lanes and 32-bit multiplies (the sample offsets'
+ * hashes) are what they gain. */
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define RENDER_X86_AVX2 1
+#else
+#define RENDER_X86_AVX2 0
+#endif
+#define RENDER_INLINE static inline __attribute__((always_inline))
+
 /* Lanes of the largest packet (32 x 32). */
 #define RENDER_LANES_MAX 1024
 /* camera_ray's rays of sample s into the first count lanes of packet p, lane q the one of pixel
- * (bx + li[q], by + lj[q]) (tnear 0, tfar inf, no hit yet). */
+ * (bx + li[q], by + lj[q]) (tnear 0, tfar inf, no hit yet); avx2: by the AVX2 copy of its loops
+ * (render_frame.avx2), the same rays. */
 void camera_rays_n(const render_camera *c, int bx, int by, int s, uint32_t count, const uint8_t *li,
-                   const uint8_t *lj, rp_rayhit_n *p);
+                   const uint8_t *lj, bool avx2, rp_rayhit_n *p);
 /* A camera framing the bounds of a committed scene (camera.c). */
 rp_camera camera_frame_bounds(const rp_render_scene *scene, const rp_bounds *b);
 
@@ -513,7 +526,10 @@ typedef struct render_frame {
                                 * margin of its filter's radius around it */
     uint32_t tile;             /* tile side in pixels (a multiple of the packet side) */
     uint8_t lane_i[RENDER_LANES_MAX], lane_j[RENDER_LANES_MAX]; /* pixel (i, j) of lane q of an n x n packet */
+    uint16_t lane_of[RENDER_LANES_MAX];                          /* the lane of pixel (i, j): lane_of[j n + i] */
     bool packets;              /* Whitted in n x n packets */
+    bool avx2;                 /* the AVX2 copies of the per-lane loops (RENDER_X86_AVX2): the CPU has
+                                * AVX2 and the device's kernels are 8 or 16 wide (not --isa sse/scalar) */
     rp_traversal traversal[RP_RAY_KIND_COUNT];
     render_thread *threads;
     struct pbr_frame *pbr;     /* per-frame state of the physically based integrators */

@@ -278,11 +278,15 @@ bool rp_render(rp_render_scene *scene, const rp_render_desc *desc, float *pixels
     f->s = scene;
     f->desc = dd;
     f->packets = packets;
+#if RENDER_X86_AVX2
+    f->avx2 = rp_device_isa(scene->device) >= 8 && __builtin_cpu_supports("avx2");
+#endif
     for (uint32_t n = (uint32_t)(dd.packet > 0 ? dd.packet : 4), j = 0; j < n; j++)
         for (uint32_t i = 0; i < n; i++) {
             uint32_t q = rp_packet_n_index(n, i, j);
             f->lane_i[q] = (uint8_t)i;
             f->lane_j[q] = (uint8_t)j;
+            f->lane_of[j * n + i] = (uint16_t)q;
         }
     choose_traversal(&dd, f->traversal);
     f->channels = rp_render_channels(&f->desc);

@@ -41,20 +41,12 @@ v3 eyelight_shade(const rp_rayhit *rh) {
 
 float rp_render_eyelight(const rp_rayhit *rayhit) { return eyelight_shade(rayhit).x; }
 
-bool eyelight_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
-                    int s) {
-    const rp_render_desc *d = &f->desc;
-    uint32_t n = (uint32_t)d->packet;
-    whitted_level *lv = whitted_packet_level(f, th, 0);
-    if (!lv) return false;
-    uint64_t live = whitted_primary_rays(f, lv, bx, by, x0, y0, tw, tile_h, s);
-    lv->rh.valid = lv->valid;
-    rp_query_n_desc qd = whitted_packet_query(f, th, lv, RP_RAY_PRIMARY);
-    alpha_intersect_n(f->s, &qd, &lv->rh);
-    th->rays[RP_RAY_PRIMARY] += live;
-    const rp_rayhit_n *p = &lv->rh;
-    /* Lane by lane in the packet's order (vectorised: CMakeLists.txt compiles this file without
-     * errno and FP traps), then into the tile's pixels. */
+/* The eye light of a traced block into the tile's accumulator: the shading lane by lane in the
+ * packet's order (vectorised: CMakeLists.txt compiles this file without errno and FP traps), then
+ * the block's pixels row by row, each from its lane (render_frame.lane_of). */
+RENDER_INLINE void eyelight_store_body(const render_frame *f, render_thread *th, const rp_rayhit_n *p, int bx,
+                                       int by, int x0, int y0, int tw, int tile_h) {
+    uint32_t n = (uint32_t)f->desc.packet;
     float c[RENDER_LANES_MAX];
     const float *restrict nx = p->Ng_x, *restrict ny = p->Ng_y, *restrict nz = p->Ng_z;
     const float *restrict dx = p->dir_x, *restrict dy = p->dir_y, *restrict dz = p->dir_z;
@@ -63,12 +55,49 @@ bool eyelight_block(const render_frame *f, render_thread *th, int bx, int by, in
         float v = eyelight_cos(nx[q], ny[q], nz[q], dx[q], dy[q], dz[q]);
         c[q] = g[q] == RP_INVALID_ID ? 0.0f : v;
     }
-    for (uint32_t q = 0; q < n * n; q++) {
-        if (!lv->valid[q]) continue;
-        float *a = th->accum + 3 * ((by + f->lane_j[q] - y0) * tw + (bx + f->lane_i[q] - x0));
-        a[0] += c[q];
-        a[1] += c[q];
-        a[2] += c[q];
+    /* the live lanes (whitted_primary_rays): pixels inside the tile */
+    int xe = x0 + tw - bx, ye = y0 + tile_h - by;
+    uint32_t ni = xe < (int)n ? (uint32_t)xe : n, nj = ye < (int)n ? (uint32_t)ye : n;
+    for (uint32_t j = 0; j < nj; j++) {
+        float *restrict a = th->accum + 3 * ((by + (int)j - y0) * tw + (bx - x0));
+        const uint16_t *lane = f->lane_of + j * n;
+        for (uint32_t i = 0; i < ni; i++) {
+            float v = c[lane[i]];
+            a[3 * i + 0] += v;
+            a[3 * i + 1] += v;
+            a[3 * i + 2] += v;
+        }
     }
+}
+
+static void eyelight_store_base(const render_frame *f, render_thread *th, const rp_rayhit_n *p, int bx, int by,
+                                int x0, int y0, int tw, int tile_h) {
+    eyelight_store_body(f, th, p, bx, by, x0, y0, tw, tile_h);
+}
+
+#if RENDER_X86_AVX2
+__attribute__((target("avx2"))) static void eyelight_store_avx2(const render_frame *f, render_thread *th,
+                                                                const rp_rayhit_n *p, int bx, int by, int x0,
+                                                                int y0, int tw, int tile_h) {
+    eyelight_store_body(f, th, p, bx, by, x0, y0, tw, tile_h);
+}
+#endif
+
+bool eyelight_block(const render_frame *f, render_thread *th, int bx, int by, int x0, int y0, int tw, int tile_h,
+                    int s) {
+    whitted_level *lv = whitted_packet_level(f, th, 0);
+    if (!lv) return false;
+    uint64_t live = whitted_primary_rays(f, lv, bx, by, x0, y0, tw, tile_h, s);
+    lv->rh.valid = lv->valid;
+    rp_query_n_desc qd = whitted_packet_query(f, th, lv, RP_RAY_PRIMARY);
+    alpha_intersect_n(f->s, &qd, &lv->rh);
+    th->rays[RP_RAY_PRIMARY] += live;
+#if RENDER_X86_AVX2
+    if (f->avx2) {
+        eyelight_store_avx2(f, th, &lv->rh, bx, by, x0, y0, tw, tile_h);
+        return true;
+    }
+#endif
+    eyelight_store_base(f, th, &lv->rh, bx, by, x0, y0, tw, tile_h);
     return true;
 }

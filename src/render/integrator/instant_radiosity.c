@@ -233,7 +233,7 @@ typedef struct ir_lanes {
     uint16_t li[64];         /* the lane's pixel in the tile (ly T + lx) */
 } ir_lanes;
 
-static inline void lanes_to_vpl_(uint32_t n, const ir_lanes *restrict L, const ir_vpl *v, float clamp_d2,
+RENDER_INLINE void lanes_to_vpl_(uint32_t n, const ir_lanes *restrict L, const ir_vpl *v, float clamp_d2,
                                   const bool omni, float *restrict dx_out, float *restrict dy_out,
                                   float *restrict dz_out, float *restrict tf_out, float *restrict cr,
                                   float *restrict cg, float *restrict cb, int32_t *restrict live) {
@@ -261,7 +261,7 @@ static inline void lanes_to_vpl_(uint32_t n, const ir_lanes *restrict L, const i
 /* vpl_contrib for n lanes of Lambert points and a finite VPL at once, the same arithmetic in the
  * same order (so the same bits), in the compiler's vectors: each lane's shadow ray (direction,
  * tfar) and contribution go into row k of the chunk, and live says whether it has one. */
-static void lanes_to_vpl(uint32_t n, const ir_lanes *L, const ir_vpl *v, float clamp_d2, ir_chunk *c, int k) {
+RENDER_INLINE void lanes_to_vpl(uint32_t n, const ir_lanes *L, const ir_vpl *v, float clamp_d2, ir_chunk *c, int k) {
     if (v3_is_zero(v->n))
         lanes_to_vpl_(n, L, v, clamp_d2, true, c->dx[k], c->dy[k], c->dz[k], c->tf[k], c->cr[k], c->cg[k], c->cb[k],
                       c->live[k]);
@@ -280,7 +280,7 @@ static inline float ir_lum(float r, float g, float b) { return 0.2126f * r + 0.7
  * it is dropped. The
  * threshold depends on the point and the VPLs only, never on visibility, so the expectation of each
  * contribution is what it was: the estimate stays unbiased and gains noise. */
-static void ir_roulette(ir_chunk *c, const ir_lanes *L, uint32_t Q, int nv, int v0, float rr) {
+RENDER_INLINE void ir_roulette(ir_chunk *c, const ir_lanes *L, uint32_t Q, int nv, int v0, float rr) {
     float thr[64];
     for (uint32_t q = 0; q < Q; q++) thr[q] = 0.0f;
     for (int k = 0; k < nv; k++)
@@ -304,7 +304,7 @@ static void ir_roulette(ir_chunk *c, const ir_lanes *L, uint32_t Q, int nv, int 
     }
 }
 
-bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1) {
+RENDER_INLINE bool ir_tile_body(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1) {
     pbr_thread *pt = th->pbr;
     pbr_frame *pf = f->pbr;
     const rp_render_scene *s = f->s;
@@ -597,6 +597,26 @@ bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, i
                                   a.z > 0.0f ? sum.z / a.z : sum.z);
         }
     return true;
+}
+
+static bool ir_tile_base(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1) {
+    return ir_tile_body(f, th, x0, y0, x1, y1);
+}
+
+#if RENDER_X86_AVX2
+__attribute__((target("avx2"))) static bool ir_tile_avx2(const render_frame *f, render_thread *th, int x0, int y0,
+                                                         int x1, int y1) {
+    return ir_tile_body(f, th, x0, y0, x1, y1);
+}
+#endif
+
+/* A tile's pass: its loops over lanes and VPLs in the AVX2 copy where the frame says so (the same
+ * values: render.h, RENDER_X86_AVX2). */
+bool ir_tile(const render_frame *f, render_thread *th, int x0, int y0, int x1, int y1) {
+#if RENDER_X86_AVX2
+    if (f->avx2) return ir_tile_avx2(f, th, x0, y0, x1, y1);
+#endif
+    return ir_tile_base(f, th, x0, y0, x1, y1);
 }
 
 typedef struct ir_filter_job {

@@ -242,7 +242,7 @@ rp_query_n_desc whitted_packet_query(const render_frame *f, render_thread *th, w
 /* whitted_light's arithmetic towards the light at pos for every lane of a (see packet_shadows):
  * the shadow packet's directions and ends, live where the light can reach the lit point; returns
  * the live count. */
-static uint64_t shadow_lanes(uint32_t nn, whitted_shadow_soa *restrict a, v3 pos,
+RENDER_INLINE uint64_t shadow_lanes(uint32_t nn, whitted_shadow_soa *restrict a, v3 pos,
                              float *restrict dx, float *restrict dy, float *restrict dz, float *restrict tfar,
                              int32_t *restrict valid) {
     const float px = pos.x, py = pos.y, pz = pos.z;
@@ -269,7 +269,7 @@ static uint64_t shadow_lanes(uint32_t nn, whitted_shadow_soa *restrict a, v3 pos
  * lane over the level's shading points in SoA (vectorised: CMakeLists.txt compiles this file
  * without errno and FP traps), straight into the packet; the light each unoccluded ray brings
  * (whitted_light_contrib) after the test. The same rays and sums as whitted_light's. */
-static void packet_shadows(const render_frame *f, render_thread *th, whitted_level *lv) {
+RENDER_INLINE void packet_shadows_body(const render_frame *f, render_thread *th, whitted_level *lv) {
     uint32_t nn = (uint32_t)f->desc.packet * (uint32_t)f->desc.packet;
     rp_rayhit_n *sp = &th->shadow;
     whitted_shadow_soa *a = th->shadow_soa;
@@ -313,6 +313,29 @@ static void packet_shadows(const render_frame *f, render_thread *th, whitted_lev
             o->direct = v3_add(o->direct, whitted_light_contrib(o, &lt));
         }
     }
+}
+
+static void packet_shadows_base(const render_frame *f, render_thread *th, whitted_level *lv) {
+    packet_shadows_body(f, th, lv);
+}
+
+#if RENDER_X86_AVX2
+__attribute__((target("avx2"))) static void packet_shadows_avx2(const render_frame *f, render_thread *th,
+                                                                whitted_level *lv) {
+    packet_shadows_body(f, th, lv);
+}
+#endif
+
+/* The shadow pass of a level, in the AVX2 copy where the frame says so (the same values: render.h,
+ * RENDER_X86_AVX2). */
+static void packet_shadows(const render_frame *f, render_thread *th, whitted_level *lv) {
+#if RENDER_X86_AVX2
+    if (f->avx2) {
+        packet_shadows_avx2(f, th, lv);
+        return;
+    }
+#endif
+    packet_shadows_base(f, th, lv);
 }
 
 static bool packet_trace(const render_frame *f, render_thread *th, int level, rp_ray_kind kind);
@@ -380,8 +403,12 @@ uint64_t whitted_primary_rays(const render_frame *f, whitted_level *lv, int bx, 
                               int tile_h, int s) {
     uint32_t n = (uint32_t)f->desc.packet, nn = n * n;
     /* Rays past the image's edge are made too (the frustum code ignores them) but not live. */
-    camera_rays_n(&f->cam, bx, by, s, nn, f->lane_i, f->lane_j, &lv->rh);
+    camera_rays_n(&f->cam, bx, by, s, nn, f->lane_i, f->lane_j, f->avx2, &lv->rh);
     int xe = x0 + tw - bx, ye = y0 + tile_h - by;
+    if (xe >= (int)n && ye >= (int)n) { /* a block inside the tile: every lane */
+        memset(lv->valid, 0xFF, nn * sizeof *lv->valid);
+        return nn;
+    }
     uint64_t live = 0;
     for (uint32_t q = 0; q < nn; q++) {
         bool in = f->lane_i[q] < xe && f->lane_j[q] < ye;

@@ -295,6 +295,13 @@ v3 bsdf_eval(const render_bsdf *b, v3 wo, v3 wi) {
     return zero;
 }
 
+bool bsdf_eval_constant(const render_bsdf *b, v3 wo, v3 *f) {
+    if (b->type != BSDF_PLASTIC || b->alpha != 0.0f) return false;
+    /* bsdf_eval's: no coat term at alpha 0, the diffuse base on the reflecting side */
+    *f = wo.z > 0.0f ? plastic_diffuse(b, wo) : v3_make(0, 0, 0);
+    return true;
+}
+
 float bsdf_pdf(const render_bsdf *b, v3 wo, v3 wi) {
     if (b->type == BSDF_DIELECTRIC) return b->alpha == 0.0f ? 0.0f : rough_dielectric_pdf(b, wo, wi);
     bool reflect_side = wo.z > 0.0f && wi.z > 0.0f;

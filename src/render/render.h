@@ -242,11 +242,12 @@ static inline void render_ray_init(rp_ray *r, v3 org, v3 dir, float tfar) {
 }
 
 void camera_ray(const render_camera *c, float x, float y, rp_ray *ray);
-/* The per-lane loops of primary rays and eye light are compiled twice, for the baseline and for
- * AVX2 (GCC's and Clang's target attribute), the copy picked per frame (render_frame.avx2). AVX2
- * without FMA: no multiply-add is contracted, so both copies make the same IEEE operations in the
- * same order and give the same values; AVX2's 8 lanes and 32-bit multiplies (the sample offsets'
- * hashes) are what they gain. */
+/* The per-lane loops of the packets' primary rays (camera_rays_n), eye light's shading, Whitted's
+ * shadow pass and instant radiosity's tile pass are compiled twice, for the baseline (SSE2) and for
+ * AVX2 (GCC's and Clang's target attribute on a wrapper of an always-inlined body), the copy picked
+ * per frame (render_frame.avx2). AVX2 without FMA: no multiply-add is contracted, so both copies
+ * make the same IEEE operations in the same order and give the same values (test_isa_images);
+ * AVX2's 8 lanes and 32-bit multiplies (the sample offsets' hashes) are what they gain. */
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #define RENDER_X86_AVX2 1
 #else
@@ -377,6 +378,10 @@ typedef struct bsdf_sample {
 
 /* f(wo, wi) for the non-delta lobes (wo, wi local, unit, pointing away from the surface). */
 v3 bsdf_eval(const render_bsdf *b, v3 wo, v3 wi);
+/* Whether bsdf_eval(b, wo, wi) is *f for every wi with wi.z > 0 (the smooth plastic's diffuse base,
+ * 0 when wo.z <= 0: its mirror coat is a delta lobe), so that instant radiosity gathers the point's
+ * VPLs as a Lambert point's; the same values as bsdf_eval gives there. Lambert itself: false. */
+bool bsdf_eval_constant(const render_bsdf *b, v3 wo, v3 *f);
 /* The solid angle density bsdf_sample picks wi with (non-delta lobes). */
 float bsdf_pdf(const render_bsdf *b, v3 wo, v3 wi);
 /* Samples wi from u (3 numbers); false when no direction results. */

@@ -234,9 +234,9 @@ typedef struct ir_lanes {
 } ir_lanes;
 
 RENDER_INLINE void lanes_to_vpl_(uint32_t n, const ir_lanes *restrict L, const ir_vpl *v, float clamp_d2,
-                                  const bool omni, float *restrict dx_out, float *restrict dy_out,
-                                  float *restrict dz_out, float *restrict tf_out, float *restrict cr,
-                                  float *restrict cg, float *restrict cb, int32_t *restrict live) {
+                                 const bool omni, float *restrict dx_out, float *restrict dy_out,
+                                 float *restrict dz_out, float *restrict tf_out, float *restrict cr,
+                                 float *restrict cg, float *restrict cb, int32_t *restrict live) {
     const float px = v->p.x, py = v->p.y, pz = v->p.z, vnx = v->n.x, vny = v->n.y, vnz = v->n.z;
     const float wr = v->power.x, wg = v->power.y, wb = v->power.z;
     for (uint32_t i = 0; i < n; i++) {
@@ -401,9 +401,16 @@ RENDER_INLINE bool ir_tile_body(const render_frame *f, render_thread *th, int x0
                     pt_->ns = sf.ns;
                     bsdf_frame(sf.ns, &pt_->t, &pt_->b);
                     pt_->wo = bsdf_to_local(v3_neg(v3_make(ray.dir_x, ray.dir_y, ray.dir_z)), pt_->t, pt_->b, sf.ns);
+                    /* Lambert points, and points whose BSDF gives one value towards every VPL
+                     * (smooth plastic), take the VPLs lane by lane (lanes_to_vpl) */
+                    v3 fc;
                     pt_->is_lambert = bsdf.type == BSDF_LAMBERT;
                     pt_->beta = beta;
                     pt_->lambert = v3_mul(beta, v3_scale(bsdf.kd, 1.0f / PI_F));
+                    if (!pt_->is_lambert && bsdf_eval_constant(&bsdf, pt_->wo, &fc)) {
+                        pt_->is_lambert = true;
+                        pt_->lambert = v3_mul(beta, fc);
+                    }
                     pt_->valid = hit_surface && !bsdf_is_delta(&bsdf);
                     pf->depth[gi] = depth;
                     pf->normal[gi] = sf.ns;
@@ -447,6 +454,7 @@ RENDER_INLINE bool ir_tile_body(const render_frame *f, render_thread *th, int x0
         /* The set's points in lane order: origins into the packet once, the rest for lanes_to_vpl. */
         ir_lanes *L = &lanes;
         rp_rayhit_n *vp = &pt->vpl_packet;
+        bool slow = false; /* a lane of the set takes vpl_contrib (a valid point, not Lambert) */
         for (int b = 0; b < P; b++)
             for (int a = 0; a < P; a++) {
                 uint32_t q = lane[b * P + a];
@@ -460,6 +468,7 @@ RENDER_INLINE bool ir_tile_body(const render_frame *f, render_thread *th, int x0
                 L->ngx[q] = ng.x, L->ngy[q] = ng.y, L->ngz[q] = ng.z;
                 L->lr[q] = lam.x, L->lg[q] = lam.y, L->lb[q] = lam.z;
                 L->lambert[q] = ok && x->is_lambert ? -1 : 0;
+                slow |= ok && !x->is_lambert;
                 L->key[q] = sampler_start((uint32_t)(x0 + lx), (uint32_t)(y0 + ly), sample).key;
                 L->li[q] = (uint16_t)li;
                 packet_set_ray(vp, q, o, v3_make(0, 0, 1), 0.0f);
@@ -480,6 +489,10 @@ RENDER_INLINE bool ir_tile_body(const render_frame *f, render_thread *th, int x0
                         c->dx[k][q] = vl->p.x, c->dy[k][q] = vl->p.y, c->dz[k][q] = vl->p.z;
                         c->tf[k][q] = INFINITY, c->live[k][q] = 0;
                     }
+                }
+                if (!vl->infinite && !slow) { /* every lane's contribution is lanes_to_vpl's (0 where invalid) */
+                    for (uint32_t q = 0; q < Q; q++) live += c->live[k][q] != 0;
+                    continue;
                 }
                 for (uint32_t q = 0; q < Q; q++) {
                     if (!vl->infinite && L->lambert[q]) {

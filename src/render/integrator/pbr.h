@@ -29,9 +29,10 @@ typedef struct ir_point {
     v3 ng, ns, t, b;  /* t, b, ns: the shading frame */
     v3 wo;            /* towards the eye, in the shading frame */
     v3 beta;          /* throughput of the delta chain from the eye to here (1 without one) */
-    v3 lambert;       /* beta kd / pi when the BSDF is Lambert (the common case, no eval needed) */
+    v3 lambert;       /* beta kd / pi when the BSDF is Lambert (the common case, no eval needed), beta
+                       * times bsdf_eval_constant's value for a smooth plastic */
     render_bsdf bsdf;
-    bool is_lambert;
+    bool is_lambert;  /* lambert is the BSDF's value towards every VPL above the surface */
     bool valid;       /* a non-delta surface was hit */
 } ir_point;
 

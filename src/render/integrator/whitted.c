@@ -242,9 +242,9 @@ rp_query_n_desc whitted_packet_query(const render_frame *f, render_thread *th, w
 /* whitted_light's arithmetic towards the light at pos for every lane of a (see packet_shadows):
  * the shadow packet's directions and ends, live where the light can reach the lit point; returns
  * the live count. */
-RENDER_INLINE uint64_t shadow_lanes(uint32_t nn, whitted_shadow_soa *restrict a, v3 pos,
-                             float *restrict dx, float *restrict dy, float *restrict dz, float *restrict tfar,
-                             int32_t *restrict valid) {
+RENDER_INLINE uint64_t shadow_lanes(uint32_t nn, whitted_shadow_soa *restrict a, v3 pos, float *restrict dx,
+                                    float *restrict dy, float *restrict dz, float *restrict tfar,
+                                    int32_t *restrict valid) {
     const float px = pos.x, py = pos.y, pz = pos.z;
     uint64_t live = 0;
     for (uint32_t q = 0; q < nn; q++) {

@@ -25,11 +25,11 @@ static const float identity_xfm[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
 
 static void grow(float *lo, float *hi, const float *p, float r) {
     for (int k = 0; k < 3; k++)
-        if (isfinite(p[k])) lo[k] = fminf(lo[k], p[k] - r), hi[k] = fmaxf(hi[k], p[k] + r);
+        if (isfinite(p[k])) lo[k] = render_fminf(lo[k], p[k] - r), hi[k] = render_fmaxf(hi[k], p[k] + r);
 }
 
 static void grow_cone(float *lo, float *hi, const rp_cone_data *c) {
-    float r = fmaxf(fabsf(c->base_radius), fabsf(c->apex_radius));
+    float r = render_fmaxf(fabsf(c->base_radius), fabsf(c->apex_radius));
     grow(lo, hi, c->base, r);
     grow(lo, hi, c->apex, r);
 }

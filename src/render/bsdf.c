@@ -9,7 +9,7 @@
 #define PI_F 3.14159265358979323846f
 
 static float lum(v3 c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
-static float max3(v3 c) { return fmaxf(c.x, fmaxf(c.y, c.z)); }
+static float max3(v3 c) { return render_fmaxf(c.x, render_fmaxf(c.y, c.z)); }
 
 void bsdf_frame(v3 n, v3 *t, v3 *b) {
     /* Duff et al. 2017, "Building an orthonormal basis, revisited". */
@@ -31,7 +31,7 @@ v3 bsdf_cosine_hemisphere(float u0, float u1) {
         phi = PI_F / 2.0f - (PI_F / 4.0f) * (ox / oy);
     }
     float x = r * cosf(phi), y = r * sinf(phi);
-    return v3_make(x, y, sqrtf(fmaxf(0.0f, 1.0f - x * x - y * y)));
+    return v3_make(x, y, sqrtf(render_fmaxf(0.0f, 1.0f - x * x - y * y)));
 }
 
 /* ---- GGX (Trowbridge-Reitz), isotropic, pbrt-v4's formulation ---- */
@@ -39,7 +39,7 @@ v3 bsdf_cosine_hemisphere(float u0, float u1) {
 static float ggx_d(float alpha, v3 wm) {
     float c2 = wm.z * wm.z;
     if (!(c2 > 0.0f)) return 0.0f;
-    float s2 = fmaxf(0.0f, 1.0f - c2), t2 = s2 / c2;
+    float s2 = render_fmaxf(0.0f, 1.0f - c2), t2 = s2 / c2;
     float e = 1.0f + t2 / (alpha * alpha);
     return 1.0f / (PI_F * alpha * alpha * c2 * c2 * e * e);
 }
@@ -47,7 +47,7 @@ static float ggx_d(float alpha, v3 wm) {
 static float ggx_lambda(float alpha, v3 w) {
     float c2 = w.z * w.z;
     if (!(c2 > 0.0f)) return 0.0f;
-    float t2 = fmaxf(0.0f, 1.0f - c2) / c2;
+    float t2 = render_fmaxf(0.0f, 1.0f - c2) / c2;
     return (sqrtf(1.0f + alpha * alpha * t2) - 1.0f) * 0.5f;
 }
 
@@ -67,12 +67,12 @@ static v3 ggx_sample_wm(float alpha, v3 wo, float u0, float u1) {
     v3 t2 = v3_cross(wh, t1);
     float r = sqrtf(u0), phi = 2.0f * PI_F * u1;
     float px = r * cosf(phi), py = r * sinf(phi);
-    float h = sqrtf(fmaxf(0.0f, 1.0f - px * px));
+    float h = sqrtf(render_fmaxf(0.0f, 1.0f - px * px));
     float s = (1.0f + wh.z) * 0.5f;
     py = (1.0f - s) * h + s * py;
-    float pz = sqrtf(fmaxf(0.0f, 1.0f - px * px - py * py));
+    float pz = sqrtf(render_fmaxf(0.0f, 1.0f - px * px - py * py));
     v3 nh = v3_add(v3_add(v3_scale(t1, px), v3_scale(t2, py)), v3_scale(wh, pz));
-    return v3_normalize(v3_make(alpha * nh.x, alpha * nh.y, fmaxf(1e-6f, nh.z)));
+    return v3_normalize(v3_make(alpha * nh.x, alpha * nh.y, render_fmaxf(1e-6f, nh.z)));
 }
 
 static v3 reflect(v3 wo, v3 n) { return v3_sub(v3_scale(n, 2.0f * v3_dot(wo, n)), wo); }
@@ -102,7 +102,7 @@ static cpx c_sqrt(cpx a) {
 }
 
 static float fresnel_complex1(float cos_i, float eta, float k) {
-    cos_i = fminf(fmaxf(cos_i, 0.0f), 1.0f);
+    cos_i = render_fminf(render_fmaxf(cos_i, 0.0f), 1.0f);
     cpx e = c_make(eta, k), ci = c_make(cos_i, 0.0f);
     float sin2_i = 1.0f - cos_i * cos_i;
     cpx sin2_t = c_div(c_make(sin2_i, 0.0f), c_mul(e, e));
@@ -122,7 +122,7 @@ v3 bsdf_conductor_k_from_reflectance(v3 r) {
     /* With eta = 1, F(0) = k^2 / (4 + k^2), so k = 2 sqrt(r / (1 - r)). */
     float c[3] = {r.x, r.y, r.z};
     for (int i = 0; i < 3; i++) {
-        float x = fminf(fmaxf(c[i], 0.0f), 0.9999f);
+        float x = render_fminf(render_fmaxf(c[i], 0.0f), 0.9999f);
         c[i] = 2.0f * sqrtf(x / (1.0f - x));
     }
     return v3_make(c[0], c[1], c[2]);
@@ -144,7 +144,7 @@ static float fresnel_dielectric(float cos_i, float eta) {
  * specification, appendix B): the coat's reflectance F(ks, c) (ks = lerp(0.04, base, metallic)) and
  * its dielectric part's F(0.04, c), which the diffuse base loses. */
 static float schlick_w(float c) {
-    float m = 1.0f - fminf(fmaxf(c, 0.0f), 1.0f), m2 = m * m;
+    float m = 1.0f - render_fminf(render_fmaxf(c, 0.0f), 1.0f), m2 = m * m;
     return m2 * m2 * m;
 }
 static v3 schlick(v3 f0, float c) {
@@ -161,7 +161,7 @@ static float plastic_spec_prob(const render_bsdf *b, v3 wo) {
         ld = lum(b->kd) * schlick_base(wo.z);
     } else {
         ls = lum(b->ks);
-        ld = lum(b->kd) * (1.0f - fminf(1.0f, max3(b->ks)));
+        ld = lum(b->kd) * (1.0f - render_fminf(1.0f, max3(b->ks)));
     }
     if (!(ls + ld > 0.0f)) return 0.5f;
     return ls / (ls + ld);
@@ -171,7 +171,7 @@ static float plastic_spec_prob(const render_bsdf *b, v3 wo) {
  * takes it at the half vector, which reflects up to 8% more than arrives at grazing angles for a
  * white base; at wo the coat takes at most F(wo.z), as its half vectors lean towards wo.) */
 static v3 plastic_diffuse(const render_bsdf *b, v3 wo) {
-    if (!b->schlick) return v3_scale(b->kd, (1.0f - fminf(1.0f, max3(b->ks))) / PI_F);
+    if (!b->schlick) return v3_scale(b->kd, (1.0f - render_fminf(1.0f, max3(b->ks))) / PI_F);
     return v3_scale(b->kd, schlick_base(wo.z) / PI_F);
 }
 
@@ -244,7 +244,7 @@ static bool rough_dielectric_sample(const render_bsdf *b, v3 wo, const float u[3
         out->wi = reflect(wo, wm);
         if (out->wi.z <= 0.0f) return false;
     } else {
-        float sin2_t = fmaxf(0.0f, 1.0f - c * c) / (eta * eta);
+        float sin2_t = render_fmaxf(0.0f, 1.0f - c * c) / (eta * eta);
         if (sin2_t >= 1.0f) return false;
         float cos_t = sqrtf(1.0f - sin2_t);
         out->wi = v3_add(v3_scale(wo, -1.0f / eta), v3_scale(wm, c / eta - cos_t));
@@ -364,7 +364,7 @@ bool bsdf_sample_dir(const render_bsdf *b, v3 wo, const float u[3], bsdf_sample 
             return true;
         }
         float sin2_t = (1.0f - wo.z * wo.z) / (eta * eta);
-        float cos_t = sqrtf(fmaxf(0.0f, 1.0f - sin2_t));
+        float cos_t = sqrtf(render_fmaxf(0.0f, 1.0f - sin2_t));
         out->wi = v3_normalize(v3_make(-wo.x / eta, -wo.y / eta, -cos_t));
         /* Radiance is scaled by 1 / eta^2 across the interface (pbrt's TransportMode::Radiance). */
         float t = (1.0f - fr) / (cos_t * eta * eta);

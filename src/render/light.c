@@ -71,7 +71,7 @@ static v3 env_dir(float u, float v) {
 }
 
 static void env_uv(v3 d, float *u, float *v) {
-    float y = fminf(1.0f, fmaxf(-1.0f, d.y));
+    float y = render_fminf(1.0f, render_fmaxf(-1.0f, d.y));
     *v = acosf(y) / PI_F;
     *u = 0.5f + atan2f(d.x, -d.z) / (2.0f * PI_F);
     if (!(*u >= 0.0f)) *u = 0.0f;
@@ -91,7 +91,7 @@ static bool env_build(render_envmap *e) {
         cdf[0] = 0.0f;
         for (int x = 0; x < w; x++) {
             const float *c = e->rgb + ((size_t)y * (size_t)w + (size_t)x) * 3;
-            float l = fmaxf(0.0f, lum(v3_load(c))) * st;
+            float l = render_fmaxf(0.0f, lum(v3_load(c))) * st;
             row += l;
             cdf[x + 1] = (float)row;
         }
@@ -204,7 +204,7 @@ float light_triangle_pdf(const rp_light_source *l, v3 p, v3 q, v3 ng) {
 }
 
 static v3 uniform_sphere(float u0, float u1) {
-    float z = 1.0f - 2.0f * u0, r = sqrtf(fmaxf(0.0f, 1.0f - z * z)), phi = 2.0f * PI_F * u1;
+    float z = 1.0f - 2.0f * u0, r = sqrtf(render_fmaxf(0.0f, 1.0f - z * z)), phi = 2.0f * PI_F * u1;
     return v3_make(r * cosf(phi), r * sinf(phi), z);
 }
 
@@ -291,8 +291,8 @@ bool light_sample_li(const rp_render_scene *s, const rp_light_source *l, v3 p, f
         /* A uniform point inside the texel, from what is left of u0 and u1. */
         float prow = e->row_cdf[y + 1] - e->row_cdf[y], pcol = cdf[x + 1] - cdf[x];
         float fy = prow > 0.0f ? (u0 - e->row_cdf[y]) / prow : 0.5f, fx = pcol > 0.0f ? (u1 - cdf[x]) / pcol : 0.5f;
-        fx = fminf(fmaxf(fx, 0.0f), 0.999f);
-        fy = fminf(fmaxf(fy, 0.0f), 0.999f);
+        fx = render_fminf(render_fmaxf(fx, 0.0f), 0.999f);
+        fy = render_fminf(render_fmaxf(fy, 0.0f), 0.999f);
         float u = ((float)x + fx) / (float)e->width, v = ((float)y + fy) / (float)e->height;
         out->wi = env_dir(u, v);
         float st = sinf(PI_F * v);

@@ -22,7 +22,7 @@ rp_material rp_material_from_data(const rp_material_data *d) {
     m.metal_rough_texture = -1;
     /* alpha cutouts: a mode the renderer does not know is opaque */
     m.alpha_mode = d->alpha_mode == RP_ALPHA_MASK || d->alpha_mode == RP_ALPHA_BLEND ? d->alpha_mode : RP_ALPHA_OPAQUE;
-    m.alpha = isfinite(d->alpha) ? fminf(fmaxf(d->alpha, 0.0f), 1.0f) : 1.0f;
+    m.alpha = isfinite(d->alpha) ? render_fminf(render_fmaxf(d->alpha, 0.0f), 1.0f) : 1.0f;
     m.alpha_cutoff = d->alpha_cutoff;
     m.alpha_texture = d->map_alpha - 1;
     m.uv_transform = d->uv_transform;
@@ -33,15 +33,15 @@ rp_material rp_material_from_data(const rp_material_data *d) {
          * (metal_rough_bsdf), Whitted too (material_phong); ks and ns here are the factors' Phong
          * look: a highlight of lerp(0.04, base, metallic), Blinn-Phong exponent 2 / alpha^2 - 2
          * (alpha = r^2) */
-        float metallic = fminf(fmaxf(d->metallic, 0.0f), 1.0f), r = fminf(fmaxf(d->roughness, 0.0f), 1.0f);
+        float metallic = render_fminf(render_fmaxf(d->metallic, 0.0f), 1.0f), r = render_fminf(render_fmaxf(d->roughness, 0.0f), 1.0f);
         m.type = RP_MATERIAL_PHONG;
         m.metal_rough = true;
         m.metallic = metallic;
         m.roughness = r;
         m.metal_rough_texture = d->map_metal_rough - 1;
-        for (int k = 0; k < 3; k++) m.ks[k] = 0.04f * (1.0f - metallic) + fminf(fmaxf(d->kd[k], 0.0f), 1.0f) * metallic;
-        float alpha = fmaxf(r * r, 0.01f);
-        m.ns = fmaxf(2.0f / (alpha * alpha) - 2.0f, 1.0f);
+        for (int k = 0; k < 3; k++) m.ks[k] = 0.04f * (1.0f - metallic) + render_fminf(render_fmaxf(d->kd[k], 0.0f), 1.0f) * metallic;
+        float alpha = render_fmaxf(r * r, 0.01f);
+        m.ns = render_fmaxf(2.0f / (alpha * alpha) - 2.0f, 1.0f);
         return m;
     }
     if (any_positive(d->kt)) {
@@ -71,7 +71,7 @@ static inline __attribute__((always_inline)) void texture_axis(float f, int32_t 
                                                                float *a) {
     switch (wrap) {
     case RP_TEXTURE_CLAMP:
-        f = fminf(fmaxf(f, 0.0f), 1.0f); /* NaN to 0 */
+        f = render_fminf(render_fmaxf(f, 0.0f), 1.0f); /* NaN to 0 */
         break;
     case RP_TEXTURE_MIRROR:
         f -= 2.0f * floorf(0.5f * f);
@@ -194,7 +194,7 @@ float material_fresnel(float cos_i, float eta) {
  *     surfaces) multiplies Ke; such a surface is not sampled as a light (light.c), it adds its
  *     radiance where a ray hits it, which path tracing weighs in full (no MIS partner). */
 
-static float clamp01(float x) { return fminf(fmaxf(x, 0.0f), 1.0f); }
+static float clamp01(float x) { return render_fminf(render_fmaxf(x, 0.0f), 1.0f); }
 static v3 clamp3(v3 c) { return v3_make(clamp01(c.x), clamp01(c.y), clamp01(c.z)); }
 
 /* glTF's metallic-roughness model on the plastic BSDF with the specification's Fresnel (glTF 2.0,
@@ -239,8 +239,8 @@ void material_phong(const rp_render_scene *s, const rp_material *m, const render
     *ks = v3_add(v3_scale(v3_make(0.04f, 0.04f, 0.04f), 1.0f - metallic), v3_scale(base, metallic));
     /* kd stays the base colour: a metal has no diffuse term, and under Whitted's point lights (no
      * environment, no glossy reflection) it would be black but for its highlights */
-    float alpha = fmaxf(r * r, 0.01f);
-    *ns = fmaxf(2.0f / (alpha * alpha) - 2.0f, 1.0f);
+    float alpha = render_fmaxf(r * r, 0.01f);
+    *ns = render_fmaxf(2.0f / (alpha * alpha) - 2.0f, 1.0f);
 }
 
 render_bsdf material_bsdf(const rp_render_scene *s, const rp_material *m, const render_surface *surf) {
@@ -259,11 +259,11 @@ render_bsdf material_bsdf(const rp_render_scene *s, const rp_material *m, const 
         }
         b.type = BSDF_PLASTIC;
         b.ks = clamp3(material_specular(s, m, surf));
-        b.alpha = sqrtf(2.0f / (fmaxf(m->ns, 0.0f) + 2.0f));
+        b.alpha = sqrtf(2.0f / (render_fmaxf(m->ns, 0.0f) + 2.0f));
         if (m->roughness_texture >= 0 && surf->has_uv) {
             /* a roughness map holds perceptual roughness r (linear); alpha = r^2, at least 1e-3 */
             float r = material_texture_linear(s, m->roughness_texture, surf->uv).x;
-            b.alpha = fmaxf(1e-3f, r * r);
+            b.alpha = render_fmaxf(1e-3f, r * r);
         }
         break;
     case RP_MATERIAL_MIRROR: {
@@ -295,7 +295,7 @@ v3 material_ke(const rp_render_scene *s, uint32_t material) {
         v3 ka = v3_load(s->data->materials[material].ka);
         if (v3_max_abs(ka) > 1.0f) ke = ka;
     }
-    return v3_make(fmaxf(ke.x, 0.0f), fmaxf(ke.y, 0.0f), fmaxf(ke.z, 0.0f));
+    return v3_make(render_fmaxf(ke.x, 0.0f), render_fmaxf(ke.y, 0.0f), render_fmaxf(ke.z, 0.0f));
 }
 
 v3 material_ke_textured(const rp_render_scene *s, const rp_material *m, v3 ke, const render_surface *surf) {

@@ -56,12 +56,12 @@ bool medium_init(render_medium *m, const rp_volume_data *vol, const rp_medium_de
     memset(m, 0, sizeof *m);
     m->vol = vol;
     rp_medium_desc d = desc ? *desc : (rp_medium_desc){0};
-    m->density_scale = d.density_scale > 0.0f ? fminf(d.density_scale, MEDIUM_MAX_SCALE) : 1.0f;
+    m->density_scale = d.density_scale > 0.0f ? render_fminf(d.density_scale, MEDIUM_MAX_SCALE) : 1.0f;
     if (d.albedo[0] == 0.0f && d.albedo[1] == 0.0f && d.albedo[2] == 0.0f) m->albedo = v3_make(1, 1, 1);
     else
-        m->albedo = v3_make(fminf(fmaxf(d.albedo[0], 0.0f), 1.0f), fminf(fmaxf(d.albedo[1], 0.0f), 1.0f),
-                            fminf(fmaxf(d.albedo[2], 0.0f), 1.0f));
-    m->g = isfinite(d.hg_g) ? fminf(fmaxf(d.hg_g, -0.99f), 0.99f) : 0.0f;
+        m->albedo = v3_make(render_fminf(render_fmaxf(d.albedo[0], 0.0f), 1.0f), render_fminf(render_fmaxf(d.albedo[1], 0.0f), 1.0f),
+                            render_fminf(render_fmaxf(d.albedo[2], 0.0f), 1.0f));
+    m->g = isfinite(d.hg_g) ? render_fminf(render_fmaxf(d.hg_g, -0.99f), 0.99f) : 0.0f;
     memcpy(m->i2w, vol->index_to_world, sizeof m->i2w);
     if (!xfm_invert(m->i2w, m->w2i)) { /* a degenerate transform: the medium is left empty */
         memset(m->w2i, 0, sizeof m->w2i);
@@ -92,8 +92,8 @@ bool medium_init(render_medium *m, const rp_volume_data *vol, const rp_medium_de
                        (float)(c & 4 ? vol->active_max[2] + 1 : vol->active_min[2] - 1));
         v3 w = xfm_point(m->i2w, p);
         for (int a = 0; a < 3; a++) {
-            lo[a] = fminf(lo[a], v3_at(w, a));
-            hi[a] = fmaxf(hi[a], v3_at(w, a));
+            lo[a] = render_fminf(lo[a], v3_at(w, a));
+            hi[a] = render_fmaxf(hi[a], v3_at(w, a));
         }
     }
     m->bounds = (rp_bounds){.lower_x = lo[0], .lower_y = lo[1], .lower_z = lo[2],
@@ -186,7 +186,7 @@ static bool walk_start(const render_medium *m, v3 org, v3 dir, float tmax, brick
     for (int a = 0; a < 3; a++) {
         float o = v3_at(w->o, a), d = v3_at(w->d, a), base = (float)v->origin[a];
         /* clamped as a float: converting one beyond int32's range would be undefined */
-        float cf = fminf(fmaxf(floorf((v3_at(p, a) - base) / (float)B), 0.0f), (float)(v->dims[a] - 1));
+        float cf = render_fminf(render_fmaxf(floorf((v3_at(p, a) - base) / (float)B), 0.0f), (float)(v->dims[a] - 1));
         int32_t c = (int32_t)cf;
         w->c[a] = c;
         if (d > 0.0f) {
@@ -212,7 +212,7 @@ static bool walk_next(const render_medium *m, brick_walk *w, float *a, float *b,
     if (w->done) return false;
     int k = w->tnext[0] < w->tnext[1] ? (w->tnext[0] < w->tnext[2] ? 0 : 2) : (w->tnext[1] < w->tnext[2] ? 1 : 2);
     *a = w->t;
-    *b = fmaxf(*a, fminf(w->tnext[k], w->tend)); /* never backwards, whatever rounding did to the first cell */
+    *b = render_fmaxf(*a, render_fminf(w->tnext[k], w->tend)); /* never backwards, whatever rounding did to the first cell */
     *mu = m->majorant[((size_t)w->c[2] * v->dims[1] + (size_t)w->c[1]) * v->dims[0] + (size_t)w->c[0]];
     w->t = *b;
     if (w->tnext[k] >= w->tend) {
@@ -299,8 +299,8 @@ v3 medium_phase_sample(float g, v3 d_in, float u0, float u1) {
         float q = (1.0f - g * g) / (1.0f - g + 2.0f * g * u0);
         mu = (1.0f + g * g - q * q) / (2.0f * g);
     }
-    mu = fminf(1.0f, fmaxf(-1.0f, mu));
-    float st = sqrtf(fmaxf(0.0f, 1.0f - mu * mu)), phi = 2.0f * PI_F * u1;
+    mu = render_fminf(1.0f, render_fmaxf(-1.0f, mu));
+    float st = sqrtf(render_fmaxf(0.0f, 1.0f - mu * mu)), phi = 2.0f * PI_F * u1;
     v3 t, b;
     bsdf_frame(d_in, &t, &b);
     return v3_add(v3_add(v3_scale(t, st * cosf(phi)), v3_scale(b, st * sinf(phi))), v3_scale(d_in, mu));

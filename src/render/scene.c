@@ -213,12 +213,12 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
         const rp_bounds *mb = &s->medium->bounds;
         rp_bounds *sb = &s->bounds;
         bool none = !(sb->lower_x <= sb->upper_x && sb->lower_y <= sb->upper_y && sb->lower_z <= sb->upper_z);
-        sb->lower_x = none ? mb->lower_x : fminf(sb->lower_x, mb->lower_x);
-        sb->lower_y = none ? mb->lower_y : fminf(sb->lower_y, mb->lower_y);
-        sb->lower_z = none ? mb->lower_z : fminf(sb->lower_z, mb->lower_z);
-        sb->upper_x = none ? mb->upper_x : fmaxf(sb->upper_x, mb->upper_x);
-        sb->upper_y = none ? mb->upper_y : fmaxf(sb->upper_y, mb->upper_y);
-        sb->upper_z = none ? mb->upper_z : fmaxf(sb->upper_z, mb->upper_z);
+        sb->lower_x = none ? mb->lower_x : render_fminf(sb->lower_x, mb->lower_x);
+        sb->lower_y = none ? mb->lower_y : render_fminf(sb->lower_y, mb->lower_y);
+        sb->lower_z = none ? mb->lower_z : render_fminf(sb->lower_z, mb->lower_z);
+        sb->upper_x = none ? mb->upper_x : render_fmaxf(sb->upper_x, mb->upper_x);
+        sb->upper_y = none ? mb->upper_y : render_fmaxf(sb->upper_y, mb->upper_y);
+        sb->upper_z = none ? mb->upper_z : render_fmaxf(sb->upper_z, mb->upper_z);
     }
     /* Offsets of secondary rays scale with the largest coordinate: float spacing grows with it. */
     const rp_bounds *b = &s->bounds;

@@ -41,14 +41,14 @@
 #endif
 #define IR_NO_RAY 0xFFFFu
 
-static float max3(v3 c) { return fmaxf(c.x, fmaxf(c.y, c.z)); }
+static float max3(v3 c) { return render_fmaxf(c.x, render_fmaxf(c.y, c.z)); }
 
 /* The diffuse albedo of a BSDF, the part that reflects VPL light onwards. */
 static v3 diffuse_albedo(const render_bsdf *b) {
     switch (b->type) {
     case BSDF_LAMBERT: return b->kd;
     case BSDF_PLASTIC: /* glTF's (schlick) base loses F(0.04) = 4% at normal incidence */
-        return v3_scale(b->kd, b->schlick ? 0.96f : 1.0f - fminf(1.0f, max3(b->ks)));
+        return v3_scale(b->kd, b->schlick ? 0.96f : 1.0f - render_fminf(1.0f, max3(b->ks)));
     case BSDF_CONDUCTOR:
     case BSDF_DIELECTRIC: return v3_make(0, 0, 0);
     }
@@ -120,7 +120,7 @@ static void ir_set(const render_frame *f, uint32_t sample, uint32_t set, ir_vpl 
             if (v3_is_zero(kd)) break;
             power = v3_mul(power, kd);
             vpl_keep(out, V, &seen, (ir_vpl){.p = v3_madd(sf.p, sf.ng, sf.eps), .n = sf.ns, .power = power}, &pick);
-            float q = fminf(1.0f, max3(kd));
+            float q = render_fminf(1.0f, max3(kd));
             if (!(sampler_1d(&rng) < q)) break;
             power = v3_scale(power, 1.0f / q);
             v3 t, bb;

@@ -9,7 +9,7 @@
 
 #define PI_F 3.14159265358979323846f
 
-static float max3(v3 c) { return fmaxf(c.x, fmaxf(c.y, c.z)); }
+static float max3(v3 c) { return render_fmaxf(c.x, render_fmaxf(c.y, c.z)); }
 
 void path_add_px(render_thread *th, uint32_t pixel, v3 c) {
     if (!(isfinite(c.x) && isfinite(c.y) && isfinite(c.z))) return; /* never let one NaN poison a pixel */
@@ -121,7 +121,7 @@ bool path_vertex(const render_frame *f, render_thread *th, pbr_path *st, const r
     st->prev = sf.p;
     st->depth++;
     if (st->depth >= 3) {
-        float q = fminf(0.95f, max3(st->beta));
+        float q = render_fminf(0.95f, max3(st->beta));
         if (!(sampler_at(&st->rng, base + 6) < q)) return false;
         st->beta = v3_scale(st->beta, 1.0f / q);
     }

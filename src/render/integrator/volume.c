@@ -14,7 +14,7 @@
 #include "../medium.h"
 #include "pbr.h"
 
-static float max3(v3 c) { return fmaxf(c.x, fmaxf(c.y, c.z)); }
+static float max3(v3 c) { return render_fmaxf(c.x, render_fmaxf(c.y, c.z)); }
 
 /* The tracking numbers of one path vertex: a stream of its own, seeded by the pixel's sampler,
  * the sample and the depth (and which of the vertex's estimates it is). */
@@ -65,7 +65,7 @@ int volume_path_vertex(const render_frame *f, render_thread *th, pbr_path *st, c
     st->prev = p;
     st->depth++;
     if (st->depth >= 3) {
-        float q = fminf(0.95f, max3(st->beta));
+        float q = render_fminf(0.95f, max3(st->beta));
         if (!(sampler_at(&st->rng, base + 6) < q)) return 0;
         st->beta = v3_scale(st->beta, 1.0f / q);
     }

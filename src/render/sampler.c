@@ -72,9 +72,4 @@ static float sobol_owen(uint32_t index, uint32_t dim, uint32_t seed) {
     return (float)(x >> 8) * (1.0f / 16777216.0f);
 }
 
-float sampler_at(const render_sampler *s, uint32_t d) {
-    if (s->sobol) return sobol_owen(s->index, d, s->key);
-    return sampler_pcg_number(s->key, sampler_pcg_dim(d));
-}
-
-float sampler_1d(render_sampler *s) { return sampler_at(s, s->dim++); }
+float sampler_sobol_at(const render_sampler *s, uint32_t d) { return sobol_owen(s->index, d, s->key); }

@@ -91,6 +91,69 @@ static bool live(const rp_rayhit_n *p, uint32_t i) {
     return (!p->valid || p->valid[i]) && p->tnear[i] <= p->tfar[i];
 }
 
+/* The packets' per-ray loops below (slab tests against instance boxes, the rays mapped into an
+ * instance, inverse directions, live tnear, merges of occlusion) compiled for the baseline and for
+ * AVX2, the copy picked for the CPU when the library loads (GCC's and clang's target_clones). Without
+ * FMA both copies make the same IEEE operations in the same order, so they give the same values. */
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define RAY_LOOPS __attribute__((target_clones("avx2", "default")))
+#else
+#define RAY_LOOPS
+#endif
+
+/* A packet's rays as SIMD rays of the kernels' width W, W at a time (count is a multiple of 16): each
+ * group filled straight into the W-wide layout (an earlier version filled a 16-wide one and copied
+ * all its fields into the narrow one and back, a fifth of this function's instructions), and for
+ * occlusion only tfar read back. */
+#define TRACE_SIMD_DEFINE(W)                                                                                 \
+    static void trace_simd_##W(const rp_kernels *k, const rp_accel *acc, rp_rayhit_n *p, uint32_t count,   \
+                               bool any) {                                                                 \
+        for (uint32_t base = 0; base < count; base += W) {                                                 \
+            rp_rayhit##W s;                                                                                \
+            int32_t valid[W];                                                                              \
+            memcpy(s.ray.org_x, p->org_x + base, sizeof s.ray.org_x);                                      \
+            memcpy(s.ray.org_y, p->org_y + base, sizeof s.ray.org_y);                                      \
+            memcpy(s.ray.org_z, p->org_z + base, sizeof s.ray.org_z);                                      \
+            memcpy(s.ray.dir_x, p->dir_x + base, sizeof s.ray.dir_x);                                      \
+            memcpy(s.ray.dir_y, p->dir_y + base, sizeof s.ray.dir_y);                                      \
+            memcpy(s.ray.dir_z, p->dir_z + base, sizeof s.ray.dir_z);                                      \
+            memcpy(s.ray.tnear, p->tnear + base, sizeof s.ray.tnear);                                      \
+            memcpy(s.ray.tfar, p->tfar + base, sizeof s.ray.tfar);                                         \
+            int32_t any_live = 0;                                                                          \
+            for (int j = 0; j < W; j++) { /* live(), branch free */                                        \
+                int32_t on = (p->valid ? p->valid[base + (uint32_t)j] != 0 : 1) & (s.ray.tnear[j] <= s.ray.tfar[j]); \
+                valid[j] = -on;                                                                            \
+                any_live |= on;                                                                            \
+            }                                                                                              \
+            if (!any_live) continue;                                                                       \
+            for (int j = 0; j < W; j++) {                                                                  \
+                s.ray.time[j] = 0.0f, s.ray.id[j] = 0, s.ray.flags[j] = 0;                                 \
+                s.ray.mask[j] = p->mask ? p->mask[base + (uint32_t)j] : 0xFFFFFFFFu;                       \
+                s.hit.geom_id[j] = RP_INVALID_ID;                                                          \
+            }                                                                                              \
+            if (any) {                                                                                     \
+                k->occluded##W(acc, valid, &s.ray);                                                        \
+                for (int j = 0; j < W; j++) /* the live rays' tfar (-inf where occluded), branch free */   \
+                    p->tfar[base + (uint32_t)j] = valid[j] ? s.ray.tfar[j] : p->tfar[base + (uint32_t)j];   \
+                continue;                                                                                  \
+            }                                                                                              \
+            k->intersect##W(acc, valid, &s);                                                               \
+            for (int j = 0; j < W; j++) {                                                                  \
+                uint32_t q = base + (uint32_t)j;                                                           \
+                if (!valid[j] || s.hit.geom_id[j] == RP_INVALID_ID) continue;                              \
+                p->tfar[q] = s.ray.tfar[j];                                                                \
+                p->u[q] = s.hit.u[j], p->v[q] = s.hit.v[j];                                                \
+                p->Ng_x[q] = s.hit.Ng_x[j], p->Ng_y[q] = s.hit.Ng_y[j], p->Ng_z[q] = s.hit.Ng_z[j];        \
+                p->geom_id[q] = s.hit.geom_id[j], p->prim_id[q] = s.hit.prim_id[j];                        \
+                p->inst_id[q] = s.hit.inst_id[j];                                                          \
+            }                                                                                              \
+        }                                                                                                  \
+    }
+TRACE_SIMD_DEFINE(4)
+TRACE_SIMD_DEFINE(8)
+TRACE_SIMD_DEFINE(16)
+#undef TRACE_SIMD_DEFINE
+
 /* RP_TRAVERSAL_SINGLE and RP_TRAVERSAL_SIMD: the rays without the large packet. */
 static void trace_small(rp_scene *scene, rp_traversal mode, rp_rayhit_n *p, bool any) {
     const rp_kernels *k = scene->kernels;
@@ -120,77 +183,9 @@ static void trace_small(rp_scene *scene, rp_traversal mode, rp_rayhit_n *p, bool
         }
         return;
     }
-    int w = k->isa >= 16 ? 16 : k->isa >= 8 ? 8 : 4;
-    for (uint32_t base = 0; base < count; base += (uint32_t)w) {
-        rp_rayhit16 s; /* large enough for 4 and 8; the smaller layouts are filled in place */
-        int32_t valid[16];
-        int any_live = 0;
-        /* fill as rp_rayhit16 fields and copy into the narrow layout below */
-        for (int j = 0; j < w; j++) {
-            uint32_t q = base + (uint32_t)j;
-            valid[j] = live(p, q) ? -1 : 0;
-            any_live |= valid[j];
-            s.ray.org_x[j] = p->org_x[q], s.ray.org_y[j] = p->org_y[q], s.ray.org_z[j] = p->org_z[q];
-            s.ray.dir_x[j] = p->dir_x[q], s.ray.dir_y[j] = p->dir_y[q], s.ray.dir_z[j] = p->dir_z[q];
-            s.ray.tnear[j] = p->tnear[q], s.ray.tfar[j] = p->tfar[q], s.ray.time[j] = 0.0f;
-            s.ray.mask[j] = p->mask ? p->mask[q] : 0xFFFFFFFFu, s.ray.id[j] = 0, s.ray.flags[j] = 0;
-            s.hit.geom_id[j] = RP_INVALID_ID;
-        }
-        if (!any_live) continue;
-#define NARROW(W)                                                                                   \
-    do {                                                                                            \
-        rp_rayhit##W r;                                                                             \
-        memcpy(r.ray.org_x, s.ray.org_x, sizeof r.ray.org_x);                                       \
-        memcpy(r.ray.org_y, s.ray.org_y, sizeof r.ray.org_y);                                       \
-        memcpy(r.ray.org_z, s.ray.org_z, sizeof r.ray.org_z);                                       \
-        memcpy(r.ray.dir_x, s.ray.dir_x, sizeof r.ray.dir_x);                                       \
-        memcpy(r.ray.dir_y, s.ray.dir_y, sizeof r.ray.dir_y);                                       \
-        memcpy(r.ray.dir_z, s.ray.dir_z, sizeof r.ray.dir_z);                                       \
-        memcpy(r.ray.tnear, s.ray.tnear, sizeof r.ray.tnear);                                       \
-        memcpy(r.ray.tfar, s.ray.tfar, sizeof r.ray.tfar);                                          \
-        memcpy(r.ray.time, s.ray.time, sizeof r.ray.time);                                          \
-        memcpy(r.ray.mask, s.ray.mask, sizeof r.ray.mask);                                          \
-        memcpy(r.ray.id, s.ray.id, sizeof r.ray.id);                                                \
-        memcpy(r.ray.flags, s.ray.flags, sizeof r.ray.flags);                                       \
-        memcpy(r.hit.geom_id, s.hit.geom_id, sizeof r.hit.geom_id);                                 \
-        if (any) {                                                                                  \
-            k->occluded##W(acc, valid, &r.ray);                                                     \
-        } else {                                                                                    \
-            k->intersect##W(acc, valid, &r);                                                        \
-        }                                                                                           \
-        memcpy(s.ray.tfar, r.ray.tfar, sizeof r.ray.tfar);                                          \
-        memcpy(s.hit.Ng_x, r.hit.Ng_x, sizeof r.hit.Ng_x);                                          \
-        memcpy(s.hit.Ng_y, r.hit.Ng_y, sizeof r.hit.Ng_y);                                          \
-        memcpy(s.hit.Ng_z, r.hit.Ng_z, sizeof r.hit.Ng_z);                                          \
-        memcpy(s.hit.u, r.hit.u, sizeof r.hit.u);                                                   \
-        memcpy(s.hit.v, r.hit.v, sizeof r.hit.v);                                                   \
-        memcpy(s.hit.prim_id, r.hit.prim_id, sizeof r.hit.prim_id);                                 \
-        memcpy(s.hit.geom_id, r.hit.geom_id, sizeof r.hit.geom_id);                                 \
-        memcpy(s.hit.inst_id, r.hit.inst_id, sizeof r.hit.inst_id);                                 \
-    } while (0)
-        if (w == 16) {
-            if (any) k->occluded16(acc, valid, &s.ray);
-            else k->intersect16(acc, valid, &s);
-        } else if (w == 8) {
-            NARROW(8);
-        } else {
-            NARROW(4);
-        }
-#undef NARROW
-        for (int j = 0; j < w; j++) {
-            uint32_t q = base + (uint32_t)j;
-            if (!valid[j]) continue;
-            if (any) {
-                p->tfar[q] = s.ray.tfar[j];
-                continue;
-            }
-            if (s.hit.geom_id[j] == RP_INVALID_ID) continue;
-            p->tfar[q] = s.ray.tfar[j];
-            p->u[q] = s.hit.u[j], p->v[q] = s.hit.v[j];
-            p->Ng_x[q] = s.hit.Ng_x[j], p->Ng_y[q] = s.hit.Ng_y[j], p->Ng_z[q] = s.hit.Ng_z[j];
-            p->geom_id[q] = s.hit.geom_id[j], p->prim_id[q] = s.hit.prim_id[j], p->inst_id[q] = s.hit.inst_id[j];
-        }
-    }
+    if (k->isa >= 16) trace_simd_16(k, acc, p, count, any);
+    else if (k->isa >= 8) trace_simd_8(k, acc, p, count, any);
+    else trace_simd_4(k, acc, p, count, any);
 }
 
 /* Adds a packet of class c with `rays` live rays that took `ticks` by way `way`. */
@@ -213,6 +208,7 @@ static void tally_add(rp_auto_tally *t, int c, int way, uint64_t rays, uint64_t 
 
 static void trace_usable(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p, bool any);
 
+
 static inline float fmin2(float a, float b) { return a < b ? a : b; }
 static inline float fmax2(float a, float b) { return a > b ? a : b; }
 
@@ -232,7 +228,7 @@ static bool instances_only(const rp_scene *s) {
 /* Which rays of a packet meet an instance's box (lower xyz, upper xyz): slab tests, branch free, in
  * a function of its own so that its restrict parameters let the compiler's vectors through (rays
  * not live start at tn0 = +inf, occluded ones end at tfar = -inf). Returns how many do. */
-static uint32_t instance_slabs(uint32_t n, const float box[6], const float *restrict ox, const float *restrict oy,
+RAY_LOOPS static uint32_t instance_slabs(uint32_t n, const float box[6], const float *restrict ox, const float *restrict oy,
                                const float *restrict oz, const float *restrict ix, const float *restrict iy,
                                const float *restrict iz, const float *restrict tn0, const float *restrict tfar,
                                int32_t *restrict valid) {
@@ -310,7 +306,7 @@ static bool packet_misses_box(const packet_bounds *b, const float box[6]) {
 }
 
 /* tnear of the live rays (live()), +inf for the others: branch free, so that it vectorizes. */
-static void live_tnear(uint32_t n, const rp_rayhit_n *p, float *restrict tn0) {
+RAY_LOOPS static void live_tnear(uint32_t n, const rp_rayhit_n *p, float *restrict tn0) {
     const float *restrict tn = p->tnear, *restrict tf = p->tfar;
     const int32_t *restrict v = p->valid;
     if (v)
@@ -321,7 +317,7 @@ static void live_tnear(uint32_t n, const rp_rayhit_n *p, float *restrict tn0) {
 
 /* 1 / d of n directions; a zero (or denormal) component becomes +-1e30, which never makes a NaN and
  * keeps the slab tests conservative. One array at a time, branch free, so that it vectorizes. */
-static void inverse_dirs(uint32_t n, const float *restrict d, float *restrict inv) {
+RAY_LOOPS static void inverse_dirs(uint32_t n, const float *restrict d, float *restrict inv) {
     for (uint32_t i = 0; i < n; i++) {
         float x = d[i];
         bool ok = fabsf(x) > 1e-30f;
@@ -332,7 +328,7 @@ static void inverse_dirs(uint32_t n, const float *restrict d, float *restrict in
 
 /* Points (with the translation) or directions of n rays through the 3x4 map m, as instance_ray maps
  * them. */
-static void instance_map(uint32_t n, const float m[12], bool points, const float *restrict x, const float *restrict y,
+RAY_LOOPS static void instance_map(uint32_t n, const float m[12], bool points, const float *restrict x, const float *restrict y,
                          const float *restrict z, float *restrict ox, float *restrict oy, float *restrict oz) {
     const float m0 = m[0], m1 = m[1], m2 = m[2], m3 = m[3], m4 = m[4], m5 = m[5], m6 = m[6], m7 = m[7], m8 = m[8],
                 m9 = m[9], m10 = m[10], m11 = m[11];
@@ -352,7 +348,7 @@ static void instance_map(uint32_t n, const float m[12], bool points, const float
 }
 
 /* Shadow rays of a packet occluded in an instance (tfar -inf there) are occluded in the packet. */
-static void occluded_merge(uint32_t n, const int32_t *restrict valid, const float *restrict qtfar, float *restrict tfar) {
+RAY_LOOPS static void occluded_merge(uint32_t n, const int32_t *restrict valid, const float *restrict qtfar, float *restrict tfar) {
     for (uint32_t i = 0; i < n; i++) {
         int32_t hit = (valid[i] != 0) & (qtfar[i] == -INFINITY); /* & rather than &&: no branch */
         tfar[i] = hit ? -INFINITY : tfar[i];
@@ -443,7 +439,8 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
         instance_map(count, m, false, p->dir_x, p->dir_y, p->dir_z, q.dir_x, q.dir_y, q.dir_z);
         memcpy(q.tnear, p->tnear, each);
         memcpy(q.tfar, p->tfar, each);
-        for (uint32_t i = 0; i < count; i++) q.geom_id[i] = RP_INVALID_ID;
+        if (!any) /* hits_merge reads them; occlusion reads tfar alone */
+            for (uint32_t i = 0; i < count; i++) q.geom_id[i] = RP_INVALID_ID;
         rp_query_n_desc sd = *d;
         if (sd.frustum == RP_FRUSTUM_SHADOW) { /* the common end point, in the instance's space */
             float x = d->point[0], y = d->point[1], z = d->point[2];
@@ -510,16 +507,15 @@ static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p
  * without such rays goes as it is. The mask is made in one branch-free pass the compiler
  * vectorizes (the two scalar passes it replaced cost a third as much as the 16x16 kernel itself on
  * Cornell's primary rays, and twice that with bad rays mixed in: bench --bad-rays). */
-static void trace_usable(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p, bool any) {
-    uint32_t count = p->n * p->n;
+/* ray_usable lane by lane, with & and |, into live (-1 or 0); returns how many valid lanes are not
+ * usable. */
+RAY_LOOPS static int32_t usable_lanes(uint32_t count, const rp_rayhit_n *p, const int32_t *restrict valid,
+                                      int32_t *restrict live) {
     const float *restrict ox = p->org_x, *restrict oy = p->org_y, *restrict oz = p->org_z;
     const float *restrict dx = p->dir_x, *restrict dy = p->dir_y, *restrict dz = p->dir_z;
     const float *restrict tn = p->tnear, *restrict tf = p->tfar;
-    static const int32_t all_live[RP_PACKET_N_MAX * RP_PACKET_N_MAX] = {[0 ... RP_PACKET_N_MAX * RP_PACKET_N_MAX - 1] = -1};
-    const int32_t *restrict valid = p->valid ? p->valid : all_live; /* (no branch in the loop) */
-    RP_ALIGN(64) int32_t live[RP_PACKET_N_MAX * RP_PACKET_N_MAX];
     int32_t bad = 0;
-    for (uint32_t i = 0; i < count; i++) { /* ray_usable, lane by lane, with & and | */
+    for (uint32_t i = 0; i < count; i++) {
         float f = (ox[i] - ox[i]) + (oy[i] - oy[i]) + (oz[i] - oz[i]) + (dx[i] - dx[i]) + (dy[i] - dy[i]) +
                   (dz[i] - dz[i]);
         int32_t ok = (f == 0.0f) & ((dx[i] != 0.0f) | (dy[i] != 0.0f) | (dz[i] != 0.0f)) & (tn[i] <= tf[i]) &
@@ -528,6 +524,15 @@ static void trace_usable(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit
         live[i] = -(v & ok);
         bad += v & (ok ^ 1);
     }
+    return bad;
+}
+
+static void trace_usable(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p, bool any) {
+    uint32_t count = p->n * p->n;
+    static const int32_t all_live[RP_PACKET_N_MAX * RP_PACKET_N_MAX] = {[0 ... RP_PACKET_N_MAX * RP_PACKET_N_MAX - 1] = -1};
+    const int32_t *valid = p->valid ? p->valid : all_live; /* (no branch in the loop) */
+    RP_ALIGN(64) int32_t live[RP_PACKET_N_MAX * RP_PACKET_N_MAX];
+    int32_t bad = usable_lanes(count, p, valid, live);
     if (RP_LIKELY(bad == 0)) {
         trace_n(scene, desc, p, any);
         return;

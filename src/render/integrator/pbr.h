@@ -78,7 +78,8 @@ typedef struct pbr_frame {
     float rr;                            /* Russian roulette's threshold (ir_roulette); 0: off */
     rp_traversal shadow_traversal;       /* of the shadow packets to VPLs (ir_frame_init) */
     /* full-frame buffers for the discontinuity buffer */
-    v3 *raw, *albedo, *emit, *normal;
+    v3 *albedo, *emit;
+    float *raw[3], *normal[3]; /* by axis: the filter's loops read them in vectors */
     float *depth;
     uint8_t *valid;
     void *planes; /* the block that holds them (render_scratch_take) */

@@ -288,7 +288,7 @@ render_bsdf material_bsdf(const rp_render_scene *s, const rp_material *m, const 
     return b;
 }
 
-v3 material_ke(const rp_render_scene *s, uint32_t material) {
+v3 material_ke_compute(const rp_render_scene *s, uint32_t material) {
     const rp_material *m = rp_render_scene_material(s, material);
     v3 ke = v3_load(m->ke);
     if (v3_is_zero(ke) && material < s->data->material_count && s->data->materials[material].illum >= 0) {
@@ -296,6 +296,11 @@ v3 material_ke(const rp_render_scene *s, uint32_t material) {
         if (v3_max_abs(ka) > 1.0f) ke = ka;
     }
     return v3_make(render_fmaxf(ke.x, 0.0f), render_fmaxf(ke.y, 0.0f), render_fmaxf(ke.z, 0.0f));
+}
+
+v3 material_ke(const rp_render_scene *s, uint32_t material) {
+    if (material < s->material_ke_count) return s->material_ke[material];
+    return material_ke_compute(s, material);
 }
 
 v3 material_ke_textured(const rp_render_scene *s, const rp_material *m, v3 ke, const render_surface *surf) {

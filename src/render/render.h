@@ -107,6 +107,9 @@ struct rp_render_scene {
     const rp_scene_data *data;
     uint32_t geom_ids[3];          /* per render_geom_kind, RP_INVALID_ID when absent */
     rp_material *materials;        /* data->material_count */
+    v3 *material_ke;               /* per material, material_ke's value (set once at creation: the
+                                    * emission of every path vertex read it through five calls) */
+    size_t material_ke_count;      /* its entries: data->material_count at creation */
     rp_light_source *lights;
     size_t light_count;
     render_cone *cones;            /* data->cone_count */
@@ -430,6 +433,8 @@ void material_normal_map(const rp_render_scene *s, const rp_material *m, render_
 v3 material_emission(const rp_render_scene *s, uint32_t material, const render_surface *surf);
 /* Emitted radiance of material i on its front side, whatever the side it is seen from. */
 v3 material_ke(const rp_render_scene *s, uint32_t material);
+/* What material_ke returns, computed (rp_render_scene.material_ke holds it per material). */
+v3 material_ke_compute(const rp_render_scene *s, uint32_t material);
 /* ke times the material's emission texture at the hit (ke itself where it has none). */
 v3 material_ke_textured(const rp_render_scene *s, const rp_material *m, v3 ke, const render_surface *surf);
 

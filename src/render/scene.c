@@ -80,6 +80,7 @@ static void scene_free(rp_render_scene *s) {
     anim_groups_free(s); /* after the top scene, whose instances hold the sub-scenes */
     if (s->device) rp_device_release(s->device);
     free(s->materials);
+    free(s->material_ke);
     free(s->lights);
     free(s->cones);
     light_scene_free(s);
@@ -167,6 +168,11 @@ rp_render_scene *rp_render_scene_new(rp_device *device, const rp_scene_data *dat
                                         .emission_texture = -1, .alpha = 1.0f, .alpha_texture = -1,
                                         .specular_texture = -1};
     }
+
+    s->material_ke = malloc(nm * sizeof *s->material_ke);
+    if (!s->material_ke) return fail(s, err, err_size, "out of memory");
+    for (size_t i = 0; i < data->material_count; i++) s->material_ke[i] = material_ke_compute(s, (uint32_t)i);
+    s->material_ke_count = data->material_count;
 
     s->cutouts = alpha_scene_has_cutouts(s);
 

@@ -649,6 +649,27 @@ int ir_filter_radius(const rp_render_desc *d) { return d->ir.filter == 0 ? 1 : (
  * the same. Pixel by pixel with a branch per neighbour, the filter took 450 instructions a pixel. */
 enum { IR_FILTER_RUN = 64 };
 
+/* n pixels of a run against their neighbours at one offset: va..rz the neighbours' planes, dc..ncz
+ * the pixels' own depth, depth limit and normal, sr..cnt their sums. (ivdep: the sums are the
+ * stack's, the planes the frame's; without it GCC wanted more run-time alias checks than it makes,
+ * and kept the loop scalar.) */
+RENDER_INLINE void ir_filter_offset(int n, const uint8_t *restrict va, const float *restrict de,
+                                    const float *restrict nx, const float *restrict ny, const float *restrict nz,
+                                    const float *restrict rx, const float *restrict ry, const float *restrict rz,
+                                    const float *restrict dc, const float *restrict lim, const float *restrict ncx,
+                                    const float *restrict ncy, const float *restrict ncz, float *restrict sr,
+                                    float *restrict sg, float *restrict sb, float *restrict cnt) {
+#pragma GCC ivdep
+    for (int i = 0; i < n; i++) {
+        const float dot = nx[i] * ncx[i] + ny[i] * ncy[i] + nz[i] * ncz[i];
+        const bool ok = (va[i] != 0) & !(fabsf(de[i] - dc[i]) > lim[i]) & !(dot < 0.9f);
+        sr[i] += ok ? rx[i] : 0.0f;
+        sg[i] += ok ? ry[i] : 0.0f;
+        sb[i] += ok ? rz[i] : 0.0f;
+        cnt[i] += ok ? 1.0f : 0.0f;
+    }
+}
+
 RENDER_INLINE void ir_filter_row_body(const render_frame *f, uint32_t row) {
     const pbr_frame *pf = f->pbr;
     const int W = f->desc.width, H = f->desc.height, r = ir_filter_radius(&f->desc);
@@ -670,25 +691,13 @@ RENDER_INLINE void ir_filter_row_body(const render_frame *f, uint32_t row) {
             const int yy = y + dy;
             if (yy < 0 || yy >= H) continue;
             for (int dx = -r; dx <= r; dx++) {
-                /* the run's pixels whose neighbour x0 + i + dx lies in [0, W) */
+                /* the run's pixels i in [lo, hi) whose neighbour x0 + i + dx lies in [0, W) */
                 const int lo = -dx - x0 > 0 ? -dx - x0 : 0, hi = W - dx - x0 < m ? W - dx - x0 : m;
-                const ptrdiff_t gb = (ptrdiff_t)yy * W + x0 + dx;
-                const uint8_t *restrict va = valid + gb;
-                const float *restrict de = depth + gb, *restrict nx = pf->normal[0] + gb,
-                                      *restrict ny = pf->normal[1] + gb, *restrict nz = pf->normal[2] + gb,
-                                      *restrict rx = pf->raw[0] + gb, *restrict ry = pf->raw[1] + gb,
-                                      *restrict rz = pf->raw[2] + gb;
-                /* (ivdep: the sums are the stack's, the planes the frame's; without it GCC wanted
-                 * more run-time alias checks than it makes, and kept the loop scalar) */
-#pragma GCC ivdep
-                for (int i = lo; i < hi; i++) {
-                    const float dot = nx[i] * ncx[i] + ny[i] * ncy[i] + nz[i] * ncz[i];
-                    const bool ok = (va[i] != 0) & !(fabsf(de[i] - dc[i]) > lim[i]) & !(dot < 0.9f);
-                    sr[i] += ok ? rx[i] : 0.0f;
-                    sg[i] += ok ? ry[i] : 0.0f;
-                    sb[i] += ok ? rz[i] : 0.0f;
-                    cnt[i] += ok ? 1.0f : 0.0f;
-                }
+                if (lo >= hi) continue;
+                const size_t gl = (size_t)((ptrdiff_t)yy * W + x0 + dx + lo); /* neighbour of pixel lo */
+                ir_filter_offset(hi - lo, valid + gl, depth + gl, pf->normal[0] + gl, pf->normal[1] + gl,
+                                 pf->normal[2] + gl, pf->raw[0] + gl, pf->raw[1] + gl, pf->raw[2] + gl, dc + lo,
+                                 lim + lo, ncx + lo, ncy + lo, ncz + lo, sr + lo, sg + lo, sb + lo, cnt + lo);
             }
         }
         for (int i = 0; i < m; i++) {

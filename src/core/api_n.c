@@ -92,13 +92,30 @@ static bool live(const rp_rayhit_n *p, uint32_t i) {
 }
 
 /* The packets' per-ray loops below (slab tests against instance boxes, the rays mapped into an
- * instance, inverse directions, live tnear, merges of occlusion) compiled for the baseline and for
- * AVX2, the copy picked for the CPU when the library loads (GCC's and clang's target_clones). Without
- * FMA both copies make the same IEEE operations in the same order, so they give the same values. */
+ * instance, inverse directions, live tnear, merges of occlusion, ray_usable's lanes): each an
+ * always-inlined body (NAME_body) compiled twice, for the baseline and for AVX2, and NAME picks the
+ * copy the CPU runs (as the render library's loops, render.h). Without FMA both copies make the
+ * same IEEE operations in the same order, so they give the same values. (GCC's target_clones made
+ * the same copies through an ifunc, whose resolver runs before ThreadSanitizer's runtime is up:
+ * every TSan binary crashed at load.) */
+#define RAY_BODY static inline __attribute__((always_inline))
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-#define RAY_LOOPS __attribute__((target_clones("avx2", "default")))
+#define RAY_COPIES(T, name, params, args)                                                                 \
+    static T name##_base params { return name##_body args; }                                              \
+    __attribute__((target("avx2"))) static T name##_avx2 params { return name##_body args; }              \
+    static T name params { return __builtin_cpu_supports("avx2") ? name##_avx2 args : name##_base args; }
+#define RAY_COPIES_VOID(name, params, args)                                                               \
+    static void name##_base params { name##_body args; }                                                  \
+    __attribute__((target("avx2"))) static void name##_avx2 params { name##_body args; }                  \
+    static void name params {                                                                             \
+        if (__builtin_cpu_supports("avx2")) name##_avx2 args;                                             \
+        else name##_base args;                                                                            \
+    }
 #else
-#define RAY_LOOPS
+#define RAY_COPIES(T, name, params, args)                                                                 \
+    static T name params { return name##_body args; }
+#define RAY_COPIES_VOID(name, params, args)                                                               \
+    static void name params { name##_body args; }
 #endif
 
 /* A packet's rays as SIMD rays of the kernels' width W, W at a time (count is a multiple of 16): each
@@ -228,7 +245,7 @@ static bool instances_only(const rp_scene *s) {
 /* Which rays of a packet meet an instance's box (lower xyz, upper xyz): slab tests, branch free, in
  * a function of its own so that its restrict parameters let the compiler's vectors through (rays
  * not live start at tn0 = +inf, occluded ones end at tfar = -inf). Returns how many do. */
-RAY_LOOPS static uint32_t instance_slabs(uint32_t n, const float box[6], const float *restrict ox, const float *restrict oy,
+RAY_BODY uint32_t instance_slabs_body(uint32_t n, const float box[6], const float *restrict ox, const float *restrict oy,
                                const float *restrict oz, const float *restrict ix, const float *restrict iy,
                                const float *restrict iz, const float *restrict tn0, const float *restrict tfar,
                                int32_t *restrict valid) {
@@ -248,6 +265,12 @@ RAY_LOOPS static uint32_t instance_slabs(uint32_t n, const float box[6], const f
     }
     return on_n;
 }
+RAY_COPIES(uint32_t, instance_slabs,
+           (uint32_t n, const float box[6], const float *restrict ox, const float *restrict oy,
+            const float *restrict oz, const float *restrict ix, const float *restrict iy,
+            const float *restrict iz, const float *restrict tn0, const float *restrict tfar,
+            int32_t *restrict valid),
+           (n, box, ox, oy, oz, ix, iy, iz, tn0, tfar, valid))
 
 /* Bounds over a packet's live rays (tn0 finite) of what instance_slabs reads: origins, inverse
  * directions, tn0 and tfar; from them one interval test per instance box can tell that no ray of
@@ -306,7 +329,7 @@ static bool packet_misses_box(const packet_bounds *b, const float box[6]) {
 }
 
 /* tnear of the live rays (live()), +inf for the others: branch free, so that it vectorizes. */
-RAY_LOOPS static void live_tnear(uint32_t n, const rp_rayhit_n *p, float *restrict tn0) {
+RAY_BODY void live_tnear_body(uint32_t n, const rp_rayhit_n *p, float *restrict tn0) {
     const float *restrict tn = p->tnear, *restrict tf = p->tfar;
     const int32_t *restrict v = p->valid;
     if (v)
@@ -314,10 +337,11 @@ RAY_LOOPS static void live_tnear(uint32_t n, const rp_rayhit_n *p, float *restri
     else
         for (uint32_t i = 0; i < n; i++) tn0[i] = tn[i] <= tf[i] ? tn[i] : INFINITY;
 }
+RAY_COPIES_VOID(live_tnear, (uint32_t n, const rp_rayhit_n *p, float *restrict tn0), (n, p, tn0))
 
 /* 1 / d of n directions; a zero (or denormal) component becomes +-1e30, which never makes a NaN and
  * keeps the slab tests conservative. One array at a time, branch free, so that it vectorizes. */
-RAY_LOOPS static void inverse_dirs(uint32_t n, const float *restrict d, float *restrict inv) {
+RAY_BODY void inverse_dirs_body(uint32_t n, const float *restrict d, float *restrict inv) {
     for (uint32_t i = 0; i < n; i++) {
         float x = d[i];
         bool ok = fabsf(x) > 1e-30f;
@@ -325,10 +349,11 @@ RAY_LOOPS static void inverse_dirs(uint32_t n, const float *restrict d, float *r
         inv[i] = ok ? r : copysignf(1e30f, x);
     }
 }
+RAY_COPIES_VOID(inverse_dirs, (uint32_t n, const float *restrict d, float *restrict inv), (n, d, inv))
 
 /* Points (with the translation) or directions of n rays through the 3x4 map m, as instance_ray maps
  * them. */
-RAY_LOOPS static void instance_map(uint32_t n, const float m[12], bool points, const float *restrict x, const float *restrict y,
+RAY_BODY void instance_map_body(uint32_t n, const float m[12], bool points, const float *restrict x, const float *restrict y,
                          const float *restrict z, float *restrict ox, float *restrict oy, float *restrict oz) {
     const float m0 = m[0], m1 = m[1], m2 = m[2], m3 = m[3], m4 = m[4], m5 = m[5], m6 = m[6], m7 = m[7], m8 = m[8],
                 m9 = m[9], m10 = m[10], m11 = m[11];
@@ -346,14 +371,21 @@ RAY_LOOPS static void instance_map(uint32_t n, const float m[12], bool points, c
         oz[i] = m8 * x[i] + m9 * y[i] + m10 * z[i];
     }
 }
+RAY_COPIES_VOID(instance_map,
+           (uint32_t n, const float m[12], bool points, const float *restrict x, const float *restrict y,
+            const float *restrict z, float *restrict ox, float *restrict oy, float *restrict oz),
+           (n, m, points, x, y, z, ox, oy, oz))
 
 /* Shadow rays of a packet occluded in an instance (tfar -inf there) are occluded in the packet. */
-RAY_LOOPS static void occluded_merge(uint32_t n, const int32_t *restrict valid, const float *restrict qtfar, float *restrict tfar) {
+RAY_BODY void occluded_merge_body(uint32_t n, const int32_t *restrict valid, const float *restrict qtfar, float *restrict tfar) {
     for (uint32_t i = 0; i < n; i++) {
         int32_t hit = (valid[i] != 0) & (qtfar[i] == -INFINITY); /* & rather than &&: no branch */
         tfar[i] = hit ? -INFINITY : tfar[i];
     }
 }
+RAY_COPIES_VOID(occluded_merge,
+           (uint32_t n, const int32_t *restrict valid, const float *restrict qtfar, float *restrict tfar),
+           (n, valid, qtfar, tfar))
 
 /* The hits q found in instance gi (valid lanes whose geom_id is set) replace p's, their normals
  * mapped back by the inverse transpose of m: four lanes at a time (n is a multiple of 16), a lane
@@ -509,7 +541,7 @@ static void trace_n(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p
  * Cornell's primary rays, and twice that with bad rays mixed in: bench --bad-rays). */
 /* ray_usable lane by lane, with & and |, into live (-1 or 0); returns how many valid lanes are not
  * usable. */
-RAY_LOOPS static int32_t usable_lanes(uint32_t count, const rp_rayhit_n *p, const int32_t *restrict valid,
+RAY_BODY int32_t usable_lanes_body(uint32_t count, const rp_rayhit_n *p, const int32_t *restrict valid,
                                       int32_t *restrict live) {
     const float *restrict ox = p->org_x, *restrict oy = p->org_y, *restrict oz = p->org_z;
     const float *restrict dx = p->dir_x, *restrict dy = p->dir_y, *restrict dz = p->dir_z;
@@ -526,6 +558,9 @@ RAY_LOOPS static int32_t usable_lanes(uint32_t count, const rp_rayhit_n *p, cons
     }
     return bad;
 }
+RAY_COPIES(int32_t, usable_lanes,
+           (uint32_t count, const rp_rayhit_n *p, const int32_t *restrict valid, int32_t *restrict live),
+           (count, p, valid, live))
 
 static void trace_usable(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit_n *p, bool any) {
     uint32_t count = p->n * p->n;

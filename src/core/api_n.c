@@ -93,30 +93,40 @@ static bool live(const rp_rayhit_n *p, uint32_t i) {
 
 /* The packets' per-ray loops below (slab tests against instance boxes, the rays mapped into an
  * instance, inverse directions, live tnear, merges of occlusion, ray_usable's lanes): each an
- * always-inlined body (NAME_body) compiled twice, for the baseline and for AVX2, and NAME picks the
- * copy the CPU runs (as the render library's loops, render.h). Without FMA both copies make the
- * same IEEE operations in the same order, so they give the same values. (GCC's target_clones made
- * the same copies through an ifunc, whose resolver runs before ThreadSanitizer's runtime is up:
- * every TSan binary crashed at load.) */
+ * always-inlined body (NAME_body) compiled twice, for the baseline and for AVX2, and NAME(avx2, ...)
+ * runs the copy its first argument names (ray_avx2: the CPU has AVX2 and the device's kernels are
+ * 8 or 16 wide, so --isa sse and scalar run the baseline copy, as the render library's loops do,
+ * render.h). Without FMA both copies make the same IEEE operations in the same order, so they give
+ * the same values (test_isa_images compares them). (GCC's target_clones made such copies through an
+ * ifunc, whose resolver runs before ThreadSanitizer's runtime is up: every TSan binary crashed at
+ * load.) */
 #define RAY_BODY static inline __attribute__((always_inline))
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #define RAY_COPIES(T, name, params, args)                                                                 \
     static T name##_base params { return name##_body args; }                                              \
     __attribute__((target("avx2"))) static T name##_avx2 params { return name##_body args; }              \
-    static T name params { return __builtin_cpu_supports("avx2") ? name##_avx2 args : name##_base args; }
+    static inline T name(bool avx2, RAY_UNPAREN params) { return avx2 ? name##_avx2 args : name##_base args; }
 #define RAY_COPIES_VOID(name, params, args)                                                               \
     static void name##_base params { name##_body args; }                                                  \
     __attribute__((target("avx2"))) static void name##_avx2 params { name##_body args; }                  \
-    static void name params {                                                                             \
-        if (__builtin_cpu_supports("avx2")) name##_avx2 args;                                             \
+    static inline void name(bool avx2, RAY_UNPAREN params) {                                              \
+        if (avx2) name##_avx2 args;                                                                       \
         else name##_base args;                                                                            \
     }
+static bool ray_avx2(const rp_scene *scene) {
+    return scene->device->kernels->isa >= 8 && __builtin_cpu_supports("avx2");
+}
 #else
 #define RAY_COPIES(T, name, params, args)                                                                 \
-    static T name params { return name##_body args; }
+    static inline T name(bool avx2, RAY_UNPAREN params) { (void)avx2; return name##_body args; }
 #define RAY_COPIES_VOID(name, params, args)                                                               \
-    static void name params { name##_body args; }
+    static inline void name(bool avx2, RAY_UNPAREN params) { (void)avx2; name##_body args; }
+static bool ray_avx2(const rp_scene *scene) {
+    (void)scene;
+    return false;
+}
 #endif
+#define RAY_UNPAREN(...) __VA_ARGS__ /* RAY_UNPAREN (a, b): a, b */
 
 /* A packet's rays as SIMD rays of the kernels' width W, W at a time (count is a multiple of 16): each
  * group filled straight into the W-wide layout (an earlier version filled a 16-wide one and copied
@@ -245,10 +255,10 @@ static bool instances_only(const rp_scene *s) {
 /* Which rays of a packet meet an instance's box (lower xyz, upper xyz): slab tests, branch free, in
  * a function of its own so that its restrict parameters let the compiler's vectors through (rays
  * not live start at tn0 = +inf, occluded ones end at tfar = -inf). Returns how many do. */
-RAY_BODY uint32_t instance_slabs_body(uint32_t n, const float box[6], const float *restrict ox, const float *restrict oy,
-                               const float *restrict oz, const float *restrict ix, const float *restrict iy,
-                               const float *restrict iz, const float *restrict tn0, const float *restrict tfar,
-                               int32_t *restrict valid) {
+RAY_BODY uint32_t instance_slabs_body(uint32_t n, const float box[6], const float *restrict ox,
+                                      const float *restrict oy, const float *restrict oz, const float *restrict ix,
+                                      const float *restrict iy, const float *restrict iz, const float *restrict tn0,
+                                      const float *restrict tfar, int32_t *restrict valid) {
     const float l0 = box[0], l1 = box[1], l2 = box[2], h0 = box[3], h1 = box[4], h2 = box[5];
     uint32_t on_n = 0;
     for (uint32_t i = 0; i < n; i++) {
@@ -353,8 +363,9 @@ RAY_COPIES_VOID(inverse_dirs, (uint32_t n, const float *restrict d, float *restr
 
 /* Points (with the translation) or directions of n rays through the 3x4 map m, as instance_ray maps
  * them. */
-RAY_BODY void instance_map_body(uint32_t n, const float m[12], bool points, const float *restrict x, const float *restrict y,
-                         const float *restrict z, float *restrict ox, float *restrict oy, float *restrict oz) {
+RAY_BODY void instance_map_body(uint32_t n, const float m[12], bool points, const float *restrict x,
+                                const float *restrict y, const float *restrict z, float *restrict ox,
+                                float *restrict oy, float *restrict oz) {
     const float m0 = m[0], m1 = m[1], m2 = m[2], m3 = m[3], m4 = m[4], m5 = m[5], m6 = m[6], m7 = m[7], m8 = m[8],
                 m9 = m[9], m10 = m[10], m11 = m[11];
     if (points) {
@@ -377,7 +388,8 @@ RAY_COPIES_VOID(instance_map,
            (n, m, points, x, y, z, ox, oy, oz))
 
 /* Shadow rays of a packet occluded in an instance (tfar -inf there) are occluded in the packet. */
-RAY_BODY void occluded_merge_body(uint32_t n, const int32_t *restrict valid, const float *restrict qtfar, float *restrict tfar) {
+RAY_BODY void occluded_merge_body(uint32_t n, const int32_t *restrict valid, const float *restrict qtfar,
+                                  float *restrict tfar) {
     for (uint32_t i = 0; i < n; i++) {
         int32_t hit = (valid[i] != 0) & (qtfar[i] == -INFINITY); /* & rather than &&: no branch */
         tfar[i] = hit ? -INFINITY : tfar[i];
@@ -445,10 +457,11 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
     /* the rays' inverse directions for the slab tests and the packet's bounds, once for every
      * instance */
     float *ix = (float *)(void *)(mem + 17 * each), *iy = ix + count, *iz = iy + count, *tn0 = iz + count;
-    live_tnear(count, p, tn0);
-    inverse_dirs(count, p->dir_x, ix);
-    inverse_dirs(count, p->dir_y, iy);
-    inverse_dirs(count, p->dir_z, iz);
+    const bool avx2 = ray_avx2(scene);
+    live_tnear(avx2, count, p, tn0);
+    inverse_dirs(avx2, count, p->dir_x, ix);
+    inverse_dirs(avx2, count, p->dir_y, iy);
+    inverse_dirs(avx2, count, p->dir_z, iz);
     const float *inv[3] = {ix, iy, iz};
     packet_bounds pb;
     packet_bounds_make(count, p, inv, tn0, &pb);
@@ -462,13 +475,14 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
          * five car and wheel instances is met by a packet in ten) */
         if (packet_misses_box(&pb, g->box)) continue;
         const float *m = g->inv;
-        uint32_t live_n = instance_slabs(count, g->box, p->org_x, p->org_y, p->org_z, ix, iy, iz, tn0, p->tfar, valid);
+        uint32_t live_n =
+            instance_slabs(avx2, count, g->box, p->org_x, p->org_y, p->org_z, ix, iy, iz, tn0, p->tfar, valid);
         if (!live_n) continue;
         if (p->mask)
             for (uint32_t i = 0; i < count; i++)
                 if (valid[i] && (p->mask[i] & g->mask) == 0) valid[i] = 0, live_n--;
-        instance_map(count, m, true, p->org_x, p->org_y, p->org_z, q.org_x, q.org_y, q.org_z);
-        instance_map(count, m, false, p->dir_x, p->dir_y, p->dir_z, q.dir_x, q.dir_y, q.dir_z);
+        instance_map(avx2, count, m, true, p->org_x, p->org_y, p->org_z, q.org_x, q.org_y, q.org_z);
+        instance_map(avx2, count, m, false, p->dir_x, p->dir_y, p->dir_z, q.dir_x, q.dir_y, q.dir_z);
         memcpy(q.tnear, p->tnear, each);
         memcpy(q.tfar, p->tfar, each);
         if (!any) /* hits_merge reads them; occlusion reads tfar alone */
@@ -479,7 +493,7 @@ static void trace_instances(rp_scene *scene, const rp_query_n_desc *d, rp_rayhit
             for (int r = 0; r < 3; r++) sd.point[r] = m[4 * r] * x + m[4 * r + 1] * y + m[4 * r + 2] * z + m[4 * r + 3];
         }
         trace_usable(g->inst, &sd, &q, any);
-        if (any) occluded_merge(count, valid, q.tfar, p->tfar);
+        if (any) occluded_merge(avx2, count, valid, q.tfar, p->tfar);
         else hits_merge(count, valid, m, gi, &q, p);
     }
     if (mem != stack) sys_free(&scene->device->alloc, mem, each * SCRATCH);
@@ -567,7 +581,7 @@ static void trace_usable(rp_scene *scene, const rp_query_n_desc *desc, rp_rayhit
     static const int32_t all_live[RP_PACKET_N_MAX * RP_PACKET_N_MAX] = {[0 ... RP_PACKET_N_MAX * RP_PACKET_N_MAX - 1] = -1};
     const int32_t *valid = p->valid ? p->valid : all_live; /* (no branch in the loop) */
     RP_ALIGN(64) int32_t live[RP_PACKET_N_MAX * RP_PACKET_N_MAX];
-    int32_t bad = usable_lanes(count, p, valid, live);
+    int32_t bad = usable_lanes(ray_avx2(scene), count, p, valid, live);
     if (RP_LIKELY(bad == 0)) {
         trace_n(scene, desc, p, any);
         return;

@@ -252,10 +252,10 @@ static bool instances_only(const rp_scene *s) {
     return true;
 }
 
-/* Which rays of a packet meet an instance's box (lower xyz, upper xyz): slab tests, branch free, so
- * that the loop vectorizes in both copies, whose restrict parameters tell the compiler the arrays are
- * apart (inlined into trace_instances, as it once was, GCC left it scalar: rays not live start at
- * tn0 = +inf, occluded ones end at tfar = -inf). Returns how many do. */
+/* Which rays of a packet meet an instance's box (lower xyz, upper xyz): slab tests, branch free
+ * (rays not live start at tn0 = +inf, occluded ones end at tfar = -inf). Returns how many do. The
+ * loop vectorizes in both copies, whose restrict parameters tell the compiler the arrays are apart;
+ * inlined into trace_instances, as it once was, GCC left it scalar. */
 RAY_BODY uint32_t instance_slabs_body(uint32_t n, const float box[6], const float *restrict ox,
                                       const float *restrict oy, const float *restrict oz, const float *restrict ix,
                                       const float *restrict iy, const float *restrict iz, const float *restrict tn0,
